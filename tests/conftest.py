@@ -1,0 +1,31 @@
+import json
+import os
+import subprocess
+import sys
+
+
+def run_x64(test_file: str, function_name: str) -> dict:
+    """Runs ``function_name()`` from ``test_file`` in a fresh Python with float64 JAX.
+
+    Toggling ``jax_enable_x64`` inside one process can reuse a float32 lowering of a nested
+    jitted helper (seen with MJX's RK4 integrator), so x64 checks run in their own process.
+    The function returns a JSON-serialisable dict, which is returned here.
+    """
+    code = (
+        "import json, runpy, sys\n"
+        f"sys.path.insert(0, {os.path.dirname(os.path.abspath(test_file))!r})\n"
+        f"namespace = runpy.run_path({test_file!r})\n"
+        f"print('RESULT ' + json.dumps(namespace[{function_name!r}]()))\n"
+    )
+    env = {**os.environ, "JAX_ENABLE_X64": "1"}
+    done = subprocess.run(
+        [sys.executable, "-c", code],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
+    results = [line for line in done.stdout.splitlines() if line.startswith("RESULT ")]
+    assert done.returncode == 0 and results, f"x64 subprocess failed:\n{done.stderr[-3000:]}"
+    return json.loads(results[-1].removeprefix("RESULT "))
