@@ -1,0 +1,235 @@
+"""Environment-only throughput: the ceiling every training throughput is compared against.
+
+For each environment and parallel width, compiles ``lax.scan`` over ``jit(vmap(env.step))``
+fed with pre-drawn uniform random actions, then times warm calls (median of 3). Reports
+steps/s (environment transitions, all slots counted), compile seconds (tracing + XLA) and peak
+memory (XLA's ``memory_analysis()`` of the compiled program: arguments + outputs + temporaries,
+the device buffers it needs; process RSS is dominated by the JAX runtime and not per config).
+
+    python benchmarks/env_throughput.py --quick            # about 3 minutes on a 2-core CPU
+    python benchmarks/env_throughput.py --json out.json    # all widths, both solver settings
+
+Writes ``env_throughput.{json,md,png}`` to ``--out`` (default ``results/env_throughput``); with
+``--json PATH`` the rows also go to PATH. Row schema: ``{name, env, width, steps_per_second,
+compile_seconds, peak_memory_bytes, device, jax_version}`` plus ``solver`` and ``num_steps``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import jax
+import numpy as np
+
+from pngail_jax import envs
+
+CPU_WIDTHS = (1, 4, 16, 64, 256)
+GPU_WIDTHS = (1, 64, 512, 2048, 8192)
+QUICK_PENDULUM_WIDTHS = (1, 16, 256)
+QUICK_MUJOCO_WIDTHS = (16,)
+NUM_REPEATS = 3
+
+
+def scan_length(env_name: str, width: int, quick: bool) -> int:
+    """Steps per timed call: long enough to dwarf dispatch, short enough for a slow CPU."""
+    if env_name == "Pendulum-v1":
+        return 2000
+    steps = 100 if width <= 64 else 40
+    return steps // 2 if quick else steps
+
+
+def measure(env, width: int, num_steps: int, key: jax.Array) -> dict:
+    """Compiles and times ``num_steps`` vmapped steps of ``width`` parallel copies of ``env``."""
+    reset_key, action_key = jax.random.split(key)
+    states = jax.jit(jax.vmap(env.reset))(jax.random.split(reset_key, width))
+    actions = jax.random.uniform(
+        action_key,
+        (num_steps, width, env.action_size),
+        minval=env.action_low,
+        maxval=env.action_high,
+    )
+    step = jax.vmap(env.step)
+
+    def rollout(states, actions):
+        def body(states, action):
+            states = step(states, action)
+            return states, states.reward
+
+        states, rewards = jax.lax.scan(body, states, actions)
+        return states, rewards.sum()
+
+    start = time.perf_counter()
+    compiled = jax.jit(rollout).lower(states, actions).compile()
+    compile_seconds = time.perf_counter() - start
+    timings = []
+    for _ in range(NUM_REPEATS):
+        start = time.perf_counter()
+        states, reward_sum = compiled(states, actions)
+        jax.block_until_ready(reward_sum)
+        timings.append(time.perf_counter() - start)
+    if not np.isfinite(float(reward_sum)):
+        raise RuntimeError(f"{env.name}: non-finite rewards in the benchmark rollout")
+    memory = compiled.memory_analysis()
+    peak = None
+    if memory is not None:
+        peak = int(
+            memory.argument_size_in_bytes
+            + memory.output_size_in_bytes
+            + memory.temp_size_in_bytes
+            - memory.alias_size_in_bytes
+        )
+    return {
+        "steps_per_second": width * num_steps / statistics.median(timings),
+        "compile_seconds": compile_seconds,
+        "peak_memory_bytes": peak,
+    }
+
+
+def configurations(env_names, quick: bool, on_gpu: bool, fast_solver_only: bool):
+    """Yields (env_name, solver_label, make_options, widths)."""
+    for name in env_names:
+        if name == "Pendulum-v1":
+            widths = QUICK_PENDULUM_WIDTHS if quick else (GPU_WIDTHS if on_gpu else CPU_WIDTHS)
+            yield name, "-", {}, widths
+            continue
+        widths = QUICK_MUJOCO_WIDTHS if quick else (GPU_WIDTHS if on_gpu else CPU_WIDTHS)
+        if name == "Ant":
+            # Brax's own Ant already runs the fast setting (Newton, 1 / 4 iterations).
+            yield name, "default=fast", {}, widths
+            continue
+        if not (quick or fast_solver_only):
+            yield name, "default", {}, widths
+        yield name, "fast", envs.FAST_SOLVER, widths
+
+
+def markdown_table(rows: list[dict]) -> str:
+    lines = [
+        "| env | solver | width | steps/s | compile s | peak memory MiB |",
+        "|---|---|---:|---:|---:|---:|",
+    ]
+    for row in rows:
+        memory = (
+            "-" if row["peak_memory_bytes"] is None else f"{row['peak_memory_bytes'] / 2**20:.1f}"
+        )
+        lines.append(
+            f"| {row['env']} | {row['solver']} | {row['width']} | "
+            f"{row['steps_per_second']:,.0f} | {row['compile_seconds']:.1f} | {memory} |"
+        )
+    return "\n".join(lines)
+
+
+def plot(rows: list[dict], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, axis = plt.subplots(figsize=(7, 4.5))
+    series = {}
+    for row in rows:
+        label = row["env"] if row["solver"] == "-" else f"{row['env']} ({row['solver']} solver)"
+        series.setdefault(label, []).append((row["width"], row["steps_per_second"]))
+    for label, points in series.items():
+        widths, speeds = zip(*sorted(points), strict=True)
+        axis.plot(widths, speeds, marker="o", label=label)
+    axis.set(
+        xscale="log",
+        yscale="log",
+        xlabel="parallel environments (vmap width)",
+        ylabel="environment steps / s",
+        title=f"Environment-only throughput ({rows[0]['device']}, jax {rows[0]['jax_version']})",
+    )
+    axis.grid(True, which="both", alpha=0.3)
+    axis.legend(fontsize=8)
+    figure.tight_layout()
+    figure.savefig(path, dpi=120)
+    plt.close(figure)
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument(
+        "--envs",
+        default=",".join(envs.ENV_NAMES),
+        help="comma-separated environment names (default: all)",
+    )
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="few widths and the fast MJX solver only (a few minutes on a CPU)",
+    )
+    parser.add_argument(
+        "--fast-solver-only",
+        action="store_true",
+        help="skip the default-solver rows of the MuJoCo tasks",
+    )
+    parser.add_argument(
+        "--widths",
+        default=None,
+        help="comma-separated widths overriding the defaults for every env",
+    )
+    parser.add_argument("--out", type=Path, default=Path("results/env_throughput"))
+    parser.add_argument("--json", type=Path, default=None, help="also write the rows here")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args(argv)
+
+    names = [name.strip() for name in args.envs.split(",") if name.strip()]
+    unknown = sorted(set(names) - set(envs.ENV_NAMES))
+    if unknown:
+        parser.error(f"unknown environment(s) {unknown}; available: {', '.join(envs.ENV_NAMES)}")
+    widths_override = None
+    if args.widths:
+        widths_override = tuple(int(w) for w in args.widths.split(","))
+        if min(widths_override) < 1:
+            parser.error("--widths must be positive integers")
+    device = jax.devices()[0]
+    device_name = f"{device.platform}:{getattr(device, 'device_kind', device.platform)}"
+    on_gpu = device.platform == "gpu"
+    key = jax.random.key(args.seed)
+    rows = []
+    print(f"device {device_name}, jax {jax.__version__}", flush=True)
+    for name, solver, options, widths in configurations(
+        names, args.quick, on_gpu, args.fast_solver_only
+    ):
+        env = envs.make(name, **options)
+        for width in widths_override or widths:
+            key, measure_key = jax.random.split(key)
+            num_steps = scan_length(name, width, args.quick)
+            result = measure(env, width, num_steps, measure_key)
+            row = {
+                "name": "env_step",
+                "env": name,
+                "solver": solver,
+                "width": width,
+                "num_steps": num_steps,
+                **result,
+                "device": device_name,
+                "jax_version": jax.__version__,
+            }
+            rows.append(row)
+            print(
+                f"  {name:12s} solver={solver:8s} width={width:5d}  "
+                f"{row['steps_per_second']:>12,.0f} steps/s  "
+                f"compile {row['compile_seconds']:5.1f} s",
+                flush=True,
+            )
+
+    table = markdown_table(rows)
+    print("\n" + table)
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "env_throughput.json").write_text(json.dumps(rows, indent=2))
+    (args.out / "env_throughput.md").write_text(table + "\n")
+    plot(rows, args.out / "env_throughput.png")
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(rows, indent=2))
+    print(f"\nwrote {args.out}/env_throughput.{{json,md,png}}", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()
