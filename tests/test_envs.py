@@ -44,8 +44,9 @@ class EnvContract:
     env_name: str
 
     @pytest.fixture(scope="class")
-    def rollout(self):
-        env = envs.make(self.env_name)
+    @classmethod
+    def rollout(cls):
+        env = envs.make(cls.env_name)
         first, trace = _rollout(env, jax.random.key(0))
         return env, jax.device_get(first), jax.device_get(trace)
 
