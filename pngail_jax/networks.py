@@ -1,0 +1,84 @@
+"""flax.linen modules: architecture only (no data, optimiser or learning rate).
+
+Hidden layers use PyTorch's default ``nn.Linear`` weight distribution, U(+-1/sqrt(fan_in)),
+with zero biases; every network's output layer starts with those weights scaled by 0.1 and a
+zero bias, as the reference code initialises them (``../shared/REFERENCE.md``, TRPO).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+
+OUTPUT_SCALE = 0.1
+
+
+def _torch_like_init(scale: float = 1.0):
+    """U(-scale / sqrt(fan_in), scale / sqrt(fan_in)): variance scale^2 / (3 fan_in)."""
+    return nn.initializers.variance_scaling(scale**2 / 3.0, "fan_in", "uniform")
+
+
+class MLP(nn.Module):
+    """Tanh MLP: ``hidden_sizes`` hidden layers, then a linear output of ``output_size``.
+
+    Input float[..., in]; output float[..., output_size].
+    """
+
+    hidden_sizes: Sequence[int]
+    output_size: int
+
+    @nn.compact
+    def __call__(self, x: jax.Array) -> jax.Array:
+        for size in self.hidden_sizes:
+            x = jnp.tanh(nn.Dense(size, kernel_init=_torch_like_init())(x))
+        return nn.Dense(self.output_size, kernel_init=_torch_like_init(OUTPUT_SCALE))(x)
+
+
+class GaussianPolicy(nn.Module):
+    """Diagonal Gaussian policy with a state-independent log standard deviation.
+
+    ``__call__(obs)`` with obs float[..., obs_size] returns ``(mean, log_std)``:
+    float[..., action_size] and float[action_size] (initialised to 0).
+    """
+
+    action_size: int
+    hidden_sizes: Sequence[int] = (100, 100)
+
+    @nn.compact
+    def __call__(self, obs: jax.Array) -> tuple[jax.Array, jax.Array]:
+        mean = MLP(self.hidden_sizes, self.action_size)(obs)
+        log_std = self.param("log_std", nn.initializers.zeros, (self.action_size,))
+        return mean, log_std
+
+
+class ValueNetwork(nn.Module):
+    """State-value MLP: obs float[..., obs_size] -> float[...]."""
+
+    hidden_sizes: Sequence[int] = (100, 100)
+
+    @nn.compact
+    def __call__(self, obs: jax.Array) -> jax.Array:
+        return MLP(self.hidden_sizes, 1)(obs)[..., 0]
+
+
+def gaussian_log_prob(mean: jax.Array, log_std: jax.Array, action: jax.Array) -> jax.Array:
+    """log N(action; mean, exp(log_std)^2), summed over the last axis: float[...]."""
+    z = (action - mean) * jnp.exp(-log_std)
+    return jnp.sum(-0.5 * z**2 - log_std - 0.5 * jnp.log(2 * jnp.pi), axis=-1)
+
+
+def gaussian_kl(
+    mean_0: jax.Array, log_std_0: jax.Array, mean_1: jax.Array, log_std_1: jax.Array
+) -> jax.Array:
+    """KL(N_0 || N_1) of diagonal Gaussians, summed over the last axis: float[...]."""
+    variance_ratio = jnp.exp(2 * (log_std_0 - log_std_1))
+    mean_term = (mean_0 - mean_1) ** 2 * jnp.exp(-2 * log_std_1)
+    return jnp.sum(log_std_1 - log_std_0 + 0.5 * (variance_ratio + mean_term) - 0.5, axis=-1)
+
+
+def gaussian_entropy(log_std: jax.Array) -> jax.Array:
+    """Entropy of a diagonal Gaussian: float[]."""
+    return jnp.sum(log_std + 0.5 * jnp.log(2 * jnp.pi * jnp.e))

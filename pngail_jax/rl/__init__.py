@@ -1,0 +1,5 @@
+"""TRPO in pure JAX: rollouts, GAE, conjugate gradient, Fisher products, line search."""
+
+from pngail_jax.rl.train import TRPO, TRPOConfig, TRPOHyperparams, TRPOState, make_train
+
+__all__ = ["TRPO", "TRPOConfig", "TRPOHyperparams", "TRPOState", "make_train"]

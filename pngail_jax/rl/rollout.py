@@ -1,0 +1,93 @@
+"""Fixed-shape rollouts from parallel auto-reset environments, and deterministic evaluation."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from pngail_jax import envs
+from pngail_jax.networks import GaussianPolicy, gaussian_log_prob
+
+
+@struct.dataclass
+class Transitions:
+    """One iteration's experience, time-major: leaves are [T, N, ...].
+
+    obs and final_obs are raw (unnormalised) observations: obs is where the action was taken,
+    final_obs where the step really arrived (before any auto-reset).
+    """
+
+    obs: jax.Array
+    action: jax.Array
+    log_prob: jax.Array
+    reward: jax.Array
+    done: jax.Array
+    truncated: jax.Array
+    final_obs: jax.Array
+    episode_return: jax.Array
+
+
+def collect(
+    env: envs.AutoReset,
+    policy: GaussianPolicy,
+    policy_params,
+    normalize: Callable[[jax.Array], jax.Array],
+    env_state: envs.AutoResetState,
+    unroll_length: int,
+    key: jax.Array,
+) -> tuple[envs.AutoResetState, Transitions]:
+    """Steps N parallel envs (``env_state`` leaves are [N, ...]) ``unroll_length`` times.
+
+    Actions are sampled from the Gaussian policy and passed unclipped (the environment
+    clips, as the reference does).
+    """
+    step = jax.vmap(env.step)
+
+    def body(env_state, step_key):
+        mean, log_std = policy.apply(policy_params, normalize(env_state.obs))
+        noise = jax.random.normal(step_key, mean.shape, mean.dtype)
+        action = mean + jnp.exp(log_std) * noise
+        next_state = step(env_state, action)
+        transition = Transitions(
+            obs=env_state.obs,
+            action=action,
+            log_prob=gaussian_log_prob(mean, log_std, action),
+            reward=next_state.reward,
+            done=next_state.done,
+            truncated=next_state.truncated,
+            final_obs=next_state.final_obs,
+            episode_return=next_state.episode_return,
+        )
+        return next_state, transition
+
+    return jax.lax.scan(body, env_state, jax.random.split(key, unroll_length))
+
+
+def evaluate(
+    env: envs.Env,
+    policy: GaussianPolicy,
+    policy_params,
+    normalize: Callable[[jax.Array], jax.Array],
+    keys: jax.Array,
+) -> jax.Array:
+    """Mean undiscounted return of the deterministic (mean-action) policy.
+
+    One episode per key in ``keys`` (key[E]), run in parallel on the plain env for
+    ``max_episode_steps`` steps; rewards after an episode's termination are not counted.
+    """
+    states = jax.vmap(env.reset)(keys)
+    step = jax.vmap(env.step)
+
+    def body(carry, _):
+        states, returns, alive = carry
+        mean, _ = policy.apply(policy_params, normalize(states.obs))
+        states = step(states, mean)
+        returns = returns + jnp.where(alive, states.reward, 0.0)
+        return (states, returns, alive & ~states.done), None
+
+    initial = (states, jnp.zeros(keys.shape[0]), jnp.ones(keys.shape[0], bool))
+    (_, returns, _), _ = jax.lax.scan(body, initial, None, length=env.max_episode_steps)
+    return returns.mean()

@@ -1,0 +1,426 @@
+"""TRPO as one pure function: ``make_train(config, env) -> train(hyperparams, key)``.
+
+Static configuration (shapes, iteration counts, which Fisher product) lives in the frozen
+``TRPOConfig``; everything a grid may vary (discount, KL bound, learning rate, whether to
+bootstrap through truncation) is a ``TRPOHyperparams`` pytree, so
+``jax.jit(jax.vmap(train))(stacked_hyperparams, keys)`` trains many runs in one program.
+Defaults are the paper's and the reference code's (``../shared/REFERENCE.md``, TRPO), except
+that GAE bootstraps the value through time-limit truncation (``bootstrap_truncation``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from typing import Literal
+
+import jax
+import jax.numpy as jnp
+import optax
+from flax import struct
+from jax.flatten_util import ravel_pytree
+
+from pngail_jax import envs
+from pngail_jax.networks import (
+    GaussianPolicy,
+    ValueNetwork,
+    gaussian_entropy,
+    gaussian_kl,
+    gaussian_log_prob,
+)
+from pngail_jax.rl.gae import generalized_advantages
+from pngail_jax.rl.rollout import Transitions, collect, evaluate
+from pngail_jax.rl.trpo import hessian_vector_product, natural_gradient_step
+
+RewardFunction = Callable[[Transitions], jax.Array]
+
+
+@dataclasses.dataclass(frozen=True)
+class TRPOConfig:
+    """Shape-giving, static settings. ``num_envs * unroll_length`` steps per iteration."""
+
+    num_envs: int = 25
+    unroll_length: int = 200
+    num_iterations: int = 100
+    eval_every: int = 10
+    num_eval_episodes: int = 32
+    hidden_sizes: tuple[int, ...] = (100, 100)
+    num_value_minibatches: int = 30
+    num_cg_iterations: int = 10
+    num_backtracks: int = 10
+    normalize_observations: bool = False
+    # "hessian": Hessian of the mean KL times v, the reference's form (second-order autodiff).
+    # "gauss_newton": J^T M J v for the Gaussian policy, the same matrix at the current
+    # parameters, from one jvp and one vjp: a speed option.
+    fisher: Literal["hessian", "gauss_newton"] = "hessian"
+    # Fisher products on every k-th sample of the batch (OpenAI baselines uses 5); 1 = all.
+    fisher_subsample: int = 1
+
+    def __post_init__(self):
+        for name in (
+            "num_envs",
+            "unroll_length",
+            "num_iterations",
+            "eval_every",
+            "num_eval_episodes",
+            "num_value_minibatches",
+            "num_cg_iterations",
+            "num_backtracks",
+            "fisher_subsample",
+        ):
+            value = getattr(self, name)
+            if not isinstance(value, int) or value < 1:
+                raise ValueError(f"TRPOConfig.{name} must be a positive integer, got {value!r}")
+        if self.num_iterations % self.eval_every:
+            raise ValueError(
+                f"TRPOConfig.num_iterations ({self.num_iterations}) must be a "
+                f"multiple of eval_every ({self.eval_every})"
+            )
+        if self.fisher not in ("hessian", "gauss_newton"):
+            raise ValueError(
+                f"TRPOConfig.fisher must be 'hessian' or 'gauss_newton', got {self.fisher!r}"
+            )
+        if self.batch_size < self.num_value_minibatches:
+            raise ValueError("TRPOConfig: fewer samples per iteration than value minibatches")
+
+    @property
+    def batch_size(self) -> int:
+        return self.num_envs * self.unroll_length
+
+    @property
+    def num_evaluations(self) -> int:
+        return self.num_iterations // self.eval_every
+
+
+@struct.dataclass
+class TRPOHyperparams:
+    """Per-run values (pytree leaves, so a grid can vmap over them)."""
+
+    gamma: jax.Array
+    lam: jax.Array
+    max_kl: jax.Array
+    damping: jax.Array
+    value_learning_rate: jax.Array
+    bootstrap_truncation: jax.Array  # bool[]: False treats truncation as terminal (reference)
+
+    @classmethod
+    def create(
+        cls,
+        gamma=0.995,
+        lam=0.97,
+        max_kl=0.01,
+        damping=0.1,
+        value_learning_rate=3e-4,
+        bootstrap_truncation=True,
+    ) -> TRPOHyperparams:
+        floats = dict(
+            gamma=gamma,
+            lam=lam,
+            max_kl=max_kl,
+            damping=damping,
+            value_learning_rate=value_learning_rate,
+        )
+        for name, value in floats.items():
+            if not (value > 0) or (name in ("gamma", "lam") and value > 1):
+                raise ValueError(f"TRPOHyperparams.{name} out of range: {value!r}")
+        return cls(
+            **{k: jnp.asarray(v, jnp.float32) for k, v in floats.items()},
+            bootstrap_truncation=jnp.asarray(bootstrap_truncation, bool),
+        )
+
+
+@struct.dataclass
+class ObservationNormalizer:
+    """Running mean and variance of observations (Welford / Chan parallel update)."""
+
+    count: jax.Array
+    mean: jax.Array
+    sum_squares: jax.Array
+
+    @classmethod
+    def create(cls, size: int) -> ObservationNormalizer:
+        return cls(count=jnp.zeros(()), mean=jnp.zeros(size), sum_squares=jnp.zeros(size))
+
+    def update(self, obs: jax.Array) -> ObservationNormalizer:
+        obs = obs.reshape(-1, obs.shape[-1])
+        batch_count = obs.shape[0]
+        batch_mean = obs.mean(axis=0)
+        batch_sum_squares = ((obs - batch_mean) ** 2).sum(axis=0)
+        count = self.count + batch_count
+        delta = batch_mean - self.mean
+        return ObservationNormalizer(
+            count=count,
+            mean=self.mean + delta * batch_count / count,
+            sum_squares=self.sum_squares
+            + batch_sum_squares
+            + delta**2 * self.count * batch_count / count,
+        )
+
+    def __call__(self, obs: jax.Array) -> jax.Array:
+        std = jnp.sqrt(self.sum_squares / jnp.maximum(self.count, 1.0)) + 1e-8
+        normalized = jnp.clip((obs - self.mean) / std, -10.0, 10.0)
+        return jnp.where(self.count > 0, normalized, obs)
+
+
+@struct.dataclass
+class TRPOState:
+    policy_params: dict
+    value_params: dict
+    value_optimizer_state: optax.OptState
+    normalizer: ObservationNormalizer
+    env_state: envs.AutoResetState
+    env_steps: jax.Array
+    key: jax.Array
+
+
+class TRPO:
+    """The pieces of a TRPO run for one environment and static config.
+
+    ``init``, ``rollout``, ``update`` and ``evaluate`` are pure; an adversarial trainer calls
+    ``rollout``, computes its own rewards and calls ``update`` with them.
+    """
+
+    def __init__(self, config: TRPOConfig, env: envs.Env):
+        self.config = config
+        self.env = env
+        self.auto_env = envs.AutoReset(env)
+        self.policy = GaussianPolicy(env.action_size, config.hidden_sizes)
+        self.value = ValueNetwork(config.hidden_sizes)
+        self.value_optimizer = optax.scale_by_adam()
+
+    def init(self, key: jax.Array) -> TRPOState:
+        policy_key, value_key, env_key, carry_key = jax.random.split(key, 4)
+        dummy_obs = jnp.zeros((self.env.observation_size,))
+        value_params = self.value.init(value_key, dummy_obs)
+        env_state = jax.vmap(self.auto_env.reset)(jax.random.split(env_key, self.config.num_envs))
+        return TRPOState(
+            policy_params=self.policy.init(policy_key, dummy_obs),
+            value_params=value_params,
+            value_optimizer_state=self.value_optimizer.init(value_params),
+            normalizer=ObservationNormalizer.create(self.env.observation_size),
+            env_state=env_state,
+            env_steps=jnp.zeros((), jnp.int32),
+            key=carry_key,
+        )
+
+    def rollout(self, state: TRPOState) -> tuple[TRPOState, Transitions]:
+        key, rollout_key = jax.random.split(state.key)
+        env_state, transitions = collect(
+            self.auto_env,
+            self.policy,
+            state.policy_params,
+            state.normalizer,
+            state.env_state,
+            self.config.unroll_length,
+            rollout_key,
+        )
+        state = state.replace(
+            env_state=env_state, key=key, env_steps=state.env_steps + self.config.batch_size
+        )
+        return state, transitions
+
+    def update(
+        self,
+        hyperparams: TRPOHyperparams,
+        state: TRPOState,
+        transitions: Transitions,
+        rewards: jax.Array,
+    ) -> tuple[TRPOState, dict[str, jax.Array]]:
+        """Value regression then one natural-gradient policy step, on ``rewards`` float[T, N]."""
+        config = self.config
+        normalizer = state.normalizer
+        if config.normalize_observations:
+            normalizer = normalizer.update(transitions.obs)
+        obs = normalizer(transitions.obs)
+        values = self.value.apply(state.value_params, obs)
+        next_values = self.value.apply(state.value_params, normalizer(transitions.final_obs))
+        advantages, _ = generalized_advantages(
+            rewards,
+            values,
+            next_values,
+            transitions.done,
+            transitions.truncated,
+            hyperparams.gamma,
+            hyperparams.lam,
+            hyperparams.bootstrap_truncation,
+        )
+        # Value targets: bootstrapped discounted returns (lambda = 1), as the reference's.
+        _, targets = generalized_advantages(
+            rewards,
+            values,
+            next_values,
+            transitions.done,
+            transitions.truncated,
+            hyperparams.gamma,
+            1.0,
+            hyperparams.bootstrap_truncation,
+        )
+        advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
+
+        flat = lambda x: x.reshape(config.batch_size, *x.shape[2:])  # noqa: E731
+        key, value_key = jax.random.split(state.key)
+        value_params, value_optimizer_state, value_loss = self._fit_value(
+            hyperparams, state, flat(obs), flat(targets), value_key
+        )
+        policy_params, policy_metrics = self._policy_step(
+            hyperparams,
+            state.policy_params,
+            flat(obs),
+            flat(transitions.action),
+            flat(transitions.log_prob),
+            flat(advantages),
+        )
+
+        finished = transitions.done | transitions.truncated
+        num_finished = finished.sum()
+        metrics = {
+            "train/episode_return": jnp.where(
+                num_finished > 0,
+                jnp.where(finished, transitions.episode_return, 0.0).sum()
+                / jnp.maximum(num_finished, 1),
+                jnp.nan,
+            ),
+            "train/reward": rewards.mean(),
+            "value/loss": value_loss,
+            **policy_metrics,
+        }
+        state = state.replace(
+            policy_params=policy_params,
+            value_params=value_params,
+            value_optimizer_state=value_optimizer_state,
+            normalizer=normalizer,
+            key=key,
+        )
+        return state, metrics
+
+    def evaluate(self, state: TRPOState, keys: jax.Array) -> jax.Array:
+        return evaluate(self.env, self.policy, state.policy_params, state.normalizer, keys)
+
+    def _fit_value(self, hyperparams, state, obs, targets, key):
+        """Adam over one permutation of the batch in ``num_value_minibatches`` steps."""
+        num_minibatches = self.config.num_value_minibatches
+        minibatch_size = self.config.batch_size // num_minibatches
+        order = jax.random.permutation(key, self.config.batch_size)
+        order = order[: num_minibatches * minibatch_size].reshape(num_minibatches, minibatch_size)
+
+        def loss_fn(params, indices):
+            prediction = self.value.apply(params, obs[indices])
+            return jnp.mean((prediction - targets[indices]) ** 2)
+
+        def body(carry, indices):
+            params, optimizer_state = carry
+            loss, grads = jax.value_and_grad(loss_fn)(params, indices)
+            updates, optimizer_state = self.value_optimizer.update(grads, optimizer_state)
+            params = optax.apply_updates(
+                params, jax.tree.map(lambda u: -hyperparams.value_learning_rate * u, updates)
+            )
+            return (params, optimizer_state), loss
+
+        (params, optimizer_state), losses = jax.lax.scan(
+            body, (state.value_params, state.value_optimizer_state), order
+        )
+        return params, optimizer_state, losses.mean()
+
+    def _policy_step(self, hyperparams, policy_params, obs, actions, old_log_prob, advantages):
+        flat_params, unravel = ravel_pytree(policy_params)
+        old_mean, old_log_std = jax.lax.stop_gradient(self.policy.apply(policy_params, obs))
+        fisher_obs = obs[:: self.config.fisher_subsample]
+        fisher_old_mean = old_mean[:: self.config.fisher_subsample]
+
+        def surrogate_loss(flat):
+            mean, log_std = self.policy.apply(unravel(flat), obs)
+            ratio = jnp.exp(gaussian_log_prob(mean, log_std, actions) - old_log_prob)
+            return -jnp.mean(advantages * ratio)
+
+        def mean_kl(flat):
+            mean, log_std = self.policy.apply(unravel(flat), fisher_obs)
+            return jnp.mean(gaussian_kl(fisher_old_mean, old_log_std, mean, log_std))
+
+        if self.config.fisher == "gauss_newton":
+            fisher_vector_product = gauss_newton_fisher_product(
+                self.policy, unravel, flat_params, fisher_obs, hyperparams.damping
+            )
+        else:
+            fisher_vector_product = hessian_vector_product(
+                mean_kl, flat_params, hyperparams.damping
+            )
+        new_flat, metrics = natural_gradient_step(
+            surrogate_loss,
+            mean_kl,
+            flat_params,
+            hyperparams.max_kl,
+            hyperparams.damping,
+            self.config.num_cg_iterations,
+            self.config.num_backtracks,
+            fisher_vector_product,
+        )
+        new_mean, new_log_std = self.policy.apply(unravel(new_flat), obs)
+        metrics = {
+            **metrics,
+            "trpo/kl": jnp.mean(gaussian_kl(old_mean, old_log_std, new_mean, new_log_std)),
+            "trpo/entropy": gaussian_entropy(new_log_std),
+            "trpo/surrogate_improvement": surrogate_loss(flat_params) - surrogate_loss(new_flat),
+        }
+        return unravel(new_flat), metrics
+
+
+def gauss_newton_fisher_product(policy, unravel, flat_params, obs, damping):
+    """v -> (J^T M J / N) v + damping v for a diagonal Gaussian policy.
+
+    J is the Jacobian of (mean float[N, A], log_std float[A]) in the parameters and M the
+    Fisher metric of a Gaussian in those coordinates: 1/sigma^2 per mean entry, 2 per log-std.
+    At the current parameters this equals the Hessian of the mean KL (the reference's form).
+    """
+    num_samples = obs.shape[0]
+
+    def outputs(flat):
+        return policy.apply(unravel(flat), obs)
+
+    (_, log_std), vjp = jax.vjp(outputs, flat_params)
+
+    def product(v):
+        _, (d_mean, d_log_std) = jax.jvp(outputs, (flat_params,), (v,))
+        weighted = (d_mean * jnp.exp(-2 * log_std) / num_samples, 2.0 * d_log_std)
+        return vjp(weighted)[0] + damping * v
+
+    return product
+
+
+def true_reward(transitions: Transitions) -> jax.Array:
+    return transitions.reward
+
+
+def make_train(config: TRPOConfig, env: envs.Env, reward_fn: RewardFunction = true_reward):
+    """Returns ``train(hyperparams, key) -> (final_state, metrics)``, pure and jittable.
+
+    ``metrics`` maps names to float[num_iterations]; ``eval/return`` (the deterministic policy
+    on ``num_eval_episodes`` fixed-key episodes) is set every ``eval_every`` iterations, at
+    the end of each block, and NaN elsewhere.
+    """
+    trpo = TRPO(config, env)
+
+    def iteration(hyperparams, state, _):
+        state, transitions = trpo.rollout(state)
+        state, metrics = trpo.update(hyperparams, state, transitions, reward_fn(transitions))
+        metrics["env_steps"] = state.env_steps
+        return state, metrics
+
+    def train(hyperparams: TRPOHyperparams, key: jax.Array):
+        init_key, eval_key = jax.random.split(key)
+        eval_keys = jax.random.split(eval_key, config.num_eval_episodes)
+        state = trpo.init(init_key)
+
+        def block(state, _):
+            state, metrics = jax.lax.scan(
+                lambda s, x: iteration(hyperparams, s, x), state, None, length=config.eval_every
+            )
+            eval_return = trpo.evaluate(state, eval_keys)
+            metrics["eval/return"] = jnp.full((config.eval_every,), jnp.nan).at[-1].set(eval_return)
+            return state, metrics
+
+        state, metrics = jax.lax.scan(block, state, None, length=config.num_evaluations)
+        metrics = jax.tree.map(lambda x: x.reshape(config.num_iterations, *x.shape[2:]), metrics)
+        return state, metrics
+
+    train.trpo = trpo
+    return train

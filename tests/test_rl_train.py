@@ -1,0 +1,105 @@
+"""TRPO training runs: determinism, vmap invariance, validation and a learning test."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from pngail_jax import envs
+from pngail_jax.rl import TRPOConfig, TRPOHyperparams, make_train
+
+SMALL = TRPOConfig(
+    num_envs=4,
+    unroll_length=50,
+    num_iterations=2,
+    eval_every=2,
+    num_eval_episodes=4,
+    num_value_minibatches=5,
+)
+
+
+def _stack(tree, n):
+    return jax.tree.map(lambda x: jnp.broadcast_to(x, (n, *x.shape)), tree)
+
+
+@pytest.fixture(scope="module")
+def pendulum():
+    return envs.make("Pendulum-v1")
+
+
+def test_same_key_same_program_is_bit_identical(pendulum):
+    train = jax.jit(make_train(SMALL, pendulum))
+    hyperparams = TRPOHyperparams.create()
+    key = jax.random.key(3)
+    _, first = train(hyperparams, key)
+    _, second = train(hyperparams, key)
+    for name in first:
+        np.testing.assert_array_equal(first[name], second[name], err_msg=name)
+    _, other = train(hyperparams, jax.random.key(4))
+    assert not np.array_equal(first["train/episode_return"], other["train/episode_return"])
+
+
+def test_vmapped_seeds_match_single_runs(pendulum):
+    """Float32 reductions may be ordered differently under vmap: rtol 1e-4 over 2 iterations."""
+    train = make_train(SMALL, pendulum)
+    hyperparams = TRPOHyperparams.create()
+    keys = jax.random.split(jax.random.key(0), 3)
+    batched_state, batched = jax.jit(jax.vmap(train))(_stack(hyperparams, 3), keys)
+    single = jax.jit(train)
+    for seed in range(3):
+        state, metrics = single(hyperparams, keys[seed])
+        for name in ("train/episode_return", "eval/return", "value/loss", "trpo/kl"):
+            np.testing.assert_allclose(
+                batched[name][seed], metrics[name], rtol=1e-4, atol=1e-6, err_msg=name
+            )
+        np.testing.assert_allclose(
+            jax.tree.leaves(batched_state.policy_params)[0][seed],
+            jax.tree.leaves(state.policy_params)[0],
+            rtol=1e-4,
+            atol=1e-6,
+        )
+
+
+def test_metrics_and_counters(pendulum):
+    _, metrics = jax.jit(make_train(SMALL, pendulum))(TRPOHyperparams.create(), jax.random.key(0))
+    np.testing.assert_array_equal(metrics["env_steps"], [200, 400])
+    assert np.isnan(metrics["eval/return"][0]) and np.isfinite(metrics["eval/return"][1])
+    assert set(metrics) >= {
+        "train/episode_return",
+        "eval/return",
+        "trpo/kl",
+        "trpo/entropy",
+        "value/loss",
+        "trpo/accepted",
+        "env_steps",
+    }
+
+
+def test_bad_configuration_is_a_clear_error():
+    with pytest.raises(ValueError, match="multiple of eval_every"):
+        TRPOConfig(num_iterations=25, eval_every=10)
+    with pytest.raises(ValueError, match="num_envs must be a positive integer"):
+        TRPOConfig(num_envs=0)
+    with pytest.raises(ValueError, match="fisher must be"):
+        TRPOConfig(fisher="exact")
+    with pytest.raises(ValueError, match="max_kl out of range"):
+        TRPOHyperparams.create(max_kl=-0.1)
+    with pytest.raises(ValueError, match="gamma out of range"):
+        TRPOHyperparams.create(gamma=1.5)
+
+
+def test_learns_pendulum_with_reference_defaults(pendulum):
+    """Reference defaults (5,000 steps per iteration, max KL 0.01, ...), 100 iterations.
+
+    An optimal policy averages about -150 over random starts; -250 or better on at least two
+    of three seeds. Measured here: -186, -169, -168 (from about -900 at iteration 20), 25 s
+    on 2 CPU cores.
+    """
+    config = TRPOConfig(num_iterations=100, eval_every=20)
+    train = jax.jit(jax.vmap(make_train(config, pendulum)))
+    keys = jax.random.split(jax.random.key(0), 3)
+    _, metrics = train(_stack(TRPOHyperparams.create(), 3), keys)
+    final = np.asarray(metrics["eval/return"][:, -1])
+    assert (final >= -250).sum() >= 2, final
+    first = np.asarray(metrics["eval/return"][:, config.eval_every - 1])
+    assert (final > first + 300).all(), (first, final)
