@@ -396,31 +396,44 @@ def make_train(config: TRPOConfig, env: envs.Env, reward_fn: RewardFunction = tr
     ``metrics`` maps names to float[num_iterations]; ``eval/return`` (the deterministic policy
     on ``num_eval_episodes`` fixed-key episodes) is set every ``eval_every`` iterations, at
     the end of each block, and NaN elsewhere.
+
+    ``train`` is ``init`` followed by ``num_evaluations`` calls of ``block``; both are
+    attached (``train.init(key) -> (state, eval_keys)``, ``train.block(hyperparams, state,
+    eval_keys) -> (state, metrics[eval_every])``) so a host loop can run the same computation
+    in chunks, with progress and checkpoints in between.
     """
     trpo = TRPO(config, env)
 
-    def iteration(hyperparams, state, _):
+    def iteration(hyperparams, state):
         state, transitions = trpo.rollout(state)
         state, metrics = trpo.update(hyperparams, state, transitions, reward_fn(transitions))
         metrics["env_steps"] = state.env_steps
         return state, metrics
 
-    def train(hyperparams: TRPOHyperparams, key: jax.Array):
+    def init(key: jax.Array):
         init_key, eval_key = jax.random.split(key)
-        eval_keys = jax.random.split(eval_key, config.num_eval_episodes)
-        state = trpo.init(init_key)
+        return trpo.init(init_key), jax.random.split(eval_key, config.num_eval_episodes)
 
-        def block(state, _):
-            state, metrics = jax.lax.scan(
-                lambda s, x: iteration(hyperparams, s, x), state, None, length=config.eval_every
-            )
-            eval_return = trpo.evaluate(state, eval_keys)
-            metrics["eval/return"] = jnp.full((config.eval_every,), jnp.nan).at[-1].set(eval_return)
-            return state, metrics
+    def block(hyperparams: TRPOHyperparams, state: TRPOState, eval_keys: jax.Array):
+        state, metrics = jax.lax.scan(
+            lambda s, _: iteration(hyperparams, s), state, None, length=config.eval_every
+        )
+        eval_return = trpo.evaluate(state, eval_keys)
+        metrics["eval/return"] = jnp.full((config.eval_every,), jnp.nan).at[-1].set(eval_return)
+        return state, metrics
 
-        state, metrics = jax.lax.scan(block, state, None, length=config.num_evaluations)
+    def train(hyperparams: TRPOHyperparams, key: jax.Array):
+        state, eval_keys = init(key)
+        state, metrics = jax.lax.scan(
+            lambda s, _: block(hyperparams, s, eval_keys),
+            state,
+            None,
+            length=config.num_evaluations,
+        )
         metrics = jax.tree.map(lambda x: x.reshape(config.num_iterations, *x.shape[2:]), metrics)
         return state, metrics
 
+    train.init = init
+    train.block = block
     train.trpo = trpo
     return train

@@ -1,0 +1,206 @@
+"""Train TRPO on an environment's true reward, several seeds in one compiled program.
+
+    python -m experiments.train_rl --env Pendulum-v1 --iterations 100 --seeds 3 --out runs/trpo
+
+Shows progress every ``--eval-every`` iterations (iteration, evaluation and training returns,
+steps/s), then writes to ``--out``: ``config.json``, ``metrics.csv`` (one row per seed and
+iteration), ``learning_curve.png`` and the policies (``policy.json`` + ``policy_params/``),
+which ``pngail_jax.load_policy(out)`` loads without this code.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import dataclasses
+import json
+import time
+import warnings
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from pngail_jax import envs
+from pngail_jax.checkpoint import save_policies
+from pngail_jax.rl import TRPOConfig, TRPOHyperparams, make_train
+
+METRIC_COLUMNS = (
+    "env_steps",
+    "eval/return",
+    "train/episode_return",
+    "trpo/kl",
+    "trpo/entropy",
+    "trpo/accepted",
+    "value/loss",
+)
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--env", default="Pendulum-v1", help=f"one of {', '.join(envs.ENV_NAMES)}")
+    parser.add_argument("--iterations", type=int, default=100)
+    parser.add_argument("--seeds", type=int, default=3)
+    parser.add_argument("--seed", type=int, default=0, help="base PRNG seed")
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="output directory (default runs/trpo-<env>-<timestamp>)",
+    )
+    parser.add_argument("--eval-every", type=int, default=10)
+    parser.add_argument("--num-envs", type=int, default=25)
+    parser.add_argument("--unroll-length", type=int, default=200)
+    parser.add_argument("--fisher", choices=("hessian", "gauss_newton"), default="hessian")
+    parser.add_argument("--fisher-subsample", type=int, default=1)
+    parser.add_argument("--normalize-observations", action="store_true")
+    parser.add_argument(
+        "--truncation-as-terminal",
+        action="store_true",
+        help="the reference's GAE: no bootstrapping through time limits",
+    )
+    parser.add_argument("--fast-solver", action="store_true", help="envs.FAST_SOLVER (MuJoCo)")
+    args = parser.parse_args(argv)
+    if args.env not in envs.ENV_NAMES:
+        parser.error(f"unknown environment {args.env!r}; available: {', '.join(envs.ENV_NAMES)}")
+    for name in ("iterations", "seeds", "eval_every", "num_envs", "unroll_length"):
+        if getattr(args, name) < 1:
+            parser.error(f"--{name.replace('_', '-')} must be positive")
+    if args.iterations % args.eval_every:
+        parser.error("--iterations must be a multiple of --eval-every")
+    if args.out is None:
+        args.out = Path("runs") / f"trpo-{args.env}-{time.strftime('%Y%m%d-%H%M%S')}"
+    return args
+
+
+def nanmean(values, axis=None):
+    """Mean ignoring NaN (iterations where no training episode finished), NaN if all are."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmean(values, axis=axis)
+
+
+def write_metrics_csv(path: Path, metrics: dict[str, np.ndarray]) -> None:
+    num_seeds, num_iterations = metrics["env_steps"].shape
+    with path.open("w", newline="") as file:
+        writer = csv.writer(file)
+        writer.writerow(["seed", "iteration", *METRIC_COLUMNS])
+        for seed in range(num_seeds):
+            for iteration in range(num_iterations):
+                values = [metrics[name][seed, iteration] for name in METRIC_COLUMNS]
+                writer.writerow([seed, iteration + 1, *(f"{v:.6g}" for v in values)])
+
+
+def plot_learning_curve(path: Path, metrics: dict[str, np.ndarray], title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, axis = plt.subplots(figsize=(7, 4.5))
+    steps = metrics["env_steps"][0]
+    evaluated = ~np.isnan(metrics["eval/return"][0])
+    for seed, returns in enumerate(metrics["eval/return"]):
+        axis.plot(
+            steps[evaluated],
+            returns[evaluated],
+            alpha=0.35,
+            lw=1,
+            label="seeds (deterministic eval)" if seed == 0 else None,
+        )
+    mean = metrics["eval/return"][:, evaluated].mean(axis=0)
+    axis.plot(steps[evaluated], mean, color="black", lw=2, marker="o", ms=3, label="mean")
+    train_mean = nanmean(metrics["train/episode_return"], axis=0)
+    axis.plot(steps, train_mean, color="tab:orange", lw=1, label="training episodes (mean)")
+    axis.set(xlabel="environment steps", ylabel="episode return", title=title)
+    axis.grid(alpha=0.3)
+    axis.legend()
+    figure.tight_layout()
+    figure.savefig(path, dpi=120)
+    plt.close(figure)
+
+
+def main(argv=None) -> None:
+    args = parse_args(argv)
+    env_options = envs.FAST_SOLVER if args.fast_solver else {}
+    env = envs.make(args.env, **env_options)
+    config = TRPOConfig(
+        num_envs=args.num_envs,
+        unroll_length=args.unroll_length,
+        num_iterations=args.iterations,
+        eval_every=args.eval_every,
+        normalize_observations=args.normalize_observations,
+        fisher=args.fisher,
+        fisher_subsample=args.fisher_subsample,
+    )
+    hyperparams = TRPOHyperparams.create(bootstrap_truncation=not args.truncation_as_terminal)
+    train = make_train(config, env)
+    seeds_hyperparams = jax.tree.map(
+        lambda x: jnp.broadcast_to(x, (args.seeds, *x.shape)), hyperparams
+    )
+    keys = jax.random.split(jax.random.key(args.seed), args.seeds)
+    args.out.mkdir(parents=True, exist_ok=True)
+    run_config = {
+        "env": args.env,
+        "env_options": env_options,
+        "seeds": args.seeds,
+        "seed": args.seed,
+        "trpo": dataclasses.asdict(config),
+        "hyperparams": jax.tree.map(lambda x: x.item(), hyperparams).__dict__,
+    }
+    (args.out / "config.json").write_text(json.dumps(run_config, indent=2))
+
+    print(
+        f"TRPO on {args.env}: {args.seeds} seeds x {args.iterations} iterations x "
+        f"{config.batch_size} steps -> {args.out}",
+        flush=True,
+    )
+    start = time.perf_counter()
+    state, eval_keys = jax.jit(jax.vmap(train.init))(keys)
+    block = jax.jit(jax.vmap(train.block))
+    chunks = []
+    for done_blocks in range(1, config.num_evaluations + 1):
+        block_start = time.perf_counter()
+        state, metrics = block(seeds_hyperparams, state, eval_keys)
+        metrics = jax.device_get(metrics)
+        chunks.append(metrics)
+        seconds = time.perf_counter() - block_start
+        rate = args.seeds * config.eval_every * config.batch_size / seconds
+        note = " (includes compilation)" if done_blocks == 1 else ""
+        print(
+            f"iter {done_blocks * config.eval_every:5d}  "
+            f"eval {np.mean(metrics['eval/return'][:, -1]):9.1f} "
+            f"[{', '.join(f'{r:.0f}' for r in metrics['eval/return'][:, -1])}]  "
+            f"train {nanmean(metrics['train/episode_return'][:, -1]):9.1f}  "
+            f"{rate:10,.0f} steps/s{note}",
+            flush=True,
+        )
+    metrics = {name: np.concatenate([c[name] for c in chunks], axis=1) for name in chunks[0]}
+    final_returns = metrics["eval/return"][:, -1]
+    write_metrics_csv(args.out / "metrics.csv", metrics)
+    plot_learning_curve(
+        args.out / "learning_curve.png", metrics, f"TRPO on {args.env} ({args.seeds} seeds)"
+    )
+    save_policies(
+        args.out,
+        env_name=args.env,
+        observation_size=env.observation_size,
+        action_low=env.action_low,
+        action_high=env.action_high,
+        hidden_sizes=config.hidden_sizes,
+        policy_params=state.policy_params,
+        normalizer=state.normalizer,
+        normalize_observations=config.normalize_observations,
+        final_eval_returns=final_returns,
+        extra={"env_options": env_options},
+    )
+    print(
+        f"done in {time.perf_counter() - start:.0f} s; final deterministic returns "
+        f"[{', '.join(f'{r:.1f}' for r in final_returns)}] (mean {final_returns.mean():.1f}); "
+        f"wrote {args.out}/{{config.json,metrics.csv,learning_curve.png,policy.json}}"
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,119 @@
+"""Self-describing policy checkpoints: parameters (orbax) plus the JSON needed to rebuild them.
+
+``load_policy(path)`` needs neither the training code nor the environment: the directory holds
+``policy.json`` (architecture, action bounds, observation normaliser flag, per-seed final
+evaluation returns) and ``policy_params/`` (orbax), with a leading seed axis on every array.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import orbax.checkpoint as ocp
+
+from pngail_jax.networks import GaussianPolicy
+from pngail_jax.rl.train import ObservationNormalizer
+
+POLICY_FORMAT_VERSION = 1
+
+
+def save_policies(
+    directory: str | Path,
+    *,
+    env_name: str,
+    observation_size: int,
+    action_low: np.ndarray,
+    action_high: np.ndarray,
+    hidden_sizes: tuple[int, ...],
+    policy_params,
+    normalizer,
+    normalize_observations: bool,
+    final_eval_returns: np.ndarray,
+    extra: dict | None = None,
+) -> Path:
+    """Saves stacked per-seed policies (every leaf has a leading seed axis) to ``directory``."""
+    directory = Path(directory).absolute()
+    directory.mkdir(parents=True, exist_ok=True)
+    normalizer_fields = ("count", "mean", "sum_squares")
+    arrays = {
+        "policy_params": policy_params,
+        "normalizer": {name: getattr(normalizer, name) for name in normalizer_fields},
+    }
+    checkpointer = ocp.StandardCheckpointer()
+    checkpointer.save(directory / "policy_params", jax.device_get(arrays), force=True)
+    checkpointer.wait_until_finished()
+    metadata = {
+        "format_version": POLICY_FORMAT_VERSION,
+        "env": env_name,
+        "observation_size": int(observation_size),
+        "action_size": len(action_low),
+        "action_low": [float(x) for x in action_low],
+        "action_high": [float(x) for x in action_high],
+        "hidden_sizes": list(hidden_sizes),
+        "normalize_observations": bool(normalize_observations),
+        "final_eval_returns": [float(x) for x in final_eval_returns],
+        **(extra or {}),
+    }
+    (directory / "policy.json").write_text(json.dumps(metadata, indent=2))
+    return directory
+
+
+def load_policy(
+    directory: str | Path, seed: int | None = None, verbose: bool = True
+) -> Callable[[np.ndarray], np.ndarray]:
+    """Loads a saved policy as ``policy(obs) -> action`` (deterministic mean action).
+
+    ``obs``: float32[obs_size] or a batch float32[..., obs_size]; the saved observation
+    normaliser is applied. Actions are in the environment's own units, clipped to its bounds.
+    With several seeds, ``seed=None`` picks the best final evaluation return and says which.
+    """
+    directory = Path(directory).absolute()
+    metadata_path = directory / "policy.json"
+    if not metadata_path.exists():
+        raise FileNotFoundError(f"no policy.json in {directory}: not a saved policy directory")
+    metadata = json.loads(metadata_path.read_text())
+    if metadata.get("format_version") != POLICY_FORMAT_VERSION:
+        raise ValueError(
+            f"{metadata_path}: unsupported format_version {metadata.get('format_version')!r}"
+        )
+    returns = metadata["final_eval_returns"]
+    if seed is None:
+        seed = int(np.nanargmax(returns))
+        if verbose and len(returns) > 1:
+            print(
+                f"load_policy: seed {seed} of {len(returns)} (best final evaluation return "
+                f"{returns[seed]:.1f})"
+            )
+    elif not 0 <= seed < len(returns):
+        raise ValueError(f"seed must be in [0, {len(returns)}), got {seed}")
+    arrays = ocp.StandardCheckpointer().restore(directory / "policy_params")
+    arrays = jax.tree.map(lambda x: jnp.asarray(x[seed]), arrays)
+    policy = GaussianPolicy(metadata["action_size"], tuple(metadata["hidden_sizes"]))
+    low = jnp.asarray(metadata["action_low"], jnp.float32)
+    high = jnp.asarray(metadata["action_high"], jnp.float32)
+    normalizer = ObservationNormalizer(**arrays["normalizer"])
+    observation_size = metadata["observation_size"]
+
+    @jax.jit
+    def act(obs):
+        if metadata["normalize_observations"]:
+            obs = normalizer(obs)
+        mean, _ = policy.apply(arrays["policy_params"], obs)
+        return jnp.clip(mean, low, high)
+
+    def policy_fn(obs) -> np.ndarray:
+        obs = np.asarray(obs, np.float32)
+        if obs.shape[-1:] != (observation_size,):
+            raise ValueError(
+                f"observation must have shape (..., {observation_size}), got {obs.shape}"
+            )
+        return np.asarray(act(obs))
+
+    policy_fn.seed = seed
+    policy_fn.metadata = metadata
+    return policy_fn

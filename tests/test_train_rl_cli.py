@@ -1,0 +1,103 @@
+"""experiments.train_rl end to end (tiny budget) and pngail_jax.load_policy."""
+
+import json
+
+import jax
+import numpy as np
+import pytest
+
+import pngail_jax
+from experiments import train_rl
+from pngail_jax.networks import GaussianPolicy
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("trpo")
+    train_rl.main(
+        [
+            "--env",
+            "Pendulum-v1",
+            "--iterations",
+            "4",
+            "--eval-every",
+            "2",
+            "--seeds",
+            "2",
+            "--num-envs",
+            "4",
+            "--unroll-length",
+            "50",
+            "--out",
+            str(out),
+        ]
+    )
+    return out
+
+
+def test_outputs_are_written(run_dir):
+    for name in ("config.json", "metrics.csv", "learning_curve.png", "policy.json"):
+        assert (run_dir / name).stat().st_size > 0, name
+    lines = (run_dir / "metrics.csv").read_text().splitlines()
+    assert lines[0].startswith("seed,iteration,env_steps,eval/return")
+    assert len(lines) == 1 + 2 * 4
+    config = json.loads((run_dir / "config.json").read_text())
+    assert config["trpo"]["num_iterations"] == 4 and config["seeds"] == 2
+
+
+def test_load_policy_picks_best_seed_and_acts(run_dir, capsys):
+    metadata = json.loads((run_dir / "policy.json").read_text())
+    policy = pngail_jax.load_policy(run_dir)
+    assert policy.seed == int(np.argmax(metadata["final_eval_returns"]))
+    assert f"seed {policy.seed} of 2" in capsys.readouterr().out
+    obs = np.array([1.0, 0.0, 0.5], np.float32)
+    action = policy(obs)
+    assert action.shape == (1,) and np.all(np.abs(action) <= 2.0)
+    assert policy(np.stack([obs, obs])).shape == (2, 1)
+    # The same numbers as the network itself, clipped to the torque bound.
+    other = pngail_jax.load_policy(run_dir, seed=1 - policy.seed)
+    assert not np.allclose(other(obs), action)
+
+
+def test_load_policy_matches_saved_parameters(tmp_path):
+    from pngail_jax.checkpoint import save_policies
+    from pngail_jax.rl.train import ObservationNormalizer
+
+    policy = GaussianPolicy(action_size=2, hidden_sizes=(8,))
+    params = jax.vmap(lambda k: policy.init(k, np.zeros(3, np.float32)))(
+        jax.random.split(jax.random.key(0), 2)
+    )
+    normalizer = ObservationNormalizer.create(3).update(np.arange(12.0).reshape(4, 3))
+    stacked = jax.tree.map(lambda x: np.stack([x, x]), normalizer)
+    save_policies(
+        tmp_path,
+        env_name="Test",
+        observation_size=3,
+        action_low=np.array([-5.0, -5.0]),
+        action_high=np.array([5.0, 5.0]),
+        hidden_sizes=(8,),
+        policy_params=params,
+        normalizer=stacked,
+        normalize_observations=True,
+        final_eval_returns=np.array([1.0, 2.0]),
+    )
+    loaded = pngail_jax.load_policy(tmp_path, seed=0, verbose=False)
+    obs = np.array([[3.0, -1.0, 2.0]], np.float32)
+    expected, _ = policy.apply(jax.tree.map(lambda x: x[0], params), normalizer(obs))
+    np.testing.assert_allclose(loaded(obs), np.clip(expected, -5, 5), rtol=1e-6, atol=1e-6)
+
+
+def test_load_policy_errors(run_dir, tmp_path):
+    with pytest.raises(FileNotFoundError, match="no policy.json"):
+        pngail_jax.load_policy(tmp_path)
+    with pytest.raises(ValueError, match=r"seed must be in \[0, 2\)"):
+        pngail_jax.load_policy(run_dir, seed=5)
+    with pytest.raises(ValueError, match=r"observation must have shape \(\.\.\., 3\)"):
+        pngail_jax.load_policy(run_dir, verbose=False)(np.zeros(4))
+
+
+def test_cli_rejects_bad_arguments():
+    with pytest.raises(SystemExit):
+        train_rl.parse_args(["--env", "CartPole-v1"])
+    with pytest.raises(SystemExit):
+        train_rl.parse_args(["--iterations", "15", "--eval-every", "10"])
