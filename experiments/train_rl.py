@@ -105,6 +105,7 @@ def plot_learning_curve(path: Path, metrics: dict[str, np.ndarray], title: str) 
         axis.plot(
             steps[evaluated],
             returns[evaluated],
+            color="tab:blue",
             alpha=0.35,
             lw=1,
             label="seeds (deterministic eval)" if seed == 0 else None,

@@ -103,3 +103,35 @@ def test_learns_pendulum_with_reference_defaults(pendulum):
     assert (final >= -250).sum() >= 2, final
     first = np.asarray(metrics["eval/return"][:, config.eval_every - 1])
     assert (final > first + 300).all(), (first, final)
+
+
+def test_observation_normalizer_matches_numpy():
+    from pngail_jax.rl.train import ObservationNormalizer
+
+    rng = np.random.default_rng(0)
+    chunks = [rng.normal(3.0, 2.0, size=(n, 4)).astype(np.float32) for n in (5, 17, 40)]
+    normalizer = ObservationNormalizer.create(4)
+    assert np.array_equal(normalizer(chunks[0]), chunks[0])  # identity before any data
+    for chunk in chunks:
+        normalizer = normalizer.update(jnp.asarray(chunk))
+    everything = np.concatenate(chunks)
+    np.testing.assert_allclose(normalizer.mean, everything.mean(axis=0), rtol=1e-5)
+    expected = (everything - everything.mean(axis=0)) / (everything.std(axis=0) + 1e-8)
+    np.testing.assert_allclose(normalizer(everything), expected, rtol=1e-4, atol=1e-4)
+
+
+def test_observation_normalization_option_trains(pendulum):
+    config = TRPOConfig(
+        num_envs=4,
+        unroll_length=50,
+        num_iterations=2,
+        eval_every=2,
+        num_eval_episodes=4,
+        num_value_minibatches=5,
+        normalize_observations=True,
+    )
+    state, metrics = jax.jit(make_train(config, pendulum))(
+        TRPOHyperparams.create(), jax.random.key(0)
+    )
+    assert float(state.normalizer.count) == 2 * config.batch_size
+    assert np.isfinite(metrics["eval/return"][-1])
