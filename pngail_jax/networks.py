@@ -16,7 +16,7 @@ import jax.numpy as jnp
 OUTPUT_SCALE = 0.1
 
 
-def _torch_like_init(scale: float = 1.0):
+def torch_like_init(scale: float = 1.0):
     """U(-scale / sqrt(fan_in), scale / sqrt(fan_in)): variance scale^2 / (3 fan_in)."""
     return nn.initializers.variance_scaling(scale**2 / 3.0, "fan_in", "uniform")
 
@@ -33,8 +33,8 @@ class MLP(nn.Module):
     @nn.compact
     def __call__(self, x: jax.Array) -> jax.Array:
         for size in self.hidden_sizes:
-            x = jnp.tanh(nn.Dense(size, kernel_init=_torch_like_init())(x))
-        return nn.Dense(self.output_size, kernel_init=_torch_like_init(OUTPUT_SCALE))(x)
+            x = jnp.tanh(nn.Dense(size, kernel_init=torch_like_init())(x))
+        return nn.Dense(self.output_size, kernel_init=torch_like_init(OUTPUT_SCALE))(x)
 
 
 class GaussianPolicy(nn.Module):

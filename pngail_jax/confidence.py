@@ -1,0 +1,202 @@
+"""Semi-supervised confidence classifiers: SC (2IWIL) and BSC (PN-GAIL, eq. 13).
+
+A classifier g maps a demonstration pair x = [s, a] to a logit; sigmoid(g(x)) is the predicted
+confidence that x is optimal. Training sees labelled rows D_c (with confidence r) and
+unlabelled rows D_u. ``l(z) = softplus(-z)`` is the logistic loss and
+``alpha = beta = n_u / (n_c + n_u)`` (``../shared/REFERENCE.md``, confidence classifiers).
+
+Which classifier runs is data (``ClassifierSpec.bsc_coef``), so SC and BSC train side by side
+in one vmapped program.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+import optax
+from flax import struct
+
+from pngail_jax.networks import OUTPUT_SCALE, torch_like_init
+
+
+def logistic_loss(z: jax.Array) -> jax.Array:
+    """l(z) = log(1 + exp(-z)) = softplus(-z), elementwise."""
+    return jax.nn.softplus(-z)
+
+
+def bsc_loss(logits_labelled, confidence, logits_unlabelled, alpha, beta, eps):
+    """Balanced semi-conf risk, eq. 13 with the clip of appendix C.2.
+
+    ``R_C + clip(R_1, -eps, eps)`` with ``R_C = mean_c[r l(g) + (1 - r) l(-g)]`` and
+    ``R_1 = alpha (mean_u l(g) - mean_c l(g)) + beta (mean_u l(-g) - mean_c l(-g))``. When
+    ``|R_1| > eps`` the clip passes no gradient to it.
+
+    Args: logits_labelled float[n_c], confidence float[n_c], logits_unlabelled float[n_u].
+    Returns ``(loss, metrics)``.
+    """
+    supervised = jnp.mean(
+        confidence * logistic_loss(logits_labelled)
+        + (1 - confidence) * logistic_loss(-logits_labelled)
+    )
+    balance = alpha * (
+        jnp.mean(logistic_loss(logits_unlabelled)) - jnp.mean(logistic_loss(logits_labelled))
+    ) + beta * (
+        jnp.mean(logistic_loss(-logits_unlabelled)) - jnp.mean(logistic_loss(-logits_labelled))
+    )
+    loss = supervised + jnp.clip(balance, -eps, eps)
+    return loss, {
+        "bsc/supervised": supervised,
+        "bsc/balance": balance,
+        "bsc/clip_active": (jnp.abs(balance) > eps).astype(loss.dtype),
+    }
+
+
+def sc_loss(logits_labelled, confidence, logits_unlabelled, beta, positive_branch):
+    """Semi-conf risk of 2IWIL (eq. 2) with its code's non-negative correction.
+
+    ``positive_branch`` (bool[]) is whether the mean *labelled* confidence exceeds 0.5 (the
+    reference decides with the hidden unlabelled confidences; we use what is known):
+      True:  pos = mean_c (r - beta) l(g) + beta mean_u l(g),  neg = mean_c (1 - r) l(-g)
+      False: pos = mean_c r l(g),  neg = mean_c (1 - beta - r) l(-g) + beta mean_u l(-g)
+    loss = max(pos, 0) + max(neg, 0). Returns ``(loss, metrics)``.
+    """
+    l_pos_c, l_neg_c = logistic_loss(logits_labelled), logistic_loss(-logits_labelled)
+    l_pos_u, l_neg_u = logistic_loss(logits_unlabelled), logistic_loss(-logits_unlabelled)
+    positive_pos = jnp.mean((confidence - beta) * l_pos_c) + beta * jnp.mean(l_pos_u)
+    positive_neg = jnp.mean((1 - confidence) * l_neg_c)
+    negative_pos = jnp.mean(confidence * l_pos_c)
+    negative_neg = jnp.mean((1 - beta - confidence) * l_neg_c) + beta * jnp.mean(l_neg_u)
+    pos = jnp.where(positive_branch, positive_pos, negative_pos)
+    neg = jnp.where(positive_branch, positive_neg, negative_neg)
+    loss = jnp.maximum(pos, 0.0) + jnp.maximum(neg, 0.0)
+    return loss, {"sc/positive_risk": pos, "sc/negative_risk": neg}
+
+
+class ConfidenceClassifier(nn.Module):
+    """The reference's classifier: MLP 40-40 tanh with dropout 0.5 after each hidden layer."""
+
+    hidden_sizes: tuple[int, ...] = (40, 40)
+    dropout_rate: float = 0.5
+
+    @nn.compact
+    def __call__(self, x: jax.Array, deterministic: bool) -> jax.Array:
+        """x float[..., obs_size + action_size] -> logit float[...]."""
+        for size in self.hidden_sizes:
+            x = jnp.tanh(nn.Dense(size, kernel_init=torch_like_init())(x))
+            x = nn.Dropout(self.dropout_rate, deterministic=deterministic)(x)
+        logit = nn.Dense(1, kernel_init=torch_like_init(OUTPUT_SCALE))(x)
+        return logit[..., 0]
+
+
+@dataclasses.dataclass(frozen=True)
+class ClassifierConfig:
+    """Static settings. Defaults: the reference code (25,000 steps of 1 labelled + 4 unlabelled
+    rows); the paper's Walker2d setting is 50,000 steps and eps 0.05."""
+
+    num_steps: int = 25_000
+    labelled_batch_size: int = 1
+    unlabelled_batch_size: int = 4
+    learning_rate: float = 3e-4
+    hidden_sizes: tuple[int, ...] = (40, 40)
+    dropout_rate: float = 0.5
+
+    def __post_init__(self):
+        for name in ("num_steps", "labelled_batch_size", "unlabelled_batch_size"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or value < 1:
+                raise ValueError(
+                    f"ClassifierConfig.{name} must be a positive integer, got {value!r}"
+                )
+
+
+@struct.dataclass
+class ClassifierSpec:
+    """Which classifier (``bsc_coef`` 1 = BSC, 0 = SC) and its eps: pytree leaves."""
+
+    bsc_coef: jax.Array
+    eps: jax.Array
+
+    @classmethod
+    def sc(cls) -> ClassifierSpec:
+        return cls(bsc_coef=jnp.asarray(0.0), eps=jnp.asarray(0.01))
+
+    @classmethod
+    def bsc(cls, eps: float = 0.01) -> ClassifierSpec:
+        if not eps > 0:
+            raise ValueError(f"BSC eps must be positive, got {eps!r}")
+        return cls(bsc_coef=jnp.asarray(1.0), eps=jnp.asarray(eps, jnp.float32))
+
+
+def train_classifier(
+    config: ClassifierConfig,
+    spec: ClassifierSpec,
+    inputs: jax.Array,
+    confidence: jax.Array,
+    labelled: jax.Array,
+    key: jax.Array,
+):
+    """Trains one classifier; pure, so ``vmap`` runs seeds x variants at once.
+
+    Args:
+      inputs: float[N, d] rows [s, a] (all of D_c and D_u; rows outside the split have
+        ``labelled`` False and are treated as unlabelled, so callers pass only the split).
+      confidence: float[N], the labels the learner may see (only read where ``labelled``).
+      labelled: bool[N], the D_c mask. alpha = beta = n_u / (n_c + n_u) follow from it.
+      key: draws the initialisation, dropout and batches.
+
+    Returns ``(predicted, metrics)``: predicted confidence float[N], sigmoid(g(x)) for
+    unlabelled rows and the given label for labelled rows; metrics float[num_steps] each.
+    """
+    model = ConfidenceClassifier(config.hidden_sizes, config.dropout_rate)
+    init_key, train_key = jax.random.split(key)
+    params = model.init(init_key, inputs[0], deterministic=True)
+    optimizer = optax.amsgrad(config.learning_rate)
+    num_labelled = labelled.sum()
+    beta = (inputs.shape[0] - num_labelled) / inputs.shape[0]
+    positive_branch = jnp.sum(jnp.where(labelled, confidence, 0.0)) / num_labelled > 0.5
+    labelled_p = labelled / num_labelled
+    unlabelled_p = (~labelled) / jnp.maximum((~labelled).sum(), 1)
+
+    def loss_fn(params, batch_labelled, batch_unlabelled, dropout_key):
+        key_c, key_u = jax.random.split(dropout_key)
+        logits_c = model.apply(
+            params, inputs[batch_labelled], deterministic=False, rngs={"dropout": key_c}
+        )
+        logits_u = model.apply(
+            params, inputs[batch_unlabelled], deterministic=False, rngs={"dropout": key_u}
+        )
+        r = confidence[batch_labelled]
+        bsc, bsc_metrics = bsc_loss(logits_c, r, logits_u, beta, beta, spec.eps)
+        sc, sc_metrics = sc_loss(logits_c, r, logits_u, beta, positive_branch)
+        loss = spec.bsc_coef * bsc + (1 - spec.bsc_coef) * sc
+        return loss, {"loss": loss, "bsc/clip_active": bsc_metrics["bsc/clip_active"]}
+
+    def step(carry, step_key):
+        params, optimizer_state = carry
+        key_c, key_u, dropout_key = jax.random.split(step_key, 3)
+        batch_c = jax.random.choice(
+            key_c, inputs.shape[0], (config.labelled_batch_size,), p=labelled_p
+        )
+        batch_u = jax.random.choice(
+            key_u, inputs.shape[0], (config.unlabelled_batch_size,), p=unlabelled_p
+        )
+        grads, metrics = jax.grad(loss_fn, has_aux=True)(params, batch_c, batch_u, dropout_key)
+        updates, optimizer_state = optimizer.update(grads, optimizer_state, params)
+        return (optax.apply_updates(params, updates), optimizer_state), metrics
+
+    (params, _), metrics = jax.lax.scan(
+        step, (params, optimizer.init(params)), jax.random.split(train_key, config.num_steps)
+    )
+    predicted = jax.nn.sigmoid(model.apply(params, inputs, deterministic=True))
+    return jnp.where(labelled, confidence, predicted), metrics
+
+
+def confidence_errors(predicted, true_confidence, labelled):
+    """MAE and RMSE over the unlabelled rows only (Table 1): a dict of float[]."""
+    unlabelled = ~labelled
+    errors = jnp.where(unlabelled, predicted - true_confidence, 0.0)
+    count = jnp.maximum(unlabelled.sum(), 1)
+    return {"mae": jnp.abs(errors).sum() / count, "rmse": jnp.sqrt((errors**2).sum() / count)}
