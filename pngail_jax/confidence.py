@@ -200,3 +200,31 @@ def confidence_errors(predicted, true_confidence, labelled):
     errors = jnp.where(unlabelled, predicted - true_confidence, 0.0)
     count = jnp.maximum(unlabelled.sum(), 1)
     return {"mae": jnp.abs(errors).sum() / count, "rmse": jnp.sqrt((errors**2).sum() / count)}
+
+
+def split_and_train(
+    config: ClassifierConfig,
+    spec: ClassifierSpec,
+    inputs: jax.Array,
+    confidence: jax.Array,
+    traj_size: int,
+    label_ratio,
+    noise_std,
+    key: jax.Array,
+) -> dict[str, jax.Array]:
+    """One seed of Table 1: draw the split, train, score the unlabelled rows.
+
+    The seed's key draws the rows, the split, the noise, the initialisation, dropout and
+    batches, so SC and BSC run with the same key see the same split. Returns float[] metrics:
+    ``mae``, ``rmse`` and ``clip_active`` (fraction of steps where BSC's clip was active; also
+    computed, unused, for SC).
+    """
+    from pngail_jax.demos import make_split
+
+    split_key, train_key = jax.random.split(key)
+    split = make_split(split_key, confidence, traj_size, label_ratio, noise_std)
+    predicted, metrics = train_classifier(
+        config, spec, inputs[split.indices], split.confidence, split.labelled, train_key
+    )
+    errors = confidence_errors(predicted, split.true_confidence, split.labelled)
+    return {**errors, "clip_active": metrics["bsc/clip_active"].mean()}

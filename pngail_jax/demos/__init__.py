@@ -1,0 +1,23 @@
+"""Imperfect demonstrations: the ``Demonstrations`` type, loaders, savers and splits."""
+
+from pngail_jax.demos.data import (
+    DemonstrationError,
+    Demonstrations,
+    Split,
+    load_demonstrations,
+    load_npz,
+    load_released,
+    make_split,
+    save_npz,
+)
+
+__all__ = [
+    "DemonstrationError",
+    "Demonstrations",
+    "Split",
+    "load_demonstrations",
+    "load_npz",
+    "load_released",
+    "make_split",
+    "save_npz",
+]

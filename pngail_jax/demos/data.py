@@ -1,0 +1,279 @@
+"""The ``Demonstrations`` type, its validation, loaders and savers, and vmappable splits.
+
+Two on-disk layouts:
+
+- The paper's released layout: ``{env}_mixture.npy`` of shape (N, obs_dim + act_dim), rows
+  ``[s, a]``, and ``{env}_mixture_conf.npy`` of shape (N, 1). The released Pendulum set stores
+  the torque divided by 2, so load it with ``action_scale=2`` to get the environment's units;
+  the default 1 keeps the rows as stored (``../shared/REFERENCE.md``, demonstrations).
+- Our ``.npz`` schema, version 1: arrays ``observations`` float32[N, O], ``actions``
+  float32[N, A], optional ``confidence`` float32[N], ``labelled`` bool[N],
+  ``trajectory_ids`` int32[N], plus ``metadata_json`` (a JSON string) and ``format_version``.
+
+Everything is loaded with ``allow_pickle=False``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from flax import struct
+
+NPZ_FORMAT_VERSION = 1
+
+# Observation sizes of the paper's released files (gym -v2 MuJoCo tasks), to split [s, a].
+RELEASED_OBSERVATION_SIZES = {
+    "Pendulum-v1": 3,
+    "Ant-v2": 111,
+    "HalfCheetah-v2": 17,
+    "Hopper-v2": 11,
+    "Swimmer-v2": 8,
+    "Walker2d-v2": 17,
+}
+
+
+class DemonstrationError(ValueError):
+    """Demonstrations that cannot be used as given; the message names the problem."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Demonstrations:
+    """State-action pairs with optional per-row confidence that the pair is optimal.
+
+    Attributes:
+      observations: float32[N, observation_size].
+      actions: float32[N, action_size], in the environment's units.
+      confidence: float32[N] in [0, 1], or None.
+      labelled: bool[N], rows whose confidence a learner may see (default: all, when
+        confidence is given).
+      trajectory_ids: int32[N] or None.
+      metadata: environment name, action scale, random / optimal returns for normalisation,
+        and how the set was made.
+    """
+
+    observations: np.ndarray
+    actions: np.ndarray
+    confidence: np.ndarray | None = None
+    labelled: np.ndarray | None = None
+    trajectory_ids: np.ndarray | None = None
+    metadata: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+    def __post_init__(self):
+        obs = _float_matrix("observations", self.observations)
+        actions = _float_matrix("actions", self.actions)
+        if len(obs) != len(actions):
+            raise DemonstrationError(
+                f"observations has {len(obs)} rows but actions has {len(actions)}"
+            )
+        if len(obs) == 0:
+            raise DemonstrationError("no demonstration rows")
+        object.__setattr__(self, "observations", obs)
+        object.__setattr__(self, "actions", actions)
+        if self.confidence is not None:
+            confidence = np.asarray(self.confidence)
+            if confidence.ndim == 2 and confidence.shape[1] == 1:
+                confidence = confidence[:, 0]
+            _check_rows("confidence", confidence, len(obs), ndim=1)
+            if not np.issubdtype(confidence.dtype, np.floating):
+                raise DemonstrationError(
+                    f"confidence must be floating point, got {confidence.dtype}"
+                )
+            if not np.isfinite(confidence).all():
+                raise DemonstrationError("confidence contains NaN or infinite values")
+            if confidence.min() < 0 or confidence.max() > 1:
+                raise DemonstrationError(
+                    f"confidence must lie in [0, 1], got values in "
+                    f"[{confidence.min():.3g}, {confidence.max():.3g}]"
+                )
+            object.__setattr__(self, "confidence", confidence.astype(np.float32))
+        if self.labelled is not None:
+            labelled = np.asarray(self.labelled)
+            _check_rows("labelled", labelled, len(obs), ndim=1)
+            if labelled.dtype != np.bool_:
+                raise DemonstrationError(f"labelled must be a bool mask, got {labelled.dtype}")
+            if self.confidence is None and labelled.any():
+                raise DemonstrationError("labelled rows given but no confidence")
+        if self.trajectory_ids is not None:
+            ids = np.asarray(self.trajectory_ids)
+            _check_rows("trajectory_ids", ids, len(obs), ndim=1)
+            if not np.issubdtype(ids.dtype, np.integer):
+                raise DemonstrationError(f"trajectory_ids must be integers, got {ids.dtype}")
+            object.__setattr__(self, "trajectory_ids", ids.astype(np.int32))
+
+    @property
+    def num_rows(self) -> int:
+        return len(self.observations)
+
+    @property
+    def inputs(self) -> np.ndarray:
+        """float32[N, observation_size + action_size]: rows [s, a]."""
+        return np.concatenate([self.observations, self.actions], axis=1)
+
+    def check_env(self, env) -> None:
+        """Raises ``DemonstrationError`` unless the sizes match ``env``'s."""
+        if self.observations.shape[1] != env.observation_size:
+            raise DemonstrationError(
+                f"demonstrations have observations of size "
+                f"{self.observations.shape[1]}, {env.name} has "
+                f"{env.observation_size}"
+            )
+        if self.actions.shape[1] != env.action_size:
+            raise DemonstrationError(
+                f"demonstrations have actions of size "
+                f"{self.actions.shape[1]}, {env.name} has {env.action_size}"
+            )
+
+
+def _float_matrix(name: str, values) -> np.ndarray:
+    values = np.asarray(values)
+    if values.ndim != 2:
+        raise DemonstrationError(f"{name} must be 2-D (rows, features), got shape {values.shape}")
+    if not np.issubdtype(values.dtype, np.floating):
+        raise DemonstrationError(f"{name} must be floating point, got {values.dtype}")
+    if not np.isfinite(values).all():
+        bad = np.argwhere(~np.isfinite(values))[0]
+        raise DemonstrationError(
+            f"{name} contains NaN or infinite values (first at row {bad[0]}, column {bad[1]})"
+        )
+    return values.astype(np.float32)
+
+
+def _check_rows(name: str, values: np.ndarray, num_rows: int, ndim: int) -> None:
+    if values.ndim != ndim or len(values) != num_rows:
+        raise DemonstrationError(f"{name} must have shape ({num_rows},), got {values.shape}")
+
+
+def load_released(
+    mixture_path: str | Path,
+    conf_path: str | Path | None = None,
+    action_scale: float = 1.0,
+    observation_size: int | None = None,
+) -> Demonstrations:
+    """Loads the paper's ``{env}_mixture.npy`` (+ ``{env}_mixture_conf.npy``) layout.
+
+    ``conf_path`` defaults to the sibling ``*_mixture_conf.npy``. ``action_scale`` multiplies
+    the stored action columns (2 for the released Pendulum set, whose torques are stored / 2).
+    ``observation_size`` splits [s, a]; by default it is looked up from the file name's
+    environment (``RELEASED_OBSERVATION_SIZES``).
+    """
+    mixture_path = Path(mixture_path)
+    if not mixture_path.name.endswith("_mixture.npy"):
+        raise DemonstrationError(f"{mixture_path}: expected a file named {{env}}_mixture.npy")
+    env_name = mixture_path.name.removesuffix("_mixture.npy")
+    if conf_path is None:
+        conf_path = mixture_path.with_name(f"{env_name}_mixture_conf.npy")
+    rows = np.load(mixture_path, allow_pickle=False)
+    confidence = np.load(conf_path, allow_pickle=False)
+    if observation_size is None:
+        if env_name not in RELEASED_OBSERVATION_SIZES:
+            raise DemonstrationError(
+                f"{mixture_path}: unknown environment {env_name!r}; pass "
+                f"observation_size (known: "
+                f"{', '.join(RELEASED_OBSERVATION_SIZES)})"
+            )
+        observation_size = RELEASED_OBSERVATION_SIZES[env_name]
+    if rows.ndim != 2 or not 0 < observation_size < rows.shape[1]:
+        raise DemonstrationError(
+            f"{mixture_path}: rows of shape {rows.shape} cannot be split "
+            f"into {observation_size} observation columns and actions"
+        )
+    if not action_scale > 0:
+        raise DemonstrationError(f"action_scale must be positive, got {action_scale!r}")
+    return Demonstrations(
+        observations=rows[:, :observation_size],
+        actions=rows[:, observation_size:] * action_scale,
+        confidence=confidence,
+        metadata={
+            "env": env_name,
+            "action_scale": float(action_scale),
+            "source": f"released layout: {mixture_path.name}",
+        },
+    )
+
+
+def save_npz(path: str | Path, demos: Demonstrations) -> None:
+    arrays = {"observations": demos.observations, "actions": demos.actions}
+    for name in ("confidence", "labelled", "trajectory_ids"):
+        if getattr(demos, name) is not None:
+            arrays[name] = getattr(demos, name)
+    np.savez(
+        path,
+        **arrays,
+        metadata_json=np.asarray(json.dumps(demos.metadata)),
+        format_version=np.asarray(NPZ_FORMAT_VERSION),
+    )
+
+
+def load_npz(path: str | Path) -> Demonstrations:
+    with np.load(path, allow_pickle=False) as data:
+        version = int(data["format_version"]) if "format_version" in data else None
+        if version != NPZ_FORMAT_VERSION:
+            raise DemonstrationError(
+                f"{path}: unsupported format_version {version!r} "
+                f"(this version reads {NPZ_FORMAT_VERSION})"
+            )
+        optional = {
+            name: data[name]
+            for name in ("confidence", "labelled", "trajectory_ids")
+            if name in data
+        }
+        return Demonstrations(
+            observations=data["observations"],
+            actions=data["actions"],
+            metadata=json.loads(str(data["metadata_json"])),
+            **optional,
+        )
+
+
+def load_demonstrations(
+    path: str | Path, conf_path: str | Path | None = None, action_scale: float = 1.0
+) -> Demonstrations:
+    """Loads either layout, chosen by the file name (``*_mixture.npy`` or ``*.npz``)."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"demonstrations not found: {path}")
+    if path.suffix == ".npz":
+        return load_npz(path)
+    return load_released(path, conf_path, action_scale)
+
+
+@struct.dataclass
+class Split:
+    """One seed's D_c / D_u split of ``traj_size`` rows; leaves are [traj_size]."""
+
+    indices: jax.Array  # int32, rows of the full set
+    confidence: jax.Array  # float32, confidences the learner sees (after any noise)
+    true_confidence: jax.Array  # float32, before noise (for MAE / RMSE)
+    labelled: jax.Array  # bool, D_c
+
+
+def make_split(
+    key: jax.Array,
+    confidence: jax.Array,
+    traj_size: int,
+    label_ratio: float | jax.Array,
+    noise_std: float | jax.Array = 0.0,
+) -> Split:
+    """Draws ``traj_size`` rows; the first ``round(label_ratio * traj_size)`` are labelled.
+
+    Confidence noise ``clip(r + N(0, noise_std^2), 0, 1)`` as the paper's robustness test.
+    ``traj_size`` is static (a shape); ``label_ratio`` and ``noise_std`` are values, so a grid
+    can vmap over them.
+    """
+    order_key, noise_key = jax.random.split(key)
+    indices = jax.random.permutation(order_key, confidence.shape[0])[:traj_size]
+    true_confidence = confidence[indices]
+    noise = noise_std * jax.random.normal(noise_key, true_confidence.shape)
+    num_labelled = jnp.round(label_ratio * traj_size)
+    return Split(
+        indices=indices.astype(jnp.int32),
+        confidence=jnp.clip(true_confidence + noise, 0.0, 1.0),
+        true_confidence=true_confidence,
+        labelled=jnp.arange(traj_size) < num_labelled,
+    )
