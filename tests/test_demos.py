@@ -1,0 +1,134 @@
+"""Demonstrations: validation errors, loaders, round trips and splits."""
+
+from pathlib import Path
+
+import jax
+import numpy as np
+import pytest
+
+from pngail_jax import envs
+from pngail_jax.demos import (
+    DemonstrationError,
+    Demonstrations,
+    load_demonstrations,
+    load_released,
+    make_split,
+    save_npz,
+)
+
+SHARED_PENDULUM = Path(__file__).resolve().parents[2] / "shared" / "data" / "pendulum"
+
+
+def _valid(**overrides):
+    rng = np.random.default_rng(0)
+    fields = dict(
+        observations=rng.normal(size=(10, 3)).astype(np.float32),
+        actions=rng.normal(size=(10, 1)).astype(np.float32),
+        confidence=rng.uniform(size=10).astype(np.float32),
+        labelled=np.arange(10) < 2,
+        trajectory_ids=np.repeat([0, 1], 5),
+        metadata={"env": "Pendulum-v1", "random_return": -1200.96},
+    )
+    return {**fields, **overrides}
+
+
+@pytest.mark.parametrize(
+    ("overrides", "message"),
+    [
+        (dict(observations=np.zeros(10, np.float32)), r"observations must be 2-D"),
+        (dict(actions=np.zeros((9, 1), np.float32)), r"observations has 10 rows but actions has 9"),
+        (dict(actions=np.zeros((10, 1), np.int64)), r"actions must be floating point"),
+        (dict(observations=np.full((10, 3), np.nan, np.float32)), r"observations contains NaN"),
+        (dict(confidence=np.full(10, 1.5, np.float32)), r"confidence must lie in \[0, 1\]"),
+        (dict(confidence=np.full(10, np.nan, np.float32)), r"confidence contains NaN"),
+        (dict(confidence=np.zeros(7, np.float32)), r"confidence must have shape \(10,\)"),
+        (dict(confidence=np.zeros(10, np.int32)), r"confidence must be floating point"),
+        (dict(labelled=np.ones(10, np.int32)), r"labelled must be a bool mask"),
+        (dict(confidence=None), r"labelled rows given but no confidence"),
+        (dict(trajectory_ids=np.zeros(10, np.float32)), r"trajectory_ids must be integers"),
+        (
+            dict(
+                observations=np.zeros((0, 3), np.float32),
+                actions=np.zeros((0, 1), np.float32),
+                confidence=None,
+                labelled=None,
+                trajectory_ids=None,
+            ),
+            r"no demonstration rows",
+        ),
+    ],
+)
+def test_validation_errors_name_the_problem(overrides, message):
+    with pytest.raises(DemonstrationError, match=message):
+        Demonstrations(**_valid(**overrides))
+
+
+def test_npz_round_trip(tmp_path):
+    demos = Demonstrations(**_valid())
+    save_npz(tmp_path / "demos.npz", demos)
+    loaded = load_demonstrations(tmp_path / "demos.npz")
+    for name in ("observations", "actions", "confidence", "labelled", "trajectory_ids"):
+        np.testing.assert_array_equal(getattr(loaded, name), getattr(demos, name))
+    assert loaded.metadata == demos.metadata
+    np.testing.assert_array_equal(loaded.inputs[:, 3], demos.actions[:, 0])
+
+
+def test_npz_version_and_missing_file(tmp_path):
+    np.savez(tmp_path / "old.npz", observations=np.zeros((2, 3)), format_version=np.asarray(0))
+    with pytest.raises(DemonstrationError, match="unsupported format_version 0"):
+        load_demonstrations(tmp_path / "old.npz")
+    with pytest.raises(FileNotFoundError, match="demonstrations not found"):
+        load_demonstrations(tmp_path / "missing.npz")
+
+
+def test_released_layout_errors(tmp_path):
+    np.save(tmp_path / "Unknown-v0_mixture.npy", np.zeros((4, 5)))
+    np.save(tmp_path / "Unknown-v0_mixture_conf.npy", np.zeros((4, 1)))
+    with pytest.raises(DemonstrationError, match="unknown environment 'Unknown-v0'"):
+        load_released(tmp_path / "Unknown-v0_mixture.npy")
+    demos = load_released(tmp_path / "Unknown-v0_mixture.npy", observation_size=3)
+    assert demos.observations.shape == (4, 3) and demos.actions.shape == (4, 2)
+    with pytest.raises(DemonstrationError, match="cannot be split"):
+        load_released(tmp_path / "Unknown-v0_mixture.npy", observation_size=5)
+    with pytest.raises(DemonstrationError, match="action_scale must be positive"):
+        load_released(tmp_path / "Unknown-v0_mixture.npy", observation_size=3, action_scale=0)
+
+
+def test_check_env_sizes():
+    demos = Demonstrations(**_valid())
+    demos.check_env(envs.make("Pendulum-v1"))
+    with pytest.raises(DemonstrationError, match="Swimmer has 8"):
+        demos.check_env(envs.make("Swimmer"))
+
+
+@pytest.mark.skipif(
+    not SHARED_PENDULUM.exists(), reason=f"the authors' Pendulum set is not at {SHARED_PENDULUM}"
+)
+def test_released_pendulum_set_loads():
+    path = SHARED_PENDULUM / "Pendulum-v1_mixture.npy"
+    stored = load_released(path)
+    scaled = load_released(path, action_scale=2.0)
+    assert stored.num_rows == 1000 and stored.observations.shape == (1000, 3)
+    assert np.abs(stored.actions).max() <= 1.0  # stored as torque / 2
+    np.testing.assert_allclose(scaled.actions, 2 * stored.actions)
+    np.testing.assert_allclose(stored.confidence[:200], 1.0)  # the optimal trajectory
+    assert 0.3 < stored.confidence[200:].max() < 0.55
+    stored.check_env(envs.make("Pendulum-v1"))
+
+
+def test_split_shapes_labels_and_noise():
+    confidence = jax.numpy.linspace(0.0, 1.0, 50)
+    split = make_split(jax.random.key(0), confidence, traj_size=20, label_ratio=0.2)
+    assert split.indices.shape == split.labelled.shape == (20,)
+    assert int(split.labelled.sum()) == 4 and bool(split.labelled[:4].all())
+    assert len(set(np.asarray(split.indices).tolist())) == 20  # drawn without replacement
+    np.testing.assert_array_equal(split.true_confidence, confidence[split.indices])
+    np.testing.assert_array_equal(split.confidence, split.true_confidence)
+    noisy = make_split(jax.random.key(0), confidence, 20, 0.2, noise_std=0.5)
+    np.testing.assert_array_equal(noisy.indices, split.indices)  # same key, same rows
+    assert np.all((noisy.confidence >= 0) & (noisy.confidence <= 1))
+    assert not np.allclose(noisy.confidence, split.confidence)
+    # The label ratio is a value: one compiled split serves a grid of ratios.
+    ratios = jax.numpy.array([0.1, 0.2, 0.5])
+    grid = jax.jit(jax.vmap(lambda r: make_split(jax.random.key(1), confidence, 20, r)))(ratios)
+    np.testing.assert_array_equal(grid.labelled.sum(axis=1), [2, 4, 10])
