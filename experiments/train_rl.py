@@ -122,6 +122,40 @@ def plot_learning_curve(path: Path, metrics: dict[str, np.ndarray], title: str) 
     plt.close(figure)
 
 
+def train_with_progress(train, config: TRPOConfig, hyperparams, keys, on_block=None):
+    """Runs ``train`` (from ``make_train``) for stacked seeds in host-driven blocks.
+
+    Prints progress after every block of ``config.eval_every`` iterations and calls
+    ``on_block(iteration, state, block_metrics)`` if given (e.g. to keep checkpoints). The
+    numbers are those of the whole-scan ``train`` (same computation, in chunks).
+    Returns ``(final_state, metrics)`` with metrics float[seeds, num_iterations].
+    """
+    num_seeds = keys.shape[0]
+    state, eval_keys = jax.jit(jax.vmap(train.init))(keys)
+    block = jax.jit(jax.vmap(train.block))
+    chunks = []
+    for done_blocks in range(1, config.num_evaluations + 1):
+        block_start = time.perf_counter()
+        state, metrics = block(hyperparams, state, eval_keys)
+        metrics = jax.device_get(metrics)
+        chunks.append(metrics)
+        seconds = time.perf_counter() - block_start
+        rate = num_seeds * config.eval_every * config.batch_size / seconds
+        note = " (includes compilation)" if done_blocks == 1 else ""
+        print(
+            f"iter {done_blocks * config.eval_every:5d}  "
+            f"eval {np.mean(metrics['eval/return'][:, -1]):9.1f} "
+            f"[{', '.join(f'{r:.0f}' for r in metrics['eval/return'][:, -1])}]  "
+            f"train {nanmean(metrics['train/episode_return'][:, -1]):9.1f}  "
+            f"{rate:10,.0f} steps/s{note}",
+            flush=True,
+        )
+        if on_block is not None:
+            on_block(done_blocks * config.eval_every, state, metrics)
+    metrics = {name: np.concatenate([c[name] for c in chunks], axis=1) for name in chunks[0]}
+    return state, metrics
+
+
 def main(argv=None) -> None:
     args = parse_args(argv)
     env_options = envs.FAST_SOLVER if args.fast_solver else {}
@@ -158,26 +192,7 @@ def main(argv=None) -> None:
         flush=True,
     )
     start = time.perf_counter()
-    state, eval_keys = jax.jit(jax.vmap(train.init))(keys)
-    block = jax.jit(jax.vmap(train.block))
-    chunks = []
-    for done_blocks in range(1, config.num_evaluations + 1):
-        block_start = time.perf_counter()
-        state, metrics = block(seeds_hyperparams, state, eval_keys)
-        metrics = jax.device_get(metrics)
-        chunks.append(metrics)
-        seconds = time.perf_counter() - block_start
-        rate = args.seeds * config.eval_every * config.batch_size / seconds
-        note = " (includes compilation)" if done_blocks == 1 else ""
-        print(
-            f"iter {done_blocks * config.eval_every:5d}  "
-            f"eval {np.mean(metrics['eval/return'][:, -1]):9.1f} "
-            f"[{', '.join(f'{r:.0f}' for r in metrics['eval/return'][:, -1])}]  "
-            f"train {nanmean(metrics['train/episode_return'][:, -1]):9.1f}  "
-            f"{rate:10,.0f} steps/s{note}",
-            flush=True,
-        )
-    metrics = {name: np.concatenate([c[name] for c in chunks], axis=1) for name in chunks[0]}
+    state, metrics = train_with_progress(train, config, seeds_hyperparams, keys)
     final_returns = metrics["eval/return"][:, -1]
     write_metrics_csv(args.out / "metrics.csv", metrics)
     plot_learning_curve(

@@ -1,0 +1,246 @@
+"""Generate imperfect demonstrations: an optimal and an intermediate TRPO policy, mixed.
+
+    python -m experiments.make_demos --env Pendulum-v1 --out demos/pendulum
+
+1. Trains TRPO on the true reward (``--seeds`` in one program), keeping every evaluated
+   checkpoint (``checkpoints/iter_XXXX/``, loadable with ``pngail_jax.load_policy``).
+2. The optimal policy is the best-evaluated checkpoint; the intermediate policy is the earlier
+   checkpoint whose evaluated normalised return is closest to ``--intermediate-target`` (0.45:
+   the authors' Pendulum set has intermediate confidences of 0.37-0.50), not the optimal
+   policy plus noise.
+3. Measures the random (uniform actions) and optimal returns on fresh episodes (Table 3).
+4. Rolls out ``--num-trajectories`` deterministic (mean-action) episodes at the
+   optimal:intermediate ``--ratio`` (1:4 as the paper's Pendulum set), labels each trajectory
+   with its return normalised between random and optimal (clipped to [0, 1]) and saves
+   ``demos.npz`` (our schema; actions clipped to the bounds, as the environment applies them)
+   with the normaliser in its metadata.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from experiments.train_rl import train_with_progress
+from pngail_jax import envs
+from pngail_jax.checkpoint import save_policies
+from pngail_jax.demos import Demonstrations, save_npz
+from pngail_jax.demos.generate import normalized_return, rollout_episodes, uniform_random_actions
+from pngail_jax.rl import TRPOConfig, TRPOHyperparams, make_train
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--env", default="Pendulum-v1", help=f"one of {', '.join(envs.ENV_NAMES)}")
+    parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--iterations", type=int, default=150)
+    parser.add_argument("--eval-every", type=int, default=10)
+    parser.add_argument("--seeds", type=int, default=3)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--num-envs", type=int, default=25)
+    parser.add_argument("--unroll-length", type=int, default=200)
+    parser.add_argument("--ratio", default="1:4", help="optimal:intermediate trajectories")
+    parser.add_argument("--num-trajectories", type=int, default=5)
+    parser.add_argument("--intermediate-target", type=float, default=0.45)
+    parser.add_argument(
+        "--measure-episodes",
+        type=int,
+        default=64,
+        help="episodes for the random and optimal returns",
+    )
+    args = parser.parse_args(argv)
+    if args.env not in envs.ENV_NAMES:
+        parser.error(f"unknown environment {args.env!r}; available: {', '.join(envs.ENV_NAMES)}")
+    try:
+        optimal_part, intermediate_part = (float(x) for x in args.ratio.split(":"))
+    except ValueError:
+        parser.error(f"--ratio must look like 1:4, got {args.ratio!r}")
+    if optimal_part < 0 or intermediate_part < 0 or optimal_part + intermediate_part == 0:
+        parser.error(f"--ratio parts must be non-negative and not both 0, got {args.ratio!r}")
+    args.num_optimal = round(
+        args.num_trajectories * optimal_part / (optimal_part + intermediate_part)
+    )
+    if args.iterations % args.eval_every:
+        parser.error("--iterations must be a multiple of --eval-every")
+    if not 0 < args.intermediate_target < 1:
+        parser.error("--intermediate-target must be in (0, 1)")
+    return args
+
+
+def main(argv=None) -> Path:
+    args = parse_args(argv)
+    env = envs.make(args.env)
+    config = TRPOConfig(
+        num_envs=args.num_envs,
+        unroll_length=args.unroll_length,
+        num_iterations=args.iterations,
+        eval_every=args.eval_every,
+    )
+    train = make_train(config, env)
+    policy = train.trpo.policy
+    hyperparams = jax.tree.map(
+        lambda x: jnp.broadcast_to(x, (args.seeds, *x.shape)), TRPOHyperparams.create()
+    )
+    train_key, measure_key, demo_key = jax.random.split(jax.random.key(args.seed), 3)
+    snapshots = []  # (iteration, seed, policy_params, normalizer, eval_return)
+
+    def keep(iteration, state, metrics):
+        returns = metrics["eval/return"][:, -1]
+        save_policies(
+            args.out / "checkpoints" / f"iter_{iteration:04d}",
+            env_name=args.env,
+            observation_size=env.observation_size,
+            action_low=env.action_low,
+            action_high=env.action_high,
+            hidden_sizes=config.hidden_sizes,
+            policy_params=state.policy_params,
+            normalizer=state.normalizer,
+            normalize_observations=config.normalize_observations,
+            final_eval_returns=returns,
+        )
+        for seed in range(args.seeds):
+            pick = jax.tree.map(lambda x, s=seed: x[s], (state.policy_params, state.normalizer))
+            snapshots.append((iteration, seed, *pick, float(returns[seed])))
+
+    start = time.perf_counter()
+    print(
+        f"1/3 training TRPO on {args.env} ({args.seeds} seeds x {args.iterations} iterations)",
+        flush=True,
+    )
+    train_with_progress(
+        train, config, hyperparams, jax.random.split(train_key, args.seeds), on_block=keep
+    )
+
+    def act_with(params, normalizer):
+        def act(obs, key):
+            return policy.apply(params, normalizer(obs))[0]
+
+        return act
+
+    def measure(act, key, num_episodes):
+        run = jax.jit(lambda keys: rollout_episodes(env, act, keys))
+        return run(jax.random.split(key, num_episodes))
+
+    print("2/3 measuring random and optimal returns", flush=True)
+    random_key, optimal_key, intermediate_key = jax.random.split(measure_key, 3)
+    random_return = float(
+        measure(uniform_random_actions(env), random_key, args.measure_episodes).returns.mean()
+    )
+    best = max(snapshots, key=lambda snapshot: snapshot[4])
+    optimal_return = float(
+        measure(act_with(best[2], best[3]), optimal_key, args.measure_episodes).returns.mean()
+    )
+    beats_random = optimal_return > random_return
+    if not beats_random:
+        print(
+            f"WARNING: the best policy ({optimal_return:.1f}) does not beat the random one "
+            f"({random_return:.1f}); confidences will be meaningless. Train longer "
+            "(--iterations).",
+            flush=True,
+        )
+    # An earlier checkpoint; if the best came first, any other one (and say so).
+    candidates = [s for s in snapshots if s[0] < best[0]]
+    if not candidates:
+        print(
+            "WARNING: the best checkpoint is the first one; the intermediate policy is "
+            "picked among the later ones",
+            flush=True,
+        )
+        candidates = [s for s in snapshots if s[:2] != best[:2]] or snapshots
+    intermediate = min(
+        candidates,
+        key=lambda s: abs(
+            normalized_return(s[4], random_return, optimal_return) - args.intermediate_target
+        ),
+    )
+    intermediate_return = float(
+        measure(
+            act_with(intermediate[2], intermediate[3]), intermediate_key, args.measure_episodes
+        ).returns.mean()
+    )
+
+    print(
+        f"3/3 rolling out {args.num_optimal} optimal + "
+        f"{args.num_trajectories - args.num_optimal} intermediate trajectories",
+        flush=True,
+    )
+    optimal_key, intermediate_key = jax.random.split(demo_key)
+    parts = [
+        (measure(act_with(best[2], best[3]), optimal_key, args.num_optimal), "optimal")
+        if args.num_optimal
+        else None,
+        (
+            measure(
+                act_with(intermediate[2], intermediate[3]),
+                intermediate_key,
+                args.num_trajectories - args.num_optimal,
+            ),
+            "intermediate",
+        )
+        if args.num_trajectories > args.num_optimal
+        else None,
+    ]
+    rows = {"observations": [], "actions": [], "confidence": [], "trajectory_ids": []}
+    trajectory_returns = []
+    for episodes, _ in (p for p in parts if p is not None):
+        episodes = jax.device_get(episodes)
+        for index in range(len(episodes.returns)):
+            valid = episodes.valid[index]
+            confidence = float(
+                np.clip(
+                    normalized_return(episodes.returns[index], random_return, optimal_return),
+                    0.0,
+                    1.0,
+                )
+            )
+            trajectory_returns.append(float(episodes.returns[index]))
+            rows["observations"].append(episodes.observations[index][valid])
+            rows["actions"].append(
+                np.clip(episodes.actions[index][valid], env.action_low, env.action_high)
+            )
+            rows["confidence"].append(np.full(valid.sum(), confidence, np.float32))
+            rows["trajectory_ids"].append(np.full(valid.sum(), len(trajectory_returns) - 1))
+    metadata = {
+        "env": args.env,
+        "action_scale": 1.0,
+        "random_return": random_return,
+        "optimal_return": optimal_return,
+        "intermediate_return": intermediate_return,
+        "optimal_checkpoint": {"iteration": best[0], "seed": best[1]},
+        "intermediate_checkpoint": {"iteration": intermediate[0], "seed": intermediate[1]},
+        "ratio": args.ratio,
+        "trajectory_returns": trajectory_returns,
+        "optimal_beats_random": beats_random,
+        "source": "experiments.make_demos (deterministic TRPO policies)",
+    }
+    demos = Demonstrations(**{k: np.concatenate(v) for k, v in rows.items()}, metadata=metadata)
+    demos.check_env(env)
+    save_npz(args.out / "demos.npz", demos)
+    (args.out / "normalizer.json").write_text(
+        json.dumps({k: metadata[k] for k in ("env", "random_return", "optimal_return")}, indent=2)
+    )
+    print(
+        f"\n| policy | return | normalised |\n|---|---:|---:|\n"
+        f"| random (uniform actions) | {random_return:.1f} | 0.00 |\n"
+        f"| optimal (iter {best[0]}, seed {best[1]}) | {optimal_return:.1f} | 1.00 |\n"
+        f"| intermediate (iter {intermediate[0]}, seed {intermediate[1]}) | "
+        f"{intermediate_return:.1f} | "
+        f"{normalized_return(intermediate_return, random_return, optimal_return):.2f} |"
+    )
+    confidences = [float(c[0]) for c in rows["confidence"]]
+    print(
+        f"\n{demos.num_rows} rows in {len(confidences)} trajectories, confidences "
+        f"{[round(c, 2) for c in confidences]}; wrote {args.out}/demos.npz "
+        f"in {time.perf_counter() - start:.0f} s"
+    )
+    return args.out / "demos.npz"
+
+
+if __name__ == "__main__":
+    main()
