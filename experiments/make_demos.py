@@ -27,9 +27,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from experiments.train_rl import train_with_progress
+from experiments.train_rl import save_trpo_policies, train_with_progress
 from pngail_jax import envs
-from pngail_jax.checkpoint import save_policies
 from pngail_jax.demos import Demonstrations, save_npz
 from pngail_jax.demos.generate import normalized_return, rollout_episodes, uniform_random_actions
 from pngail_jax.rl import TRPOConfig, TRPOHyperparams, make_train
@@ -92,17 +91,8 @@ def main(argv=None) -> Path:
 
     def keep(iteration, state, metrics):
         returns = metrics["eval/return"][:, -1]
-        save_policies(
-            args.out / "checkpoints" / f"iter_{iteration:04d}",
-            env_name=args.env,
-            observation_size=env.observation_size,
-            action_low=env.action_low,
-            action_high=env.action_high,
-            hidden_sizes=config.hidden_sizes,
-            policy_params=state.policy_params,
-            normalizer=state.normalizer,
-            normalize_observations=config.normalize_observations,
-            final_eval_returns=returns,
+        save_trpo_policies(
+            args.out / "checkpoints" / f"iter_{iteration:04d}", env, config, state, returns
         )
         for seed in range(args.seeds):
             pick = jax.tree.map(lambda x, s=seed: x[s], (state.policy_params, state.normalizer))

@@ -122,6 +122,23 @@ def plot_learning_curve(path: Path, metrics: dict[str, np.ndarray], title: str) 
     plt.close(figure)
 
 
+def save_trpo_policies(directory, env, config: TRPOConfig, state, eval_returns, extra=None):
+    """Saves the stacked per-seed policies of a TRPO state with what load_policy needs."""
+    return save_policies(
+        directory,
+        env_name=env.name,
+        observation_size=env.observation_size,
+        action_low=env.action_low,
+        action_high=env.action_high,
+        hidden_sizes=config.hidden_sizes,
+        policy_params=state.policy_params,
+        normalizer=state.normalizer,
+        normalize_observations=config.normalize_observations,
+        final_eval_returns=eval_returns,
+        extra=extra,
+    )
+
+
 def train_with_progress(train, config: TRPOConfig, hyperparams, keys, on_block=None):
     """Runs ``train`` (from ``make_train``) for stacked seeds in host-driven blocks.
 
@@ -198,19 +215,7 @@ def main(argv=None) -> None:
     plot_learning_curve(
         args.out / "learning_curve.png", metrics, f"TRPO on {args.env} ({args.seeds} seeds)"
     )
-    save_policies(
-        args.out,
-        env_name=args.env,
-        observation_size=env.observation_size,
-        action_low=env.action_low,
-        action_high=env.action_high,
-        hidden_sizes=config.hidden_sizes,
-        policy_params=state.policy_params,
-        normalizer=state.normalizer,
-        normalize_observations=config.normalize_observations,
-        final_eval_returns=final_returns,
-        extra={"env_options": env_options},
-    )
+    save_trpo_policies(args.out, env, config, state, final_returns, {"env_options": env_options})
     print(
         f"done in {time.perf_counter() - start:.0f} s; final deterministic returns "
         f"[{', '.join(f'{r:.1f}' for r in final_returns)}] (mean {final_returns.mean():.1f}); "

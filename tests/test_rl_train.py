@@ -1,5 +1,7 @@
 """TRPO training runs: determinism, vmap invariance, validation and a learning test."""
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -121,15 +123,7 @@ def test_observation_normalizer_matches_numpy():
 
 
 def test_observation_normalization_option_trains(pendulum):
-    config = TRPOConfig(
-        num_envs=4,
-        unroll_length=50,
-        num_iterations=2,
-        eval_every=2,
-        num_eval_episodes=4,
-        num_value_minibatches=5,
-        normalize_observations=True,
-    )
+    config = dataclasses.replace(SMALL, normalize_observations=True)
     state, metrics = jax.jit(make_train(config, pendulum))(
         TRPOHyperparams.create(), jax.random.key(0)
     )

@@ -234,27 +234,22 @@ class TRPO:
         obs = normalizer(transitions.obs)
         values = self.value.apply(state.value_params, obs)
         next_values = self.value.apply(state.value_params, normalizer(transitions.final_obs))
-        advantages, _ = generalized_advantages(
-            rewards,
-            values,
-            next_values,
-            transitions.done,
-            transitions.truncated,
-            hyperparams.gamma,
-            hyperparams.lam,
-            hyperparams.bootstrap_truncation,
-        )
+
+        def gae(lam):
+            return generalized_advantages(
+                rewards,
+                values,
+                next_values,
+                transitions.done,
+                transitions.truncated,
+                hyperparams.gamma,
+                lam,
+                hyperparams.bootstrap_truncation,
+            )
+
+        advantages, _ = gae(hyperparams.lam)
         # Value targets: bootstrapped discounted returns (lambda = 1), as the reference's.
-        _, targets = generalized_advantages(
-            rewards,
-            values,
-            next_values,
-            transitions.done,
-            transitions.truncated,
-            hyperparams.gamma,
-            1.0,
-            hyperparams.bootstrap_truncation,
-        )
+        _, targets = gae(1.0)
         advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
 
         flat = lambda x: x.reshape(config.batch_size, *x.shape[2:])  # noqa: E731
