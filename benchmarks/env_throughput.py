@@ -47,6 +47,19 @@ def scan_length(env_name: str, width: int, quick: bool) -> int:
     return steps // 2 if quick else steps
 
 
+def peak_memory_bytes(compiled) -> int | None:
+    """XLA's estimate of a compiled program's device buffers: args + outputs + temps - aliases."""
+    memory = compiled.memory_analysis()
+    if memory is None:
+        return None
+    return int(
+        memory.argument_size_in_bytes
+        + memory.output_size_in_bytes
+        + memory.temp_size_in_bytes
+        - memory.alias_size_in_bytes
+    )
+
+
 def measure(env, width: int, num_steps: int, key: jax.Array) -> dict:
     """Compiles and times ``num_steps`` vmapped steps of ``width`` parallel copies of ``env``."""
     reset_key, action_key = jax.random.split(key)
@@ -78,15 +91,7 @@ def measure(env, width: int, num_steps: int, key: jax.Array) -> dict:
         jax.block_until_ready(non_finite)
         timings.append(time.perf_counter() - start)
         diverged |= np.asarray(non_finite)
-    memory = compiled.memory_analysis()
-    peak = None
-    if memory is not None:
-        peak = int(
-            memory.argument_size_in_bytes
-            + memory.output_size_in_bytes
-            + memory.temp_size_in_bytes
-            - memory.alias_size_in_bytes
-        )
+    peak = peak_memory_bytes(compiled)
     # A slot whose physics diverged (NaN) keeps stepping at the same cost, so the timing
     # stands; the fraction is reported because it is part of a solver setting's cost.
     return {

@@ -12,14 +12,15 @@ fidelity (``TRPOConfig()``: Hessian Fisher products on every sample) and the spe
 25 envs x 200 steps; Brax tasks 16 x 64 so that a CPU finishes.
 
     python benchmarks/trpo_throughput.py --quick                 # Pendulum, seeds 1,5, 2 rows
-    python benchmarks/trpo_throughput.py --brax-seeds 1,5 --json rows.json
+    python benchmarks/trpo_throughput.py --brax-seeds 1,5 --json rows.json  # 8 min, 2-core CPU
     python benchmarks/trpo_throughput.py --devices 2             # only the sharding study
 
 ``--devices N``: Pendulum-v1, reference fidelity, 5N seeds on one device in this process, then
 in a subprocess with N host devices (XLA_FLAGS), on one of them and sharded over the seed axis.
 Row schema: env_throughput's plus ``seeds``, ``num_envs``, ``unroll_length``, ``fisher``,
 ``fisher_subsample``, ``env_steps_per_second``, ``train_over_env_ratio``,
-``speedup_vs_reference`` (sharding rows: ``setting``, ``devices``, ``ratio_vs_plain``).
+``speedup_vs_reference`` (sharding rows: ``setting``, ``devices``, ``ratio_vs_plain``; a
+sharded row's peak memory is per device).
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ from pathlib import Path
 
 import jax
 import numpy as np
-from env_throughput import NUM_REPEATS, measure, scan_length
+from env_throughput import NUM_REPEATS, measure, peak_memory_bytes, scan_length
 
 from pngail_jax import envs
 from pngail_jax.rl.train import TRPOConfig, TRPOHyperparams, make_train
@@ -91,15 +92,7 @@ def measure_training(config, env, states, num_iterations: int, mesh=None) -> dic
         states, rewards = compiled(hyperparams, states)
         jax.block_until_ready((states, rewards))
         timings.append(time.perf_counter() - start)
-    memory = compiled.memory_analysis()
-    peak = None
-    if memory is not None:
-        peak = int(
-            memory.argument_size_in_bytes
-            + memory.output_size_in_bytes
-            + memory.temp_size_in_bytes
-            - memory.alias_size_in_bytes
-        )
+    peak = peak_memory_bytes(compiled)
     steps = num_iterations * config.batch_size * num_seeds
     return {
         "steps_per_second": steps / statistics.median(timings),
@@ -134,8 +127,10 @@ def sharding_rows(num_devices: int, num_iterations: int, common: dict) -> list[d
     command = [sys.executable, __file__, "--sharding-worker", str(num_devices)]
     command += ["--iterations", str(num_iterations)]
     process = subprocess.run(command, env=environment, capture_output=True, text=True)
-    lines = process.stdout.strip().splitlines()
-    result = json.loads(lines[-1]) if lines else {"error": process.stderr[-2000:]}
+    try:
+        result = json.loads(process.stdout.strip().splitlines()[-1])
+    except (IndexError, json.JSONDecodeError):
+        result = {"error": process.stderr[-2000:]}
     if "error" in result:
         print(f"sharding failed (exit {process.returncode}): {result['error']}", flush=True)
     settings = [("1 device, plain process", 1, plain)]
