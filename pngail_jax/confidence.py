@@ -147,8 +147,9 @@ def train_classifier(
       labelled: bool[N], the D_c mask. alpha = beta = n_u / (n_c + n_u) follow from it.
       key: draws the initialisation, dropout and batches.
 
-    Returns ``(predicted, metrics)``: predicted confidence float[N], sigmoid(g(x)) for
-    unlabelled rows and the given label for labelled rows; metrics float[num_steps] each.
+    Returns ``(predicted, logits, metrics)``: predicted confidence float[N], sigmoid(g(x))
+    for unlabelled rows and the given label for labelled rows; the trained g(x) float[N]
+    (no dropout); metrics float[num_steps] each.
     """
     model = ConfidenceClassifier(config.hidden_sizes, config.dropout_rate)
     init_key, train_key = jax.random.split(key)
@@ -190,8 +191,8 @@ def train_classifier(
     (params, _), metrics = jax.lax.scan(
         step, (params, optimizer.init(params)), jax.random.split(train_key, config.num_steps)
     )
-    predicted = jax.nn.sigmoid(model.apply(params, inputs, deterministic=True))
-    return jnp.where(labelled, confidence, predicted), metrics
+    logits = model.apply(params, inputs, deterministic=True)
+    return jnp.where(labelled, confidence, jax.nn.sigmoid(logits)), logits, metrics
 
 
 def confidence_errors(predicted, true_confidence, labelled):
@@ -223,8 +224,49 @@ def split_and_train(
 
     split_key, train_key = jax.random.split(key)
     split = make_split(split_key, confidence, traj_size, label_ratio, noise_std)
-    predicted, metrics = train_classifier(
+    variance_key = jax.random.fold_in(key, 1)  # leaves the training draws as they were
+    predicted, logits, metrics = train_classifier(
         config, spec, inputs[split.indices], split.confidence, split.labelled, train_key
     )
     errors = confidence_errors(predicted, split.true_confidence, split.labelled)
-    return {**errors, "clip_active": metrics["bsc/clip_active"].mean()}
+    beta = 1.0 - split.labelled.mean()
+    variances = {
+        f"variance_{name}": risk_estimator_variance(
+            logits, split.confidence, split.labelled, coefficient, variance_key
+        )
+        for name, coefficient in (("origin", 0.0), ("balanced", beta))
+    }
+    return {**errors, **variances, "clip_active": metrics["bsc/clip_active"].mean()}
+
+
+def risk_estimator_variance(
+    logits, confidence, labelled, alpha_beta, key, num_resamples: int = 1000
+):
+    """Variance of the empirical BSC risk (eq. 13, unclipped) of a fixed classifier (Table 5).
+
+    Resamples D_c and D_u with replacement at their own sizes (a bootstrap of the estimator
+    of Theorem 4.2 with n_c and n_u fixed) and evaluates ``R_C + R_1`` with
+    ``alpha = beta = alpha_beta``; ``alpha_beta = 0`` is the paper's "origin". Returns float[].
+    """
+    num_rows = logits.shape[0]
+    num_labelled = labelled.sum()
+    labelled_p = labelled / num_labelled
+    unlabelled_p = (~labelled) / jnp.maximum(num_rows - num_labelled, 1)
+    # Shapes must be static: draw num_rows rows from each set and weight the first n_c (or
+    # n_u) of them, so each resample has exactly the set's own size.
+    weights_c = (jnp.arange(num_rows) < num_labelled) / num_labelled
+    weights_u = (jnp.arange(num_rows) < num_rows - num_labelled) / (num_rows - num_labelled)
+
+    def one(resample_key):
+        key_c, key_u = jax.random.split(resample_key)
+        rows_c = jax.random.choice(key_c, num_rows, (num_rows,), p=labelled_p)
+        rows_u = jax.random.choice(key_u, num_rows, (num_rows,), p=unlabelled_p)
+        g_c, r, g_u = logits[rows_c], confidence[rows_c], logits[rows_u]
+        supervised = jnp.sum(weights_c * (r * logistic_loss(g_c) + (1 - r) * logistic_loss(-g_c)))
+        balance = alpha_beta * (
+            jnp.sum(weights_u * (logistic_loss(g_u) + logistic_loss(-g_u)))
+            - jnp.sum(weights_c * (logistic_loss(g_c) + logistic_loss(-g_c)))
+        )
+        return supervised + balance
+
+    return jnp.var(jax.vmap(one)(jax.random.split(key, num_resamples)))

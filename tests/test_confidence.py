@@ -127,3 +127,33 @@ def test_table1_pendulum_bsc_beats_sc():
     )
     assert summary["bsc"]["mae_mean"] <= 0.11, summary
     assert summary["bsc"]["mae_mean"] < summary["sc"]["mae_mean"], summary
+
+
+def test_risk_estimator_variance_matches_the_bootstrap_formula():
+    """alpha = beta = 0 leaves the supervised mean over D_c: variance ~ Var(row loss) / n_c."""
+    from pngail_jax.confidence import risk_estimator_variance
+
+    rng = np.random.default_rng(0)
+    logits = rng.normal(size=500)
+    confidence = rng.uniform(size=500)
+    labelled = np.arange(500) < 100
+    row_loss = (confidence * np_l(logits) + (1 - confidence) * np_l(-logits))[:100]
+    variance = risk_estimator_variance(
+        f32(logits),
+        f32(confidence),
+        jnp.asarray(labelled),
+        0.0,
+        jax.random.key(0),
+        num_resamples=4000,
+    )
+    np.testing.assert_allclose(variance, row_loss.var() / 100, rtol=0.1)
+    # With alpha = beta > 0 the unlabelled rows add their own term: the variance changes.
+    balanced = risk_estimator_variance(
+        f32(logits),
+        f32(confidence),
+        jnp.asarray(labelled),
+        0.8,
+        jax.random.key(0),
+        num_resamples=4000,
+    )
+    assert not np.isclose(balanced, variance, rtol=0.1)
