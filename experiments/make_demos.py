@@ -22,6 +22,7 @@ import argparse
 import json
 import time
 from pathlib import Path
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -32,6 +33,14 @@ from pngail_jax import envs
 from pngail_jax.demos import Demonstrations, save_npz
 from pngail_jax.demos.generate import normalized_return, rollout_episodes, uniform_random_actions
 from pngail_jax.rl import TRPOConfig, TRPOHyperparams, make_train
+
+
+class Checkpoint(NamedTuple):
+    iteration: int
+    seed: int
+    policy_params: Any
+    normalizer: Any
+    eval_return: float
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -87,7 +96,7 @@ def main(argv=None) -> Path:
         lambda x: jnp.broadcast_to(x, (args.seeds, *x.shape)), TRPOHyperparams.create()
     )
     train_key, measure_key, demo_key = jax.random.split(jax.random.key(args.seed), 3)
-    snapshots = []  # (iteration, seed, policy_params, normalizer, eval_return)
+    snapshots: list[Checkpoint] = []
 
     def keep(iteration, state, metrics):
         returns = metrics["eval/return"][:, -1]
@@ -96,7 +105,7 @@ def main(argv=None) -> Path:
         )
         for seed in range(args.seeds):
             pick = jax.tree.map(lambda x, s=seed: x[s], (state.policy_params, state.normalizer))
-            snapshots.append((iteration, seed, *pick, float(returns[seed])))
+            snapshots.append(Checkpoint(iteration, seed, *pick, float(returns[seed])))
 
     start = time.perf_counter()
     print(
@@ -122,9 +131,11 @@ def main(argv=None) -> Path:
     random_return = float(
         measure(uniform_random_actions(env), random_key, args.measure_episodes).returns.mean()
     )
-    best = max(snapshots, key=lambda snapshot: snapshot[4])
+    best = max(snapshots, key=lambda snapshot: snapshot.eval_return)
     optimal_return = float(
-        measure(act_with(best[2], best[3]), optimal_key, args.measure_episodes).returns.mean()
+        measure(
+            act_with(best.policy_params, best.normalizer), optimal_key, args.measure_episodes
+        ).returns.mean()
     )
     beats_random = optimal_return > random_return
     if not beats_random:
@@ -135,23 +146,26 @@ def main(argv=None) -> Path:
             flush=True,
         )
     # An earlier checkpoint; if the best came first, any other one (and say so).
-    candidates = [s for s in snapshots if s[0] < best[0]]
+    candidates = [s for s in snapshots if s.iteration < best.iteration]
     if not candidates:
         print(
             "WARNING: the best checkpoint is the first one; the intermediate policy is "
             "picked among the later ones",
             flush=True,
         )
-        candidates = [s for s in snapshots if s[:2] != best[:2]] or snapshots
+        candidates = [s for s in snapshots if s is not best] or snapshots
     intermediate = min(
         candidates,
         key=lambda s: abs(
-            normalized_return(s[4], random_return, optimal_return) - args.intermediate_target
+            normalized_return(s.eval_return, random_return, optimal_return)
+            - args.intermediate_target
         ),
     )
     intermediate_return = float(
         measure(
-            act_with(intermediate[2], intermediate[3]), intermediate_key, args.measure_episodes
+            act_with(intermediate.policy_params, intermediate.normalizer),
+            intermediate_key,
+            args.measure_episodes,
         ).returns.mean()
     )
 
@@ -161,24 +175,18 @@ def main(argv=None) -> Path:
         flush=True,
     )
     optimal_key, intermediate_key = jax.random.split(demo_key)
+    sources = [
+        (best, optimal_key, args.num_optimal),
+        (intermediate, intermediate_key, args.num_trajectories - args.num_optimal),
+    ]
     parts = [
-        (measure(act_with(best[2], best[3]), optimal_key, args.num_optimal), "optimal")
-        if args.num_optimal
-        else None,
-        (
-            measure(
-                act_with(intermediate[2], intermediate[3]),
-                intermediate_key,
-                args.num_trajectories - args.num_optimal,
-            ),
-            "intermediate",
-        )
-        if args.num_trajectories > args.num_optimal
-        else None,
+        measure(act_with(snapshot.policy_params, snapshot.normalizer), key, count)
+        for snapshot, key, count in sources
+        if count > 0
     ]
     rows = {"observations": [], "actions": [], "confidence": [], "trajectory_ids": []}
     trajectory_returns = []
-    for episodes, _ in (p for p in parts if p is not None):
+    for episodes in parts:
         episodes = jax.device_get(episodes)
         for index in range(len(episodes.returns)):
             valid = episodes.valid[index]
@@ -202,8 +210,8 @@ def main(argv=None) -> Path:
         "random_return": random_return,
         "optimal_return": optimal_return,
         "intermediate_return": intermediate_return,
-        "optimal_checkpoint": {"iteration": best[0], "seed": best[1]},
-        "intermediate_checkpoint": {"iteration": intermediate[0], "seed": intermediate[1]},
+        "optimal_checkpoint": {"iteration": best.iteration, "seed": best.seed},
+        "intermediate_checkpoint": {"iteration": intermediate.iteration, "seed": intermediate.seed},
         "ratio": args.ratio,
         "trajectory_returns": trajectory_returns,
         "optimal_beats_random": beats_random,
@@ -218,8 +226,8 @@ def main(argv=None) -> Path:
     print(
         f"\n| policy | return | normalised |\n|---|---:|---:|\n"
         f"| random (uniform actions) | {random_return:.1f} | 0.00 |\n"
-        f"| optimal (iter {best[0]}, seed {best[1]}) | {optimal_return:.1f} | 1.00 |\n"
-        f"| intermediate (iter {intermediate[0]}, seed {intermediate[1]}) | "
+        f"| optimal (iter {best.iteration}, seed {best.seed}) | {optimal_return:.1f} | 1.00 |\n"
+        f"| intermediate (iter {intermediate.iteration}, seed {intermediate.seed}) | "
         f"{intermediate_return:.1f} | "
         f"{normalized_return(intermediate_return, random_return, optimal_return):.2f} |"
     )
