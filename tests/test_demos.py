@@ -132,3 +132,35 @@ def test_split_shapes_labels_and_noise():
     ratios = jax.numpy.array([0.1, 0.2, 0.5])
     grid = jax.jit(jax.vmap(lambda r: make_split(jax.random.key(1), confidence, 20, r)))(ratios)
     np.testing.assert_array_equal(grid.labelled.sum(axis=1), [2, 4, 10])
+
+
+def test_local_minari_dataset_loads(tmp_path, monkeypatch):
+    minari = pytest.importorskip("minari", reason="the optional 'minari' extra is not installed")
+    import gymnasium as gym
+
+    from pngail_jax.demos import load_minari
+
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path))
+    env = minari.DataCollector(gym.make("Pendulum-v1", max_episode_steps=20))
+    for episode in range(3):
+        env.reset(seed=episode)
+        for _ in range(20):
+            _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+            if terminated or truncated:
+                break
+    env.create_dataset(
+        dataset_id="pendulum/test-v0",
+        algorithm_name="random",
+        author="tests",
+        author_email="tests@example.invalid",
+        code_permalink="tests",
+        description="three random Pendulum episodes",
+    )
+    demos = load_minari("pendulum/test-v0", confidence=[1.0, 0.5, 0.0])
+    assert demos.observations.shape == (60, 3) and demos.actions.shape == (60, 1)
+    np.testing.assert_array_equal(np.bincount(demos.trajectory_ids), [20, 20, 20])
+    np.testing.assert_array_equal(demos.confidence[::20], [1.0, 0.5, 0.0])
+    with pytest.raises(DemonstrationError, match="one value or one per episode"):
+        load_minari("pendulum/test-v0", confidence=[1.0, 0.5])
+    with pytest.raises(DemonstrationError, match="no local Minari dataset"):
+        load_minari("pendulum/missing-v0")

@@ -277,3 +277,48 @@ def make_split(
         true_confidence=true_confidence,
         labelled=jnp.arange(traj_size) < num_labelled,
     )
+
+
+def load_minari(dataset_id: str, confidence=None) -> Demonstrations:
+    """Loads a *local* Minari dataset (never downloads) as demonstrations.
+
+    Minari stores T + 1 observations per episode; the final one is dropped so rows are
+    (s_t, a_t) pairs. ``confidence``: None, one value for all rows, or one value per episode.
+    Needs the optional dependency: ``pip install 'pngail-jax[minari]'``. Datasets are found in
+    ``MINARI_DATASETS_PATH`` (default ``~/.minari/datasets``).
+    """
+    try:
+        import minari
+    except ImportError as error:
+        raise ImportError("load_minari needs minari: pip install 'pngail-jax[minari]'") from error
+    try:
+        dataset = minari.load_dataset(dataset_id, download=False)
+    except FileNotFoundError as error:
+        raise DemonstrationError(f"no local Minari dataset {dataset_id!r}: {error}") from None
+    observations, actions, ids = [], [], []
+    for index, episode in enumerate(dataset.iterate_episodes()):
+        if not isinstance(episode.observations, np.ndarray):
+            raise DemonstrationError(f"{dataset_id}: only flat Box observations are supported")
+        steps = len(episode.actions)
+        observations.append(np.asarray(episode.observations[:steps], np.float32))
+        actions.append(np.asarray(episode.actions, np.float32).reshape(steps, -1))
+        ids.append(np.full(steps, index, np.int32))
+    ids = np.concatenate(ids)
+    if confidence is not None:
+        confidence = np.asarray(confidence, np.float32)
+        if confidence.ndim == 0:
+            confidence = np.full(len(ids), confidence, np.float32)
+        elif confidence.shape == (len(observations),):
+            confidence = confidence[ids]
+        else:
+            raise DemonstrationError(
+                f"confidence must be one value or one per episode "
+                f"({len(observations)}), got shape {confidence.shape}"
+            )
+    return Demonstrations(
+        observations=np.concatenate(observations),
+        actions=np.concatenate(actions),
+        confidence=confidence,
+        trajectory_ids=ids,
+        metadata={"source": f"minari: {dataset_id}", "action_scale": 1.0},
+    )
