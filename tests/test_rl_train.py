@@ -129,3 +129,24 @@ def test_observation_normalization_option_trains(pendulum):
     )
     assert float(state.normalizer.count) == 2 * config.batch_size
     assert np.isfinite(metrics["eval/return"][-1])
+
+
+def test_host_chunks_reuse_one_compiled_block(pendulum):
+    """The sweep-style host loop traces its block once, whatever the number of chunks."""
+    import chex
+
+    config = dataclasses.replace(SMALL, num_iterations=6)
+    train = make_train(config, pendulum)
+    block = jax.jit(chex.assert_max_traces(train.block, n=1))
+    state, eval_keys = jax.jit(train.init)(jax.random.key(0))
+    for _ in range(config.num_evaluations):
+        state, _ = block(TRPOHyperparams.create(), state, eval_keys)
+    assert int(state.env_steps) == 6 * config.batch_size
+
+
+def test_rewards_of_the_wrong_shape_are_rejected(pendulum):
+    train = make_train(SMALL, pendulum)
+    state = train.trpo.init(jax.random.key(0))
+    state, transitions = train.trpo.rollout(state)
+    with pytest.raises(AssertionError, match="shape"):
+        train.trpo.update(TRPOHyperparams.create(), state, transitions, transitions.reward[:, :2])

@@ -14,6 +14,7 @@ import dataclasses
 from collections.abc import Callable
 from typing import Literal
 
+import chex
 import jax
 import jax.numpy as jnp
 import optax
@@ -228,6 +229,7 @@ class TRPO:
     ) -> tuple[TRPOState, dict[str, jax.Array]]:
         """Value regression then one natural-gradient policy step, on ``rewards`` float[T, N]."""
         config = self.config
+        chex.assert_shape(rewards, (config.unroll_length, config.num_envs))
         normalizer = state.normalizer
         if config.normalize_observations:
             normalizer = normalizer.update(transitions.obs)
