@@ -117,3 +117,45 @@ def load_policy(
     policy_fn.seed = seed
     policy_fn.metadata = metadata
     return policy_fn
+
+
+def _is_key(x) -> bool:
+    return hasattr(x, "dtype") and jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key)
+
+
+def save_tree(directory: str | Path, tree) -> None:
+    """Saves any pytree of arrays (typed PRNG keys included, as their key data) with orbax.
+
+    Leaves are stored flat (``leaf_00000``, ...); ``restore_tree`` rebuilds the structure
+    from a template of the same structure, e.g. ``jax.eval_shape`` of the init function.
+    """
+    leaves = jax.tree.leaves(jax.device_get(tree))
+    arrays = {
+        f"leaf_{i:05d}": np.asarray(jax.random.key_data(x) if _is_key(x) else x)
+        for i, x in enumerate(leaves)
+    }
+    checkpointer = ocp.StandardCheckpointer()
+    checkpointer.save(Path(directory).absolute(), arrays, force=True)
+    checkpointer.wait_until_finished()
+
+
+def restore_tree(directory: str | Path, template):
+    """The pytree ``save_tree`` wrote, as host arrays shaped like ``template``'s leaves."""
+    arrays = ocp.StandardCheckpointer().restore(Path(directory).absolute())
+    leaves, treedef = jax.tree.flatten(template)
+    if len(arrays) != len(leaves):
+        raise ValueError(
+            f"{directory}: checkpoint has {len(arrays)} arrays, the template {len(leaves)}"
+        )
+    restored = []
+    for i, like in enumerate(leaves):
+        value = np.asarray(arrays[f"leaf_{i:05d}"])
+        if _is_key(like):
+            value = jax.random.wrap_key_data(value)  # the default implementation
+        elif value.shape != like.shape or value.dtype != like.dtype:
+            raise ValueError(
+                f"{directory}: leaf {i} is {value.dtype}{value.shape}, expected "
+                f"{like.dtype}{like.shape}"
+            )
+        restored.append(value)
+    return jax.tree.unflatten(treedef, restored)

@@ -82,3 +82,16 @@ def gaussian_kl(
 def gaussian_entropy(log_std: jax.Array) -> jax.Array:
     """Entropy of a diagonal Gaussian: float[]."""
     return jnp.sum(log_std + 0.5 * jnp.log(2 * jnp.pi * jnp.e))
+
+
+class Discriminator(nn.Module):
+    """GAIL discriminator: tanh MLP over [obs, action] giving a logit z (agent = label 1).
+
+    Input float[..., obs_size + action_size]; output float[...]. sigmoid(z) -> 1 on agent data.
+    """
+
+    hidden_sizes: Sequence[int] = (100, 100)
+
+    @nn.compact
+    def __call__(self, x: jax.Array) -> jax.Array:
+        return MLP(self.hidden_sizes, 1)(x)[..., 0]

@@ -37,6 +37,16 @@ RELEASED_OBSERVATION_SIZES = {
     "Walker2d-v2": 17,
 }
 
+# The paper's Table 3: (random policy, optimal policy) returns, the normaliser of its figures.
+PAPER_NORMALIZERS = {
+    "Pendulum-v1": (-1200.96, -116.81),
+    "Ant-v2": (-72.30, 4143.10),
+    "HalfCheetah-v2": (-288.44, 3467.32),
+    "Hopper-v2": (18.04, 3250.67),
+    "Swimmer-v2": (2.31, 348.99),
+    "Walker2d-v2": (1.91, 3694.13),
+}
+
 
 class DemonstrationError(ValueError):
     """Demonstrations that cannot be used as given; the message names the problem."""
@@ -185,15 +195,23 @@ def load_released(
         )
     if not action_scale > 0:
         raise DemonstrationError(f"action_scale must be positive, got {action_scale!r}")
+    metadata = {
+        "env": env_name,
+        "action_scale": float(action_scale),
+        "source": f"released layout: {mixture_path.name}",
+    }
+    if env_name in PAPER_NORMALIZERS:
+        random_return, optimal_return = PAPER_NORMALIZERS[env_name]
+        metadata |= {
+            "random_return": random_return,
+            "optimal_return": optimal_return,
+            "normalizer_source": "paper Table 3",
+        }
     return Demonstrations(
         observations=rows[:, :observation_size],
         actions=rows[:, observation_size:] * action_scale,
         confidence=confidence,
-        metadata={
-            "env": env_name,
-            "action_scale": float(action_scale),
-            "source": f"released layout: {mixture_path.name}",
-        },
+        metadata=metadata,
     )
 
 

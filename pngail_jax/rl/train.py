@@ -290,6 +290,11 @@ class TRPO:
         )
         return state, metrics
 
+    def log_prob(self, state: TRPOState, obs: jax.Array, action: jax.Array) -> jax.Array:
+        """log pi(action | obs) of the current policy: obs float[..., O], action float[..., A]."""
+        mean, log_std = self.policy.apply(state.policy_params, state.normalizer(obs))
+        return gaussian_log_prob(mean, log_std, action)
+
     def evaluate(self, state: TRPOState, keys: jax.Array) -> jax.Array:
         return evaluate(self.env, self.policy, state.policy_params, state.normalizer, keys)
 

@@ -1,0 +1,185 @@
+"""Grids of runs (methods x seeds x settings) as one compiled, optionally sharded, program.
+
+A grid is a list of ``Cell``s. ``stack_cells`` turns it into stacked hyperparameters, method
+specs and keys with one leading grid axis; ``Grid`` compiles ``jit(vmap(train.init))`` and
+``jit(vmap(train.run_blocks))`` over that axis and, when more than one device is given,
+shards it over a one-axis ``Mesh`` (padding the grid to a multiple of the device count with
+copies of its last cell, which are dropped from every result).
+
+Cells never exchange data, so a NaN in one cell stays in that cell (``nonfinite_cells``
+reports which). The same seed draws the same split, classifier and network initialisations
+in every method and setting (common random numbers): methods differ only by their spec.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+import time
+from collections.abc import Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.sharding import NamedSharding, PartitionSpec
+
+from pngail_jax.methods import MethodSpec, method_spec, stack
+from pngail_jax.train import Hyperparams, TrainState
+
+GRID_AXIS = "grid"
+
+
+@dataclasses.dataclass(frozen=True)
+class Cell:
+    method: str
+    seed: int
+    label_ratio: float = 0.2
+    noise_std: float = 0.0
+
+    @property
+    def setting(self) -> str:
+        return f"label_ratio={self.label_ratio:g},noise={self.noise_std:g}"
+
+
+def make_cells(
+    methods: Sequence[str],
+    num_seeds: int,
+    label_ratios: Sequence[float] = (0.2,),
+    noise_stds: Sequence[float] = (0.0,),
+) -> list[Cell]:
+    """Every combination, ordered setting-major, then method, then seed."""
+    return [
+        Cell(method, seed, label_ratio, noise_std)
+        for label_ratio in label_ratios
+        for noise_std in noise_stds
+        for method in methods
+        for seed in range(num_seeds)
+    ]
+
+
+def stack_cells(
+    cells: Sequence[Cell],
+    key: jax.Array,
+    method_overrides: dict[str, float] | None = None,
+    **hyperparams,
+) -> tuple[Hyperparams, MethodSpec, jax.Array]:
+    """Stacked ``(hyperparams, specs, keys)`` with a leading axis of ``len(cells)``.
+
+    ``hyperparams`` are ``Hyperparams.create`` keywords shared by every cell; each cell's key
+    is ``fold_in(key, cell.seed)``.
+    """
+    if not cells:
+        raise ValueError("a grid needs at least one cell")
+    overrides = method_overrides or {}
+    specs = stack([method_spec(cell.method, **overrides) for cell in cells])
+    stacked_hyperparams = stack(
+        [
+            Hyperparams.create(
+                label_ratio=cell.label_ratio, noise_std=cell.noise_std, **hyperparams
+            )
+            for cell in cells
+        ]
+    )
+    keys = jnp.stack([jax.random.fold_in(key, cell.seed) for cell in cells])
+    return stacked_hyperparams, specs, keys
+
+
+def _pad(tree, size: int):
+    def pad(x):
+        extra = size - x.shape[0]
+        return x if extra == 0 else jnp.concatenate([x, jnp.repeat(x[-1:], extra, axis=0)])
+
+    return jax.tree.map(pad, tree)
+
+
+class Grid:
+    """Compiled init and chunk programs for stacked cells, sharded over ``devices``.
+
+    ``run_chunk(state)`` advances every cell by ``blocks_per_chunk * eval_every`` iterations;
+    ``unpad(tree)`` drops padding cells from a host copy of any grid-leading pytree.
+    """
+
+    def __init__(
+        self,
+        train,
+        hyperparams: Hyperparams,
+        specs: MethodSpec,
+        keys: jax.Array,
+        blocks_per_chunk: int,
+        devices: Sequence[jax.Device] | None = None,
+    ):
+        self.num_cells = keys.shape[0]
+        devices = list(jax.devices() if devices is None else devices)
+        self.num_devices = len(devices)
+        self.num_padded = math.ceil(self.num_cells / self.num_devices) * self.num_devices
+        self.blocks_per_chunk = blocks_per_chunk
+        self.iterations_per_chunk = blocks_per_chunk * train.config.trpo.eval_every
+        inputs = _pad((hyperparams, specs, keys), self.num_padded)
+        if self.num_devices > 1:
+            mesh = jax.make_mesh(
+                (self.num_devices,),
+                (GRID_AXIS,),
+                axis_types=(jax.sharding.AxisType.Auto,),
+                devices=devices,
+            )
+            self.sharding = NamedSharding(mesh, PartitionSpec(GRID_AXIS))
+            inputs = jax.device_put(inputs, self.sharding)
+        else:
+            self.sharding = None
+            inputs = jax.device_put(inputs, devices[0])
+        self.hyperparams, self.specs, self.keys = inputs
+        jit = functools.partial(jax.jit, out_shardings=self.sharding)
+        init = jit(jax.vmap(train.init))
+        state_shape, _ = jax.eval_shape(init, *inputs)
+        start = time.perf_counter()
+        self._init = init.lower(*inputs).compile()
+        self.init_compile_seconds = time.perf_counter() - start
+        chunk = jax.vmap(functools.partial(train.run_blocks, num_blocks=blocks_per_chunk))
+        start = time.perf_counter()
+        self._chunk = (
+            jit(chunk, donate_argnums=(2,))
+            .lower(self.hyperparams, self.specs, self._with_sharding(state_shape))
+            .compile()
+        )
+        self.chunk_compile_seconds = time.perf_counter() - start
+
+    @property
+    def compile_seconds(self) -> float:
+        return self.init_compile_seconds + self.chunk_compile_seconds
+
+    def _with_sharding(self, state_shape):
+        if self.sharding is None:
+            return state_shape
+        return jax.tree.map(
+            lambda s: jax.ShapeDtypeStruct(s.shape, s.dtype, sharding=self.sharding), state_shape
+        )
+
+    def init(self) -> tuple[TrainState, dict]:
+        """Splits, classifier phase and initial networks of every cell (device arrays)."""
+        return self._init(self.hyperparams, self.specs, self.keys)
+
+    def run_chunk(self, state: TrainState) -> tuple[TrainState, dict]:
+        """The next chunk. ``state`` is donated (do not reuse it); metrics float[G, I]."""
+        return self._chunk(self.hyperparams, self.specs, state)
+
+    def place(self, state: TrainState) -> TrainState:
+        """Puts a host copy of a (padded) state where ``run_chunk`` expects it."""
+        if self.sharding is None:
+            return jax.device_put(state)
+        return jax.device_put(state, self.sharding)
+
+    def unpad(self, tree):
+        return jax.tree.map(lambda x: np.asarray(x)[: self.num_cells], tree)
+
+
+def nonfinite_cells(metrics: dict[str, np.ndarray], eval_every: int) -> np.ndarray:
+    """Indices of cells with a NaN or inf discriminator loss or evaluated return.
+
+    metrics float[G, I] from whole chunks (which start at multiples of ``eval_every``), so
+    ``eval/return`` is defined at every ``eval_every``-th column and NaN by design elsewhere.
+    """
+    evaluations = np.asarray(metrics["eval/return"])[:, eval_every - 1 :: eval_every]
+    losses = np.asarray(metrics["disc/loss"])
+    bad = ~np.isfinite(evaluations).all(axis=1) | ~np.isfinite(losses).all(axis=1)
+    return np.flatnonzero(bad)

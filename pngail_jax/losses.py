@@ -1,0 +1,95 @@
+"""The discriminator loss of every method, and the policy reward, as pure functions.
+
+Notation of ``../shared/REFERENCE.md``: z is the discriminator logit, agent rows have label 1
+(sigmoid(z) -> 1), demonstrations label 0, ``sp`` is softplus, ``sp(-z) = -log sigmoid(z)``.
+"""
+
+from __future__ import annotations
+
+import chex
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from pngail_jax.methods import MethodSpec
+
+_TINY = 1e-8
+
+
+def policy_reward(logits: jax.Array) -> jax.Array:
+    """-log sigmoid(z) = sp(-z): large where the discriminator thinks a pair is a demo's."""
+    return jax.nn.softplus(-logits)
+
+
+@struct.dataclass
+class ConfidenceStats:
+    """Split-wide statistics the losses need (float[] each)."""
+
+    mean_confidence: jax.Array  # mean r over all demonstrations of the split (2IWIL)
+    mean_labelled_confidence: jax.Array  # mean r over D_c (IC-GAIL's mean r_c)
+
+
+def demo_weights(
+    spec: MethodSpec,
+    confidence: jax.Array,
+    labelled: jax.Array,
+    importance_weight: jax.Array,
+    stats: ConfidenceStats,
+):
+    """Per-method coefficients of the shared terms for a batch of B demonstration rows.
+
+    Args: confidence float[B] (r), labelled bool[B] (row in D_c), importance_weight float[B]
+    (WGAIL's w). Returns ``(agent_coef float[], u float[B], v float[B])`` such that the loss is
+    ``agent_coef mean_agent sp(-z) + mean_B [u sp(z) + v sp(-z)]``. IC-GAIL's means over D_c
+    and D_u are means over the batch's rows of each set (weights 1[D] / P_batch(D)).
+    """
+    labelled = labelled.astype(confidence.dtype)
+    fraction_labelled = labelled.mean()
+    labelled_share = labelled / jnp.maximum(fraction_labelled, _TINY)
+    unlabelled_share = (1 - labelled) / jnp.maximum(1 - fraction_labelled, _TINY)
+    mean_rc = stats.mean_labelled_confidence
+    class_prior = jnp.maximum(mean_rc, spec.class_prior_floor)
+    # Z >= mean r_c, so this lies in [0, 1]; 0 when every labelled row is certain (r_c = 1).
+    labelled_negative_coef = jnp.where(
+        mean_rc < 1, (1 - class_prior) / jnp.maximum(1 - mean_rc, _TINY), 0.0
+    )
+    u = (
+        spec.gail_coef
+        + spec.importance_weighted_coef * confidence / jnp.maximum(stats.mean_confidence, _TINY)
+        + spec.pn_coef * confidence
+        + spec.wgail_coef * importance_weight
+        + spec.icgail_coef * unlabelled_share
+    )
+    v = spec.pn_coef * (1 - confidence) + spec.icgail_coef * labelled_negative_coef * (
+        labelled_share * (1 - confidence)
+    )
+    agent_coef = spec.agent_coef + spec.icgail_coef * class_prior
+    return agent_coef, u, v
+
+
+def discriminator_loss(
+    spec: MethodSpec,
+    logits_agent: jax.Array,
+    logits_demo: jax.Array,
+    confidence: jax.Array,
+    labelled: jax.Array,
+    importance_weight: jax.Array,
+    stats: ConfidenceStats,
+):
+    """The method's discriminator objective (minimised) on one batch.
+
+    Args: logits_agent float[N] on agent pairs (actions clipped to the bounds), logits_demo
+    float[B] on demonstration rows with their confidence float[B], labelled bool[B] and
+    importance_weight float[B]. Returns ``(loss, metrics)``.
+    """
+    chex.assert_rank(logits_agent, 1)
+    chex.assert_equal_shape([logits_demo, confidence, labelled, importance_weight])
+    agent_coef, u, v = demo_weights(spec, confidence, labelled, importance_weight, stats)
+    agent_term = jnp.mean(jax.nn.softplus(-logits_agent))
+    demo_term = jnp.mean(u * jax.nn.softplus(logits_demo) + v * jax.nn.softplus(-logits_demo))
+    loss = agent_coef * agent_term + demo_term
+    return loss, {
+        "disc/loss": loss,
+        "disc/acc_agent": jnp.mean(logits_agent > 0),
+        "disc/acc_demo": jnp.mean(logits_demo < 0),
+    }
