@@ -76,7 +76,17 @@ def parse_args(argv=None) -> argparse.Namespace:
         f"{DEFAULTS['chunk_iterations']}",
     )
     parser.add_argument("--classifier-steps", type=int, help="default 25,000 (the paper's)")
-    parser.add_argument("--fisher", choices=("hessian", "gauss_newton"), default="hessian")
+    parser.add_argument("--num-envs", type=int, default=25, help="parallel envs per run")
+    parser.add_argument(
+        "--unroll-length", type=int, default=200, help="steps per env per iteration"
+    )
+    parser.add_argument(
+        "--fisher",
+        choices=("hessian", "gauss_newton"),
+        default="gauss_newton",
+        help="Fisher-vector product: the same matrix either way (the Hessian of the mean KL at "
+        "the current policy); gauss_newton is 1.7x faster here, hessian the reference's form",
+    )
     parser.add_argument("--fisher-subsample", type=int, default=1)
     parser.add_argument(
         "--cpu-devices",
@@ -110,7 +120,8 @@ def resolve(parser, args: argparse.Namespace) -> argparse.Namespace:
     unknown = [m for m in args.methods if m not in METHOD_NAMES]
     if unknown or not args.methods:
         parser.error(f"unknown method(s) {unknown}; available: {', '.join(METHOD_NAMES)}")
-    for name in ("seeds", "iterations", "eval_every", "chunk_iterations", "classifier_steps"):
+    positive = ("seeds", "iterations", "eval_every", "chunk_iterations", "classifier_steps")
+    for name in (*positive, "num_envs", "unroll_length", "fisher_subsample"):
         if getattr(args, name) < 1:
             parser.error(f"--{name.replace('_', '-')} must be positive")
     if args.iterations % args.eval_every:
@@ -155,7 +166,8 @@ def load_or_make_demos(args):
 def run_config(args, demos, demos_path) -> dict:
     names = (
         "env methods seeds iterations preset action_scale num_demos label_ratios noise_stds "
-        "seed eval_every chunk_iterations classifier_steps fisher fisher_subsample cpu_devices"
+        "seed eval_every chunk_iterations classifier_steps fisher fisher_subsample cpu_devices "
+        "num_envs unroll_length"
     ).split()
     config = {name: getattr(args, name) for name in names}
     config["demos"] = str(Path(demos_path).absolute())
@@ -218,6 +230,8 @@ def main(argv=None) -> Path:
     demos.check_env(env)
     config = AdversarialConfig(
         trpo=TRPOConfig(
+            num_envs=args.num_envs,
+            unroll_length=args.unroll_length,
             num_iterations=args.iterations,
             eval_every=args.eval_every,
             fisher=args.fisher,
@@ -274,10 +288,11 @@ def main(argv=None) -> Path:
     chunks_done, metrics_so_far, timing = 0, None, {"seconds": 0.0, "steps": 0}
     start = time.perf_counter()
     state, init_metrics = grid.init()
-    init_metrics = grid.unpad(init_metrics)
+    init_metrics = grid.unpad(jax.device_get(init_metrics))
     latest = _latest_checkpoint(checkpoint_dir)
     if resume_dir is not None and latest is not None:
-        state = grid.place(restore_tree(latest / "state", jax.eval_shape(lambda: state)))
+        template = jax.eval_shape(lambda: grid.unpad(state))
+        state = grid.place(restore_tree(latest / "state", template))
         saved = np.load(latest / "metrics.npz")
         metrics_so_far = {name.replace(":", "/"): saved[name] for name in saved.files}
         progress = json.loads((latest / "progress.json").read_text())
@@ -336,9 +351,8 @@ def main(argv=None) -> Path:
         out, args, cells, metrics_so_far, init_metrics, normalizer, grid, timing
     )
     print()
-    print(
-        report.summary_markdown(summary, cells, metrics, _title(args, len(cells))).split("\n\n")[0]
-    )
+    markdown = report.summary_markdown(summary, cells, metrics, _title(args, len(cells)))
+    print(markdown.split("\n\nFinal return")[0])
     print(
         f"\ndone in {format_seconds(time.perf_counter() - start)} (+ compile); wrote "
         f"{out}/{{config.json,metrics.csv,curves.png,summary.md,summary.json,checkpoints/}}"
@@ -373,7 +387,7 @@ def _latest_checkpoint(directory: Path):
 def _save_checkpoint(directory, chunks_done, grid, state, metrics, timing, save_tree):
     """Writes chunk_NNNN/ (state via orbax, metrics, progress last) and keeps the last two."""
     path = directory / f"chunk_{chunks_done:04d}"
-    save_tree(path / "state", state)
+    save_tree(path / "state", grid.unpad(state))
     np.savez(path / "metrics.npz", **{name.replace("/", ":"): v for name, v in metrics.items()})
     progress = {"chunks_done": chunks_done, "timing": timing}
     (path / "progress.json").write_text(json.dumps(progress))  # marks the checkpoint complete

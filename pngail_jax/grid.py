@@ -164,13 +164,16 @@ class Grid:
         return self._chunk(self.hyperparams, self.specs, state)
 
     def place(self, state: TrainState) -> TrainState:
-        """Puts a host copy of a (padded) state where ``run_chunk`` expects it."""
+        """Pads an unpadded state (e.g. restored from a checkpoint, possibly written with a
+        different device count) and puts it where ``run_chunk`` expects it."""
+        state = _pad(state, self.num_padded)
         if self.sharding is None:
             return jax.device_put(state)
         return jax.device_put(state, self.sharding)
 
     def unpad(self, tree):
-        return jax.tree.map(lambda x: np.asarray(x)[: self.num_cells], tree)
+        """The real cells of any grid-leading pytree (host or device arrays)."""
+        return jax.tree.map(lambda x: x[: self.num_cells], tree)
 
 
 def nonfinite_cells(metrics: dict[str, np.ndarray], eval_every: int) -> np.ndarray:

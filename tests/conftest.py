@@ -11,13 +11,19 @@ def run_x64(test_file: str, function_name: str) -> dict:
     jitted helper (seen with MJX's RK4 integrator), so x64 checks run in their own process.
     The function returns a JSON-serialisable dict, which is returned here.
     """
+    return run_in_subprocess(test_file, function_name, {"JAX_ENABLE_X64": "1"})
+
+
+def run_in_subprocess(test_file: str, function_name: str, environment: dict) -> dict:
+    """Runs ``function_name()`` from ``test_file`` in a fresh Python with ``environment``
+    added to the environment variables (settings fixed at JAX start-up, e.g. XLA_FLAGS)."""
     code = (
         "import json, runpy, sys\n"
         f"sys.path.insert(0, {os.path.dirname(os.path.abspath(test_file))!r})\n"
         f"namespace = runpy.run_path({test_file!r})\n"
         f"print('RESULT ' + json.dumps(namespace[{function_name!r}]()))\n"
     )
-    env = {**os.environ, "JAX_ENABLE_X64": "1"}
+    env = {**os.environ, **environment}
     done = subprocess.run(
         [sys.executable, "-c", code],
         env=env,
@@ -27,5 +33,5 @@ def run_x64(test_file: str, function_name: str) -> dict:
         check=False,
     )
     results = [line for line in done.stdout.splitlines() if line.startswith("RESULT ")]
-    assert done.returncode == 0 and results, f"x64 subprocess failed:\n{done.stderr[-3000:]}"
+    assert done.returncode == 0 and results, f"subprocess failed:\n{done.stderr[-3000:]}"
     return json.loads(results[-1].removeprefix("RESULT "))

@@ -1,0 +1,220 @@
+"""The adversarial train function and grids: vmap, sharding, chunking, resume, NaN isolation.
+
+Small configs throughout (Pendulum, 4 envs x 50 steps, a 50-step classifier); tolerances:
+float32 programs that differ (vmapped vs single, sharded vs not) agree to rtol 1e-4; the same
+program with the same key is bit-identical.
+"""
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from pngail_jax import envs
+from pngail_jax.checkpoint import restore_tree, save_tree
+from pngail_jax.confidence import ClassifierConfig
+from pngail_jax.demos import DemonstrationError, Demonstrations
+from pngail_jax.grid import Grid, make_cells, nonfinite_cells, stack_cells
+from pngail_jax.methods import method_spec
+from pngail_jax.rl import TRPOConfig
+from pngail_jax.train import AdversarialConfig, Hyperparams, make_train
+
+COMPARED = ("eval/return", "disc/loss", "disc/acc_agent", "train/reward", "trpo/kl")
+
+
+def small_setup(num_iterations=2, eval_every=1, **config_overrides):
+    env = envs.make("Pendulum-v1")
+    rng = np.random.default_rng(0)
+    num_rows = 120
+    demos = Demonstrations(
+        observations=rng.normal(size=(num_rows, 3)).astype(np.float32),
+        actions=rng.uniform(-2, 2, size=(num_rows, 1)).astype(np.float32),
+        confidence=np.repeat(rng.uniform(0.2, 1.0, 6), 20).astype(np.float32),
+        metadata={"random_return": -1200.0, "optimal_return": -150.0},
+    )
+    config = AdversarialConfig(
+        trpo=TRPOConfig(
+            num_envs=4,
+            unroll_length=50,
+            num_iterations=num_iterations,
+            eval_every=eval_every,
+            num_eval_episodes=2,
+            num_value_minibatches=5,
+        ),
+        classifier=ClassifierConfig(num_steps=50),
+        **config_overrides,
+    )
+    return env, demos, config
+
+
+def small_grid_inputs(methods=("gail", "pngail", "wgail"), num_seeds=2):
+    cells = make_cells(methods, num_seeds)
+    return cells, stack_cells(cells, jax.random.key(0))
+
+
+def run_single_and_grid() -> dict:
+    """3 methods x 2 seeds as one vmapped program and as six separate runs."""
+    env, demos, config = small_setup()
+    train = make_train(config, env, demos)
+    cells, (hyperparams, specs, keys) = small_grid_inputs()
+    _, grid_metrics = jax.jit(jax.vmap(train))(hyperparams, specs, keys)
+    single = jax.jit(train)
+    rows = []
+    for index in range(len(cells)):
+        pick = jax.tree.map(lambda x, i=index: x[i], (hyperparams, specs, keys))
+        rows.append(single(*pick)[1])
+    return {
+        name: [
+            np.asarray(grid_metrics[name]).tolist(),
+            [np.asarray(r[name]).tolist() for r in rows],
+        ]
+        for name in COMPARED
+    }
+
+
+def test_grid_matches_runs_one_at_a_time():
+    results = run_single_and_grid()
+    for name, (grid_values, single_values) in results.items():
+        np.testing.assert_allclose(grid_values, single_values, rtol=1e-4, atol=1e-6, err_msg=name)
+
+
+def chunked_grid_results(devices=None, chunks=2):
+    env, demos, config = small_setup()
+    train = make_train(config, env, demos)
+    _, inputs = small_grid_inputs()
+    grid = Grid(train, *inputs, blocks_per_chunk=1, devices=devices)
+    state, _ = grid.init()
+    outputs = []
+    for _ in range(chunks):
+        state, metrics = grid.run_chunk(state)
+        outputs.append(grid.unpad(metrics))
+    return grid, state, {name: np.concatenate([o[name] for o in outputs], 1) for name in COMPARED}
+
+
+def sharded_vs_unsharded() -> dict:
+    devices = jax.devices()
+    assert len(devices) == 4, devices
+    sharded_grid, _, sharded = chunked_grid_results(devices)
+    _, _, unsharded = chunked_grid_results(devices[:1])
+    return {
+        "num_padded": sharded_grid.num_padded,
+        **{name: [sharded[name].tolist(), unsharded[name].tolist()] for name in COMPARED},
+    }
+
+
+def test_sharded_over_four_devices_matches_one_device():
+    from conftest import run_in_subprocess
+
+    results = run_in_subprocess(
+        __file__,
+        "sharded_vs_unsharded",
+        {"XLA_FLAGS": "--xla_force_host_platform_device_count=4"},
+    )
+    assert results.pop("num_padded") == 8  # 6 cells padded to a multiple of 4 devices
+    for name, (sharded, unsharded) in results.items():
+        np.testing.assert_allclose(sharded, unsharded, rtol=1e-4, atol=1e-6, err_msg=name)
+
+
+def test_chunks_match_the_whole_scan_and_repeat_bit_identically():
+    env, demos, config = small_setup()
+    train = make_train(config, env, demos)
+    _, inputs = small_grid_inputs()
+    _, whole = jax.jit(jax.vmap(train))(*inputs)
+    _, _, first = chunked_grid_results()
+    _, _, second = chunked_grid_results()
+    for name in COMPARED:
+        np.testing.assert_allclose(first[name], whole[name], rtol=1e-5, atol=1e-7, err_msg=name)
+        np.testing.assert_array_equal(first[name], second[name], err_msg=name)
+
+
+def test_resume_from_a_checkpoint_is_bit_exact(tmp_path):
+    env, demos, config = small_setup()
+    train = make_train(config, env, demos)
+    _, inputs = small_grid_inputs()
+    grid = Grid(train, *inputs, blocks_per_chunk=1)
+    state, _ = grid.init()
+    state, _ = grid.run_chunk(state)
+    template = jax.eval_shape(lambda: grid.unpad(state))
+    save_tree(tmp_path / "state", grid.unpad(state))
+    _, uninterrupted = grid.run_chunk(state)
+    restored = grid.place(restore_tree(tmp_path / "state", template))
+    _, resumed = grid.run_chunk(restored)
+    for name in uninterrupted:
+        np.testing.assert_array_equal(resumed[name], uninterrupted[name], err_msg=name)
+
+
+def test_a_nan_cell_is_reported_and_leaves_the_others_alone():
+    env, demos, config = small_setup()
+    train = make_train(config, env, demos)
+    cells, (hyperparams, specs, keys) = small_grid_inputs(("pngail",), num_seeds=2)
+    poisoned = hyperparams.replace(
+        discriminator_learning_rate=hyperparams.discriminator_learning_rate.at[1].set(jnp.nan)
+    )
+    _, clean = jax.jit(jax.vmap(train))(hyperparams, specs, keys)
+    _, mixed = jax.jit(jax.vmap(train))(poisoned, specs, keys)
+    mixed = jax.device_get(mixed)
+    assert nonfinite_cells(mixed, config.trpo.eval_every).tolist() == [1]
+    assert nonfinite_cells(jax.device_get(clean), config.trpo.eval_every).tolist() == []
+    for name in COMPARED:
+        np.testing.assert_array_equal(mixed[name][0], np.asarray(clean[name])[0], err_msg=name)
+
+
+def test_wgail_weights_refresh_on_schedule():
+    env, demos, config = small_setup(
+        num_iterations=3, eval_every=1, wgail_refresh_every=2, wgail_refresh_until=2
+    )
+    train = make_train(config, env, demos)
+    hyperparams, spec, key = Hyperparams.create(), method_spec("wgail"), jax.random.key(1)
+    state, _ = jax.jit(train.init)(hyperparams, spec, key)
+    run = jax.jit(functools.partial(train.run_blocks, num_blocks=1))
+    state, _ = run(hyperparams, spec, state)
+    state, _ = run(hyperparams, spec, state)
+    np.testing.assert_array_equal(state.importance_weights, 1.0)  # before iteration 2: w = 1
+    before = state
+    state, _ = run(hyperparams, spec, state)  # iteration 2 refreshes from `before`
+    inputs = demos.inputs[np.asarray(before.demo_rows)]
+    logits = train_discriminator_logits(train, before, inputs)
+    log_pi = train.trpo.log_prob(before.trpo, inputs[:, :3], inputs[:, 3:])
+    expected = np.sqrt(np.exp(-np.asarray(logits, np.float64)) * np.exp(np.asarray(log_pi)))
+    np.testing.assert_allclose(state.importance_weights, expected, rtol=1e-4)
+    state, _ = jax.jit(functools.partial(train.run_blocks, num_blocks=1))(hyperparams, spec, state)
+
+
+def train_discriminator_logits(train, state, inputs):
+    from pngail_jax.networks import Discriminator
+
+    model = Discriminator(train.config.discriminator_hidden_sizes)
+    return model.apply(state.discriminator_params, inputs)
+
+
+def test_given_confidences_need_no_classifier_and_classifier_fills_unlabelled_rows():
+    env, demos, config = small_setup()
+    train = make_train(config, env, demos)
+    hyperparams, key = Hyperparams.create(label_ratio=0.25), jax.random.key(3)
+    given, _ = jax.jit(train.init)(hyperparams, method_spec("icgail"), key)
+    classified, errors = jax.jit(train.init)(hyperparams, method_spec("pngail"), key)
+    labelled = np.asarray(given.labelled)
+    assert labelled.sum() == 30  # round(0.25 * 120)
+    np.testing.assert_array_equal(given.demo_rows, classified.demo_rows)  # same seed, same split
+    np.testing.assert_array_equal(given.confidence[labelled], classified.confidence[labelled])
+    np.testing.assert_allclose(
+        given.confidence[~labelled], np.mean(np.asarray(given.confidence)[labelled]), rtol=1e-6
+    )
+    assert not np.allclose(classified.confidence[~labelled], given.confidence[~labelled])
+    assert 0 <= float(errors["confidence/mae"]) <= 1
+
+
+def test_bad_demonstrations_are_clear_errors():
+    env, demos, config = small_setup()
+    no_confidence = Demonstrations(demos.observations, demos.actions)
+    with pytest.raises(DemonstrationError, match="confidence per demonstration row"):
+        make_train(config, env, no_confidence)
+    with pytest.raises(DemonstrationError, match="only 120 rows"):
+        make_train(AdversarialConfig(trpo=config.trpo, num_demos=500), env, demos)
+    wrong_size = Demonstrations(demos.observations[:, :2], demos.actions, demos.confidence)
+    with pytest.raises(DemonstrationError, match="observations of size 2"):
+        make_train(config, env, wrong_size)
+    with pytest.raises(ValueError, match="label_ratio"):
+        Hyperparams.create(label_ratio=1.0)
