@@ -39,9 +39,9 @@ steps are not counted; the env-only ceiling still runs on one device.
 
 Row schema: env_throughput's ``{name, env, width, steps_per_second, compile_seconds,
 peak_memory_bytes, device, jax_version}`` plus ``cells``, ``num_envs``, ``unroll_length``,
-``iterations``, ``env_steps_per_second``, ``train_over_env_ratio``, ``ratio_vs_one_cell``
-(None without a 1-cell row), ``devices``, and ``methods``, ``seeds``, ``padded_cells``,
-``init_compile_seconds``, ``chunk_compile_seconds``, ``init_peak_memory_bytes``,
+``iterations``, ``fisher``, ``env_steps_per_second``, ``train_over_env_ratio``,
+``ratio_vs_one_cell`` (None without a 1-cell row), ``devices``, and ``methods``, ``seeds``,
+``padded_cells``, ``init_compile_seconds``, ``chunk_compile_seconds``, ``init_peak_memory_bytes``,
 ``init_seconds`` (the untimed init call), ``nonfinite_cells``, ``synthetic_demos``.
 """
 
@@ -123,13 +123,13 @@ def measure_grid(train, size: int, devices, key: jax.Array) -> dict:
     return {
         "steps_per_second": steps / statistics.median(timings),
         "compile_seconds": grid.compile_seconds,
-        "peak_memory_bytes": peak_memory_bytes(grid._chunk),
+        "peak_memory_bytes": peak_memory_bytes(grid.chunk_program),
         "methods": list(methods),
         "seeds": seeds,
         "padded_cells": grid.num_padded,
         "init_compile_seconds": grid.init_compile_seconds,
         "chunk_compile_seconds": grid.chunk_compile_seconds,
-        "init_peak_memory_bytes": peak_memory_bytes(grid._init),
+        "init_peak_memory_bytes": peak_memory_bytes(grid.init_program),
         "init_seconds": init_seconds,
         "nonfinite_cells": len(bad),
     }
@@ -142,6 +142,7 @@ def measure_rows(args, env, demos, devices, common: dict) -> list[dict]:
             unroll_length=args.unroll_length,
             num_iterations=args.iterations,
             eval_every=args.iterations,
+            fisher=args.fisher,
         ),
         classifier=ClassifierConfig(num_steps=args.classifier_steps),
         num_demos=None,
@@ -164,6 +165,7 @@ def measure_rows(args, env, demos, devices, common: dict) -> list[dict]:
             "num_envs": args.num_envs,
             "unroll_length": args.unroll_length,
             "iterations": args.iterations,
+            "fisher": args.fisher,
             "env_steps_per_second": env_speed,
             "train_over_env_ratio": speed / env_speed,
             "ratio_vs_one_cell": None,
@@ -244,6 +246,12 @@ def parse_args(argv=None) -> argparse.Namespace:
         default=None,
         help=f"confidence-classifier steps in the untimed init (default {CLASSIFIER_STEPS:,}; "
         f"--quick {QUICK_CLASSIFIER_STEPS:,})",
+    )
+    parser.add_argument(
+        "--fisher",
+        choices=("hessian", "gauss_newton"),
+        default="gauss_newton",
+        help="Fisher-vector product form (default gauss_newton, as experiments.sweep)",
     )
     parser.add_argument("--devices", type=int, default=None, help="shard every grid over N devices")
     parser.add_argument(

@@ -133,11 +133,11 @@ class Grid:
         init = jit(jax.vmap(train.init))
         state_shape, _ = jax.eval_shape(init, *inputs)
         start = time.perf_counter()
-        self._init = init.lower(*inputs).compile()
+        self.init_program = init.lower(*inputs).compile()
         self.init_compile_seconds = time.perf_counter() - start
         chunk = jax.vmap(functools.partial(train.run_blocks, num_blocks=blocks_per_chunk))
         start = time.perf_counter()
-        self._chunk = (
+        self.chunk_program = (
             jit(chunk, donate_argnums=(2,))
             .lower(self.hyperparams, self.specs, self._with_sharding(state_shape))
             .compile()
@@ -157,11 +157,11 @@ class Grid:
 
     def init(self) -> tuple[TrainState, dict]:
         """Splits, classifier phase and initial networks of every cell (device arrays)."""
-        return self._init(self.hyperparams, self.specs, self.keys)
+        return self.init_program(self.hyperparams, self.specs, self.keys)
 
     def run_chunk(self, state: TrainState) -> tuple[TrainState, dict]:
         """The next chunk. ``state`` is donated (do not reuse it); metrics float[G, I]."""
-        return self._chunk(self.hyperparams, self.specs, state)
+        return self.chunk_program(self.hyperparams, self.specs, state)
 
     def place(self, state: TrainState) -> TrainState:
         """Pads an unpadded state (e.g. restored from a checkpoint, possibly written with a
