@@ -95,13 +95,27 @@ def parse_args(argv=None) -> argparse.Namespace:
         "(default: the core count)",
     )
     parser.add_argument("--out", type=Path, help="output directory (default runs/<timestamp>)")
+    multihost = parser.add_argument_group(
+        "multi-host (run the same command on every host; process 0 writes the outputs)"
+    )
+    multihost.add_argument("--coordinator", help="host:port of process 0, for jax.distributed")
+    multihost.add_argument("--num-processes", type=int)
+    multihost.add_argument("--process-id", type=int)
     parser.add_argument("--resume", type=Path, metavar="DIR", help="continue DIR's run")
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parser.parse_args(argv)
+    distributed = (args.coordinator, args.num_processes, args.process_id)
+    if any(x is not None for x in distributed) and any(x is None for x in distributed):
+        parser.error("--coordinator, --num-processes and --process-id go together")
     if args.resume is not None:
-        if len(argv) != 2:
-            parser.error("--resume DIR takes no other flags: the run's config.json has them")
+        if len(argv) != 2 + 2 * sum(x is not None for x in distributed):
+            parser.error(
+                "--resume DIR takes no other flags (except the multi-host ones): the run's "
+                "config.json has them"
+            )
         return args
+    if args.coordinator is not None and args.demos is None:
+        parser.error("multi-host runs need --demos (a file every host can read)")
     return resolve(parser, args)
 
 
@@ -207,19 +221,31 @@ def configure_devices(requested: int | None) -> None:
 def main(argv=None) -> Path:
     args = parse_args(argv)
     resume_dir = args.resume
+    distributed = {
+        "coordinator_address": args.coordinator,
+        "num_processes": args.num_processes,
+        "process_id": args.process_id,
+    }
     if resume_dir is not None:
         config_path = resume_dir / "config.json"
         if not config_path.exists():
             raise SystemExit(f"--resume {resume_dir}: no config.json there")
         saved = json.loads(config_path.read_text())
-        args = argparse.Namespace(**{**saved, "out": resume_dir})
+        args = argparse.Namespace(**{**saved, "out": resume_dir, "resume": resume_dir})
         args.demos = Path(saved["demos"])
         args.conf = None if saved["conf"] is None else Path(saved["conf"])
     configure_devices(args.cpu_devices)
     import jax
 
+    if distributed["coordinator_address"] is not None:
+        jax.config.update("jax_cpu_collectives_implementation", "gloo")
+        jax.distributed.initialize(**distributed)
+        if jax.process_index() != 0:
+            sys.stdout = open(os.devnull, "w")  # noqa: SIM115  process 0 reports
+    writer = jax.process_index() == 0
+
     from pngail_jax import envs, report
-    from pngail_jax.checkpoint import restore_tree, save_tree
+    from pngail_jax.checkpoint import restore_tree
     from pngail_jax.confidence import ClassifierConfig
     from pngail_jax.grid import Grid, make_cells, nonfinite_cells, stack_cells
     from pngail_jax.rl import TRPOConfig
@@ -249,10 +275,11 @@ def main(argv=None) -> Path:
                 "need at least one labelled and one unlabelled row"
             )
     out: Path = args.out
-    out.mkdir(parents=True, exist_ok=True)
+    if writer:
+        out.mkdir(parents=True, exist_ok=True)
     run = run_config(args, demos, demos_path)
     normalizer = run["normalizer"]
-    if resume_dir is None:
+    if resume_dir is None and writer:
         (out / "config.json").write_text(json.dumps(run, indent=2))
     cells = make_cells(args.methods, args.seeds, args.label_ratios, args.noise_stds)
     if args.env == "Walker2d":
@@ -288,7 +315,7 @@ def main(argv=None) -> Path:
     chunks_done, metrics_so_far, timing = 0, None, {"seconds": 0.0, "steps": 0}
     start = time.perf_counter()
     state, init_metrics = grid.init()
-    init_metrics = grid.unpad(jax.device_get(init_metrics))
+    init_metrics = grid.fetch(init_metrics)
     latest = _latest_checkpoint(checkpoint_dir)
     if resume_dir is not None and latest is not None:
         template = jax.eval_shape(lambda: grid.unpad(state))
@@ -317,7 +344,7 @@ def main(argv=None) -> Path:
     for chunk in range(chunks_done, num_chunks):
         chunk_start = time.perf_counter()
         state, chunk_metrics = grid.run_chunk(state)
-        chunk_metrics = grid.unpad(jax.device_get(chunk_metrics))
+        chunk_metrics = grid.fetch(chunk_metrics)
         seconds = time.perf_counter() - chunk_start
         timing["seconds"] += seconds
         timing["steps"] += len(cells) * grid.iterations_per_chunk * config.trpo.batch_size
@@ -330,7 +357,7 @@ def main(argv=None) -> Path:
             }
         iteration = (chunk + 1) * grid.iterations_per_chunk
         rate = timing["steps"] / timing["seconds"]
-        remaining = (num_chunks - chunk - 1) * timing["seconds"] / (chunk + 1 - chunks_done or 1)
+        remaining = (num_chunks - chunk - 1) * timing["seconds"] / (chunk + 1)
         bad = set(nonfinite_cells(metrics_so_far, args.eval_every).tolist())
         for index in sorted(bad - reported_bad):
             cell = cells[index]
@@ -343,8 +370,10 @@ def main(argv=None) -> Path:
             f"best {_best_cell(cells, chunk_metrics, normalizer)}",
             flush=True,
         )
-        _save_checkpoint(checkpoint_dir, chunk + 1, grid, state, metrics_so_far, timing, save_tree)
-        _write_outputs(out, args, cells, metrics_so_far, init_metrics, normalizer, grid, timing)
+        host_state = grid.fetch(state)  # every process takes part in the gather
+        if writer:
+            _save_checkpoint(checkpoint_dir, chunk + 1, host_state, metrics_so_far, timing)
+            _write_outputs(out, args, cells, metrics_so_far, init_metrics, normalizer, grid, timing)
 
     metrics = {**metrics_so_far, **init_metrics}
     summary = _write_outputs(
@@ -384,10 +413,12 @@ def _latest_checkpoint(directory: Path):
     return done[-1] if done else None
 
 
-def _save_checkpoint(directory, chunks_done, grid, state, metrics, timing, save_tree):
+def _save_checkpoint(directory, chunks_done, host_state, metrics, timing):
     """Writes chunk_NNNN/ (state via orbax, metrics, progress last) and keeps the last two."""
+    from pngail_jax.checkpoint import save_tree
+
     path = directory / f"chunk_{chunks_done:04d}"
-    save_tree(path / "state", grid.unpad(state))
+    save_tree(path / "state", host_state)
     np.savez(path / "metrics.npz", **{name.replace("/", ":"): v for name, v in metrics.items()})
     progress = {"chunks_done": chunks_done, "timing": timing}
     (path / "progress.json").write_text(json.dumps(progress))  # marks the checkpoint complete

@@ -93,6 +93,26 @@ def _pad(tree, size: int):
     return jax.tree.map(pad, tree)
 
 
+def _is_key(x) -> bool:
+    return jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key)
+
+
+def _put_global(tree, sharding: NamedSharding):
+    """``device_put`` that also works when the mesh spans several processes (multi-host,
+    after ``jax.distributed.initialize``): every process holds the whole host value and
+    contributes the shards of its own devices."""
+    if sharding.is_fully_addressable:
+        return jax.device_put(tree, sharding)
+
+    def put(x):
+        if _is_key(x):
+            return jax.random.wrap_key_data(put(jax.random.key_data(x)))
+        host = np.asarray(x)
+        return jax.make_array_from_callback(host.shape, sharding, lambda index: host[index])
+
+    return jax.tree.map(put, tree)
+
+
 class Grid:
     """Compiled init and chunk programs for stacked cells, sharded over ``devices``.
 
@@ -124,7 +144,7 @@ class Grid:
                 devices=devices,
             )
             self.sharding = NamedSharding(mesh, PartitionSpec(GRID_AXIS))
-            inputs = jax.device_put(inputs, self.sharding)
+            inputs = _put_global(inputs, self.sharding)
         else:
             self.sharding = None
             inputs = jax.device_put(inputs, devices[0])
@@ -169,11 +189,23 @@ class Grid:
         state = _pad(state, self.num_padded)
         if self.sharding is None:
             return jax.device_put(state)
-        return jax.device_put(state, self.sharding)
+        return _put_global(state, self.sharding)
 
     def unpad(self, tree):
         """The real cells of any grid-leading pytree (host or device arrays)."""
         return jax.tree.map(lambda x: x[: self.num_cells], tree)
+
+    def fetch(self, tree):
+        """Host copy of the real cells of a grid-leading pytree of device arrays, gathered
+        from every process when the mesh spans several (then every process must call it)."""
+        if self.sharding is not None and not self.sharding.is_fully_addressable:
+            from jax.experimental import multihost_utils
+
+            keys = jax.tree.map(_is_key, tree)
+            data = jax.tree.map(lambda x, k: jax.random.key_data(x) if k else x, tree, keys)
+            data = multihost_utils.process_allgather(data, tiled=True)
+            tree = jax.tree.map(lambda x, k: jax.random.wrap_key_data(x) if k else x, data, keys)
+        return self.unpad(jax.device_get(tree))
 
 
 def nonfinite_cells(metrics: dict[str, np.ndarray], eval_every: int) -> np.ndarray:

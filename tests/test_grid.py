@@ -89,7 +89,7 @@ def chunked_grid_results(devices=None, chunks=2):
     outputs = []
     for _ in range(chunks):
         state, metrics = grid.run_chunk(state)
-        outputs.append(grid.unpad(metrics))
+        outputs.append(grid.fetch(metrics))
     return grid, state, {name: np.concatenate([o[name] for o in outputs], 1) for name in COMPARED}
 
 
@@ -218,3 +218,56 @@ def test_bad_demonstrations_are_clear_errors():
         make_train(config, env, wrong_size)
     with pytest.raises(ValueError, match="label_ratio"):
         Hyperparams.create(label_ratio=1.0)
+
+
+def multihost_worker(process_id: int, port: int) -> dict:
+    """One of two processes of a multi-host grid (jax.distributed over CPU, gloo)."""
+    jax.config.update("jax_cpu_collectives_implementation", "gloo")
+    jax.distributed.initialize(f"localhost:{port}", num_processes=2, process_id=process_id)
+    assert jax.process_count() == 2 and len(jax.devices()) == 2
+    grid, state, metrics = chunked_grid_results(chunks=2)
+    assert not grid.sharding.is_fully_addressable  # the mesh spans both processes
+    state_returns = grid.fetch(state).trpo.env_steps
+    return {name: np.asarray(metrics[name]).tolist() for name in COMPARED} | {
+        "env_steps": np.asarray(state_returns).tolist()
+    }
+
+
+def test_two_processes_match_one():
+    import json
+    import os
+    import socket
+    import subprocess
+    import sys
+
+    with socket.socket() as probe:
+        probe.bind(("localhost", 0))
+        port = probe.getsockname()[1]
+    code = (
+        "import json, runpy, sys\n"
+        f"namespace = runpy.run_path({__file__!r})\n"
+        f"result = namespace['multihost_worker'](int(sys.argv[1]), {port})\n"
+        "print('RESULT ' + json.dumps(result))\n"
+    )
+    env = {**os.environ, "PYTHONPATH": os.getcwd()}
+    processes = [
+        subprocess.Popen(
+            [sys.executable, "-c", code, str(i)],
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for i in range(2)
+    ]
+    outputs = [process.communicate(timeout=600) for process in processes]
+    results = []
+    for process, (stdout, stderr) in zip(processes, outputs, strict=True):
+        lines = [line for line in stdout.splitlines() if line.startswith("RESULT ")]
+        assert process.returncode == 0 and lines, stderr[-3000:]
+        results.append(json.loads(lines[-1].removeprefix("RESULT ")))
+    assert results[0] == results[1]  # both processes see the whole gathered grid
+    _, _, single = chunked_grid_results(chunks=2)
+    for name in COMPARED:
+        np.testing.assert_allclose(results[0][name], single[name], rtol=1e-4, atol=1e-6)
+    assert results[0]["env_steps"] == [2 * 200] * 6
