@@ -370,11 +370,14 @@ def main(argv=None) -> Path:
             f"best {_best_cell(cells, chunk_metrics, normalizer)}",
             flush=True,
         )
-        host_state = grid.fetch(state)  # every process takes part in the gather
+        # Every process takes part in the gather and in orbax's save (it synchronises them).
+        host_state = grid.fetch(state)
+        _save_checkpoint(checkpoint_dir, chunk + 1, host_state, metrics_so_far, timing, writer)
         if writer:
-            _save_checkpoint(checkpoint_dir, chunk + 1, host_state, metrics_so_far, timing)
             _write_outputs(out, args, cells, metrics_so_far, init_metrics, normalizer, grid, timing)
 
+    if not writer:
+        return out
     metrics = {**metrics_so_far, **init_metrics}
     summary = _write_outputs(
         out, args, cells, metrics_so_far, init_metrics, normalizer, grid, timing
@@ -413,12 +416,17 @@ def _latest_checkpoint(directory: Path):
     return done[-1] if done else None
 
 
-def _save_checkpoint(directory, chunks_done, host_state, metrics, timing):
-    """Writes chunk_NNNN/ (state via orbax, metrics, progress last) and keeps the last two."""
+def _save_checkpoint(directory, chunks_done, host_state, metrics, timing, writer: bool):
+    """Writes chunk_NNNN/ (state via orbax, metrics, progress last) and keeps the last two.
+
+    Every process calls it (orbax synchronises processes); only the writer writes the rest.
+    """
     from pngail_jax.checkpoint import save_tree
 
     path = directory / f"chunk_{chunks_done:04d}"
     save_tree(path / "state", host_state)
+    if not writer:
+        return
     np.savez(path / "metrics.npz", **{name.replace("/", ":"): v for name, v in metrics.items()})
     progress = {"chunks_done": chunks_done, "timing": timing}
     (path / "progress.json").write_text(json.dumps(progress))  # marks the checkpoint complete

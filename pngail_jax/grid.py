@@ -201,7 +201,7 @@ class Grid:
         if self.sharding is not None and not self.sharding.is_fully_addressable:
             from jax.experimental import multihost_utils
 
-            keys = jax.tree.map(_is_key, tree)
+            keys = jax.tree.map(_is_key, tree)  # gathered as their raw key data
             data = jax.tree.map(lambda x, k: jax.random.key_data(x) if k else x, tree, keys)
             data = multihost_utils.process_allgather(data, tiled=True)
             tree = jax.tree.map(lambda x, k: jax.random.wrap_key_data(x) if k else x, data, keys)
