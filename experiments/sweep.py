@@ -40,10 +40,16 @@ DEMO_CACHE = Path("runs") / "demos-cache"
 
 def parse_args(argv=None) -> argparse.Namespace:
     from pngail_jax import envs
-    from pngail_jax.methods import METHOD_NAMES
+    from pngail_jax.methods import METHOD_NAMES, PRESETS
 
+    methods_help = "\n".join(
+        f"  {name:14s} {preset.description} (r: {preset.confidence_source})"
+        for name, preset in PRESETS.items()
+    )
     parser = argparse.ArgumentParser(
-        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+        description=__doc__.split("\n\n")[0],
+        epilog=f"methods:\n{methods_help}",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--env", default="Pendulum-v1", help=f"one of {', '.join(envs.ENV_NAMES)}")
     parser.add_argument(
