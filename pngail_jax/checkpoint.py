@@ -8,6 +8,7 @@ evaluation returns) and ``policy_params/`` (orbax), with a leading seed axis on 
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Callable
 from pathlib import Path
 
@@ -126,14 +127,16 @@ def _is_key(x) -> bool:
 def save_tree(directory: str | Path, tree) -> None:
     """Saves any pytree of arrays (typed PRNG keys included, as their key data) with orbax.
 
-    Leaves are stored flat (``leaf_00000``, ...); ``restore_tree`` rebuilds the structure
-    from a template of the same structure, e.g. ``jax.eval_shape`` of the init function.
+    Leaves are stored flat by position (``leaf_00000``, ...); empty leaves (MJX states hold
+    some, and orbax refuses them) are not stored. ``restore_tree`` rebuilds the structure from
+    a template of the same structure, e.g. ``jax.eval_shape`` of the init function.
     """
     leaves = jax.tree.leaves(jax.device_get(tree))
     arrays = {
         f"leaf_{i:05d}": np.asarray(jax.random.key_data(x) if _is_key(x) else x)
         for i, x in enumerate(leaves)
     }
+    arrays = {name: value for name, value in arrays.items() if value.size > 0}
     checkpointer = ocp.StandardCheckpointer()
     checkpointer.save(Path(directory).absolute(), arrays, force=True)
     checkpointer.wait_until_finished()
@@ -143,13 +146,15 @@ def restore_tree(directory: str | Path, template):
     """The pytree ``save_tree`` wrote, as host arrays shaped like ``template``'s leaves."""
     arrays = ocp.StandardCheckpointer().restore(Path(directory).absolute())
     leaves, treedef = jax.tree.flatten(template)
-    if len(arrays) != len(leaves):
-        raise ValueError(
-            f"{directory}: checkpoint has {len(arrays)} arrays, the template {len(leaves)}"
-        )
     restored = []
     for i, like in enumerate(leaves):
-        value = np.asarray(arrays[f"leaf_{i:05d}"])
+        name = f"leaf_{i:05d}"
+        if name not in arrays:
+            if math.prod(like.shape) == 0:
+                restored.append(np.zeros(like.shape, like.dtype))
+                continue
+            raise ValueError(f"{directory}: no array {name}; not a checkpoint of this state")
+        value = np.asarray(arrays[name])
         if _is_key(like):
             value = jax.random.wrap_key_data(value)  # the default implementation
         elif value.shape != like.shape or value.dtype != like.dtype:
@@ -158,4 +163,6 @@ def restore_tree(directory: str | Path, template):
                 f"{like.dtype}{like.shape}"
             )
         restored.append(value)
+    if len(arrays) > len(leaves):
+        raise ValueError(f"{directory}: more arrays than the template has leaves")
     return jax.tree.unflatten(treedef, restored)
