@@ -156,6 +156,8 @@ def resolve(parser, args: argparse.Namespace) -> argparse.Namespace:
         parser.error(f"--demos {args.demos} does not exist")
     if args.out is None:
         args.out = Path("runs") / time.strftime("%Y%m%d-%H%M%S")
+    if (args.out / "config.json").exists():
+        parser.error(f"{args.out} already holds a run: --resume {args.out}, or another --out")
     return args
 
 

@@ -81,6 +81,8 @@ def test_sweep_writes_every_output_and_resumes_exactly(demos_path, tmp_path):
     (out / "metrics.csv").unlink()
     sweep.main(["--resume", str(out)])
     assert (out / "metrics.csv").read_text() == original
+    with pytest.raises(SystemExit):  # a second run into the same directory
+        sweep.parse_args(tiny_sweep_args(demos_path, out))
 
 
 def sweep_columns():
