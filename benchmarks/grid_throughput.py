@@ -118,7 +118,7 @@ def measure_grid(train, size: int, devices, key: jax.Array) -> dict:
         state, metrics = grid.run_chunk(state)
         jax.block_until_ready((state, metrics))
         timings.append(time.perf_counter() - start)
-    bad = nonfinite_cells(grid.unpad(jax.device_get(metrics)), grid.iterations_per_chunk)
+    bad = nonfinite_cells(grid.fetch(metrics), grid.iterations_per_chunk)
     steps = grid.num_cells * grid.iterations_per_chunk * train.config.trpo.batch_size
     return {
         "steps_per_second": steps / statistics.median(timings),

@@ -32,7 +32,7 @@ DEFAULTS = {  # the smoke scale: a few minutes on a 2-core CPU
     "chunk_iterations": 50,
     "classifier_steps": 25_000,
 }
-PRESETS = {
+RUN_PRESETS = {
     "paper": {"iterations": 5_000, "seeds": 5, "chunk_iterations": 250},
 }
 DEMO_CACHE = Path("runs") / "demos-cache"
@@ -59,7 +59,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     )
     parser.add_argument("--seeds", type=int, help=f"default {DEFAULTS['seeds']}")
     parser.add_argument("--iterations", type=int, help=f"default {DEFAULTS['iterations']}")
-    parser.add_argument("--preset", choices=sorted(PRESETS), help="paper: 5,000 it., 5 seeds")
+    parser.add_argument(
+        "--preset", choices=sorted(RUN_PRESETS), help="paper: 5,000 iterations, 5 seeds"
+    )
     parser.add_argument("--demos", type=Path, help="*_mixture.npy (authors' layout) or *.npz")
     parser.add_argument("--conf", type=Path, help="confidence file (default: the sibling)")
     parser.add_argument(
@@ -114,7 +116,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     if any(x is not None for x in distributed) and any(x is None for x in distributed):
         parser.error("--coordinator, --num-processes and --process-id go together")
     if args.resume is not None:
-        if len(argv) != 2 + 2 * sum(x is not None for x in distributed):
+        allowed = ("--resume", "--coordinator", "--num-processes", "--process-id")
+        flags = [a.split("=")[0] for a in argv if a.startswith("--")]
+        if any(flag not in allowed for flag in flags):
             parser.error(
                 "--resume DIR takes no other flags (except the multi-host ones): the run's "
                 "config.json has them"
@@ -130,7 +134,7 @@ def resolve(parser, args: argparse.Namespace) -> argparse.Namespace:
     from pngail_jax import envs
     from pngail_jax.methods import METHOD_NAMES
 
-    preset = PRESETS.get(args.preset, {})
+    preset = RUN_PRESETS.get(args.preset, {})
     for name, value in DEFAULTS.items():
         if getattr(args, name) is None:
             setattr(args, name, preset.get(name, value))
@@ -242,6 +246,8 @@ def main(argv=None) -> Path:
         args = argparse.Namespace(**{**saved, "out": resume_dir, "resume": resume_dir})
         args.demos = Path(saved["demos"])
         args.conf = None if saved["conf"] is None else Path(saved["conf"])
+        if args.cpu_devices is None and saved["platform"] == "cpu":
+            args.cpu_devices = saved["local_device_count"]  # the same sharding as before
     configure_devices(args.cpu_devices)
     import jax
 
@@ -285,7 +291,19 @@ def main(argv=None) -> Path:
     out: Path = args.out
     if writer:
         out.mkdir(parents=True, exist_ok=True)
+    devices = jax.devices()
     run = run_config(args, demos, demos_path)
+    run |= {
+        "platform": devices[0].platform,
+        "device_count": len(devices),
+        "local_device_count": len(jax.local_devices()),
+    }
+    if resume_dir is not None and saved["device_count"] != len(devices):
+        print(
+            f"WARNING: resuming on {len(devices)} devices, the run began on "
+            f"{saved['device_count']}: a different sharding can change the last bits, and "
+            "the rest of the run with them"
+        )
     normalizer = run["normalizer"]
     if resume_dir is None and writer:
         (out / "config.json").write_text(json.dumps(run, indent=2))
@@ -299,7 +317,6 @@ def main(argv=None) -> Path:
     chunk_blocks = blocks_per_chunk(
         num_evaluations, max(1, args.chunk_iterations // args.eval_every)
     )
-    devices = jax.devices()
     print(
         f"{len(cells)} runs ({', '.join(args.methods)} x {args.seeds} seeds x "
         f"{len(args.label_ratios) * len(args.noise_stds)} setting(s)) on {args.env}, "
@@ -328,8 +345,8 @@ def main(argv=None) -> Path:
     if resume_dir is not None and latest is not None:
         template = jax.eval_shape(lambda: grid.unpad(state))
         state = grid.place(restore_tree(latest / "state", template))
-        saved = np.load(latest / "metrics.npz")
-        metrics_so_far = {name.replace(":", "/"): saved[name] for name in saved.files}
+        with np.load(latest / "metrics.npz") as stored:
+            metrics_so_far = {name.replace(":", "/"): stored[name] for name in stored.files}
         progress = json.loads((latest / "progress.json").read_text())
         chunks_done, timing = progress["chunks_done"], progress["timing"]
         print(f"resumed from {latest} (iteration {chunks_done * grid.iterations_per_chunk})")
@@ -381,7 +398,7 @@ def main(argv=None) -> Path:
         # Every process takes part in the gather and in orbax's save (it synchronises them).
         host_state = grid.fetch(state)
         _save_checkpoint(checkpoint_dir, chunk + 1, host_state, metrics_so_far, timing, writer)
-        if writer:
+        if writer and chunk + 1 < num_chunks:  # partial results; the last are written below
             _write_outputs(out, args, cells, metrics_so_far, init_metrics, normalizer, grid, timing)
 
     if not writer:
@@ -444,16 +461,27 @@ def _save_checkpoint(directory, chunks_done, host_state, metrics, timing, writer
 
 def _write_outputs(out, args, cells, metrics_so_far, init_metrics, normalizer, grid, timing):
     from pngail_jax import report
+    from pngail_jax.grid import nonfinite_cells
 
     metrics = {**metrics_so_far, **init_metrics}
     report.write_metrics_csv(out / "metrics.csv", cells, metrics, normalizer)
     title = _title(args, len(cells))
     report.plot_curves(out / "curves.png", cells, metrics, normalizer, title)
+    diverged = nonfinite_cells(metrics_so_far, args.eval_every)
     summary = report.summarize(
-        cells, metrics, normalizer, timing["steps"] / timing["seconds"], grid.compile_seconds
+        cells,
+        metrics,
+        normalizer,
+        timing["steps"] / timing["seconds"],
+        grid.compile_seconds,
+        excluded=diverged,
     )
     done = metrics["env_steps"].shape[1]
-    notes = []
+    notes = [
+        f"Diverged (NaN/inf), left out of the means: {cells[i].method} seed {cells[i].seed} "
+        f"({cells[i].setting})."
+        for i in diverged
+    ]
     if done < args.iterations:
         notes.append(f"Partial: {done} of {args.iterations} iterations so far.")
     if args.preset is None and args.iterations < 1000:

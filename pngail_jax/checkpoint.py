@@ -120,7 +120,8 @@ def load_policy(
     return policy_fn
 
 
-def _is_key(x) -> bool:
+def is_key(x) -> bool:
+    """Whether ``x`` (an array or ShapeDtypeStruct) holds typed PRNG keys."""
     return hasattr(x, "dtype") and jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key)
 
 
@@ -133,7 +134,7 @@ def save_tree(directory: str | Path, tree) -> None:
     """
     leaves = jax.tree.leaves(jax.device_get(tree))
     arrays = {
-        f"leaf_{i:05d}": np.asarray(jax.random.key_data(x) if _is_key(x) else x)
+        f"leaf_{i:05d}": np.asarray(jax.random.key_data(x) if is_key(x) else x)
         for i, x in enumerate(leaves)
     }
     arrays = {name: value for name, value in arrays.items() if value.size > 0}
@@ -155,7 +156,7 @@ def restore_tree(directory: str | Path, template):
                 continue
             raise ValueError(f"{directory}: no array {name}; not a checkpoint of this state")
         value = np.asarray(arrays[name])
-        if _is_key(like):
+        if is_key(like):
             value = jax.random.wrap_key_data(value)  # the default implementation
         elif value.shape != like.shape or value.dtype != like.dtype:
             raise ValueError(

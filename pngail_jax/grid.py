@@ -24,6 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import NamedSharding, PartitionSpec
 
+from pngail_jax.checkpoint import is_key
 from pngail_jax.methods import MethodSpec, method_spec, stack
 from pngail_jax.train import Hyperparams, TrainState
 
@@ -93,10 +94,6 @@ def _pad(tree, size: int):
     return jax.tree.map(pad, tree)
 
 
-def _is_key(x) -> bool:
-    return jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key)
-
-
 def _put_global(tree, sharding: NamedSharding):
     """``device_put`` that also works when the mesh spans several processes (multi-host,
     after ``jax.distributed.initialize``): every process holds the whole host value and
@@ -105,7 +102,7 @@ def _put_global(tree, sharding: NamedSharding):
         return jax.device_put(tree, sharding)
 
     def put(x):
-        if _is_key(x):
+        if is_key(x):
             return jax.random.wrap_key_data(put(jax.random.key_data(x)))
         host = np.asarray(x)
         return jax.make_array_from_callback(host.shape, sharding, lambda index: host[index])
@@ -148,6 +145,7 @@ class Grid:
         else:
             self.sharding = None
             inputs = jax.device_put(inputs, devices[0])
+        self.devices = devices
         self.hyperparams, self.specs, self.keys = inputs
         jit = functools.partial(jax.jit, out_shardings=self.sharding)
         init = jit(jax.vmap(train.init))
@@ -188,7 +186,7 @@ class Grid:
         different device count) and puts it where ``run_chunk`` expects it."""
         state = _pad(state, self.num_padded)
         if self.sharding is None:
-            return jax.device_put(state)
+            return jax.device_put(state, self.devices[0])
         return _put_global(state, self.sharding)
 
     def unpad(self, tree):
@@ -201,7 +199,7 @@ class Grid:
         if self.sharding is not None and not self.sharding.is_fully_addressable:
             from jax.experimental import multihost_utils
 
-            keys = jax.tree.map(_is_key, tree)  # gathered as their raw key data
+            keys = jax.tree.map(is_key, tree)  # gathered as their raw key data
             data = jax.tree.map(lambda x, k: jax.random.key_data(x) if k else x, tree, keys)
             data = multihost_utils.process_allgather(data, tiled=True)
             tree = jax.tree.map(lambda x, k: jax.random.wrap_key_data(x) if k else x, data, keys)

@@ -57,7 +57,8 @@ def demo_weights(
         spec.gail_coef
         + spec.importance_weighted_coef * confidence / jnp.maximum(stats.mean_confidence, _TINY)
         + spec.pn_coef * confidence
-        + spec.wgail_coef * importance_weight
+        # where, not a product: 0 * inf (an overflowing w) would be NaN in other methods
+        + jnp.where(spec.wgail_coef != 0, spec.wgail_coef * importance_weight, 0.0)
         + spec.icgail_coef * unlabelled_share
     )
     v = spec.pn_coef * (1 - confidence) + spec.icgail_coef * labelled_negative_coef * (

@@ -94,12 +94,14 @@ def _mean_std(values):
     return float(finite.mean()), float(finite.std())
 
 
-def summarize(cells, metrics, normalizer, train_env_steps_per_second, compile_seconds):
+def summarize(cells, metrics, normalizer, train_env_steps_per_second, compile_seconds, excluded=()):
     """The ``summary.json`` dictionary. Final return: the last iteration's evaluation.
 
-    Diverged (non-finite) cells are left out of the means and of ``num_seeds``.
+    Cells listed in ``excluded`` (diverged ones, ``pngail_jax.grid.nonfinite_cells``) and
+    non-finite final returns are left out of the means and of ``num_seeds``.
     """
-    final = np.asarray(metrics["eval/return"])[:, -1]
+    final = np.asarray(metrics["eval/return"], np.float64)[:, -1].copy()
+    final[list(excluded)] = np.nan
     final_normalized = normalize(final, normalizer)
     _, groups = _groups(cells)
     methods = {}
@@ -141,7 +143,8 @@ def summary_markdown(summary, cells, metrics, title: str, notes: Sequence[str] =
         "",
         "Final return: deterministic (mean-action) evaluation at the last iteration, mean ± "
         "std over seeds. Confidence MAE: the confidences the method's loss uses on the "
-        "unlabelled rows (GAIL and WGAIL do not use them).",
+        "unlabelled rows (GAIL and WGAIL read none; IC-GAIL reads only D_c's given ones, so "
+        "its value is that of the mean labelled confidence, which it never reads).",
         "",
         f"Training throughput: {summary['train_env_steps_per_second']:,.0f} env steps/s "
         f"(adversarial phase, all cells); compile {summary['compile_seconds']:.1f} s.",

@@ -179,7 +179,31 @@ def test_wgail_weights_refresh_on_schedule():
     log_pi = train.trpo.log_prob(before.trpo, inputs[:, :3], inputs[:, 3:])
     expected = np.sqrt(np.exp(-np.asarray(logits, np.float64)) * np.exp(np.asarray(log_pi)))
     np.testing.assert_allclose(state.importance_weights, expected, rtol=1e-4)
-    state, _ = jax.jit(functools.partial(train.run_blocks, num_blocks=1))(hyperparams, spec, state)
+    refreshed = state.importance_weights
+    state, _ = run(hyperparams, spec, state)  # iteration 3 > wgail_refresh_until: kept
+    np.testing.assert_array_equal(state.importance_weights, refreshed)
+
+
+def test_policy_reward_comes_from_the_discriminator_before_its_step():
+    from pngail_jax.losses import policy_reward
+
+    env, demos, config = small_setup(num_iterations=1)
+    train = make_train(config, env, demos)
+    hyperparams, spec = Hyperparams.create(), method_spec("pngail")
+    state, _ = jax.jit(train.init)(hyperparams, spec, jax.random.key(2))
+    _, transitions = jax.jit(train.trpo.rollout)(state.trpo)  # the iteration's own rollout
+    clipped = np.clip(transitions.action, env.action_low, env.action_high)
+    agent_inputs = np.concatenate([transitions.obs, clipped], axis=-1)
+    run = jax.jit(functools.partial(train.run_blocks, num_blocks=1))
+    new_state, metrics = run(hyperparams, spec, state)
+
+    def mean_reward(params):
+        return float(
+            np.mean(policy_reward(train_discriminator_logits(train, params, agent_inputs)))
+        )
+
+    np.testing.assert_allclose(metrics["train/reward"][0], mean_reward(state), rtol=1e-5)
+    assert abs(mean_reward(new_state) - mean_reward(state)) > 1e-4  # the step moved it
 
 
 def train_discriminator_logits(train, state, inputs):
@@ -204,6 +228,10 @@ def test_given_confidences_need_no_classifier_and_classifier_fills_unlabelled_ro
     )
     assert not np.allclose(classified.confidence[~labelled], given.confidence[~labelled])
     assert 0 <= float(errors["confidence/mae"]) <= 1
+    # 2IWIL's mean(r) is over the whole split, not a batch.
+    np.testing.assert_allclose(
+        classified.stats.mean_confidence, np.mean(classified.confidence), rtol=1e-6
+    )
 
 
 def test_bad_demonstrations_are_clear_errors():

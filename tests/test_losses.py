@@ -179,5 +179,5 @@ def test_theorem_4_3_optimal_discriminator():
     d_learned = jax.nn.sigmoid(model.apply(train(params), states))
     d_star = ((1 - r) * p + p_theta) / (p + p_theta)
     np.testing.assert_allclose(d_learned, d_star, atol=2e-3)
-    # The reward -log D* is bounded by -log(1 - r) (REFERENCE.md).
-    assert np.all(-np.log(d_star) <= -np.log(1 - r) + 1e-6)
+    # The learned reward -log D stays within -log(1 - r) (REFERENCE.md), up to the tolerance.
+    assert np.all(-np.log(d_learned) <= -np.log(1 - r) + 5e-3)

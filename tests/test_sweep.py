@@ -76,11 +76,16 @@ def test_sweep_writes_every_output_and_resumes_exactly(demos_path, tmp_path):
     # A kill after the first chunk: the second chunk's checkpoint and the outputs are lost.
     checkpoints = sorted((out / "checkpoints").iterdir())
     assert [p.name for p in checkpoints] == ["chunk_0001", "chunk_0002"]
+    with np.load(checkpoints[-1] / "metrics.npz") as stored:
+        uninterrupted = dict(stored)
     shutil.rmtree(checkpoints[-1])
     original = (out / "metrics.csv").read_text()
     (out / "metrics.csv").unlink()
     sweep.main(["--resume", str(out)])
     assert (out / "metrics.csv").read_text() == original
+    with np.load(checkpoints[-1] / "metrics.npz") as stored:  # rewritten by the resumed run
+        for name, values in uninterrupted.items():
+            np.testing.assert_array_equal(stored[name], values, err_msg=name)
     with pytest.raises(SystemExit):  # a second run into the same directory
         sweep.parse_args(tiny_sweep_args(demos_path, out))
 
