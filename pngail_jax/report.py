@@ -195,7 +195,7 @@ def plot_curves(path: Path, cells, metrics, normalizer, title: str) -> None:
             title=setting if len(settings) > 1 else None,
         )
         axis.grid(alpha=0.3)
-    axes[0][0].legend(loc="lower right", fontsize=9)
+    axes[0][-1].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9)
     figure.suptitle(title)
     figure.tight_layout()
     figure.savefig(path, dpi=120)
