@@ -1,0 +1,75 @@
+"""Summaries, CSV and plot from synthetic grid metrics (two settings, one diverged cell)."""
+
+import csv
+import json
+
+import numpy as np
+
+from pngail_jax import report
+from pngail_jax.grid import make_cells, nonfinite_cells
+
+NORMALIZER = (-1200.0, -200.0)
+
+
+def synthetic_metrics(cells, num_iterations=6, eval_every=3):
+    rng = np.random.default_rng(0)
+    grid = len(cells)
+    evaluated = (np.arange(num_iterations) + 1) % eval_every == 0
+    returns = rng.uniform(-1200, -200, (grid, num_iterations))
+    metrics = {
+        "env_steps": np.tile(np.arange(1, num_iterations + 1) * 100, (grid, 1)),
+        "eval/return": np.where(evaluated, returns, np.nan),
+        "disc/loss": rng.uniform(1, 2, (grid, num_iterations)),
+        "disc/acc_agent": rng.uniform(size=(grid, num_iterations)),
+        "disc/acc_demo": rng.uniform(size=(grid, num_iterations)),
+        "train/reward": rng.uniform(size=(grid, num_iterations)),
+        "trpo/kl": rng.uniform(0, 0.01, (grid, num_iterations)),
+        "train/episode_return": returns,
+        "confidence/mae": rng.uniform(0, 0.2, grid),
+    }
+    return metrics
+
+
+def test_summary_groups_by_method_and_setting_and_drops_diverged_cells(tmp_path):
+    cells = make_cells(["gail", "pngail"], 3, label_ratios=(0.1, 0.2))
+    metrics = synthetic_metrics(cells)
+    metrics["disc/loss"][4, 2] = np.nan  # pngail seed 1 at label ratio 0.1 diverges
+    diverged = nonfinite_cells(metrics, eval_every=3)
+    assert diverged.tolist() == [4]
+    summary = report.summarize(cells, metrics, NORMALIZER, 1000.0, 2.0, excluded=diverged)
+    assert list(summary["methods"]) == [
+        "gail [label_ratio=0.1,noise=0]",
+        "pngail [label_ratio=0.1,noise=0]",
+        "gail [label_ratio=0.2,noise=0]",
+        "pngail [label_ratio=0.2,noise=0]",
+    ]
+    final = metrics["eval/return"][:, -1]
+    row = summary["methods"]["pngail [label_ratio=0.1,noise=0]"]
+    assert row["num_seeds"] == 2
+    np.testing.assert_allclose(row["final_return_mean"], final[[3, 5]].mean())
+    np.testing.assert_allclose(row["final_return_std"], final[[3, 5]].std())
+    np.testing.assert_allclose(
+        row["final_normalized_return_mean"], ((final[[3, 5]] + 1200) / 1000).mean()
+    )
+    json.dumps(summary)  # serialisable as summary.json
+
+    report.write_metrics_csv(tmp_path / "m.csv", cells, metrics, NORMALIZER)
+    with open(tmp_path / "m.csv") as file:
+        rows = list(csv.DictReader(file))
+    assert len(rows) == len(cells) * 6
+    assert rows[0]["eval_return"] == ""  # not an evaluation iteration
+    np.testing.assert_allclose(  # both written to 6 significant digits
+        float(rows[2]["normalized_return"]),
+        (float(rows[2]["eval_return"]) + 1200) / 1000,
+        rtol=1e-4,
+    )
+
+    report.plot_curves(tmp_path / "curves.png", cells, metrics, NORMALIZER, "test")
+    assert (tmp_path / "curves.png").stat().st_size > 10_000
+    markdown = report.summary_markdown(summary, cells, metrics, "test")
+    assert markdown.count("\n| ") == 1 + 4  # header + one row per method and setting
+
+
+def test_no_normaliser_gives_nan_normalised_returns():
+    assert np.isnan(report.normalize([-300.0], None)).all()
+    np.testing.assert_allclose(report.normalize([-700.0], NORMALIZER), [0.5])
