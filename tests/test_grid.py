@@ -1,8 +1,8 @@
 """The adversarial train function and grids: vmap, sharding, chunking, resume, NaN isolation.
 
 Small configs throughout (Pendulum, 4 envs x 50 steps, a 50-step classifier); tolerances:
-float32 programs that differ (vmapped vs single, sharded vs not) agree to rtol 1e-4; the same
-program with the same key is bit-identical.
+float32 programs that differ (vmapped vs single, sharded vs not, chunked vs whole) agree to
+rtol 1e-4; the same program with the same key is bit-identical.
 """
 
 import functools
@@ -125,7 +125,11 @@ def test_chunks_match_the_whole_scan_and_repeat_bit_identically():
     _, _, first = chunked_grid_results()
     _, _, second = chunked_grid_results()
     for name in COMPARED:
-        np.testing.assert_allclose(first[name], whole[name], rtol=1e-5, atol=1e-7, err_msg=name)
+        # Chunked and whole are different programs: XLA may fuse and order their float32
+        # reductions differently, by machine (1.2e-5 relative seen on an AMD EPYC), and
+        # Pendulum's dynamics amplify last-bit differences. The same program repeated is
+        # bit-identical.
+        np.testing.assert_allclose(first[name], whole[name], rtol=1e-4, atol=1e-6, err_msg=name)
         np.testing.assert_array_equal(first[name], second[name], err_msg=name)
 
 

@@ -73,21 +73,42 @@ def evaluate(
     normalize: Callable[[jax.Array], jax.Array],
     keys: jax.Array,
 ) -> jax.Array:
-    """Mean undiscounted return of the deterministic (mean-action) policy.
+    """Mean undiscounted return of the deterministic (mean-action) policy: the mean of
+    ``evaluate_episodes``' returns."""
+    returns, _ = evaluate_episodes(env, policy, policy_params, normalize, keys)
+    return returns.mean()
 
-    One episode per key in ``keys`` (key[E]), run in parallel on the plain env for
-    ``max_episode_steps`` steps; rewards after an episode's termination are not counted.
+
+def evaluate_episodes(
+    env: envs.Env,
+    policy: GaussianPolicy,
+    policy_params,
+    normalize: Callable[[jax.Array], jax.Array],
+    keys: jax.Array,
+) -> tuple[jax.Array, jax.Array]:
+    """Undiscounted returns float[E] of the deterministic policy, one episode per key in
+    ``keys`` (key[E]), and the number of steps the loop ran (int[]).
+
+    The episodes run in parallel on the plain env for at most ``max_episode_steps`` steps;
+    rewards after an episode's termination are not counted. The loop stops as soon as every
+    episode has terminated (under ``vmap`` over runs: once every run's episodes have), so a
+    policy that falls early costs only the steps it lives.
     """
     states = jax.vmap(env.reset)(keys)
     step = jax.vmap(env.step)
 
-    def body(carry, _):
-        states, returns, alive = carry
+    def running(carry):
+        _, _, alive, steps = carry
+        return (steps < env.max_episode_steps) & alive.any()
+
+    def body(carry):
+        states, returns, alive, steps = carry
         mean, _ = policy.apply(policy_params, normalize(states.obs))
         states = step(states, mean)
         returns = returns + jnp.where(alive, states.reward, 0.0)
-        return (states, returns, alive & ~states.done), None
+        return states, returns, alive & ~states.done, steps + 1
 
-    initial = (states, jnp.zeros(keys.shape[0]), jnp.ones(keys.shape[0], bool))
-    (_, returns, _), _ = jax.lax.scan(body, initial, None, length=env.max_episode_steps)
-    return returns.mean()
+    num_episodes = keys.shape[0]
+    initial = (states, jnp.zeros(num_episodes), jnp.ones(num_episodes, bool), jnp.zeros((), int))
+    _, returns, _, num_steps = jax.lax.while_loop(running, body, initial)
+    return returns, num_steps

@@ -29,7 +29,7 @@ from pngail_jax.networks import (
     gaussian_kl,
     gaussian_log_prob,
 )
-from pngail_jax.rl.gae import generalized_advantages
+from pngail_jax.rl.gae import GAEForm, generalized_advantages
 from pngail_jax.rl.rollout import Transitions, collect, evaluate
 from pngail_jax.rl.trpo import hessian_vector_product, natural_gradient_step
 
@@ -56,6 +56,9 @@ class TRPOConfig:
     fisher: Literal["hessian", "gauss_newton"] = "hessian"
     # Fisher products on every k-th sample of the batch (OpenAI baselines uses 5); 1 = all.
     fisher_subsample: int = 1
+    # GAE as a T-step scan ("sequential") or a log-depth tree ("associative"): the same
+    # numbers up to float rounding (tests/test_gae.py); which is faster depends on the device.
+    gae_form: GAEForm = "sequential"
 
     def __post_init__(self):
         for name in (
@@ -80,6 +83,10 @@ class TRPOConfig:
         if self.fisher not in ("hessian", "gauss_newton"):
             raise ValueError(
                 f"TRPOConfig.fisher must be 'hessian' or 'gauss_newton', got {self.fisher!r}"
+            )
+        if self.gae_form not in ("sequential", "associative"):
+            raise ValueError(
+                f"TRPOConfig.gae_form must be 'sequential' or 'associative', got {self.gae_form!r}"
             )
         if self.batch_size < self.num_value_minibatches:
             raise ValueError("TRPOConfig: fewer samples per iteration than value minibatches")
@@ -237,21 +244,20 @@ class TRPO:
         values = self.value.apply(state.value_params, obs)
         next_values = self.value.apply(state.value_params, normalizer(transitions.final_obs))
 
-        def gae(lam):
-            return generalized_advantages(
-                rewards,
-                values,
-                next_values,
-                transitions.done,
-                transitions.truncated,
-                hyperparams.gamma,
-                lam,
-                hyperparams.bootstrap_truncation,
-            )
-
-        advantages, _ = gae(hyperparams.lam)
-        # Value targets: bootstrapped discounted returns (lambda = 1), as the reference's.
-        _, targets = gae(1.0)
+        # One pass for both lambdas: the policy's advantages (lam) and the value targets,
+        # bootstrapped discounted returns (lambda = 1) as the reference's.
+        both_advantages, both_targets = generalized_advantages(
+            rewards,
+            values,
+            next_values,
+            transitions.done,
+            transitions.truncated,
+            hyperparams.gamma,
+            jnp.stack([hyperparams.lam, jnp.ones_like(hyperparams.lam)]),
+            hyperparams.bootstrap_truncation,
+            config.gae_form,
+        )
+        advantages, targets = both_advantages[0], both_targets[1]
         advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
 
         flat = lambda x: x.reshape(config.batch_size, *x.shape[2:])  # noqa: E731
