@@ -29,10 +29,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from experiments.train_rl import save_trpo_policies, train_with_progress
-from pngail_jax import envs
+from pngail_jax import compilation, envs
+from pngail_jax import settings as run_settings
 from pngail_jax.demos import Demonstrations, save_npz
 from pngail_jax.demos.generate import normalized_return, rollout_episodes, uniform_random_actions
-from pngail_jax.rl import TRPOConfig, TRPOHyperparams, make_train
+from pngail_jax.rl import TRPOHyperparams, make_train
 
 
 class Checkpoint(NamedTuple):
@@ -48,11 +49,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--env", default="Pendulum-v1", help=f"one of {', '.join(envs.ENV_NAMES)}")
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--iterations", type=int, default=150)
-    parser.add_argument("--eval-every", type=int, default=10)
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--num-envs", type=int, default=25)
-    parser.add_argument("--unroll-length", type=int, default=200)
     parser.add_argument("--ratio", default="1:4", help="optimal:intermediate trajectories")
     parser.add_argument("--num-trajectories", type=int, default=5)
     parser.add_argument("--intermediate-target", type=float, default=0.45)
@@ -62,9 +60,18 @@ def parse_args(argv=None) -> argparse.Namespace:
         default=64,
         help="episodes for the random and optimal returns",
     )
+    run_settings.add_arguments(parser)
+    # Checkpoints are kept at every evaluation, and the intermediate policy is picked among
+    # them: finer than the table's evaluation interval by default.
+    parser.set_defaults(eval_every=10)
+    compilation.add_arguments(parser)
     args = parser.parse_args(argv)
     if args.env not in envs.ENV_NAMES:
         parser.error(f"unknown environment {args.env!r}; available: {', '.join(envs.ENV_NAMES)}")
+    try:
+        args.settings = run_settings.from_arguments(args.env, args)
+    except ValueError as error:
+        parser.error(str(error))
     try:
         optimal_part, intermediate_part = (float(x) for x in args.ratio.split(":"))
     except ValueError:
@@ -74,7 +81,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     args.num_optimal = round(
         args.num_trajectories * optimal_part / (optimal_part + intermediate_part)
     )
-    if args.iterations % args.eval_every:
+    if args.iterations % args.settings.eval_every:
         parser.error("--iterations must be a multiple of --eval-every")
     if not 0 < args.intermediate_target < 1:
         parser.error("--intermediate-target must be in (0, 1)")
@@ -83,13 +90,9 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def main(argv=None) -> Path:
     args = parse_args(argv)
-    env = envs.make(args.env)
-    config = TRPOConfig(
-        num_envs=args.num_envs,
-        unroll_length=args.unroll_length,
-        num_iterations=args.iterations,
-        eval_every=args.eval_every,
-    )
+    compilation.from_arguments(args)
+    env = run_settings.make_env(args.env, args.settings)
+    config = args.settings.trpo_config(args.iterations)
     train = make_train(config, env)
     policy = train.trpo.policy
     hyperparams = jax.tree.map(
@@ -109,7 +112,8 @@ def main(argv=None) -> Path:
 
     start = time.perf_counter()
     print(
-        f"1/3 training TRPO on {args.env} ({args.seeds} seeds x {args.iterations} iterations)",
+        f"1/3 training TRPO on {args.env} ({args.seeds} seeds x {args.iterations} iterations; "
+        f"{run_settings.describe(args.settings)})",
         flush=True,
     )
     train_with_progress(
@@ -216,6 +220,7 @@ def main(argv=None) -> Path:
         "trajectory_returns": trajectory_returns,
         "optimal_beats_random": beats_random,
         "source": "experiments.make_demos (deterministic TRPO policies)",
+        "env_options": args.settings.env_options,
     }
     demos = Demonstrations(**{k: np.concatenate(v) for k, v in rows.items()}, metadata=metadata)
     demos.check_env(env)

@@ -16,6 +16,7 @@ intermediate trajectories) once and reused from ``runs/demos-cache/<env>/``. Wri
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import shutil
@@ -25,10 +26,12 @@ from pathlib import Path
 
 import numpy as np
 
+from pngail_jax import compilation
+from pngail_jax import settings as run_settings
+
 DEFAULTS = {  # the smoke scale: a few minutes on a 2-core CPU
     "iterations": 300,
     "seeds": 3,
-    "eval_every": 10,
     "chunk_iterations": 50,
     "classifier_steps": 25_000,
 }
@@ -76,7 +79,6 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--label-ratio", default="0.2", help="comma-separated values: a grid axis")
     parser.add_argument("--noise", default="0", help="confidence noise std, comma-separated")
     parser.add_argument("--seed", type=int, default=0, help="base PRNG seed")
-    parser.add_argument("--eval-every", type=int, help=f"default {DEFAULTS['eval_every']}")
     parser.add_argument(
         "--chunk-iterations",
         type=int,
@@ -84,10 +86,6 @@ def parse_args(argv=None) -> argparse.Namespace:
         f"{DEFAULTS['chunk_iterations']}",
     )
     parser.add_argument("--classifier-steps", type=int, help="default 25,000 (the paper's)")
-    parser.add_argument("--num-envs", type=int, default=25, help="parallel envs per run")
-    parser.add_argument(
-        "--unroll-length", type=int, default=200, help="steps per env per iteration"
-    )
     parser.add_argument(
         "--fisher",
         choices=("hessian", "gauss_newton"),
@@ -103,6 +101,8 @@ def parse_args(argv=None) -> argparse.Namespace:
         "(default 1: on 2 cores one device already uses both, and 2 measured no faster)",
     )
     parser.add_argument("--out", type=Path, help="output directory (default runs/<timestamp>)")
+    run_settings.add_arguments(parser)
+    compilation.add_arguments(parser)
     multihost = parser.add_argument_group(
         "multi-host (run the same command on every host; process 0 writes the outputs)"
     )
@@ -110,13 +110,21 @@ def parse_args(argv=None) -> argparse.Namespace:
     multihost.add_argument("--num-processes", type=int)
     multihost.add_argument("--process-id", type=int)
     parser.add_argument("--resume", type=Path, metavar="DIR", help="continue DIR's run")
+    parser.set_defaults(run_settings=None)
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parser.parse_args(argv)
     distributed = (args.coordinator, args.num_processes, args.process_id)
     if any(x is not None for x in distributed) and any(x is None for x in distributed):
         parser.error("--coordinator, --num-processes and --process-id go together")
     if args.resume is not None:
-        allowed = ("--resume", "--coordinator", "--num-processes", "--process-id")
+        allowed = (
+            "--resume",
+            "--coordinator",
+            "--num-processes",
+            "--process-id",
+            "--compile-cache",
+            "--no-compile-cache",
+        )
         flags = [a.split("=")[0] for a in argv if a.startswith("--")]
         if any(flag not in allowed for flag in flags):
             parser.error(
@@ -144,12 +152,20 @@ def resolve(parser, args: argparse.Namespace) -> argparse.Namespace:
     unknown = [m for m in args.methods if m not in METHOD_NAMES]
     if unknown or not args.methods:
         parser.error(f"unknown method(s) {unknown}; available: {', '.join(METHOD_NAMES)}")
-    positive = ("seeds", "iterations", "eval_every", "chunk_iterations", "classifier_steps")
-    for name in (*positive, "num_envs", "unroll_length", "fisher_subsample"):
+    positive = ("seeds", "iterations", "chunk_iterations", "classifier_steps")
+    for name in (*positive, "fisher_subsample"):
         if getattr(args, name) < 1:
             parser.error(f"--{name.replace('_', '-')} must be positive")
+    try:
+        args.run_settings = run_settings.from_arguments(args.env, args)
+    except ValueError as error:
+        parser.error(str(error))
+    args.eval_every = args.run_settings.eval_every
     if args.iterations % args.eval_every:
-        parser.error(f"--iterations ({args.iterations}) must be a multiple of --eval-every")
+        parser.error(
+            f"--iterations ({args.iterations}) must be a multiple of the evaluation interval "
+            f"({args.eval_every}; set it with --eval-every)"
+        )
     args.label_ratios = _floats(parser, "--label-ratio", args.label_ratio)
     args.noise_stds = _floats(parser, "--noise", args.noise)
     if not all(0 < r < 1 for r in args.label_ratios):
@@ -192,14 +208,28 @@ def load_or_make_demos(args):
 def run_config(args, demos, demos_path) -> dict:
     names = (
         "env methods seeds iterations preset action_scale num_demos label_ratios noise_stds "
-        "seed eval_every chunk_iterations classifier_steps fisher fisher_subsample cpu_devices "
-        "num_envs unroll_length"
+        "seed eval_every chunk_iterations classifier_steps fisher fisher_subsample cpu_devices"
     ).split()
     config = {name: getattr(args, name) for name in names}
+    config["settings"] = dataclasses.asdict(args.run_settings)
     config["demos"] = str(Path(demos_path).absolute())
     config["conf"] = None if args.conf is None else str(args.conf.absolute())
     config["normalizer"] = normalizer_of(demos)
     return config
+
+
+def saved_settings(saved: dict):
+    """The run settings of a saved config.json; runs from before the settings table used the
+    reference setting with their own shape and evaluation interval."""
+    from pngail_jax.settings import REFERENCE_SETTINGS, RunSettings
+
+    if "settings" in saved:
+        return RunSettings(**saved["settings"])
+    return REFERENCE_SETTINGS.replace(
+        num_envs=saved["num_envs"],
+        unroll_length=saved["unroll_length"],
+        eval_every=saved["eval_every"],
+    )
 
 
 def normalizer_of(demos):
@@ -246,13 +276,20 @@ def main(argv=None) -> Path:
         if not config_path.exists():
             raise SystemExit(f"--resume {resume_dir}: no config.json there")
         saved = json.loads(config_path.read_text())
-        args = argparse.Namespace(**{**saved, "out": resume_dir, "resume": resume_dir})
+        args = argparse.Namespace(
+            **{**saved, "out": resume_dir, "resume": resume_dir},
+            compile_cache=args.compile_cache,
+            no_compile_cache=args.no_compile_cache,
+        )
+        args.run_settings = saved_settings(saved)
         args.demos = Path(saved["demos"])
         args.conf = None if saved["conf"] is None else Path(saved["conf"])
         if args.cpu_devices is None and saved["platform"] == "cpu":
             args.cpu_devices = saved["local_device_count"]  # the same sharding as before
     configure_devices(args.cpu_devices)
     import jax
+
+    compilation.from_arguments(args)
 
     if distributed["coordinator_address"] is not None:
         jax.config.update("jax_cpu_collectives_implementation", "gloo")
@@ -261,24 +298,19 @@ def main(argv=None) -> Path:
             sys.stdout = open(os.devnull, "w")  # noqa: SIM115  process 0 reports
     writer = jax.process_index() == 0
 
-    from pngail_jax import envs, report
+    from pngail_jax import report
     from pngail_jax.checkpoint import restore_tree
     from pngail_jax.confidence import ClassifierConfig
     from pngail_jax.grid import Grid, make_cells, nonfinite_cells, stack_cells
-    from pngail_jax.rl import TRPOConfig
     from pngail_jax.train import AdversarialConfig, make_train
 
-    env = envs.make(args.env)
+    settings = args.run_settings
+    env = run_settings.make_env(args.env, settings)
     demos, demos_path = load_or_make_demos(args)
     demos.check_env(env)
     config = AdversarialConfig(
-        trpo=TRPOConfig(
-            num_envs=args.num_envs,
-            unroll_length=args.unroll_length,
-            num_iterations=args.iterations,
-            eval_every=args.eval_every,
-            fisher=args.fisher,
-            fisher_subsample=args.fisher_subsample,
+        trpo=settings.trpo_config(
+            args.iterations, fisher=args.fisher, fisher_subsample=args.fisher_subsample
         ),
         classifier=ClassifierConfig(num_steps=args.classifier_steps),
         num_demos=args.num_demos,
@@ -325,7 +357,7 @@ def main(argv=None) -> Path:
         f"{len(args.label_ratios) * len(args.noise_stds)} setting(s)) on {args.env}, "
         f"{args.iterations} iterations x {config.trpo.batch_size} steps, "
         f"{train.num_demos} demonstration rows; {len(devices)} {devices[0].platform} device(s); "
-        f"-> {out}",
+        f"-> {out}\n  {run_settings.describe(settings)}",
         flush=True,
     )
     if normalizer is None:

@@ -22,7 +22,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from pngail_jax import envs
+from pngail_jax import compilation, envs
+from pngail_jax import settings as run_settings
 from pngail_jax.checkpoint import save_policies
 from pngail_jax.rl import TRPOConfig, TRPOHyperparams, make_train
 
@@ -49,26 +50,35 @@ def parse_args(argv=None) -> argparse.Namespace:
         default=None,
         help="output directory (default runs/trpo-<env>-<timestamp>)",
     )
-    parser.add_argument("--eval-every", type=int, default=10)
-    parser.add_argument("--num-envs", type=int, default=25)
-    parser.add_argument("--unroll-length", type=int, default=200)
     parser.add_argument("--fisher", choices=("hessian", "gauss_newton"), default="hessian")
     parser.add_argument("--fisher-subsample", type=int, default=1)
-    parser.add_argument("--normalize-observations", action="store_true")
     parser.add_argument(
         "--truncation-as-terminal",
         action="store_true",
         help="the reference's GAE: no bootstrapping through time limits",
     )
-    parser.add_argument("--fast-solver", action="store_true", help="envs.FAST_SOLVER (MuJoCo)")
+    parser.add_argument("--fast-solver", action="store_true", help="the same as --solver fast")
+    run_settings.add_arguments(parser)
+    compilation.add_arguments(parser)
     args = parser.parse_args(argv)
     if args.env not in envs.ENV_NAMES:
         parser.error(f"unknown environment {args.env!r}; available: {', '.join(envs.ENV_NAMES)}")
-    for name in ("iterations", "seeds", "eval_every", "num_envs", "unroll_length"):
+    if args.fast_solver:
+        if args.solver not in (None, "fast"):
+            parser.error("--fast-solver and --solver disagree")
+        args.solver = "fast"
+    for name in ("iterations", "seeds", "fisher_subsample"):
         if getattr(args, name) < 1:
             parser.error(f"--{name.replace('_', '-')} must be positive")
-    if args.iterations % args.eval_every:
-        parser.error("--iterations must be a multiple of --eval-every")
+    try:
+        args.settings = run_settings.from_arguments(args.env, args)
+    except ValueError as error:
+        parser.error(str(error))
+    if args.iterations % args.settings.eval_every:
+        parser.error(
+            f"--iterations ({args.iterations}) must be a multiple of the evaluation interval "
+            f"({args.settings.eval_every}; set it with --eval-every)"
+        )
     if args.out is None:
         args.out = Path("runs") / f"trpo-{args.env}-{time.strftime('%Y%m%d-%H%M%S')}"
     return args
@@ -175,16 +185,11 @@ def train_with_progress(train, config: TRPOConfig, hyperparams, keys, on_block=N
 
 def main(argv=None) -> None:
     args = parse_args(argv)
-    env_options = envs.FAST_SOLVER if args.fast_solver else {}
-    env = envs.make(args.env, **env_options)
-    config = TRPOConfig(
-        num_envs=args.num_envs,
-        unroll_length=args.unroll_length,
-        num_iterations=args.iterations,
-        eval_every=args.eval_every,
-        normalize_observations=args.normalize_observations,
-        fisher=args.fisher,
-        fisher_subsample=args.fisher_subsample,
+    compilation.from_arguments(args)
+    settings = args.settings
+    env = run_settings.make_env(args.env, settings)
+    config = settings.trpo_config(
+        args.iterations, fisher=args.fisher, fisher_subsample=args.fisher_subsample
     )
     hyperparams = TRPOHyperparams.create(bootstrap_truncation=not args.truncation_as_terminal)
     train = make_train(config, env)
@@ -195,7 +200,8 @@ def main(argv=None) -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     run_config = {
         "env": args.env,
-        "env_options": env_options,
+        "env_options": settings.env_options,
+        "settings": dataclasses.asdict(settings),
         "seeds": args.seeds,
         "seed": args.seed,
         "trpo": dataclasses.asdict(config),
@@ -205,7 +211,7 @@ def main(argv=None) -> None:
 
     print(
         f"TRPO on {args.env}: {args.seeds} seeds x {args.iterations} iterations x "
-        f"{config.batch_size} steps -> {args.out}",
+        f"{config.batch_size} steps ({run_settings.describe(settings)}) -> {args.out}",
         flush=True,
     )
     start = time.perf_counter()
@@ -215,7 +221,9 @@ def main(argv=None) -> None:
     plot_learning_curve(
         args.out / "learning_curve.png", metrics, f"TRPO on {args.env} ({args.seeds} seeds)"
     )
-    save_trpo_policies(args.out, env, config, state, final_returns, {"env_options": env_options})
+    save_trpo_policies(
+        args.out, env, config, state, final_returns, {"env_options": settings.env_options}
+    )
     print(
         f"done in {time.perf_counter() - start:.0f} s; final deterministic returns "
         f"[{', '.join(f'{r:.1f}' for r in final_returns)}] (mean {final_returns.mean():.1f}); "

@@ -111,7 +111,16 @@ def test_bad_flags_are_named(demos_path, tmp_path, capsys):
     assert "takes no other flags" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         sweep.parse_args(["--iterations", "25", "--eval-every", "10"])
-    assert "multiple of --eval-every" in capsys.readouterr().err
+    assert "multiple of the evaluation interval (10" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        sweep.parse_args(["--env", "Hopper", "--iterations", "60"])  # the table: every 50
+    assert "multiple of the evaluation interval (50" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        sweep.parse_args(["--env", "Hopper", "--solver", "2"])
+    assert "--solver: solver must be 'own', 'fast' or 'I/L'" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        sweep.parse_args(["--num-envs", "0"])
+    assert "--num-envs must be a positive integer" in capsys.readouterr().err
 
 
 def test_presets_and_chunking():

@@ -1,0 +1,209 @@
+"""Per-environment run settings: the one table the command-line programs start from.
+
+A ``RunSettings`` holds what differs between tasks but not between methods: the rollout
+shape (parallel envs x unroll length, about 5,000 samples per iteration as in the paper),
+the MJX solver caps, how often and on how many episodes the deterministic policy is
+evaluated, and whether TRPO normalises observations. ``experiments.sweep``,
+``experiments.train_rl`` and ``experiments.make_demos`` use ``settings_for(env)`` unless a
+flag overrides a field; ``benchmarks/grid_throughput.py`` measures with them.
+
+``REFERENCE_SETTINGS`` is the reference code's setting (25 envs x 200 steps, the task's own
+solver, an evaluation of 32 episodes every 10 iterations, no observation normalisation).
+Every departure from it in ``ENV_SETTINGS`` is justified by a learning measurement in
+``docs/performance.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+
+from pngail_jax import envs
+from pngail_jax.rl.train import TRPOConfig
+
+
+def _check_positive_int(name: str, value) -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ValueError(f"RunSettings.{name} must be a positive integer, got {value!r}")
+
+
+def parse_solver(text: str) -> dict[str, int | None]:
+    """``"own"`` (the task's own caps), ``"fast"`` (``envs.FAST_SOLVER``) or ``"I/L"``
+    (I Newton and L line-search iterations) as ``RunSettings`` solver fields."""
+    text = str(text).strip()
+    if text == "own":
+        return {"solver_iterations": None, "ls_iterations": None}
+    if text == "fast":
+        return dict(envs.FAST_SOLVER)
+    parts = text.split("/")
+    if len(parts) == 2 and all(part.strip().isdigit() and int(part) > 0 for part in parts):
+        return {"solver_iterations": int(parts[0]), "ls_iterations": int(parts[1])}
+    raise ValueError(
+        f"solver must be 'own', 'fast' or 'I/L' (positive Newton / line-search iteration "
+        f"counts, e.g. 4/50), got {text!r}"
+    )
+
+
+def add_arguments(parser) -> None:
+    """Adds the run-settings flags to an ``argparse`` parser; ``from_arguments`` reads them."""
+    group = parser.add_argument_group(
+        "run settings (default: the environment's row of pngail_jax.settings.ENV_SETTINGS, "
+        "see docs/performance.md)"
+    )
+    group.add_argument(
+        "--settings",
+        choices=("table", "reference"),
+        default="table",
+        help="start from the per-environment table (default) or from the reference code's "
+        "setting (25 envs x 200 steps, the task's own solver, 32 evaluation episodes every 10 "
+        "iterations); the flags below override either",
+    )
+    group.add_argument("--num-envs", type=int, help="parallel envs per run")
+    group.add_argument("--unroll-length", type=int, help="steps per env per iteration")
+    group.add_argument("--eval-every", type=int, help="iterations between evaluations")
+    group.add_argument("--num-eval-episodes", type=int, help="episodes per evaluation")
+    group.add_argument(
+        "--solver", help="MJX solver: 'own' (the task's), 'fast' (1/4) or 'I/L' iterations"
+    )
+    group.add_argument(
+        "--normalize-observations",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="running mean/std observation normalisation in TRPO",
+    )
+
+
+def from_arguments(env_name: str, args) -> RunSettings:
+    """The ``RunSettings`` that ``add_arguments``' flags select (raises ValueError naming the
+    flag on a bad value)."""
+    base = REFERENCE_SETTINGS if args.settings == "reference" else settings_for(env_name)
+    fields = {}
+    for name in ("num_envs", "unroll_length", "eval_every", "num_eval_episodes"):
+        value = getattr(args, name)
+        if value is not None and value < 1:
+            raise ValueError(f"--{name.replace('_', '-')} must be a positive integer, got {value}")
+        fields[name] = value
+    settings = base.replace(**fields, normalize_observations=args.normalize_observations)
+    if args.solver is not None:
+        try:
+            solver = parse_solver(args.solver)
+        except ValueError as error:
+            raise ValueError(f"--solver: {error}") from None
+        if env_name == "Pendulum-v1" and args.solver != "own":
+            raise ValueError("--solver: Pendulum-v1 has no MJX solver (use 'own' or omit it)")
+        settings = dataclasses.replace(settings, **solver)
+    return settings
+
+
+def describe(settings: RunSettings) -> str:
+    """One line for progress output and reports."""
+    return (
+        f"{settings.num_envs} envs x {settings.unroll_length} steps, solver: "
+        f"{settings.solver_description}, evaluation: {settings.num_eval_episodes} episodes every "
+        f"{settings.eval_every} iterations"
+        + (", normalised observations" if settings.normalize_observations else "")
+    )
+
+
+@dataclasses.dataclass(frozen=True)
+class RunSettings:
+    """Static per-task settings. ``num_envs * unroll_length`` samples per TRPO iteration."""
+
+    num_envs: int = 25
+    unroll_length: int = 200
+    # MJX Newton solver caps; None keeps the task's own (envs.make's options of that name).
+    solver_iterations: int | None = None
+    ls_iterations: int | None = None
+    eval_every: int = 10
+    num_eval_episodes: int = 32
+    normalize_observations: bool = False
+
+    def __post_init__(self):
+        for name in ("num_envs", "unroll_length", "eval_every", "num_eval_episodes"):
+            _check_positive_int(name, getattr(self, name))
+        for name in ("solver_iterations", "ls_iterations"):
+            if getattr(self, name) is not None:
+                _check_positive_int(name, getattr(self, name))
+        if not isinstance(self.normalize_observations, bool):
+            raise ValueError(
+                "RunSettings.normalize_observations must be True or False, "
+                f"got {self.normalize_observations!r}"
+            )
+
+    @property
+    def samples_per_iteration(self) -> int:
+        return self.num_envs * self.unroll_length
+
+    @property
+    def env_options(self) -> dict[str, int]:
+        """Keyword options of ``envs.make`` (the solver caps that are set)."""
+        options = {"solver_iterations": self.solver_iterations, "ls_iterations": self.ls_iterations}
+        return {name: value for name, value in options.items() if value is not None}
+
+    @property
+    def solver_description(self) -> str:
+        if not self.env_options:
+            return "the task's own"
+        return f"{self.solver_iterations} Newton / {self.ls_iterations} line-search iterations"
+
+    def trpo_config(self, num_iterations: int, **options) -> TRPOConfig:
+        """The ``TRPOConfig`` of a run of ``num_iterations`` with these settings; ``options``
+        set its other fields (Fisher product form, network sizes, ...)."""
+        return TRPOConfig(
+            num_envs=self.num_envs,
+            unroll_length=self.unroll_length,
+            num_iterations=num_iterations,
+            eval_every=self.eval_every,
+            num_eval_episodes=self.num_eval_episodes,
+            normalize_observations=self.normalize_observations,
+            **options,
+        )
+
+    def replace(self, **overrides) -> RunSettings:
+        """A copy with ``overrides`` applied; ``None`` values leave a field as it is (so
+        command-line flags that were not given can be passed straight through)."""
+        fields = {field.name for field in dataclasses.fields(self)}
+        unknown = sorted(set(overrides) - fields)
+        if unknown:
+            raise ValueError(
+                f"unknown run setting(s) {unknown}; known: {', '.join(sorted(fields))}"
+            )
+        given = {name: value for name, value in overrides.items() if value is not None}
+        return dataclasses.replace(self, **given)
+
+
+REFERENCE_SETTINGS = RunSettings()
+
+# The MuJoCo tasks: 250 envs x 20 steps (the same 5,000 samples per iteration in 10x fewer
+# sequential steps), the fast MJX solver (1 Newton / 4 line-search iterations, Brax's own
+# setting for Ant), and 10 evaluation episodes every 50 iterations (the reference evaluates
+# 5). docs/performance.md gives the learning measurements behind each value.
+MUJOCO_SETTINGS = RunSettings(
+    num_envs=250,
+    unroll_length=20,
+    solver_iterations=envs.FAST_SOLVER["solver_iterations"],
+    ls_iterations=envs.FAST_SOLVER["ls_iterations"],
+    eval_every=50,
+    num_eval_episodes=10,
+)
+
+ENV_SETTINGS: dict[str, RunSettings] = {
+    "Pendulum-v1": REFERENCE_SETTINGS,
+    "Ant": MUJOCO_SETTINGS,
+    "HalfCheetah": MUJOCO_SETTINGS,
+    "Hopper": MUJOCO_SETTINGS,
+    "Swimmer": MUJOCO_SETTINGS,
+    "Walker2d": MUJOCO_SETTINGS,
+}
+
+
+def settings_for(env_name: str, **overrides) -> RunSettings:
+    """The table's settings of ``env_name`` with ``overrides`` (``None`` = keep) applied."""
+    if env_name not in ENV_SETTINGS:
+        raise ValueError(f"unknown environment {env_name!r}; available: {', '.join(ENV_SETTINGS)}")
+    return ENV_SETTINGS[env_name].replace(**overrides)
+
+
+def make_env(env_name: str, settings: RunSettings) -> envs.Env:
+    """``envs.make(env_name)`` with the settings' solver caps (Pendulum takes none)."""
+    return envs.make(env_name, **settings.env_options)
