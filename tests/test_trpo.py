@@ -110,3 +110,13 @@ def test_line_search_keeps_parameters_when_nothing_improves():
     new_x, accepted, fraction = backtracking_line_search(loss, x, -step, jnp.array(4.0))
     assert accepted and fraction == 1.0
     np.testing.assert_allclose(new_x, [0.0, 0.0])
+
+
+def test_fisher_subsample_keeps_every_environment():
+    from pngail_jax.rl.train import TRPOConfig, fisher_sample_indices
+
+    config = TRPOConfig(num_envs=4, unroll_length=6, fisher_subsample=3, num_value_minibatches=2)
+    # Flattened time-major batch: row t * 4 + n. Every 3rd step (t = 0, 3) of all 4 envs.
+    np.testing.assert_array_equal(fisher_sample_indices(config), [0, 1, 2, 3, 12, 13, 14, 15])
+    every = fisher_sample_indices(TRPOConfig(num_envs=4, unroll_length=6, num_value_minibatches=2))
+    np.testing.assert_array_equal(every, np.arange(24))

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import chex
 import jax
@@ -54,7 +54,8 @@ class TRPOConfig:
     # "gauss_newton": J^T M J v for the Gaussian policy, the same matrix at the current
     # parameters, from one jvp and one vjp: a speed option.
     fisher: Literal["hessian", "gauss_newton"] = "hessian"
-    # Fisher products on every k-th sample of the batch (OpenAI baselines uses 5); 1 = all.
+    # Fisher products on every k-th time step of every env (OpenAI baselines uses every 5th
+    # sample); 1 = all.
     fisher_subsample: int = 1
     # GAE as a T-step scan ("sequential") or a log-depth tree ("associative"): the same
     # numbers up to float rounding (tests/test_gae.py); which is faster depends on the device.
@@ -168,6 +169,20 @@ class ObservationNormalizer:
         std = jnp.sqrt(self.sum_squares / jnp.maximum(self.count, 1.0)) + 1e-8
         normalized = jnp.clip((obs - self.mean) / std, -10.0, 10.0)
         return jnp.where(self.count > 0, normalized, obs)
+
+
+class PolicyObjective(NamedTuple):
+    """What TRPO's natural-gradient step works on (``TRPO.policy_objective``): the flat
+    parameters and their unravel function, the surrogate loss and mean KL as functions of
+    flat parameters, the damped Fisher-vector product, and the old policy's outputs."""
+
+    flat_params: jax.Array
+    unravel: Callable
+    surrogate_loss: Callable[[jax.Array], jax.Array]
+    mean_kl: Callable[[jax.Array], jax.Array]
+    fisher_vector_product: Callable[[jax.Array], jax.Array]
+    old_mean: jax.Array
+    old_log_std: jax.Array
 
 
 @struct.dataclass
@@ -329,11 +344,15 @@ class TRPO:
         )
         return params, optimizer_state, losses.mean()
 
-    def _policy_step(self, hyperparams, policy_params, obs, actions, old_log_prob, advantages):
+    def policy_objective(
+        self, hyperparams, policy_params, obs, actions, old_log_prob, advantages
+    ) -> PolicyObjective:
+        """The natural-gradient step's problem at ``policy_params`` on a flattened batch
+        (obs float[B, O], actions float[B, A], old_log_prob and advantages float[B])."""
         flat_params, unravel = ravel_pytree(policy_params)
         old_mean, old_log_std = jax.lax.stop_gradient(self.policy.apply(policy_params, obs))
-        fisher_obs = obs[:: self.config.fisher_subsample]
-        fisher_old_mean = old_mean[:: self.config.fisher_subsample]
+        fisher_rows = fisher_sample_indices(self.config)
+        fisher_obs, fisher_old_mean = obs[fisher_rows], old_mean[fisher_rows]
 
         def surrogate_loss(flat):
             mean, log_std = self.policy.apply(unravel(flat), obs)
@@ -352,24 +371,49 @@ class TRPO:
             fisher_vector_product = hessian_vector_product(
                 mean_kl, flat_params, hyperparams.damping
             )
+        return PolicyObjective(
+            flat_params=flat_params,
+            unravel=unravel,
+            surrogate_loss=surrogate_loss,
+            mean_kl=mean_kl,
+            fisher_vector_product=fisher_vector_product,
+            old_mean=old_mean,
+            old_log_std=old_log_std,
+        )
+
+    def _policy_step(self, hyperparams, policy_params, obs, actions, old_log_prob, advantages):
+        objective = self.policy_objective(
+            hyperparams, policy_params, obs, actions, old_log_prob, advantages
+        )
         new_flat, metrics = natural_gradient_step(
-            surrogate_loss,
-            mean_kl,
-            flat_params,
+            objective.surrogate_loss,
+            objective.mean_kl,
+            objective.flat_params,
             hyperparams.max_kl,
             hyperparams.damping,
             self.config.num_cg_iterations,
             self.config.num_backtracks,
-            fisher_vector_product,
+            objective.fisher_vector_product,
         )
-        new_mean, new_log_std = self.policy.apply(unravel(new_flat), obs)
+        new_mean, new_log_std = self.policy.apply(objective.unravel(new_flat), obs)
+        old_mean, old_log_std = objective.old_mean, objective.old_log_std
+        surrogate_loss = objective.surrogate_loss
         metrics = {
             **metrics,
             "trpo/kl": jnp.mean(gaussian_kl(old_mean, old_log_std, new_mean, new_log_std)),
             "trpo/entropy": gaussian_entropy(new_log_std),
-            "trpo/surrogate_improvement": surrogate_loss(flat_params) - surrogate_loss(new_flat),
+            "trpo/surrogate_improvement": surrogate_loss(objective.flat_params)
+            - surrogate_loss(new_flat),
         }
-        return unravel(new_flat), metrics
+        return objective.unravel(new_flat), metrics
+
+
+def fisher_sample_indices(config: TRPOConfig) -> jax.Array:
+    """Rows of the flattened time-major batch ([T, N] -> T * N) whose Fisher products TRPO
+    uses: every ``fisher_subsample``-th time step of every environment, so each trajectory
+    contributes (a stride over the flat batch would keep the same few environments)."""
+    steps = jnp.arange(0, config.unroll_length, config.fisher_subsample)
+    return (steps[:, None] * config.num_envs + jnp.arange(config.num_envs)).reshape(-1)
 
 
 def gauss_newton_fisher_product(policy, unravel, flat_params, obs, damping):
