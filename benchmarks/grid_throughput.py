@@ -1,36 +1,65 @@
-"""Adversarial-training throughput of a grid of runs (1, 7, 35 cells) on Pendulum-v1.
+"""Adversarial-training throughput of a grid of runs (1, 7, 35 cells) on one environment.
+
+``--env NAME`` (default Pendulum-v1) runs with that task's row of ``pngail_jax.settings``
+(parallel envs x unroll length, MJX solver, evaluation episodes and frequency); the run-settings
+flags (``--num-envs``, ``--unroll-length``, ``--solver``, ``--eval-every``, ...) override it.
 
 For each grid size, builds the cells (1 = ``pngail`` x 1 seed, 7 = every method in
-``METHOD_NAMES`` x 1 seed, 7k = every method x k seeds), compiles them into one
-``pngail_jax.grid.Grid`` (``jit(vmap(train.init))`` and ``jit(vmap(train.run_blocks))``),
-runs the init program (splits and classifier phase, not timed), one warm-up chunk, then times
-3 warm chunk calls (median). A chunk is ``--iterations`` iterations (one block: eval_every =
-iterations), each a rollout of num_envs x unroll_length steps, a discriminator step and a TRPO
-update, followed by one evaluation of ``num_eval_episodes`` (32) episodes. Steps/s counts
-training transitions of the real cells only: ``cells * iterations * num_envs * unroll_length /
-seconds``; the evaluation episodes are excluded from the count but included in the time.
+``METHOD_NAMES`` x 1 seed, 7k = every method x k seeds) and compiles them into one
+``pngail_jax.grid.Grid`` (``jit(vmap(train.init))`` and ``jit(vmap(train.run_blocks))``). It
+runs the init program (splits and classifier phase, untimed), one warm-up chunk, then times 3
+warm chunk calls (median). A chunk is ``--iterations`` iterations (eval_every = iterations),
+each a rollout of num_envs x unroll_length steps per cell, a discriminator step and a TRPO
+update, then one evaluation of every cell. The evaluation alone, ``jit(vmap(trpo.evaluate))``
+over the final state's policies and evaluation keys, is timed the same way, so
 
-Compile seconds are the Grid's AOT compile (``grid.compile_seconds``: init + chunk programs);
-peak memory is XLA's ``memory_analysis()`` of the compiled chunk program (arguments + outputs +
-temporaries - aliased; per device when sharded). ``env_steps_per_second`` is environment-only
-throughput at the same total width (num_envs x cells), measured in the same run with
-``env_throughput.measure`` (on one device), giving ``train_over_env_ratio``;
-``ratio_vs_one_cell`` divides by the 1-cell grid's steps/s in the same run (the gain from
-batching cells). On a shared, noisy machine these same-run ratios are the numbers to trust.
+    iteration_seconds = (chunk_seconds - eval_seconds) / iterations
+    steps_per_second = cells * num_envs * unroll_length / iteration_seconds   (training only)
 
-Demonstrations: the authors' Pendulum set (``--demos``, default
-``../shared/data/pendulum/Pendulum-v1_mixture.npy`` from the repository root, actions x 2);
-if missing, 1000 random rows (throughput does not depend on their contents; the run says so).
+and at the settings' evaluation frequency E (``eval_every``, not the chunk's):
 
-    python benchmarks/grid_throughput.py --quick                  # 1, 7 cells: about 1 minute
-    python benchmarks/grid_throughput.py --json rows.json         # 1, 7, 35 cells: about 5 min
+    eval_share = eval_seconds / (E * iteration_seconds + eval_seconds)
+    steps_per_second_with_eval = E * cells * num_envs * unroll_length
+                                 / (E * iteration_seconds + eval_seconds)
+
+An evaluation stops once every episode of every cell has ended. The cells' policies are barely
+trained here, and on Ant, Hopper and Walker2d their episodes end early (the body falls), so
+``eval_share`` is a lower bound; ``eval_share_full_episodes`` times the same evaluation on the
+task built with ``terminate_when_unhealthy=False`` (every episode runs ``max_episode_steps``),
+the most a trained policy's evaluation can cost. HalfCheetah, Swimmer and Pendulum-v1 never
+end an episode early: there both are one measurement.
+
+``env_steps_per_second`` is environment-only throughput (``env_throughput.measure``) at the
+same total width (num_envs x cells) with the same solver, on one device, measured in the same
+run; ``train_over_env_ratio`` = steps_per_second / env_steps_per_second, and
+``ratio_vs_one_cell`` divides steps_per_second by the 1-cell grid's (the gain from batching
+cells). On a shared, noisy machine these same-run ratios are the numbers to trust.
+
+Compile seconds are the Grid's AOT compile (tracing, lowering and XLA; init + chunk programs)
+with JAX's persistent compilation cache (``pngail_jax.compilation.enable_compilation_cache``,
+which stores programs that take at least 1 s to compile), each in a fresh Python process (this
+script with ``--compile-worker``) that builds the grid as the measurement does: the cold
+compile on a new, empty temporary directory (``compile_seconds``), then the warm one on the
+directory it filled (``compile_seconds_warm``), as a repeated command would; ``cold_cache_hits``
+(0 expected) and ``warm_cache_hits`` (2 expected) count the programs read from the directory.
+Fresh processes because a rebuild in the same process need not lower to the same program: the
+names of the lowered inner functions depend on the state of JAX's trace caches (``_take_116``
+the first time, ``_take_118`` after another program was traced), and on Hopper an in-process
+rebuild missed the disk cache. (JAX keeps no in-memory copy of a compiled program for new jit
+objects: a Pendulum-v1 rebuild in the same process reads both programs from disk.) The
+measuring process compiles its own grid again, without the cache. Peak memory is XLA's
+``memory_analysis()`` of the compiled chunk program (arguments + outputs + temporaries -
+aliased; per device when sharded).
+
+Demonstrations (their contents do not change the throughput): ``--demos``, by default the
+authors' Pendulum set ``../shared/data/pendulum/Pendulum-v1_mixture.npy`` from the repository
+root (actions x 2) for Pendulum-v1 and none for the MuJoCo tasks; without a file, 1000 random
+rows of the task's shapes (the run says so).
+
+    python benchmarks/grid_throughput.py --quick                  # Pendulum-v1, 1 and 7 cells
+    python benchmarks/grid_throughput.py --json rows.json         # Pendulum-v1, 1, 7, 35 cells
+    python benchmarks/grid_throughput.py --env Hopper --quick --json hopper.json
     python benchmarks/grid_throughput.py --quick --devices 2      # sharded over 2 host devices
-
-Runtimes are estimates for a quiet 2-core CPU, extrapolated from tiny runs (1 iteration per
-chunk at full width: about 75,000 steps/s for 1 cell, 65,000 for 7; 8-17 s of compile per
-grid), not measured at full size; a busy machine takes up to twice as long. The full run's
-35-cell grid times 4 chunks of 35 x 10 x 5,000 steps (about 2 minutes), and its chunk program
-should need about 1.4 GiB (7 cells: 274 MiB).
 
 ``--devices N`` shards every grid over N devices; on a CPU it re-runs this script in a
 subprocess with ``XLA_FLAGS=--xla_force_host_platform_device_count=N`` (XLA reads it when its
@@ -39,43 +68,57 @@ steps are not counted; the env-only ceiling still runs on one device.
 
 Row schema: env_throughput's ``{name, env, width, steps_per_second, compile_seconds,
 peak_memory_bytes, device, jax_version}`` plus ``cells``, ``num_envs``, ``unroll_length``,
-``iterations``, ``fisher``, ``env_steps_per_second``, ``train_over_env_ratio``,
-``ratio_vs_one_cell`` (None without a 1-cell row), ``devices``, and ``methods``, ``seeds``,
-``padded_cells``, ``init_compile_seconds``, ``chunk_compile_seconds``, ``init_peak_memory_bytes``,
-``init_seconds`` (the untimed init call), ``nonfinite_cells``, ``synthetic_demos``.
+``iterations``, ``fisher``, ``settings`` (the ``RunSettings`` fields), ``env_steps_per_second``,
+``train_over_env_ratio``, ``ratio_vs_one_cell`` (None without a 1-cell row), ``devices``,
+``methods``, ``seeds``, ``padded_cells``, ``chunk_seconds``, ``iteration_seconds``,
+``eval_seconds``, ``eval_seconds_full_episodes``, ``eval_share``, ``eval_share_full_episodes``,
+``steps_per_second_with_eval``, ``steps_per_second_with_full_eval``, ``init_compile_seconds``,
+``chunk_compile_seconds``, ``cold_cache_hits``, ``compile_seconds_warm``,
+``init_compile_seconds_warm``, ``chunk_compile_seconds_warm``, ``warm_cache_hits``,
+``init_peak_memory_bytes``, ``init_seconds`` (the untimed init call), ``nonfinite_cells``,
+``synthetic_demos``.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import dataclasses
 import json
 import os
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 import jax
 import numpy as np
 from env_throughput import NUM_REPEATS, measure, peak_memory_bytes, scan_length
+from jax import monitoring
 from trpo_throughput import device_description
 
 from pngail_jax import envs
+from pngail_jax import settings as run_settings
+from pngail_jax.compilation import enable_compilation_cache
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import Demonstrations, load_demonstrations
 from pngail_jax.grid import Grid, make_cells, nonfinite_cells, stack_cells
 from pngail_jax.methods import METHOD_NAMES
-from pngail_jax.rl.train import TRPOConfig
-from pngail_jax.train import AdversarialConfig, make_train
+from pngail_jax.rl.train import TRPO
+from pngail_jax.train import AdversarialConfig, TrainState, make_train
 
-ENV_NAME = "Pendulum-v1"
+DEFAULT_ENV = "Pendulum-v1"
 REPO_ROOT = Path(__file__).resolve().parents[1]
-DEFAULT_DEMOS = REPO_ROOT.parent / "shared" / "data" / "pendulum" / "Pendulum-v1_mixture.npy"
-DEMO_ACTION_SCALE = 2.0  # the released Pendulum set stores torques / 2
+PENDULUM_DEMOS = REPO_ROOT.parent / "shared" / "data" / "pendulum" / "Pendulum-v1_mixture.npy"
+PENDULUM_ACTION_SCALE = 2.0  # the released Pendulum set stores torques / 2
 SYNTHETIC_ROWS = 1000
+# Brax tasks that end an episode when the body falls (terminate_when_unhealthy).
+TERMINATING_TASKS = ("Ant", "Hopper", "Walker2d")
 SIZES, QUICK_SIZES = (1, 7, 35), (1, 7)
 CLASSIFIER_STEPS, QUICK_CLASSIFIER_STEPS = 25_000, 1_000
+CACHE_HIT_EVENT = "/jax/compilation_cache/cache_hits"
 
 
 def grid_layout(size: int) -> tuple[tuple[str, ...], int]:
@@ -85,10 +128,11 @@ def grid_layout(size: int) -> tuple[tuple[str, ...], int]:
     return METHOD_NAMES, size // len(METHOD_NAMES)
 
 
-def load_demos(path: Path, env) -> tuple[Demonstrations, str]:
-    """The released set at ``path``, or random rows of the right shapes if it is missing."""
-    if path.exists():
-        demos = load_demonstrations(path, action_scale=DEMO_ACTION_SCALE)
+def load_demos(path: Path | None, env_name: str, env) -> tuple[Demonstrations, str]:
+    """The set at ``path``, or random rows of the task's shapes without one."""
+    if path is not None and path.exists():
+        action_scale = PENDULUM_ACTION_SCALE if env_name == "Pendulum-v1" else 1.0
+        demos = load_demonstrations(path, action_scale=action_scale)
         return demos, f"{path.resolve()} ({demos.num_rows} rows)"
     rng = np.random.default_rng(0)
     low = np.broadcast_to(np.asarray(env.action_low), (env.action_size,))
@@ -98,19 +142,60 @@ def load_demos(path: Path, env) -> tuple[Demonstrations, str]:
         actions=rng.uniform(low, high, (SYNTHETIC_ROWS, env.action_size)).astype(np.float32),
         confidence=rng.uniform(0.0, 1.0, SYNTHETIC_ROWS).astype(np.float32),
     )
-    return demos, f"SYNTHETIC: {SYNTHETIC_ROWS} random rows ({path} not found)"
+    reason = "no demonstration file" if path is None else f"{path} not found"
+    return demos, f"SYNTHETIC: {SYNTHETIC_ROWS} random rows ({reason})"
 
 
-def measure_grid(train, size: int, devices, key: jax.Array) -> dict:
-    """Compiles a grid of ``size`` cells and times warm chunk calls (median of NUM_REPEATS)."""
-    methods, seeds = grid_layout(size)
-    hyperparams, specs, keys = stack_cells(make_cells(methods, seeds), key)
-    grid = Grid(train, hyperparams, specs, keys, blocks_per_chunk=1, devices=devices)
+def full_episode_trpo(env_name: str, settings, train) -> TRPO | None:
+    """``train``'s TRPO on the task without early termination; None where it never ends one."""
+    if env_name not in TERMINATING_TASKS:
+        return None
+    env = envs.make(env_name, terminate_when_unhealthy=False, **settings.env_options)
+    return TRPO(train.config.trpo, env)
+
+
+@contextlib.contextmanager
+def counting_cache_hits():
+    """Yields a list that collects one entry per persistent-compilation-cache hit."""
+    hits = []
+
+    def listener(event: str, **_) -> None:
+        if event == CACHE_HIT_EVENT:
+            hits.append(event)
+
+    monitoring.register_event_listener(listener)
+    try:
+        yield hits
+    finally:
+        monitoring.unregister_event_listener(listener)
+
+
+def median_seconds(program, *args) -> float:
+    """Median wall time of NUM_REPEATS calls of ``program(*args)``, after one warm-up call."""
+    jax.block_until_ready(program(*args))
+    timings = []
+    for _ in range(NUM_REPEATS):
+        start = time.perf_counter()
+        jax.block_until_ready(program(*args))
+        timings.append(time.perf_counter() - start)
+    return statistics.median(timings)
+
+
+def evaluation_seconds(trpo: TRPO, state: TrainState) -> float:
+    """Median seconds of one evaluation of every cell of ``state`` with ``trpo``'s env."""
+    evaluate = jax.jit(jax.vmap(trpo.evaluate))
+    program = evaluate.lower(state.trpo, state.eval_keys).compile()
+    return median_seconds(program, state.trpo, state.eval_keys)
+
+
+def time_chunks(grid: Grid) -> tuple[TrainState, dict]:
+    """Runs init and a warm-up chunk, then times NUM_REPEATS chunks (median); returns the
+    final state and the timings."""
     start = time.perf_counter()
     state, _ = grid.init()
     jax.block_until_ready(state)
     init_seconds = time.perf_counter() - start
-    state, metrics = grid.run_chunk(state)  # warm-up; run_chunk donates state: keep the new one
+    state, metrics = grid.run_chunk(state)  # run_chunk donates state: keep the new one
     jax.block_until_ready((state, metrics))
     timings = []
     for _ in range(NUM_REPEATS):
@@ -119,68 +204,163 @@ def measure_grid(train, size: int, devices, key: jax.Array) -> dict:
         jax.block_until_ready((state, metrics))
         timings.append(time.perf_counter() - start)
     bad = nonfinite_cells(grid.fetch(metrics), grid.iterations_per_chunk)
-    steps = grid.num_cells * grid.iterations_per_chunk * train.config.trpo.batch_size
-    return {
-        "steps_per_second": steps / statistics.median(timings),
-        "compile_seconds": grid.compile_seconds,
-        "peak_memory_bytes": peak_memory_bytes(grid.chunk_program),
-        "methods": list(methods),
-        "seeds": seeds,
-        "padded_cells": grid.num_padded,
-        "init_compile_seconds": grid.init_compile_seconds,
-        "chunk_compile_seconds": grid.chunk_compile_seconds,
-        "init_peak_memory_bytes": peak_memory_bytes(grid.init_program),
+    return state, {
+        "chunk_seconds": statistics.median(timings),
         "init_seconds": init_seconds,
         "nonfinite_cells": len(bad),
     }
 
 
-def measure_rows(args, env, demos, devices, common: dict) -> list[dict]:
+def evaluation_costs(
+    chunk_seconds: float,
+    eval_seconds: float,
+    eval_seconds_full_episodes: float,
+    iterations: int,
+    eval_every: int,
+    steps_per_iteration: int,
+) -> dict:
+    """Training-only steps/s, and the evaluation's share at one evaluation per ``eval_every``
+    iterations, for the measured (untrained) and full-length episodes."""
+    iteration_seconds = (chunk_seconds - eval_seconds) / iterations
+    if iteration_seconds <= 0:
+        raise SystemExit(
+            f"the evaluation ({eval_seconds:.3f} s) took longer than a whole chunk "
+            f"({chunk_seconds:.3f} s): use more --iterations"
+        )
+    training_seconds = eval_every * iteration_seconds
+    block_steps = eval_every * steps_per_iteration
+    full_block_seconds = training_seconds + eval_seconds_full_episodes
+    return {
+        "steps_per_second": steps_per_iteration / iteration_seconds,
+        "iteration_seconds": iteration_seconds,
+        "steps_per_second_with_eval": block_steps / (training_seconds + eval_seconds),
+        "steps_per_second_with_full_eval": block_steps / full_block_seconds,
+        "eval_share": eval_seconds / (training_seconds + eval_seconds),
+        "eval_share_full_episodes": eval_seconds_full_episodes / full_block_seconds,
+    }
+
+
+def compile_in_fresh_process(args, size: int, cache_dir: str) -> dict:
+    """Compile seconds of the grid of ``size`` cells in a new Python process (this script with
+    the same flags and ``--compile-worker``) whose compilation cache is ``cache_dir``."""
+    command = [sys.executable, str(Path(__file__).resolve()), *args.argv]
+    command += ["--compile-worker", str(size), "--cache-dir", cache_dir]
+    result = subprocess.run(command, stdout=subprocess.PIPE, text=True, check=True)
+    return json.loads(result.stdout.splitlines()[-1])
+
+
+def compile_worker(args, devices) -> None:
+    """Builds the grid of ``args.compile_worker`` cells as ``measure_grid`` does, with the
+    compilation cache in ``args.cache_dir``, and prints its compile seconds and cache hits."""
+    enable_compilation_cache(args.cache_dir)
+    env = run_settings.make_env(args.env, args.run_settings)
+    demos, _ = load_demos(args.demos, args.env, env)
+    train = make_grid_train(args, env, demos)
+    methods, seeds = grid_layout(args.compile_worker)
+    inputs = stack_cells(make_cells(methods, seeds), jax.random.key(args.seed))
+    with counting_cache_hits() as hits:
+        grid = Grid(train, *inputs, blocks_per_chunk=1, devices=devices)
+    times = {
+        "compile_seconds": grid.compile_seconds,
+        "init_compile_seconds": grid.init_compile_seconds,
+        "chunk_compile_seconds": grid.chunk_compile_seconds,
+        "cache_hits": len(hits),
+    }
+    print(json.dumps(times), flush=True)
+
+
+def compile_times(args, size: int) -> dict:
+    """Cold (empty cache) then warm (the cache the cold compile filled) compile of the grid of
+    ``size`` cells, each in a fresh process."""
+    print("  compiling in two fresh processes (cold, then warm)", flush=True)
+    with tempfile.TemporaryDirectory(prefix="grid_throughput_xla_cache_") as cache_dir:
+        cold = compile_in_fresh_process(args, size, cache_dir)
+        warm = compile_in_fresh_process(args, size, cache_dir)
+    return {
+        "compile_seconds": cold["compile_seconds"],
+        "init_compile_seconds": cold["init_compile_seconds"],
+        "chunk_compile_seconds": cold["chunk_compile_seconds"],
+        "cold_cache_hits": cold["cache_hits"],
+        "compile_seconds_warm": warm["compile_seconds"],
+        "init_compile_seconds_warm": warm["init_compile_seconds"],
+        "chunk_compile_seconds_warm": warm["chunk_compile_seconds"],
+        "warm_cache_hits": warm["cache_hits"],
+    }
+
+
+def measure_grid(args, train, full_trpo, size: int, devices, key) -> dict:
+    """Compile seconds (``compile_times``) of the grid of ``size`` cells, then its chunk and
+    evaluation timings in this process."""
+    compiling = compile_times(args, size)
+    methods, seeds = grid_layout(size)
+    inputs = stack_cells(make_cells(methods, seeds), key)
+    grid = Grid(train, *inputs, blocks_per_chunk=1, devices=devices)
+    state, chunks = time_chunks(grid)
+    eval_seconds = evaluation_seconds(train.trpo, state)
+    eval_seconds_full = eval_seconds if full_trpo is None else evaluation_seconds(full_trpo, state)
+    costs = evaluation_costs(
+        chunks["chunk_seconds"],
+        eval_seconds,
+        eval_seconds_full,
+        grid.iterations_per_chunk,
+        args.run_settings.eval_every,
+        grid.num_cells * train.config.trpo.batch_size,
+    )
+    return {
+        **costs,
+        "peak_memory_bytes": peak_memory_bytes(grid.chunk_program),
+        "methods": list(methods),
+        "seeds": seeds,
+        "padded_cells": grid.num_padded,
+        **chunks,
+        "eval_seconds": eval_seconds,
+        "eval_seconds_full_episodes": eval_seconds_full,
+        **compiling,
+        "init_peak_memory_bytes": peak_memory_bytes(grid.init_program),
+    }
+
+
+def make_grid_train(args, env, demos):
+    """The adversarial trainer of one chunk: ``--iterations`` iterations, one evaluation."""
+    chunk_settings = args.run_settings.replace(eval_every=args.iterations)
     config = AdversarialConfig(
-        trpo=TRPOConfig(
-            num_envs=args.num_envs,
-            unroll_length=args.unroll_length,
-            num_iterations=args.iterations,
-            eval_every=args.iterations,
-            fisher=args.fisher,
-        ),
+        trpo=chunk_settings.trpo_config(args.iterations, fisher=args.fisher),
         classifier=ClassifierConfig(num_steps=args.classifier_steps),
         num_demos=None,
     )
-    train = make_train(config, env, demos)
+    return make_train(config, env, demos)
+
+
+def measure_rows(args, env, demos, devices, common: dict) -> list[dict]:
+    settings = args.run_settings
+    train = make_grid_train(args, env, demos)
+    full_trpo = full_episode_trpo(args.env, settings, train)
     key, rows = jax.random.key(args.seed), []
     for size in args.sizes:
-        width = args.num_envs * size
+        width = settings.num_envs * size
         key, env_key, grid_key = jax.random.split(key, 3)
-        env_speed = measure(env, width, scan_length(ENV_NAME, width, False), env_key)
+        env_speed = measure(env, width, scan_length(args.env, width, False), env_key)
         env_speed = env_speed["steps_per_second"]
         print(f"{size} cells, width {width}: env only {env_speed:,.0f} steps/s", flush=True)
-        result = measure_grid(train, size, devices, grid_key)
+        result = measure_grid(args, train, full_trpo, size, devices, grid_key)
         speed = result["steps_per_second"]
         layout = f"{len(result['methods'])}x{result['seeds']}"
-        row = {"name": f"grid_train/{layout}", "env": ENV_NAME, "width": width, **result}
+        row = {"name": f"grid_train/{layout}", "env": args.env, "width": width, **result}
         row |= {
             **common,
             "cells": size,
-            "num_envs": args.num_envs,
-            "unroll_length": args.unroll_length,
+            "num_envs": settings.num_envs,
+            "unroll_length": settings.unroll_length,
             "iterations": args.iterations,
             "fisher": args.fisher,
+            "settings": dataclasses.asdict(settings),
             "env_steps_per_second": env_speed,
             "train_over_env_ratio": speed / env_speed,
             "ratio_vs_one_cell": None,
             "devices": len(devices),
         }
         rows.append(row)
-        warning = ""
-        if result["nonfinite_cells"]:
-            warning = f"  WARNING: {result['nonfinite_cells']} cell(s) non-finite"
-        print(
-            f"  {size:3d} cells ({layout} methods x seeds) {speed:>10,.0f} steps/s  "
-            f"compile {result['compile_seconds']:5.1f} s  init {result['init_seconds']:5.1f} s"
-            f"{warning}",
-            flush=True,
-        )
+        print_progress(row)
     one_cell = [row["steps_per_second"] for row in rows if row["cells"] == 1]
     for row in rows:
         if one_cell:
@@ -188,24 +368,42 @@ def measure_rows(args, env, demos, devices, common: dict) -> list[dict]:
     return rows
 
 
+def print_progress(row: dict) -> None:
+    warning = ""
+    if row["nonfinite_cells"]:
+        warning = f"  WARNING: {row['nonfinite_cells']} cell(s) non-finite"
+    if row["warm_cache_hits"] < 2:
+        warning += f"  NOTE: warm compile read {row['warm_cache_hits']} of 2 programs from cache"
+    print(
+        f"  {row['cells']:3d} cells ({len(row['methods'])}x{row['seeds']} methods x seeds) "
+        f"{row['steps_per_second']:>10,.0f} steps/s training, "
+        f"{row['steps_per_second_with_eval']:>10,.0f} with evaluation  "
+        f"compile {row['compile_seconds']:5.1f} s cold, {row['compile_seconds_warm']:5.1f} s warm"
+        f"  init {row['init_seconds']:5.1f} s{warning}",
+        flush=True,
+    )
+
+
 def markdown_table(rows: list[dict]) -> str:
     lines = [
-        "| cells | steps/s | ratio vs one cell | env-only steps/s | train/env | compile s | "
-        "peak memory MiB |",
-        "|---:|---:|---:|---:|---:|---:|---:|",
+        "| cells | steps/s training | steps/s incl. eval (untrained / full episodes) | "
+        "env-only steps/s | train/env | eval share (untrained / full episodes) | "
+        "compile s cold / warm | peak memory MiB |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for row in rows:
         memory = row["peak_memory_bytes"]
         memory = "-" if memory is None else f"{memory / 2**20:.1f}"
-        ratio = row["ratio_vs_one_cell"]
-        ratio = "-" if ratio is None else f"{ratio:.2f}"
         cells = row["cells"]
         if row["padded_cells"] != cells:
             cells = f"{cells} (padded to {row['padded_cells']})"
         lines.append(
-            f"| {cells} | {row['steps_per_second']:,.0f} | {ratio} | "
+            f"| {cells} | {row['steps_per_second']:,.0f} | "
+            f"{row['steps_per_second_with_eval']:,.0f} / "
+            f"{row['steps_per_second_with_full_eval']:,.0f} | "
             f"{row['env_steps_per_second']:,.0f} | {row['train_over_env_ratio']:.4f} | "
-            f"{row['compile_seconds']:.1f} | {memory} |"
+            f"{row['eval_share']:.1%} / {row['eval_share_full_episodes']:.1%} | "
+            f"{row['compile_seconds']:.1f} / {row['compile_seconds_warm']:.1f} | {memory} |"
         )
     return "\n".join(lines)
 
@@ -223,6 +421,12 @@ def rerun_with_host_devices(num_devices: int, argv) -> int:
 def parse_args(argv=None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument(
+        "--env",
+        choices=envs.ENV_NAMES,
+        default=DEFAULT_ENV,
+        help=f"environment (default {DEFAULT_ENV})",
+    )
+    parser.add_argument(
         "--sizes",
         default=None,
         help="comma-separated cell counts: 1 or multiples of 7 "
@@ -232,13 +436,7 @@ def parse_args(argv=None) -> argparse.Namespace:
         "--iterations",
         type=int,
         default=10,
-        help="iterations per timed chunk (= eval_every; default 10)",
-    )
-    parser.add_argument(
-        "--num-envs", type=int, default=25, help="parallel envs per cell (default 25)"
-    )
-    parser.add_argument(
-        "--unroll-length", type=int, default=200, help="steps per env per rollout (default 200)"
+        help="iterations per timed chunk, which ends with one evaluation (default 10)",
     )
     parser.add_argument(
         "--classifier-steps",
@@ -263,14 +461,19 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument(
         "--demos",
         type=Path,
-        default=DEFAULT_DEMOS,
-        help="released *_mixture.npy (default ../shared/data/pendulum/Pendulum-v1_mixture.npy "
-        "from the repository root; random rows if missing)",
+        default=None,
+        help="demonstration file (default for Pendulum-v1: "
+        "../shared/data/pendulum/Pendulum-v1_mixture.npy from the repository root; random rows "
+        "without a file)",
     )
     parser.add_argument("--json", type=Path, default=None, help="write the rows here")
     parser.add_argument("--seed", type=int, default=0, help="key of cells and env runs")
     parser.add_argument("--devices-worker", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--compile-worker", type=int, help=argparse.SUPPRESS)
+    parser.add_argument("--cache-dir", help=argparse.SUPPRESS)
+    run_settings.add_arguments(parser)
     args = parser.parse_args(argv)
+    args.argv = list(sys.argv[1:] if argv is None else argv)
     if args.sizes is None:
         args.sizes = QUICK_SIZES if args.quick else SIZES
     else:
@@ -283,12 +486,47 @@ def parse_args(argv=None) -> argparse.Namespace:
         parser.error(f"--sizes must be 1 or multiples of {len(METHOD_NAMES)}, got {bad}")
     if args.classifier_steps is None:
         args.classifier_steps = QUICK_CLASSIFIER_STEPS if args.quick else CLASSIFIER_STEPS
-    for name in ("iterations", "num_envs", "unroll_length", "classifier_steps"):
+    for name in ("iterations", "classifier_steps"):
         if getattr(args, name) < 1:
             parser.error(f"--{name.replace('_', '-')} must be a positive integer")
     if args.devices is not None and args.devices < 1:
         parser.error("--devices must be a positive integer")
+    if args.demos is None and args.env == "Pendulum-v1":
+        args.demos = PENDULUM_DEMOS
+    try:
+        args.run_settings = run_settings.from_arguments(args.env, args)
+    except ValueError as error:
+        parser.error(str(error))
     return args
+
+
+def measure_environment(args, devices) -> list[dict]:
+    """Builds the task and its demonstrations and measures every grid size."""
+    settings = args.run_settings
+    env = run_settings.make_env(args.env, settings)
+    demos, demos_note = load_demos(args.demos, args.env, env)
+    print(
+        f"device {device_description()} x{len(devices)} used, jax {jax.__version__}; "
+        f"{args.env}: {run_settings.describe(settings)}; {args.iterations} iterations per "
+        f"timed chunk, {args.classifier_steps:,} classifier steps (untimed)\n"
+        f"demonstrations: {demos_note}",
+        flush=True,
+    )
+    common = {
+        "device": device_description(),
+        "jax_version": jax.__version__,
+        "synthetic_demos": demos_note.startswith("SYNTHETIC"),
+    }
+    rows = measure_rows(args, env, demos, devices, common)
+    per_device = "; peak memory per device" if len(devices) > 1 else ""
+    print(
+        f"\n{args.env}: {run_settings.describe(settings)}; demonstrations: {demos_note}\n"
+        f"Timed: median of {NUM_REPEATS} warm calls of a chunk ({args.iterations} iterations + "
+        "one evaluation) and of an evaluation alone; training steps/s leaves the evaluation "
+        f"out, 'incl. eval' adds one every {settings.eval_every} iterations; {len(devices)} "
+        f"device(s){per_device}.\n"
+    )
+    return rows
 
 
 def main(argv=None) -> None:
@@ -299,26 +537,10 @@ def main(argv=None) -> None:
             raise SystemExit(f"--devices {num_devices}: jax sees only {jax.devices()}")
         raise SystemExit(rerun_with_host_devices(num_devices, argv))
     devices = jax.devices()[:num_devices]
-    common = {"device": device_description(), "jax_version": jax.__version__}
-    print(
-        f"device {common['device']} x{num_devices} used, jax {jax.__version__}; {ENV_NAME}, "
-        f"{args.num_envs} envs x {args.unroll_length} steps per cell-iteration, "
-        f"{args.iterations} iterations per timed chunk, {args.classifier_steps:,} classifier "
-        "steps (untimed)",
-        flush=True,
-    )
-    env = envs.make(ENV_NAME)
-    demos, demos_note = load_demos(args.demos, env)
-    print(f"demonstrations: {demos_note}", flush=True)
-    common["synthetic_demos"] = demos_note.startswith("SYNTHETIC")
-    rows = measure_rows(args, env, demos, devices, common)
-    per_device = "; peak memory per device" if num_devices > 1 else ""
-    print(
-        f"\ndemonstrations: {demos_note}\n{ENV_NAME}; {args.num_envs} envs x "
-        f"{args.unroll_length} steps x {args.iterations} iterations per cell per timed call "
-        f"(+ one {TRPOConfig.num_eval_episodes}-episode evaluation, timed, not counted); "
-        f"median of {NUM_REPEATS} warm calls; {num_devices} device(s){per_device}.\n"
-    )
+    if args.compile_worker:
+        compile_worker(args, devices)
+        return
+    rows = measure_environment(args, devices)
     print(markdown_table(rows), flush=True)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
