@@ -36,6 +36,8 @@ ARMS = {
     "table": [],
     "table-own-solver": ["--solver", "own"],
     "table-normalized": ["--normalize-observations"],
+    "reference-fisher5": ["--settings", "reference", "--fisher-subsample", "5"],
+    "table-fisher5": ["--fisher-subsample", "5"],
 }
 
 
@@ -58,8 +60,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args(argv)
-    if args.env not in envs.ENV_NAMES or args.env == "Pendulum-v1":
-        parser.error(f"--env must be a MuJoCo task of {', '.join(envs.ENV_NAMES[1:])}")
+    if args.env not in envs.ENV_NAMES:
+        parser.error(f"unknown environment {args.env!r}; available: {', '.join(envs.ENV_NAMES)}")
+    if args.env == "Pendulum-v1" and any("--solver" in ARMS[arm] for arm in args.arms):
+        parser.error("Pendulum-v1 has no MJX solver: choose arms without --solver")
     args.arms = [arm.strip() for arm in args.arms.split(",") if arm.strip()]
     unknown = [arm for arm in args.arms if arm not in ARMS]
     if unknown or not args.arms:
@@ -175,7 +179,9 @@ def main(argv=None) -> dict:
     args.out.mkdir(parents=True, exist_ok=True)
     directories = {arm: run_arm(args, arm) for arm in args.arms}
     key = jax.random.key(args.seed + 10_000)  # evaluation keys unused by any training run
-    physics = {"own": {}, "fast": dict(envs.FAST_SOLVER)}
+    physics = {"own": {}}
+    if args.env != "Pendulum-v1":
+        physics["fast"] = dict(envs.FAST_SOLVER)
     evaluators = {}
     results, curves = {}, {}
     for arm, directory in directories.items():
@@ -196,6 +202,7 @@ def main(argv=None) -> dict:
                 for name in ("num_envs", "unroll_length", "normalize_observations")
             },
             "env_options": config["env_options"],
+            "fisher_subsample": config["trpo"]["fisher_subsample"],
             "final_return": {name: values.tolist() for name, values in final.items()},
             "final_return_mean_se": {
                 name: mean_and_standard_error(values) for name, values in final.items()
@@ -250,10 +257,12 @@ def comparison_markdown(summary: dict) -> str:
         shape = f"{settings['num_envs']} x {settings['unroll_length']}"
         solver = "fast" if result["trained_on"] == "fast" else "own"
         normalized = ", norm. obs" if settings["normalize_observations"] else ""
+        if result["fisher_subsample"] > 1:
+            normalized += f", Fisher on every {result['fisher_subsample']}th step"
         lines.append(
             f"| {arm} | {shape}, {solver} solver{normalized} | "
             f"{cell(result['final_return_mean_se']['own'])} | "
-            f"{cell(result['final_return_mean_se']['fast'])} | "
+            f"{cell(result['final_return_mean_se'].get('fast', (math.nan, math.nan)))} | "
             f"{cell(result['average_eval_return_mean_se'])} | "
             f"{'yes' if result['not_worse_than_baseline'] else 'NO'} |"
         )

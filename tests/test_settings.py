@@ -20,8 +20,9 @@ DOCUMENTED = {
     "Pendulum-v1": (5000, 25, 200, {}, 10, 32),
     **{
         name: (5000, 250, 20, {"solver_iterations": 1, "ls_iterations": 4}, 50, 10)
-        for name in ("Ant", "HalfCheetah", "Hopper", "Swimmer", "Walker2d")
+        for name in ("Ant", "Hopper", "Swimmer", "Walker2d")
     },
+    "HalfCheetah": (5000, 250, 20, {}, 50, 10),  # the fast solver diverges there
 }
 
 
