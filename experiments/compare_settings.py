@@ -33,6 +33,10 @@ ARMS = {
         *("--settings", "reference", "--solver", "fast"),
         *("--num-envs", "100", "--unroll-length", "50"),
     ],
+    "wide-fast": [
+        *("--settings", "reference", "--solver", "fast"),
+        *("--num-envs", "250", "--unroll-length", "20"),
+    ],
     "table": [],
     "table-own-solver": ["--solver", "own"],
     "table-normalized": ["--normalize-observations"],

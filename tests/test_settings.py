@@ -19,10 +19,10 @@ from pngail_jax.settings import (
 DOCUMENTED = {
     "Pendulum-v1": (5000, 25, 200, {}, 10, 32),
     **{
-        name: (5000, 250, 20, {"solver_iterations": 1, "ls_iterations": 4}, 50, 10)
+        name: (5000, 25, 200, {"solver_iterations": 1, "ls_iterations": 4}, 50, 10)
         for name in ("Ant", "Hopper", "Swimmer", "Walker2d")
     },
-    "HalfCheetah": (5000, 250, 20, {}, 50, 10),  # the fast solver diverges there
+    "HalfCheetah": (5000, 25, 200, {}, 50, 10),  # the fast solver diverges there
 }
 
 
@@ -43,7 +43,9 @@ def test_reference_setting_is_the_reference_codes():
 
 
 def test_trpo_config_carries_the_settings():
-    config = settings_for("Hopper").trpo_config(100, fisher="gauss_newton")
+    config = settings_for("Hopper", num_envs=250, unroll_length=20).trpo_config(
+        100, fisher="gauss_newton"
+    )
     assert (config.num_envs, config.unroll_length, config.batch_size) == (250, 20, 5000)
     assert (config.eval_every, config.num_eval_episodes) == (50, 10)
     assert (config.num_iterations, config.fisher) == (100, "gauss_newton")
@@ -51,7 +53,7 @@ def test_trpo_config_carries_the_settings():
 
 def test_overrides_and_their_errors():
     hopper = settings_for("Hopper", num_envs=50, unroll_length=None)
-    assert (hopper.num_envs, hopper.unroll_length) == (50, 20)  # None keeps the table's
+    assert (hopper.num_envs, hopper.unroll_length) == (50, 200)  # None keeps the table's
     with pytest.raises(ValueError, match="unknown environment 'CartPole'"):
         settings_for("CartPole")
     with pytest.raises(ValueError, match=r"unknown run setting\(s\) \['num_env'\]"):
@@ -81,7 +83,7 @@ def flags(*argv):
 def test_flags_override_the_table_or_the_reference():
     assert settings.from_arguments("Hopper", flags()) == settings_for("Hopper")
     own = settings.from_arguments("Hopper", flags("--solver", "own", "--num-eval-episodes", "5"))
-    assert own.env_options == {} and own.num_eval_episodes == 5 and own.num_envs == 250
+    assert own.env_options == {} and own.num_eval_episodes == 5 and own.num_envs == 25
     reference = settings.from_arguments(
         "Hopper", flags("--settings", "reference", "--solver", "fast", "--normalize-observations")
     )
@@ -95,14 +97,14 @@ def test_flags_override_the_table_or_the_reference():
 
 def test_describe_names_shape_solver_and_evaluation():
     text = settings.describe(dataclasses.replace(settings_for("Hopper"), eval_every=25))
-    assert "250 envs x 20 steps" in text and "1 Newton / 4 line-search" in text
+    assert "25 envs x 200 steps" in text and "1 Newton / 4 line-search" in text
     assert "10 episodes every 25 iterations" in text
 
 
 def test_hopper_learns_with_the_table_settings():
-    """TRPO on Hopper's true reward with the table's row (250 envs x 20 steps, fast solver),
+    """TRPO on Hopper's true reward with the table's row (25 envs x 200 steps, fast solver),
     10 iterations (50,000 steps): the deterministic policy must reach a return of 150.
-    Measured with train_rl --seeds 3: 207, 183, 195 (this key is the first; the untrained
+    Measured with train_rl --seeds 3: 209, 212, 220 (this key is the first; the untrained
     policy scores 65-81), so 150 leaves room for another machine's float rounding. About a
     minute on 2 cores, mostly compiling."""
     import jax
