@@ -66,12 +66,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     args = parser.parse_args(argv)
     if args.env not in envs.ENV_NAMES:
         parser.error(f"unknown environment {args.env!r}; available: {', '.join(envs.ENV_NAMES)}")
-    if args.env == "Pendulum-v1" and any("--solver" in ARMS[arm] for arm in args.arms):
-        parser.error("Pendulum-v1 has no MJX solver: choose arms without --solver")
     args.arms = [arm.strip() for arm in args.arms.split(",") if arm.strip()]
     unknown = [arm for arm in args.arms if arm not in ARMS]
     if unknown or not args.arms:
         parser.error(f"unknown arm(s) {unknown}; available: {', '.join(ARMS)}")
+    if args.env == "Pendulum-v1" and any("--solver" in ARMS[arm] for arm in args.arms):
+        parser.error("Pendulum-v1 has no MJX solver: choose arms without --solver")
     args.baseline = args.baseline or args.arms[0]
     if args.baseline not in args.arms:
         parser.error(f"--baseline {args.baseline!r} is not among --arms")
