@@ -21,8 +21,11 @@ SHARED_PENDULUM = Path(__file__).resolve().parents[2] / "shared" / "data" / "pen
 )
 def test_gail_learns_pendulum_from_the_optimal_trajectory():
     """Rows 0-199 of the released set come from the optimal policy (r = 1). From random
-    (about -1200), 2 seeds x 150 iterations reach -166 / -181 here (about 45 s on 2 busy
-    cores); the bar is set well below that to allow other CPUs' float differences."""
+    (about -1200), GAIL's final return after 150 iterations varies a lot between seeds, and a
+    float rounding difference (another CPU, another XLA version) acts like a new seed: 16
+    seeds of this configuration ended between -570 and -142 (median -228) here. The bar is on
+    the median of 4 seeds (about 60 s on 2 cores), so it fails only if two of them end worse
+    than every seed measured."""
     env = envs.make("Pendulum-v1")
     released = load_demonstrations(SHARED_PENDULUM / "Pendulum-v1_mixture.npy", action_scale=2.0)
     optimal = Demonstrations(
@@ -34,8 +37,8 @@ def test_gail_learns_pendulum_from_the_optimal_trajectory():
         classifier=ClassifierConfig(num_steps=100),  # GAIL reads no confidences
     )
     train = make_train(config, env, optimal)
-    cells = make_cells(["gail"], num_seeds=2)
+    cells = make_cells(["gail"], num_seeds=4)
     _, metrics = jax.jit(jax.vmap(train))(*stack_cells(cells, jax.random.key(0)))
     final = np.asarray(metrics["eval/return"])[:, -1]
-    assert final.mean() > -450, final
+    assert np.median(final) > -600, final
     assert np.isfinite(np.asarray(metrics["disc/loss"])).all()
