@@ -20,8 +20,9 @@ DOCUMENTED = {
     "Pendulum-v1": (5000, 25, 200, {}, 10, 32),
     **{
         name: (5000, 25, 200, {"solver_iterations": 1, "ls_iterations": 4}, 50, 10)
-        for name in ("Ant", "Hopper", "Swimmer")
+        for name in ("Ant", "Hopper")
     },
+    "Swimmer": (5000, 25, 200, {}, 50, 10),  # the fast solver learned worse there
     "HalfCheetah": (5000, 25, 200, {}, 50, 10),  # the fast solver diverges there
     "Walker2d": (5000, 25, 200, {}, 50, 10),  # fast solver's learning effect not measured
 }
