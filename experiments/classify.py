@@ -1,6 +1,6 @@
 """Table 1: how well SC and BSC recover hidden confidences, all seeds x methods in one program.
 
-    python -m experiments.classify --demos ../shared/data/pendulum/Pendulum-v1_mixture.npy
+    python -m experiments.classify --demos data/pendulum/Pendulum-v1_mixture.npy
 
 Reads raw [s, a] rows (no environment needed), draws per seed a split of ``--traj-size`` rows
 with ``--label-ratio`` of them labelled, trains each classifier and prints MAE / RMSE over the
@@ -18,6 +18,7 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 
+from experiments.cli import known_names
 from pngail_jax.confidence import ClassifierConfig, ClassifierSpec, split_and_train
 from pngail_jax.demos import load_demonstrations
 
@@ -57,10 +58,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--eps", type=float, default=0.01, help="BSC clip")
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args(argv)
-    args.methods = [m.strip() for m in args.methods.split(",") if m.strip()]
-    unknown = sorted(set(args.methods) - set(METHODS))
-    if unknown or not args.methods:
-        parser.error(f"unknown method(s) {unknown}; available: {', '.join(METHODS)}")
+    args.methods = known_names(parser, args.methods, METHODS, "method")
     if not 0 < args.label_ratio < 1:
         parser.error(f"--label-ratio must be in (0, 1), got {args.label_ratio}")
     for name in ("seeds", "steps", "batch_size"):

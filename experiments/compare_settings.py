@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from experiments.cli import known_names
+
 # train_rl flags of each arm (the common flags are added by run_arm).
 ARMS = {
     "reference": ["--settings", "reference"],
@@ -66,10 +68,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     args = parser.parse_args(argv)
     if args.env not in envs.ENV_NAMES:
         parser.error(f"unknown environment {args.env!r}; available: {', '.join(envs.ENV_NAMES)}")
-    args.arms = [arm.strip() for arm in args.arms.split(",") if arm.strip()]
-    unknown = [arm for arm in args.arms if arm not in ARMS]
-    if unknown or not args.arms:
-        parser.error(f"unknown arm(s) {unknown}; available: {', '.join(ARMS)}")
+    args.arms = known_names(parser, args.arms, list(ARMS), "arm")
     if args.env == "Pendulum-v1" and any("--solver" in ARMS[arm] for arm in args.arms):
         parser.error("Pendulum-v1 has no MJX solver: choose arms without --solver")
     args.baseline = args.baseline or args.arms[0]

@@ -1,7 +1,7 @@
 """The main job: every method x seed (x label ratio x noise) as one compiled program.
 
     python -m experiments.sweep        # smoke scale: Pendulum-v1, 7 methods x 3 seeds
-    python -m experiments.sweep --demos ../shared/data/pendulum/Pendulum-v1_mixture.npy \\
+    python -m experiments.sweep --demos data/pendulum/Pendulum-v1_mixture.npy \\
         --action-scale 2 --seeds 5 --iterations 1000
     python -m experiments.sweep --preset paper --demos ...   # 5,000 iterations, 5 seeds (GPU)
     python -m experiments.sweep --resume runs/20261122-210000
@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from experiments.cli import known_names
 from pngail_jax import compilation
 from pngail_jax import settings as run_settings
 
@@ -148,10 +149,7 @@ def resolve(parser, args: argparse.Namespace) -> argparse.Namespace:
             setattr(args, name, preset.get(name, value))
     if args.env not in envs.ENV_NAMES:
         parser.error(f"unknown environment {args.env!r}; available: {', '.join(envs.ENV_NAMES)}")
-    args.methods = [m.strip() for m in args.methods.split(",") if m.strip()]
-    unknown = [m for m in args.methods if m not in METHOD_NAMES]
-    if unknown or not args.methods:
-        parser.error(f"unknown method(s) {unknown}; available: {', '.join(METHOD_NAMES)}")
+    args.methods = known_names(parser, args.methods, METHOD_NAMES, "method")
     positive = ("seeds", "iterations", "chunk_iterations", "classifier_steps")
     for name in (*positive, "fisher_subsample"):
         if getattr(args, name) < 1:

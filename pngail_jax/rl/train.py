@@ -4,7 +4,7 @@ Static configuration (shapes, iteration counts, which Fisher product) lives in t
 ``TRPOConfig``; everything a grid may vary (discount, KL bound, learning rate, whether to
 bootstrap through truncation) is a ``TRPOHyperparams`` pytree, so
 ``jax.jit(jax.vmap(train))(stacked_hyperparams, keys)`` trains many runs in one program.
-Defaults are the paper's and the reference code's (``../shared/REFERENCE.md``, TRPO), except
+Defaults are the paper's and the reference code's (``docs/trpo.md``), except
 that GAE bootstraps the value through time-limit truncation (``bootstrap_truncation``).
 """
 
@@ -395,17 +395,17 @@ class TRPO:
             self.config.num_backtracks,
             objective.fisher_vector_product,
         )
-        new_mean, new_log_std = self.policy.apply(objective.unravel(new_flat), obs)
-        old_mean, old_log_std = objective.old_mean, objective.old_log_std
-        surrogate_loss = objective.surrogate_loss
+        new_params = objective.unravel(new_flat)
+        new_mean, new_log_std = self.policy.apply(new_params, obs)
+        kl = gaussian_kl(objective.old_mean, objective.old_log_std, new_mean, new_log_std)
+        loss = objective.surrogate_loss
         metrics = {
             **metrics,
-            "trpo/kl": jnp.mean(gaussian_kl(old_mean, old_log_std, new_mean, new_log_std)),
+            "trpo/kl": jnp.mean(kl),
             "trpo/entropy": gaussian_entropy(new_log_std),
-            "trpo/surrogate_improvement": surrogate_loss(objective.flat_params)
-            - surrogate_loss(new_flat),
+            "trpo/surrogate_improvement": loss(objective.flat_params) - loss(new_flat),
         }
-        return objective.unravel(new_flat), metrics
+        return new_params, metrics
 
 
 def fisher_sample_indices(config: TRPOConfig) -> jax.Array:
