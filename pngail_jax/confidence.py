@@ -3,7 +3,7 @@
 A classifier g maps a demonstration pair x = [s, a] to a logit; sigmoid(g(x)) is the predicted
 confidence that x is optimal. Training sees labelled rows D_c (with confidence r) and
 unlabelled rows D_u. ``l(z) = softplus(-z)`` is the logistic loss and
-``alpha = beta = n_u / (n_c + n_u)`` (``../shared/REFERENCE.md``, confidence classifiers).
+``alpha = beta = n_u / (n_c + n_u)`` (``docs/demonstrations.md`` gives both losses).
 
 Which classifier runs is data (``ClassifierSpec.bsc_coef``), so SC and BSC train side by side
 in one vmapped program.

@@ -1,6 +1,6 @@
 """The discriminator loss of every method, and the policy reward, as pure functions.
 
-Notation of ``../shared/REFERENCE.md``: z is the discriminator logit, agent rows have label 1
+Notation of ``docs/methods.md``: z is the discriminator logit, agent rows have label 1
 (sigmoid(z) -> 1), demonstrations label 0, ``sp`` is softplus, ``sp(-z) = -log sigmoid(z)``.
 """
 

@@ -1,6 +1,6 @@
 """Methods as data: ``MethodSpec`` coefficients and the presets of the paper's comparison.
 
-Every discriminator objective of ``../shared/REFERENCE.md`` is one weighted sum of the same
+Every discriminator objective of ``docs/methods.md`` is one weighted sum of the same
 per-sample terms (``pngail_jax.losses.discriminator_loss``):
 
     L = A mean_agent sp(-z) + mean_demo [ u(x) sp(z) + v(x) sp(-z) ]

@@ -2,7 +2,7 @@
 
 Hidden layers use PyTorch's default ``nn.Linear`` weight distribution, U(+-1/sqrt(fan_in)),
 with zero biases; every network's output layer starts with those weights scaled by 0.1 and a
-zero bias, as the reference code initialises them (``../shared/REFERENCE.md``, TRPO).
+zero bias, as the reference code initialises them (``docs/trpo.md``).
 """
 
 from __future__ import annotations

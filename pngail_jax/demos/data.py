@@ -5,7 +5,7 @@ Two on-disk layouts:
 - The paper's released layout: ``{env}_mixture.npy`` of shape (N, obs_dim + act_dim), rows
   ``[s, a]``, and ``{env}_mixture_conf.npy`` of shape (N, 1). The released Pendulum set stores
   the torque divided by 2, so load it with ``action_scale=2`` to get the environment's units;
-  the default 1 keeps the rows as stored (``../shared/REFERENCE.md``, demonstrations).
+  the default 1 keeps the rows as stored (``docs/demonstrations.md``).
 - Our ``.npz`` schema, version 1: arrays ``observations`` float32[N, O], ``actions``
   float32[N, A], optional ``confidence`` float32[N], ``labelled`` bool[N],
   ``trajectory_ids`` int32[N], plus ``metadata_json`` (a JSON string) and ``format_version``.

@@ -1,7 +1,7 @@
 """The natural-gradient step of TRPO: Fisher-vector products, conjugate gradient, line search.
 
 Every loop has a fixed iteration count and uses masks instead of early exits, so all cells of
-a vmapped grid do the same work (STYLE.md, habit 8).
+a vmapped grid do the same work (docs/architecture.md).
 """
 
 from __future__ import annotations
