@@ -134,20 +134,18 @@ def test_split_shapes_labels_and_noise():
     np.testing.assert_array_equal(grid.labelled.sum(axis=1), [2, 4, 10])
 
 
-def test_local_minari_dataset_loads(tmp_path, monkeypatch):
+@pytest.fixture
+def minari_dataset(tmp_path, monkeypatch):
+    """The id of a local Minari dataset of three random 20-step Pendulum episodes."""
     minari = pytest.importorskip("minari", reason="the optional 'minari' extra is not installed")
     import gymnasium as gym
 
-    from pngail_jax.demos import load_minari
-
-    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path))
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "minari"))
     env = minari.DataCollector(gym.make("Pendulum-v1", max_episode_steps=20))
     for episode in range(3):
         env.reset(seed=episode)
         for _ in range(20):
-            _, _, terminated, truncated, _ = env.step(env.action_space.sample())
-            if terminated or truncated:
-                break
+            env.step(env.action_space.sample())
     env.create_dataset(
         dataset_id="pendulum/test-v0",
         algorithm_name="random",
@@ -155,12 +153,69 @@ def test_local_minari_dataset_loads(tmp_path, monkeypatch):
         author_email="tests@example.invalid",
         code_permalink="tests",
         description="three random Pendulum episodes",
+        eval_env="Pendulum-v1",
     )
-    demos = load_minari("pendulum/test-v0", confidence=[1.0, 0.5, 0.0])
+    return "pendulum/test-v0"
+
+
+def test_local_minari_dataset_loads(minari_dataset):
+    from pngail_jax.demos import load_minari
+
+    demos = load_minari(minari_dataset, confidence=[1.0, 0.5, 0.0])
     assert demos.observations.shape == (60, 3) and demos.actions.shape == (60, 1)
     np.testing.assert_array_equal(np.bincount(demos.trajectory_ids), [20, 20, 20])
     np.testing.assert_array_equal(demos.confidence[::20], [1.0, 0.5, 0.0])
     with pytest.raises(DemonstrationError, match="one value or one per episode"):
-        load_minari("pendulum/test-v0", confidence=[1.0, 0.5])
+        load_minari(minari_dataset, confidence=[1.0, 0.5])
     with pytest.raises(DemonstrationError, match="no local Minari dataset"):
         load_minari("pendulum/missing-v0")
+
+
+@pytest.mark.parametrize("file_name", ["conf.txt", "conf.npy"])
+def test_minari_confidences_from_a_file(minari_dataset, tmp_path, file_name):
+    conf_path = tmp_path / file_name
+    if file_name.endswith(".npy"):
+        np.save(conf_path, np.array([[1.0], [0.5], [0.0]]))  # (N, 1), as the released layout
+    else:
+        conf_path.write_text("1\n0.5\n0\n")
+    demos = load_demonstrations(f"minari:{minari_dataset}", conf_path, action_scale=2.0)
+    assert demos.observations.shape == (60, 3)
+    np.testing.assert_array_equal(demos.confidence[::20], [1.0, 0.5, 0.0])
+    np.testing.assert_array_equal(np.bincount(demos.trajectory_ids), [20, 20, 20])
+    unscaled = load_demonstrations(Path(f"minari:{minari_dataset}"))
+    assert unscaled.confidence is None
+    np.testing.assert_allclose(demos.actions, 2 * unscaled.actions)
+
+
+def test_minari_confidences_from_an_episode_metadata_field(minari_dataset):
+    import minari
+
+    dataset = minari.load_dataset(minari_dataset)
+    dataset.storage.update_episode_metadata([{"confidence": c} for c in (0.2, 0.9, 1.0)])
+    demos = load_demonstrations(f"minari:{minari_dataset}", confidence_field="confidence")
+    np.testing.assert_allclose(demos.confidence[::20], [0.2, 0.9, 1.0])
+    with pytest.raises(DemonstrationError, match="episode 0 has no metadata field 'quality'"):
+        load_demonstrations(f"minari:{minari_dataset}", confidence_field="quality")
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("1\n0.5\n", r"conf.txt: 2 confidences for the 3 episodes of Minari dataset"),
+        ("1\n1.5\n0\n", r"conf.txt: confidences must lie in \[0, 1\], got values in \[0, 1.5\]"),
+        ("1\nnan\n0\n", r"conf.txt: confidences contain NaN"),
+        ("1\nhigh\n0\n", r"conf.txt: expected one number per line"),
+    ],
+)
+def test_minari_confidence_file_errors(minari_dataset, tmp_path, text, message):
+    conf_path = tmp_path / "conf.txt"
+    conf_path.write_text(text)
+    with pytest.raises(DemonstrationError, match=message):
+        load_demonstrations(f"minari:{minari_dataset}", conf_path)
+
+
+def test_minari_confidence_sources_are_exclusive(minari_dataset, tmp_path):
+    with pytest.raises(DemonstrationError, match="not both"):
+        load_demonstrations(f"minari:{minari_dataset}", tmp_path / "c.txt", confidence_field="c")
+    with pytest.raises(DemonstrationError, match="confidence_field is for Minari datasets"):
+        load_demonstrations(tmp_path / "demos.npz", confidence_field="confidence")

@@ -10,6 +10,9 @@ Two on-disk layouts:
   float32[N, A], optional ``confidence`` float32[N], ``labelled`` bool[N],
   ``trajectory_ids`` int32[N], plus ``metadata_json`` (a JSON string) and ``format_version``.
 
+``load_demonstrations`` also reads a local Minari dataset, ``"minari:<dataset_id>"``, with
+per-episode confidences from a file or an episode metadata field (``load_minari``).
+
 Everything is loaded with ``allow_pickle=False``.
 """
 
@@ -26,6 +29,9 @@ import numpy as np
 from flax import struct
 
 NPZ_FORMAT_VERSION = 1
+
+# ``load_demonstrations("minari:<dataset_id>")`` loads a local Minari dataset.
+MINARI_PREFIX = "minari:"
 
 # Observation sizes of the paper's released files (gym -v2 MuJoCo tasks), to split [s, a].
 RELEASED_OBSERVATION_SIZES = {
@@ -250,9 +256,29 @@ def load_npz(path: str | Path) -> Demonstrations:
 
 
 def load_demonstrations(
-    path: str | Path, conf_path: str | Path | None = None, action_scale: float = 1.0
+    path: str | Path,
+    conf_path: str | Path | None = None,
+    action_scale: float = 1.0,
+    *,
+    confidence_field: str | None = None,
 ) -> Demonstrations:
-    """Loads either layout, chosen by the file name (``*_mixture.npy`` or ``*.npz``)."""
+    """Loads ``*_mixture.npy``, ``*.npz`` or ``"minari:<dataset_id>"``, a local Minari dataset.
+
+    For a Minari dataset, per-episode confidences come from ``conf_path`` (a ``.npy`` file or a
+    text file, one number per episode and line, in episode order) or from the episode metadata
+    field ``confidence_field`` (``load_minari``); with neither, ``confidence`` is None.
+    """
+    if str(path).startswith(MINARI_PREFIX):
+        return load_minari(
+            str(path).removeprefix(MINARI_PREFIX),
+            conf_path,
+            confidence_field=confidence_field,
+            action_scale=action_scale,
+        )
+    if confidence_field is not None:
+        raise DemonstrationError(
+            f"{path}: confidence_field is for Minari datasets ('{MINARI_PREFIX}<dataset_id>')"
+        )
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"demonstrations not found: {path}")
@@ -297,18 +323,35 @@ def make_split(
     )
 
 
-def load_minari(dataset_id: str, confidence=None) -> Demonstrations:
+def load_minari(
+    dataset_id: str,
+    confidence=None,
+    *,
+    confidence_field: str | None = None,
+    action_scale: float = 1.0,
+) -> Demonstrations:
     """Loads a *local* Minari dataset (never downloads) as demonstrations.
 
     Minari stores T + 1 observations per episode; the final one is dropped so rows are
-    (s_t, a_t) pairs. ``confidence``: None, one value for all rows, or one value per episode.
-    Needs the optional dependency: ``pip install 'pngail-jax[minari]'``. Datasets are found in
-    ``MINARI_DATASETS_PATH`` (default ``~/.minari/datasets``).
+    (s_t, a_t) pairs. Minari stores no confidence; give it per episode, in the dataset's
+    episode order, as either
+      ``confidence``: one value for all rows, one value per episode, or the path of a ``.npy``
+        file or a text file with one number per episode (one per line); or
+      ``confidence_field``: the name of an episode metadata field, written with Minari's
+        ``dataset.storage.update_episode_metadata`` or a ``DataCollector``'s
+        ``episode_metadata_callback`` (``docs/demonstrations.md``).
+    ``action_scale`` multiplies the stored actions. Needs the optional dependency:
+    ``pip install 'pngail-jax[minari]'``. Datasets are found in ``MINARI_DATASETS_PATH``
+    (default ``~/.minari/datasets``).
     """
     try:
         import minari
     except ImportError as error:
         raise ImportError("load_minari needs minari: pip install 'pngail-jax[minari]'") from error
+    if confidence is not None and confidence_field is not None:
+        raise DemonstrationError("give confidence or confidence_field, not both")
+    if not action_scale > 0:
+        raise DemonstrationError(f"action_scale must be positive, got {action_scale!r}")
     try:
         dataset = minari.load_dataset(dataset_id, download=False)
     except FileNotFoundError as error:
@@ -322,21 +365,70 @@ def load_minari(dataset_id: str, confidence=None) -> Demonstrations:
         actions.append(np.asarray(episode.actions, np.float32).reshape(steps, -1))
         ids.append(np.full(steps, index, np.int32))
     ids = np.concatenate(ids)
+    if isinstance(confidence, str | Path):
+        source = str(confidence)
+        confidence = _read_numbers(confidence)
+    elif confidence_field is not None:
+        source = f"{dataset_id}: episode metadata field {confidence_field!r}"
+        confidence = _metadata_field(dataset, dataset_id, confidence_field)
+    else:
+        source = "confidence (one value or one per episode)"
+        if confidence is not None and np.ndim(confidence) == 0:
+            confidence = np.full(len(observations), confidence)
     if confidence is not None:
-        confidence = np.asarray(confidence, np.float32)
-        if confidence.ndim == 0:
-            confidence = np.full(len(ids), confidence, np.float32)
-        elif confidence.shape == (len(observations),):
-            confidence = confidence[ids]
-        else:
-            raise DemonstrationError(
-                f"confidence must be one value or one per episode "
-                f"({len(observations)}), got shape {confidence.shape}"
-            )
+        confidence = _per_episode(source, confidence, len(observations), dataset_id)[ids]
     return Demonstrations(
         observations=np.concatenate(observations),
-        actions=np.concatenate(actions),
+        actions=np.concatenate(actions) * action_scale,
         confidence=confidence,
         trajectory_ids=ids,
-        metadata={"source": f"minari: {dataset_id}", "action_scale": 1.0},
+        metadata={"source": f"minari: {dataset_id}", "action_scale": float(action_scale)},
     )
+
+
+def _read_numbers(path: str | Path) -> np.ndarray:
+    """The numbers of a ``.npy`` file, or of a text file with one number per line."""
+    path = Path(path)
+    if path.suffix == ".npy":
+        return np.load(path, allow_pickle=False)
+    try:
+        return np.loadtxt(path, ndmin=1)
+    except ValueError as error:
+        raise DemonstrationError(f"{path}: expected one number per line: {error}") from None
+
+
+def _metadata_field(dataset, dataset_id: str, field: str) -> list:
+    """The value of ``field`` in each episode's metadata, in episode order."""
+    values = []
+    indices = dataset.episode_indices
+    for index, episode in zip(indices, dataset.storage.get_episode_metadata(indices), strict=True):
+        if field not in episode:
+            raise DemonstrationError(
+                f"{dataset_id}: episode {index} has no metadata field {field!r} "
+                f"(it has {', '.join(sorted(episode))})"
+            )
+        values.append(episode[field])
+    return values
+
+
+def _per_episode(source: str, values, num_episodes: int, dataset_id: str) -> np.ndarray:
+    """float32[num_episodes] confidences from ``values``, or raises naming ``source``."""
+    try:
+        values = np.asarray(values, np.float64)
+    except (TypeError, ValueError):
+        raise DemonstrationError(f"{source}: confidences must be numbers") from None
+    if values.ndim == 2 and values.shape[1] == 1:
+        values = values[:, 0]
+    if values.shape != (num_episodes,):
+        raise DemonstrationError(
+            f"{source}: {values.size} confidences for the {num_episodes} episodes of Minari "
+            f"dataset {dataset_id!r}"
+        )
+    if np.isnan(values).any():
+        raise DemonstrationError(f"{source}: confidences contain NaN")
+    if values.min() < 0 or values.max() > 1:
+        raise DemonstrationError(
+            f"{source}: confidences must lie in [0, 1], got values in "
+            f"[{values.min():.3g}, {values.max():.3g}]"
+        )
+    return values.astype(np.float32)

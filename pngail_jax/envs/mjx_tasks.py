@@ -4,7 +4,8 @@ Brax's tasks are used through its environment classes on the ``mjx`` backend (ne
 its wrappers or training code); ``docs/environments.md`` lists how each differs from
 gymnasium's version of the same task. Brax's own swimmer runs only on its ``generalized``
 backend, so ``Swimmer`` is built here from the MuJoCo model that gymnasium ships, with
-gymnasium's Swimmer-v5 observation, reward and reset.
+gymnasium's Swimmer-v5 observation, reward and reset. ``from_brax`` puts any other Brax
+environment behind the same API.
 
 MJX solver settings dominate CPU speed. ``solver_iterations`` and ``ls_iterations`` override
 the model's (``FAST_SOLVER`` is the setting measured in ``docs/environments.md``); the default
@@ -61,13 +62,19 @@ def _solver_options(solver_iterations: int | None, ls_iterations: int | None) ->
 
 
 class BraxTask(Env):
-    """A Brax MuJoCo task on the ``mjx`` backend behind the pngail-jax ``Env`` API.
+    """A Brax environment behind the pngail-jax ``Env`` API: one of Brax's MuJoCo tasks on the
+    ``mjx`` backend, or any Brax environment instance given as ``brax_env`` (``from_brax``).
 
     Args:
-      name: one of ``BRAX_TASKS`` (``"Ant"``, ``"HalfCheetah"``, ``"Hopper"``, ``"Walker2d"``).
+      name: one of ``BRAX_TASKS`` (``"Ant"``, ``"HalfCheetah"``, ``"Hopper"``, ``"Walker2d"``),
+        or with ``brax_env`` any name for reports.
       max_episode_steps: time limit (1000, as gymnasium's versions).
       solver_iterations, ls_iterations: MJX solver overrides; None keeps the task's own.
-      **brax_options: passed to the Brax environment (e.g. ``terminate_when_unhealthy``).
+      brax_env: a Brax environment to wrap instead of building the task ``name``. Its
+        observations must be flat arrays; its action bounds are its actuators' control range,
+        or [-1, 1] (Brax's convention) when it has no ``sys``.
+      **brax_options: passed to the Brax task (e.g. ``terminate_when_unhealthy``); not with
+        ``brax_env``, which is built already.
     """
 
     def __init__(
@@ -76,38 +83,41 @@ class BraxTask(Env):
         max_episode_steps: int = 1000,
         solver_iterations: int | None = None,
         ls_iterations: int | None = None,
+        *,
+        brax_env: Any = None,
         **brax_options: Any,
     ):
-        _import_mjx()
-        from brax import envs as brax_envs
-
         solver = _solver_options(solver_iterations, ls_iterations)
-        try:
-            with warnings.catch_warnings():
-                # Brax warns on every model load that it is not maintained; we only use its
-                # task definitions, on MJX, which is.
-                warnings.filterwarnings("ignore", "Brax System, piplines", UserWarning)
-                brax_env = brax_envs.get_environment(
-                    BRAX_TASKS[name], backend="mjx", **brax_options
-                )
-        except TypeError as error:
+        if brax_env is None:
+            brax_env = _brax_task(name, brax_options)
+        elif brax_options:
             raise ValueError(
-                f"{name}: unsupported option in {sorted(brax_options)}: {error}"
-            ) from None
+                f"{name}: options {sorted(brax_options)} are for Brax's own tasks; pass them "
+                "when you build your Brax environment"
+            )
         if solver:
             brax_env.sys = brax_env.sys.tree_replace({f"opt.{k}": v for k, v in solver.items()})
         self._brax_env = brax_env
         self.name = name
         # Brax's own observation_size property runs an un-jitted reset (about 25 s on a CPU).
         raw_key = jax.ShapeDtypeStruct((2,), jnp.uint32)
-        obs_shape = jax.eval_shape(brax_env.reset, raw_key).obs.shape
-        self.observation_size = int(obs_shape[-1])
+        obs = jax.eval_shape(brax_env.reset, raw_key).obs
+        if not isinstance(obs, jax.ShapeDtypeStruct) or obs.ndim != 1:
+            raise ValueError(f"{name}: only flat array observations are supported, got {obs}")
+        self.observation_size = int(obs.shape[0])
         self.action_size = int(brax_env.action_size)
-        low, high = brax_env.sys.actuator.ctrl_range.T
+        if hasattr(brax_env, "sys"):
+            low, high = brax_env.sys.actuator.ctrl_range.T
+        else:
+            low, high = -np.ones(self.action_size), np.ones(self.action_size)
         self.action_low = np.asarray(low, np.float32)
         self.action_high = np.asarray(high, np.float32)
         self.max_episode_steps = int(max_episode_steps)
-        self.dt = float(brax_env.dt)
+
+    @property
+    def dt(self) -> float:
+        """Seconds per step (Brax ``PipelineEnv``s only)."""
+        return float(self._brax_env.dt)
 
     @property
     def model_options(self) -> dict[str, Any]:
@@ -127,6 +137,31 @@ class BraxTask(Env):
     def _step(self, internal, action):
         brax_state = self._brax_env.step(internal, action)
         return brax_state.obs, brax_state.reward, brax_state.done > 0, brax_state
+
+
+def _brax_task(name: str, brax_options: dict[str, Any]):
+    """Brax's environment of the task ``name`` on the ``mjx`` backend."""
+    _import_mjx()
+    from brax import envs as brax_envs
+
+    try:
+        with warnings.catch_warnings():
+            # Brax warns on every model load that it is not maintained; we only use its task
+            # definitions, on MJX, which is.
+            warnings.filterwarnings("ignore", "Brax System, piplines", UserWarning)
+            return brax_envs.get_environment(BRAX_TASKS[name], backend="mjx", **brax_options)
+    except TypeError as error:
+        raise ValueError(f"{name}: unsupported option in {sorted(brax_options)}: {error}") from None
+
+
+def from_brax(brax_env: Any, name: str | None = None, max_episode_steps: int = 1000) -> BraxTask:
+    """Any Brax environment (a ``brax.envs.base.Env`` instance, e.g. from
+    ``brax.envs.get_environment``) as an ``Env``; ``name`` defaults to its class name. Brax's
+    own wrappers (auto-reset, episode limits) are not needed: ``max_episode_steps`` sets
+    ``truncated`` and ``AutoReset`` restarts episodes."""
+    return BraxTask(
+        name or type(brax_env).__name__, max_episode_steps=max_episode_steps, brax_env=brax_env
+    )
 
 
 def _gymnasium_asset(file_name: str) -> str:
