@@ -6,7 +6,7 @@ flags (``--num-envs``, ``--unroll-length``, ``--solver``, ``--eval-every``, ...)
 
 For each grid size, builds the cells (1 = ``pngail`` x 1 seed, 7 = every method in
 ``METHOD_NAMES`` x 1 seed, 7k = every method x k seeds) and compiles them into one
-``pngail_jax.grid.Grid`` (``jit(vmap(train.init))`` and ``jit(vmap(train.run_blocks))``). It
+``pngail_jax.grid.Grid`` (``jit(vmap(trainer.init))`` and ``jit(vmap(trainer.run_blocks))``). It
 runs the init program (splits and classifier phase, untimed), one warm-up chunk, then times 3
 warm chunk calls (median). A chunk is ``--iterations`` iterations (eval_every = iterations),
 each a rollout of num_envs x unroll_length steps per cell, a discriminator step and a TRPO
@@ -107,7 +107,7 @@ from pngail_jax.demos import Demonstrations, load_demonstrations
 from pngail_jax.grid import Grid, make_cells, nonfinite_cells, stack_cells
 from pngail_jax.methods import METHOD_NAMES
 from pngail_jax.rl.train import TRPO
-from pngail_jax.train import AdversarialConfig, TrainState, make_train
+from pngail_jax.train import AdversarialConfig, AdversarialTrainer, TrainState
 
 DEFAULT_ENV = "Pendulum-v1"
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -259,7 +259,7 @@ def compile_worker(args, devices) -> None:
     methods, seeds = grid_layout(args.compile_worker)
     inputs = stack_cells(make_cells(methods, seeds), jax.random.key(args.seed))
     with counting_cache_hits() as hits:
-        grid = Grid(train, *inputs, blocks_per_chunk=1, devices=devices)
+        grid = Grid(train, inputs, blocks_per_chunk=1, devices=devices)
     times = {
         "compile_seconds": grid.compile_seconds,
         "init_compile_seconds": grid.init_compile_seconds,
@@ -294,7 +294,7 @@ def measure_grid(args, train, full_trpo, size: int, devices, key) -> dict:
     compiling = compile_times(args, size)
     methods, seeds = grid_layout(size)
     inputs = stack_cells(make_cells(methods, seeds), key)
-    grid = Grid(train, *inputs, blocks_per_chunk=1, devices=devices)
+    grid = Grid(train, inputs, blocks_per_chunk=1, devices=devices)
     state, chunks = time_chunks(grid)
     eval_seconds = evaluation_seconds(train.trpo, state)
     eval_seconds_full = eval_seconds if full_trpo is None else evaluation_seconds(full_trpo, state)
@@ -328,7 +328,7 @@ def make_grid_train(args, env, demos):
         classifier=ClassifierConfig(num_steps=args.classifier_steps),
         num_demos=None,
     )
-    return make_train(config, env, demos)
+    return AdversarialTrainer(config, env, demos)
 
 
 def measure_rows(args, env, demos, devices, common: dict) -> list[dict]:

@@ -39,7 +39,7 @@ import numpy as np
 from env_throughput import NUM_REPEATS, measure, peak_memory_bytes, scan_length
 
 from pngail_jax import envs
-from pngail_jax.rl.train import TRPOConfig, TRPOHyperparams, make_train
+from pngail_jax.rl.train import TRPO, TRPOConfig, TRPOHyperparams
 
 REFERENCE_SPEED = 4400.0  # the authors' PyTorch TRPO on Pendulum-v1, one core, training only
 REFERENCE_NOTE = (
@@ -62,13 +62,13 @@ def make_config(env_name: str, variant: str) -> TRPOConfig:
 
 def initial_states(env_name: str, env, num_seeds: int, key: jax.Array):
     """TRPOState with a leading seed axis; the Fisher options do not change its shapes."""
-    trpo = make_train(make_config(env_name, "reference"), env).trpo
+    trpo = TRPO(make_config(env_name, "reference"), env)
     return jax.jit(jax.vmap(trpo.init))(jax.random.split(key, num_seeds))
 
 
 def measure_training(config, env, states, num_iterations: int, mesh=None) -> dict:
     """Compiles and times ``num_iterations`` rollout+update iterations of every seed in states."""
-    trpo = make_train(config, env).trpo
+    trpo = TRPO(config, env)
     hyperparams = TRPOHyperparams.create()
     num_seeds = jax.tree.leaves(states)[0].shape[0]
 

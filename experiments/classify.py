@@ -18,7 +18,7 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 
-from experiments.cli import known_names
+from experiments.cli import check_positive, known_names
 from pngail_jax.confidence import ClassifierConfig, ClassifierSpec, split_and_train
 from pngail_jax.demos import load_demonstrations
 
@@ -61,9 +61,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     args.methods = known_names(parser, args.methods, METHODS, "method")
     if not 0 < args.label_ratio < 1:
         parser.error(f"--label-ratio must be in (0, 1), got {args.label_ratio}")
-    for name in ("seeds", "steps", "batch_size"):
-        if getattr(args, name) < 1:
-            parser.error(f"--{name.replace('_', '-')} must be positive")
+    check_positive(parser, args, ("seeds", "steps", "batch_size"))
     if args.noise < 0 or args.eps <= 0:
         parser.error("--noise must be >= 0 and --eps > 0")
     return args

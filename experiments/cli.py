@@ -15,3 +15,39 @@ def known_names(parser: argparse.ArgumentParser, text: str, known: Sequence[str]
     if unknown or not names:
         parser.error(f"unknown {kind}(s) {unknown}; available: {', '.join(known)}")
     return names
+
+
+def comma_floats(parser: argparse.ArgumentParser, flag: str, text: str | None):
+    """The comma-separated numbers of a flag's value as a tuple (None when not given); exits
+    through ``parser.error`` naming ``flag`` when one is not a number."""
+    if text is None:
+        return None
+    try:
+        return tuple(float(x) for x in str(text).split(","))
+    except ValueError:
+        parser.error(f"{flag} must be comma-separated numbers, got {text!r}")
+
+
+ENV_HELP = (
+    "a built-in (Pendulum-v1, Ant, HalfCheetah, Hopper, Walker2d, Swimmer), a registered name, "
+    "or package.module:factory (docs/environments.md)"
+)
+
+
+def check_env(parser: argparse.ArgumentParser, name: str) -> str:
+    """``name`` when ``pngail_jax.envs.make`` knows it; else exits through ``parser.error``
+    naming what is available."""
+    from pngail_jax import envs
+
+    try:
+        envs.check_name(name)
+    except ValueError as error:
+        parser.error(str(error))
+    return name
+
+
+def check_positive(parser: argparse.ArgumentParser, args, names) -> None:
+    """Exits through ``parser.error`` naming the first flag (``args`` attribute) below 1."""
+    for name in names:
+        if getattr(args, name) < 1:
+            parser.error(f"--{name.replace('_', '-')} must be positive")

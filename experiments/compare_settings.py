@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.cli import known_names
+from experiments.cli import ENV_HELP, check_env, check_positive, known_names
 
 # train_rl flags of each arm (the common flags are added by run_arm).
 ARMS = {
@@ -48,7 +48,6 @@ ARMS = {
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    from pngail_jax import envs
 
     parser = argparse.ArgumentParser(
         description=__doc__.split("\n\n")[0],
@@ -56,7 +55,7 @@ def parse_args(argv=None) -> argparse.Namespace:
         + "\n".join(f"  {name:18s} train_rl {' '.join(flags)}" for name, flags in ARMS.items()),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--env", required=True, help=f"one of {', '.join(envs.ENV_NAMES)}")
+    parser.add_argument("--env", required=True, help=ENV_HELP)
     parser.add_argument("--arms", default="reference-fast,table", help="comma-separated")
     parser.add_argument("--baseline", help="the arm others are judged against (default: first)")
     parser.add_argument("--seeds", type=int, default=5)
@@ -66,17 +65,14 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args(argv)
-    if args.env not in envs.ENV_NAMES:
-        parser.error(f"unknown environment {args.env!r}; available: {', '.join(envs.ENV_NAMES)}")
+    check_env(parser, args.env)
     args.arms = known_names(parser, args.arms, list(ARMS), "arm")
     if args.env == "Pendulum-v1" and any("--solver" in ARMS[arm] for arm in args.arms):
         parser.error("Pendulum-v1 has no MJX solver: choose arms without --solver")
     args.baseline = args.baseline or args.arms[0]
     if args.baseline not in args.arms:
         parser.error(f"--baseline {args.baseline!r} is not among --arms")
-    for name in ("seeds", "iterations", "eval_every", "eval_episodes"):
-        if getattr(args, name) < 1:
-            parser.error(f"--{name.replace('_', '-')} must be positive")
+    check_positive(parser, args, ("seeds", "iterations", "eval_every", "eval_episodes"))
     return args
 
 

@@ -28,12 +28,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from experiments.train_rl import save_trpo_policies, train_with_progress
-from pngail_jax import compilation, envs
+from experiments.cli import ENV_HELP, check_env
+from experiments.train_rl import train_with_progress
+from pngail_jax import compilation
 from pngail_jax import settings as run_settings
+from pngail_jax.checkpoint import save_trpo_policies
 from pngail_jax.demos import Demonstrations, save_npz
 from pngail_jax.demos.generate import normalized_return, rollout_episodes, uniform_random_actions
-from pngail_jax.rl import TRPOHyperparams, make_train
+from pngail_jax.rl import TRPOHyperparams, TRPOTrainer
 
 
 class Checkpoint(NamedTuple):
@@ -46,7 +48,7 @@ class Checkpoint(NamedTuple):
 
 def parse_args(argv=None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--env", default="Pendulum-v1", help=f"one of {', '.join(envs.ENV_NAMES)}")
+    parser.add_argument("--env", default="Pendulum-v1", help=ENV_HELP)
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--iterations", type=int, default=150)
     parser.add_argument("--seeds", type=int, default=3)
@@ -66,8 +68,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.set_defaults(eval_every=10)
     compilation.add_arguments(parser)
     args = parser.parse_args(argv)
-    if args.env not in envs.ENV_NAMES:
-        parser.error(f"unknown environment {args.env!r}; available: {', '.join(envs.ENV_NAMES)}")
+    check_env(parser, args.env)
     try:
         args.settings = run_settings.from_arguments(args.env, args)
     except ValueError as error:
@@ -93,8 +94,8 @@ def main(argv=None) -> Path:
     compilation.from_arguments(args)
     env = run_settings.make_env(args.env, args.settings)
     config = args.settings.trpo_config(args.iterations)
-    train = make_train(config, env)
-    policy = train.trpo.policy
+    trainer = TRPOTrainer(config, env)
+    policy = trainer.trpo.policy
     hyperparams = jax.tree.map(
         lambda x: jnp.broadcast_to(x, (args.seeds, *x.shape)), TRPOHyperparams.create()
     )
@@ -117,7 +118,7 @@ def main(argv=None) -> Path:
         flush=True,
     )
     train_with_progress(
-        train, config, hyperparams, jax.random.split(train_key, args.seeds), on_block=keep
+        trainer, hyperparams, jax.random.split(train_key, args.seeds), on_block=keep
     )
 
     def act_with(params, normalizer):

@@ -4,13 +4,17 @@
     python -m experiments.sweep --demos data/pendulum/Pendulum-v1_mixture.npy \\
         --action-scale 2 --seeds 5 --iterations 1000
     python -m experiments.sweep --preset paper --demos ...   # 5,000 iterations, 5 seeds (GPU)
+    python -m experiments.sweep --config runs/A/config.json --seeds 10   # a new run like A
     python -m experiments.sweep --resume runs/20261122-210000
 
-Without ``--demos`` the demonstrations are made by ``experiments.make_demos`` (1:4 optimal to
-intermediate trajectories) once and reused from ``runs/demos-cache/<env>/``. Writes to
-``--out`` (default ``runs/<timestamp>``): ``config.json``, ``metrics.csv``, ``curves.png``,
-``summary.md``, ``summary.json`` and ``checkpoints/`` (the whole grid's state after every chunk;
-``--resume DIR`` continues from the last one to the numbers of an uninterrupted run).
+The command line fills in a ``pngail_jax.run_config.RunConfig``. Without ``--demos`` the
+demonstrations are made by ``experiments.make_demos`` (1:4 optimal to intermediate
+trajectories) once and reused from ``runs/demos-cache/<env>/``. Writes to ``--out`` (default
+``runs/<timestamp>``): ``config.json`` (the config, what it resolved to, and provenance),
+``metrics.csv``, ``curves.png``, ``summary.md``, ``summary.json``, ``policies/<method>/``
+(every seed's final policy, for ``pngail_jax.load_policy``) and ``checkpoints/`` (the whole
+grid's state after every chunk; ``--resume DIR`` continues from the last one to the numbers
+of an uninterrupted run).
 """
 
 from __future__ import annotations
@@ -26,24 +30,38 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.cli import known_names
+from experiments.cli import ENV_HELP, check_env, comma_floats, known_names
 from pngail_jax import compilation
 from pngail_jax import settings as run_settings
+from pngail_jax.run_config import LOG_BACKENDS, PRESETS_BY_NAME, RunConfig
 
-DEFAULTS = {  # the smoke scale: a few minutes on a 2-core CPU
-    "iterations": 300,
-    "seeds": 3,
-    "chunk_iterations": 50,
-    "classifier_steps": 25_000,
-}
-RUN_PRESETS = {
-    "paper": {"iterations": 5_000, "seeds": 5, "chunk_iterations": 250},
-}
 DEMO_CACHE = Path("runs") / "demos-cache"
+SMOKE = RunConfig.preset("smoke")
+# Flags that --resume DIR accepts: the run's config.json has every other value.
+RESUME_FLAGS = (
+    "--resume",
+    "--coordinator",
+    "--num-processes",
+    "--process-id",
+    "--compile-cache",
+    "--no-compile-cache",
+)
 
 
-def parse_args(argv=None) -> argparse.Namespace:
-    from pngail_jax import envs
+@dataclasses.dataclass(frozen=True)
+class Invocation:
+    """What one command asks for: a config (None until a resumed run's is read), where to
+    write, and how to start (multi-host, compilation cache)."""
+
+    config: RunConfig | None
+    out: Path
+    resume: bool
+    distributed: dict
+    compile_args: argparse.Namespace
+    argv: list[str]
+
+
+def build_parser() -> argparse.ArgumentParser:
     from pngail_jax.methods import METHOD_NAMES, PRESETS
 
     methods_help = "\n".join(
@@ -55,198 +73,264 @@ def parse_args(argv=None) -> argparse.Namespace:
         epilog=f"methods:\n{methods_help}",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--env", default="Pendulum-v1", help=f"one of {', '.join(envs.ENV_NAMES)}")
-    parser.add_argument(
-        "--methods",
-        default=",".join(METHOD_NAMES),
-        help=f"comma-separated, from {', '.join(METHOD_NAMES)} (default: all)",
+    add = parser.add_argument
+    add("--env", help=f"{ENV_HELP} (default {SMOKE.env})")
+    add("--methods", help=f"comma-separated, from {', '.join(METHOD_NAMES)} (default: all)")
+    add("--seeds", type=int, help=f"seeds per method and setting (default {SMOKE.seeds})")
+    add("--iterations", type=int, help=f"TRPO iterations per run (default {SMOKE.iterations})")
+    add(
+        "--preset",
+        choices=sorted(PRESETS_BY_NAME),
+        help="named scale: "
+        + "; ".join(f"{name} {values}" for name, values in PRESETS_BY_NAME.items())
+        + " (default smoke); explicit flags override it",
     )
-    parser.add_argument("--seeds", type=int, help=f"default {DEFAULTS['seeds']}")
-    parser.add_argument("--iterations", type=int, help=f"default {DEFAULTS['iterations']}")
-    parser.add_argument(
-        "--preset", choices=sorted(RUN_PRESETS), help="paper: 5,000 iterations, 5 seeds"
+    add(
+        "--config",
+        type=Path,
+        metavar="FILE",
+        help="start a new run from a saved config.json (flags given override it) (default: none)",
     )
-    parser.add_argument("--demos", type=Path, help="*_mixture.npy (authors' layout) or *.npz")
-    parser.add_argument("--conf", type=Path, help="confidence file (default: the sibling)")
-    parser.add_argument(
+    add(
+        "--demos",
+        help="*_mixture.npy (authors' layout), *.npz, or minari:<dataset id> "
+        "(default: made by experiments.make_demos and cached)",
+    )
+    add("--conf", help="confidence file (default: the mixture's sibling; per episode for Minari)")
+    add(
+        "--confidence-field",
+        help="Minari: the per-episode field holding confidences (default: none)",
+    )
+    add(
         "--action-scale",
         type=float,
-        default=1.0,
-        help="multiplies stored actions (2 for the authors' Pendulum set)",
+        help="multiplies stored actions, 2 for the authors' Pendulum set (default 1)",
     )
-    parser.add_argument(
-        "--num-demos", type=int, help="rows per split, n_c + n_u (default: all rows)"
-    )
-    parser.add_argument("--label-ratio", default="0.2", help="comma-separated values: a grid axis")
-    parser.add_argument("--noise", default="0", help="confidence noise std, comma-separated")
-    parser.add_argument("--seed", type=int, default=0, help="base PRNG seed")
-    parser.add_argument(
+    add("--num-demos", type=int, help="rows per split, n_c + n_u (default: all rows)")
+    add("--label-ratio", help="comma-separated values: a grid axis (default 0.2)")
+    add("--noise", help="confidence noise std, comma-separated: a grid axis (default 0)")
+    add("--seed", type=int, help="base PRNG seed (default 0)")
+    add(
         "--chunk-iterations",
         type=int,
-        help=f"iterations per compiled chunk (progress + checkpoint); default "
-        f"{DEFAULTS['chunk_iterations']}",
+        help="iterations per compiled chunk: progress, checkpoint, log "
+        f"(default {SMOKE.chunk_iterations})",
     )
-    parser.add_argument("--classifier-steps", type=int, help="default 25,000 (the paper's)")
-    parser.add_argument(
+    add(
+        "--classifier-steps",
+        type=int,
+        help=f"confidence classifier steps (default {SMOKE.classifier.num_steps:,}, the paper's)",
+    )
+    add("--bsc-eps", type=float, help="BSC's clip (default 0.01; 0.05 on Walker2d, the paper's)")
+    add(
         "--fisher",
         choices=("hessian", "gauss_newton"),
-        default="gauss_newton",
         help="Fisher-vector product: the same matrix either way (the Hessian of the mean KL at "
-        "the current policy); gauss_newton is 1.7x faster here, hessian the reference's form",
+        "the current policy); gauss_newton is 1.7x faster here (default gauss_newton)",
     )
-    parser.add_argument("--fisher-subsample", type=int, default=1)
-    parser.add_argument(
+    add(
+        "--fisher-subsample",
+        type=int,
+        help="Fisher products on every k-th time step (default 1: all)",
+    )
+    add(
         "--cpu-devices",
         type=int,
         help="on a CPU, split it into this many XLA devices and shard the grid over them "
         "(default 1: on 2 cores one device already uses both, and 2 measured no faster)",
     )
-    parser.add_argument("--out", type=Path, help="output directory (default runs/<timestamp>)")
+    add(
+        "--log",
+        help=f"comma-separated logging backends, from {', '.join(LOG_BACKENDS)}, fed once per "
+        "chunk (default: none)",
+    )
+    add("--out", type=Path, help="output directory (default runs/<timestamp>)")
+    add("--resume", type=Path, metavar="DIR", help="continue DIR's run (default: a new run)")
     run_settings.add_arguments(parser)
     compilation.add_arguments(parser)
     multihost = parser.add_argument_group(
         "multi-host (run the same command on every host; process 0 writes the outputs)"
     )
-    multihost.add_argument("--coordinator", help="host:port of process 0, for jax.distributed")
-    multihost.add_argument("--num-processes", type=int)
-    multihost.add_argument("--process-id", type=int)
-    parser.add_argument("--resume", type=Path, metavar="DIR", help="continue DIR's run")
-    parser.set_defaults(run_settings=None)
+    multihost.add_argument(
+        "--coordinator", help="host:port of process 0, for jax.distributed (default: one host)"
+    )
+    multihost.add_argument("--num-processes", type=int, help="(default: one host)")
+    multihost.add_argument("--process-id", type=int, help="(default: one host)")
+    return parser
+
+
+def parse_args(argv=None) -> Invocation:
+    """The ``Invocation`` of the flags in ``argv``; exits naming the flag on a bad value."""
+    parser = build_parser()
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parser.parse_args(argv)
-    distributed = (args.coordinator, args.num_processes, args.process_id)
-    if any(x is not None for x in distributed) and any(x is None for x in distributed):
+    distributed = {
+        "coordinator_address": args.coordinator,
+        "num_processes": args.num_processes,
+        "process_id": args.process_id,
+    }
+    given = [value is not None for value in distributed.values()]
+    if any(given) and not all(given):
         parser.error("--coordinator, --num-processes and --process-id go together")
     if args.resume is not None:
-        allowed = (
-            "--resume",
-            "--coordinator",
-            "--num-processes",
-            "--process-id",
-            "--compile-cache",
-            "--no-compile-cache",
-        )
         flags = [a.split("=")[0] for a in argv if a.startswith("--")]
-        if any(flag not in allowed for flag in flags):
+        if any(flag not in RESUME_FLAGS for flag in flags):
             parser.error(
                 "--resume DIR takes no other flags (except the multi-host ones): the run's "
                 "config.json has them"
             )
-        return args
-    if args.coordinator is not None and args.demos is None:
+        return Invocation(None, args.resume, True, distributed, args, argv)
+    config = config_from_flags(parser, args)
+    if args.coordinator is not None and config.demos is None:
         parser.error("multi-host runs need --demos (a file every host can read)")
-    return resolve(parser, args)
+    out = args.out if args.out is not None else Path("runs") / time.strftime("%Y%m%d-%H%M%S")
+    if out.exists() and not out.is_dir():
+        parser.error(f"--out {out} is a file, not a directory")
+    if (out / "config.json").exists():
+        parser.error(f"{out} already holds a run: --resume {out}, or another --out")
+    return Invocation(config, out, False, distributed, args, argv)
 
 
-def resolve(parser, args: argparse.Namespace) -> argparse.Namespace:
-    """Fills defaults (preset, then smoke scale) and checks every value, naming the flag."""
-    from pngail_jax import envs
+def config_from_flags(parser, args) -> RunConfig:
+    """The preset or saved config the flags name, with every flag given applied."""
     from pngail_jax.methods import METHOD_NAMES
 
-    preset = RUN_PRESETS.get(args.preset, {})
-    for name, value in DEFAULTS.items():
-        if getattr(args, name) is None:
-            setattr(args, name, preset.get(name, value))
-    if args.env not in envs.ENV_NAMES:
-        parser.error(f"unknown environment {args.env!r}; available: {', '.join(envs.ENV_NAMES)}")
-    args.methods = known_names(parser, args.methods, METHOD_NAMES, "method")
-    positive = ("seeds", "iterations", "chunk_iterations", "classifier_steps")
-    for name in (*positive, "fisher_subsample"):
-        if getattr(args, name) < 1:
-            parser.error(f"--{name.replace('_', '-')} must be positive")
+    if args.config is not None and args.preset is not None:
+        parser.error("--config and --preset both set the starting point: give one")
     try:
-        args.run_settings = run_settings.from_arguments(args.env, args)
+        if args.config is not None:
+            base = RunConfig.from_json(args.config)
+        else:
+            base = RunConfig.preset(args.preset or "smoke")
     except ValueError as error:
-        parser.error(str(error))
-    args.eval_every = args.run_settings.eval_every
-    if args.iterations % args.eval_every:
-        parser.error(
-            f"--iterations ({args.iterations}) must be a multiple of the evaluation interval "
-            f"({args.eval_every}; set it with --eval-every)"
-        )
-    args.label_ratios = _floats(parser, "--label-ratio", args.label_ratio)
-    args.noise_stds = _floats(parser, "--noise", args.noise)
-    if not all(0 < r < 1 for r in args.label_ratios):
-        parser.error("--label-ratio values must lie in (0, 1)")
-    if not all(s >= 0 for s in args.noise_stds):
-        parser.error("--noise values must be >= 0")
-    if args.demos is not None and not args.demos.exists():
-        parser.error(f"--demos {args.demos} does not exist")
-    if args.out is None:
-        args.out = Path("runs") / time.strftime("%Y%m%d-%H%M%S")
-    if (args.out / "config.json").exists():
-        parser.error(f"{args.out} already holds a run: --resume {args.out}, or another --out")
-    return args
-
-
-def _floats(parser, flag: str, text: str) -> list[float]:
+        parser.error(f"--{'config' if args.config else 'preset'}: {error}")
+    env = check_env(parser, args.env or base.env)
+    demos = args.demos
+    if demos is not None and not demos.startswith("minari:"):
+        if not Path(demos).exists():
+            parser.error(f"--demos {demos} does not exist")
+        demos = str(Path(demos).absolute())
+    conf = None if args.conf is None else str(Path(args.conf).absolute())
     try:
-        values = [float(x) for x in str(text).split(",")]
-    except ValueError:
-        parser.error(f"{flag} must be comma-separated numbers, got {text!r}")
-    return values
+        settings_base = base.settings if env == base.env else None
+        settings = run_settings.from_arguments(env, args, base=settings_base)
+        classifier = base.classifier
+        if args.classifier_steps is not None:
+            classifier = dataclasses.replace(classifier, num_steps=args.classifier_steps)
+        return base.replace(
+            env=env,
+            settings=settings,
+            methods=None
+            if args.methods is None
+            else tuple(known_names(parser, args.methods, METHOD_NAMES, "method")),
+            seeds=args.seeds,
+            iterations=args.iterations,
+            label_ratios=comma_floats(parser, "--label-ratio", args.label_ratio),
+            noise_stds=comma_floats(parser, "--noise", args.noise),
+            seed=args.seed,
+            demos=demos,
+            conf=conf,
+            confidence_field=args.confidence_field,
+            action_scale=args.action_scale,
+            num_demos=args.num_demos,
+            chunk_iterations=args.chunk_iterations,
+            classifier=classifier,
+            bsc_eps=args.bsc_eps,
+            fisher=args.fisher,
+            fisher_subsample=args.fisher_subsample,
+            cpu_devices=args.cpu_devices,
+            log=None
+            if args.log is None
+            else tuple(known_names(parser, args.log, LOG_BACKENDS, "log backend")),
+        )
+    except ValueError as error:
+        parser.error(_flag_message(str(error)))
 
 
-def load_or_make_demos(args):
-    from pngail_jax.demos import load_demonstrations
-
-    if args.demos is not None:
-        return load_demonstrations(args.demos, args.conf, args.action_scale), str(args.demos)
-    cached = DEMO_CACHE / args.env / "demos.npz"
-    if cached.exists():
-        print(f"reusing demonstrations {cached}", flush=True)
-    else:
-        print(f"no --demos: making them with experiments.make_demos into {cached.parent}")
-        from experiments import make_demos
-
-        make_demos.main(["--env", args.env, "--out", str(cached.parent)])
-    return load_demonstrations(cached), str(cached)
-
-
-def run_config(args, demos, demos_path) -> dict:
-    names = (
-        "env methods seeds iterations preset action_scale num_demos label_ratios noise_stds "
-        "seed eval_every chunk_iterations classifier_steps fisher fisher_subsample cpu_devices"
-    ).split()
-    config = {name: getattr(args, name) for name in names}
-    config["settings"] = dataclasses.asdict(args.run_settings)
-    config["demos"] = str(Path(demos_path).absolute())
-    config["conf"] = None if args.conf is None else str(args.conf.absolute())
-    config["normalizer"] = normalizer_of(demos)
-    return config
+def _flag_message(message: str) -> str:
+    """A RunConfig error in the command line's words (field names as flags)."""
+    for field, flag in (
+        ("label ratios", "--label-ratio values"),
+        ("noise stds", "--noise values"),
+        ("iterations (", "--iterations ("),
+        ("seeds must", "--seeds must"),
+        ("chunk_iterations", "--chunk-iterations"),
+        ("fisher_subsample", "--fisher-subsample"),
+        ("cpu_devices", "--cpu-devices"),
+        ("num_demos", "--num-demos"),
+        ("action_scale", "--action-scale"),
+        ("bsc_eps", "--bsc-eps"),
+        ("ClassifierConfig.num_steps", "--classifier-steps"),
+    ):
+        if message.startswith(field):
+            return flag + message[len(field) :]
+    return message
 
 
-def saved_settings(saved: dict):
-    """The run settings of a saved config.json; runs from before the settings table used the
-    reference setting with their own shape and evaluation interval."""
-    from pngail_jax.settings import REFERENCE_SETTINGS, RunSettings
+# -- starting: a new run's config, or a resumed run's ---------------------------------------
 
-    if "settings" in saved:
-        return RunSettings(**saved["settings"])
-    return REFERENCE_SETTINGS.replace(
-        num_envs=saved["num_envs"],
-        unroll_length=saved["unroll_length"],
-        eval_every=saved["eval_every"],
+
+@dataclasses.dataclass
+class Saved:
+    """A resumed run's config.json: its config, the demonstrations it used, its devices."""
+
+    config: RunConfig
+    demos_path: str
+    device_count: int
+    platform: str
+    local_device_count: int
+
+
+def load_saved(directory: Path) -> Saved:
+    path = directory / "config.json"
+    if not path.exists():
+        raise SystemExit(f"--resume {directory}: no config.json there")
+    data = json.loads(path.read_text())
+    data = _upgrade_saved(data)
+    try:
+        config = RunConfig.from_dict(data)
+    except (TypeError, ValueError) as error:
+        raise SystemExit(f"--resume {directory}: {path} is not a run config ({error})") from None
+    where = data["provenance"]
+    return Saved(
+        config,
+        data["resolved"]["demos_path"],
+        where["device_count"],
+        where["platform"],
+        where["local_device_count"],
     )
 
 
-def normalizer_of(demos):
-    metadata = demos.metadata
-    if "random_return" in metadata and "optimal_return" in metadata:
-        return [float(metadata["random_return"]), float(metadata["optimal_return"])]
-    return None
+def _upgrade_saved(data: dict) -> dict:
+    """A config.json from before RunConfig (flat keys) in today's layout."""
+    if "resolved" in data:
+        return data
+    from pngail_jax.settings import REFERENCE_SETTINGS
 
-
-def blocks_per_chunk(num_evaluations: int, target_blocks: int) -> int:
-    """The largest divisor of num_evaluations not above the target (so all chunks match)."""
-    return max(
-        d for d in range(1, min(target_blocks, num_evaluations) + 1) if not num_evaluations % d
+    settings = data.get("settings") or dataclasses.asdict(
+        REFERENCE_SETTINGS.replace(
+            num_envs=data["num_envs"],
+            unroll_length=data["unroll_length"],
+            eval_every=data["eval_every"],
+        )
     )
-
-
-def format_seconds(seconds: float) -> str:
-    seconds = int(round(seconds))
-    return f"{seconds // 60}m{seconds % 60:02d}s" if seconds >= 60 else f"{seconds}s"
+    upgraded = {
+        key: data[key]
+        for key in (
+            "env methods seeds iterations label_ratios noise_stds seed action_scale num_demos "
+            "chunk_iterations fisher fisher_subsample cpu_devices demos conf"
+        ).split()
+        if key in data
+    }
+    return {
+        **upgraded,
+        "settings": settings,
+        "classifier": {"num_steps": data["classifier_steps"]},
+        "resolved": {"demos_path": data["demos"]},
+        "provenance": {
+            key: data[key] for key in ("platform", "device_count", "local_device_count")
+        },
+    }
 
 
 def configure_devices(requested: int | None) -> None:
@@ -261,197 +345,255 @@ def configure_devices(requested: int | None) -> None:
         jax.config.update("jax_num_cpu_devices", requested)
 
 
-def main(argv=None) -> Path:
-    args = parse_args(argv)
-    resume_dir = args.resume
-    distributed = {
-        "coordinator_address": args.coordinator,
-        "num_processes": args.num_processes,
-        "process_id": args.process_id,
-    }
-    if resume_dir is not None:
-        config_path = resume_dir / "config.json"
-        if not config_path.exists():
-            raise SystemExit(f"--resume {resume_dir}: no config.json there")
-        saved = json.loads(config_path.read_text())
-        args = argparse.Namespace(
-            **{**saved, "out": resume_dir, "resume": resume_dir},
-            compile_cache=args.compile_cache,
-            no_compile_cache=args.no_compile_cache,
-        )
-        args.run_settings = saved_settings(saved)
-        args.demos = Path(saved["demos"])
-        args.conf = None if saved["conf"] is None else Path(saved["conf"])
-        if args.cpu_devices is None and saved["platform"] == "cpu":
-            args.cpu_devices = saved["local_device_count"]  # the same sharding as before
-    configure_devices(args.cpu_devices)
+def start(invocation: Invocation) -> tuple[RunConfig, Saved | None, bool]:
+    """Reads a resumed run's config, sets up devices, compilation cache and multi-host.
+
+    Returns the config, the saved run (None for a new one) and whether this process writes.
+    """
+    saved = load_saved(invocation.out) if invocation.resume else None
+    config = saved.config if saved else invocation.config
+    cpu_devices = config.cpu_devices
+    if saved and cpu_devices is None and saved.platform == "cpu":
+        cpu_devices = saved.local_device_count  # the same sharding as before
+    configure_devices(cpu_devices)
     import jax
 
-    compilation.from_arguments(args)
-
-    if distributed["coordinator_address"] is not None:
+    compilation.from_arguments(invocation.compile_args)
+    if invocation.distributed["coordinator_address"] is not None:
         jax.config.update("jax_cpu_collectives_implementation", "gloo")
-        jax.distributed.initialize(**distributed)
+        jax.distributed.initialize(**invocation.distributed)
         if jax.process_index() != 0:
             sys.stdout = open(os.devnull, "w")  # noqa: SIM115  process 0 reports
-    writer = jax.process_index() == 0
-
-    from pngail_jax import report
-    from pngail_jax.checkpoint import restore_tree
-    from pngail_jax.confidence import ClassifierConfig
-    from pngail_jax.grid import Grid, make_cells, nonfinite_cells, stack_cells
-    from pngail_jax.train import AdversarialConfig, make_train
-
-    settings = args.run_settings
-    env = run_settings.make_env(args.env, settings)
-    demos, demos_path = load_or_make_demos(args)
-    demos.check_env(env)
-    config = AdversarialConfig(
-        trpo=settings.trpo_config(
-            args.iterations, fisher=args.fisher, fisher_subsample=args.fisher_subsample
-        ),
-        classifier=ClassifierConfig(num_steps=args.classifier_steps),
-        num_demos=args.num_demos,
-    )
-    train = make_train(config, env, demos)
-    for ratio in args.label_ratios:
-        num_labelled = round(ratio * train.num_demos)
-        if not 0 < num_labelled < train.num_demos:
-            raise SystemExit(
-                f"--label-ratio {ratio} labels {num_labelled} of {train.num_demos} rows; "
-                "need at least one labelled and one unlabelled row"
-            )
-    out: Path = args.out
-    if writer:
-        out.mkdir(parents=True, exist_ok=True)
-    devices = jax.devices()
-    run = run_config(args, demos, demos_path)
-    run |= {
-        "platform": devices[0].platform,
-        "device_count": len(devices),
-        "local_device_count": len(jax.local_devices()),
-    }
-    if resume_dir is not None and saved["device_count"] != len(devices):
+    if saved and saved.device_count != len(jax.devices()):
         print(
-            f"WARNING: resuming on {len(devices)} devices, the run began on "
-            f"{saved['device_count']}: a different sharding can change the last bits, and "
+            f"WARNING: resuming on {len(jax.devices())} devices, the run began on "
+            f"{saved.device_count}: a different sharding can change the last bits, and "
             "the rest of the run with them"
         )
-    normalizer = run["normalizer"]
-    if resume_dir is None and writer:
-        (out / "config.json").write_text(json.dumps(run, indent=2))
-    cells = make_cells(args.methods, args.seeds, args.label_ratios, args.noise_stds)
-    if args.env == "Walker2d":
-        overrides = {"bsc_eps": 0.05}  # the paper's Walker2d setting (appendix C.2)
+    return config, saved, jax.process_index() == 0
+
+
+# -- building the grid ----------------------------------------------------------------------
+
+
+@dataclasses.dataclass
+class SweepRun:
+    """A compiled grid and what its outputs need."""
+
+    config: RunConfig
+    env: object
+    trainer: object
+    cells: list
+    grid: object
+    demos_path: str
+    normalizer: list[float] | None
+
+
+def load_or_make_demos(config: RunConfig, saved_path: str | None = None):
+    """The demonstrations and the path they came from (made and cached without ``demos``)."""
+    from pngail_jax.demos import load_demonstrations
+
+    source = saved_path or config.demos
+    if source is not None:
+        demos = load_demonstrations(
+            source, config.conf, config.action_scale, confidence_field=config.confidence_field
+        )
+        return demos, source
+    cached = DEMO_CACHE / config.env / "demos.npz"
+    if cached.exists():
+        print(f"reusing demonstrations {cached}", flush=True)
     else:
-        overrides = {}
-    hyperparams, specs, keys = stack_cells(cells, jax.random.key(args.seed), overrides)
-    num_evaluations = args.iterations // args.eval_every
-    chunk_blocks = blocks_per_chunk(
-        num_evaluations, max(1, args.chunk_iterations // args.eval_every)
+        print(f"no --demos: making them with experiments.make_demos into {cached.parent}")
+        from experiments import make_demos
+
+        make_demos.main(["--env", config.env, "--out", str(cached.parent)])
+    return load_demonstrations(cached), str(cached.absolute())
+
+
+def normalizer_of(demos) -> list[float] | None:
+    metadata = demos.metadata
+    if "random_return" in metadata and "optimal_return" in metadata:
+        return [float(metadata["random_return"]), float(metadata["optimal_return"])]
+    return None
+
+
+def blocks_per_chunk(num_evaluations: int, target_blocks: int) -> int:
+    """The largest divisor of num_evaluations not above the target (so all chunks match)."""
+    return max(
+        d for d in range(1, min(target_blocks, num_evaluations) + 1) if not num_evaluations % d
     )
+
+
+def build(config: RunConfig, saved: Saved | None) -> SweepRun:
+    """Environment, demonstrations, trainer and the compiled grid of ``config``."""
+    import jax
+
+    from pngail_jax.demos import DemonstrationError
+    from pngail_jax.grid import Grid, make_cells, stack_cells
+    from pngail_jax.train import AdversarialTrainer
+
+    env = run_settings.make_env(config.env, config.settings)
+    demos, demos_path = load_or_make_demos(config, saved.demos_path if saved else None)
+    try:
+        trainer = AdversarialTrainer(config.adversarial_config(), env, demos)
+        trainer.check_methods(config.methods)
+    except DemonstrationError as error:
+        raise SystemExit(f"{demos_path}: {error}") from None
+    for ratio in config.label_ratios:
+        num_labelled = round(ratio * trainer.num_demos)
+        if not 0 < num_labelled < trainer.num_demos:
+            raise SystemExit(
+                f"--label-ratio {ratio} labels {num_labelled} of {trainer.num_demos} rows; "
+                "need at least one labelled and one unlabelled row"
+            )
+    cells = make_cells(config.methods, config.seeds, config.label_ratios, config.noise_stds)
+    inputs = stack_cells(cells, jax.random.key(config.seed), {"bsc_eps": config.task_bsc_eps})
+    eval_every = config.settings.eval_every
+    num_evaluations = config.iterations // eval_every
+    chunk_blocks = blocks_per_chunk(num_evaluations, max(1, config.chunk_iterations // eval_every))
+    devices = jax.devices()
+    normalizer = normalizer_of(demos)
     print(
-        f"{len(cells)} runs ({', '.join(args.methods)} x {args.seeds} seeds x "
-        f"{len(args.label_ratios) * len(args.noise_stds)} setting(s)) on {args.env}, "
-        f"{args.iterations} iterations x {config.trpo.batch_size} steps, "
-        f"{train.num_demos} demonstration rows; {len(devices)} {devices[0].platform} device(s); "
-        f"-> {out}\n  {run_settings.describe(settings)}",
+        f"{len(cells)} runs ({', '.join(config.methods)} x {config.seeds} seeds x "
+        f"{config.num_settings} setting(s)) on {config.env}, {config.iterations} iterations x "
+        f"{config.settings.samples_per_iteration} steps, {trainer.num_demos} demonstration "
+        f"rows; {len(devices)} {devices[0].platform} device(s)\n"
+        f"  {run_settings.describe(config.settings)}",
         flush=True,
     )
     if normalizer is None:
         print("note: the demonstrations carry no random/optimal returns: no normalised return")
     print("compiling ...", flush=True)
-    grid = Grid(train, hyperparams, specs, keys, chunk_blocks, devices)
+    grid = Grid(trainer, inputs, chunk_blocks, devices)
     print(
         f"compiled in {grid.compile_seconds:.1f} s ({grid.num_cells} cells"
         f"{f', padded to {grid.num_padded}' if grid.num_padded != grid.num_cells else ''}, "
         f"{grid.iterations_per_chunk} iterations per chunk)",
         flush=True,
     )
+    return SweepRun(config, env, trainer, cells, grid, demos_path, normalizer)
 
-    checkpoint_dir = out / "checkpoints"
-    chunks_done, metrics_so_far, timing = 0, None, {"seconds": 0.0, "steps": 0}
+
+def write_config(out: Path, run: SweepRun, argv: list[str]) -> None:
+    """config.json: the RunConfig, what it resolved to, and provenance."""
+    from pngail_jax.run_config import provenance
+
+    document = {
+        **run.config.to_dict(),
+        "resolved": {
+            "demos_path": run.demos_path,
+            "normalizer": run.normalizer,
+            "num_demos": run.trainer.num_demos,
+            "bsc_eps": run.config.task_bsc_eps,
+            "adversarial": dataclasses.asdict(run.trainer.config),
+        },
+        "provenance": provenance(argv),
+    }
+    (out / "config.json").write_text(json.dumps(document, indent=2))
+
+
+# -- running chunks with progress and checkpoints --------------------------------------------
+
+
+@dataclasses.dataclass
+class Progress:
+    """What a run has done: chunks, metrics so far (float[G, I]), the timing of its chunks."""
+
+    chunks_done: int
+    init_metrics: dict
+    metrics: dict | None
+    timing: dict
+
+
+def initial_state(run: SweepRun, checkpoint_dir: Path, resume: bool):
+    """The grid's state and progress: from the last checkpoint when resuming, else fresh."""
+    import jax
+
+    from pngail_jax.checkpoint import restore_tree
+
+    grid = run.grid
     start = time.perf_counter()
     state, init_metrics = grid.init()
-    init_metrics = grid.fetch(init_metrics)
+    progress = Progress(0, grid.fetch(init_metrics), None, {"seconds": 0.0, "steps": 0})
     latest = _latest_checkpoint(checkpoint_dir)
-    if resume_dir is not None and latest is not None:
+    if resume and latest is not None:
         template = jax.eval_shape(lambda: grid.unpad(state))
         state = grid.place(restore_tree(latest / "state", template))
         with np.load(latest / "metrics.npz") as stored:
-            metrics_so_far = {name.replace(":", "/"): stored[name] for name in stored.files}
-        progress = json.loads((latest / "progress.json").read_text())
-        chunks_done, timing = progress["chunks_done"], progress["timing"]
-        print(f"resumed from {latest} (iteration {chunks_done * grid.iterations_per_chunk})")
-    else:
-        if resume_dir is not None:
-            print(f"no checkpoint in {checkpoint_dir}: starting from the beginning")
+            progress.metrics = {name.replace(":", "/"): stored[name] for name in stored.files}
+        done = json.loads((latest / "progress.json").read_text())
+        progress.chunks_done, progress.timing = done["chunks_done"], done["timing"]
         print(
-            f"classifier phase done in {time.perf_counter() - start:.1f} s "
-            f"(confidence MAE on D_u: "
-            + ", ".join(
-                f"{m} {np.mean(init_metrics['confidence/mae'][[c.method == m for c in cells]]):.3f}"
-                for m in args.methods
-            )
-            + ")",
-            flush=True,
+            f"resumed from {latest} (iteration {progress.chunks_done * grid.iterations_per_chunk})"
         )
+        return state, progress
+    if resume:
+        print(f"no checkpoint in {checkpoint_dir}: starting from the beginning")
+    mae = progress.init_metrics["confidence/mae"]
+    print(
+        f"classifier phase done in {time.perf_counter() - start:.1f} s (confidence MAE on D_u: "
+        + ", ".join(
+            f"{m} {np.mean(mae[[c.method == m for c in run.cells]]):.3f}"
+            for m in run.config.methods
+        )
+        + ")",
+        flush=True,
+    )
+    return state, progress
 
-    num_chunks = num_evaluations // chunk_blocks
+
+def run_chunks(run: SweepRun, out: Path, state, progress: Progress, writer: bool, logger=None):
+    """Runs the remaining chunks: progress lines, a checkpoint and partial outputs after each."""
+    from pngail_jax.grid import nonfinite_cells
+
+    grid, config = run.grid, run.config
+    num_chunks = config.iterations // grid.iterations_per_chunk
     reported_bad: set[int] = set()
-    for chunk in range(chunks_done, num_chunks):
+    host_state = None
+    for chunk in range(progress.chunks_done, num_chunks):
         chunk_start = time.perf_counter()
         state, chunk_metrics = grid.run_chunk(state)
         chunk_metrics = grid.fetch(chunk_metrics)
-        seconds = time.perf_counter() - chunk_start
-        timing["seconds"] += seconds
-        timing["steps"] += len(cells) * grid.iterations_per_chunk * config.trpo.batch_size
-        if metrics_so_far is None:
-            metrics_so_far = chunk_metrics
+        progress.timing["seconds"] += time.perf_counter() - chunk_start
+        progress.timing["steps"] += (
+            len(run.cells) * grid.iterations_per_chunk * config.settings.samples_per_iteration
+        )
+        if progress.metrics is None:
+            progress.metrics = chunk_metrics
         else:
-            metrics_so_far = {
-                name: np.concatenate([metrics_so_far[name], chunk_metrics[name]], axis=1)
+            progress.metrics = {
+                name: np.concatenate([progress.metrics[name], chunk_metrics[name]], axis=1)
                 for name in chunk_metrics
             }
-        iteration = (chunk + 1) * grid.iterations_per_chunk
-        rate = timing["steps"] / timing["seconds"]
-        remaining = (num_chunks - chunk - 1) * timing["seconds"] / (chunk + 1)
-        bad = set(nonfinite_cells(metrics_so_far, args.eval_every).tolist())
+        progress.chunks_done = chunk + 1
+        iteration = progress.chunks_done * grid.iterations_per_chunk
+        bad = set(nonfinite_cells(progress.metrics, config.settings.eval_every).tolist())
         for index in sorted(bad - reported_bad):
-            cell = cells[index]
+            cell = run.cells[index]
             print(f"  ! cell {cell.method} seed {cell.seed} ({cell.setting}) diverged (NaN/inf)")
         reported_bad |= bad
+        rate = progress.timing["steps"] / progress.timing["seconds"]
+        remaining = (num_chunks - chunk - 1) * progress.timing["seconds"] / (chunk + 1)
         print(
-            f"iter {iteration:5d}/{args.iterations}  "
-            f"env steps {iteration * config.trpo.batch_size:,}/run  {rate:,.0f} steps/s  "
+            f"iter {iteration:5d}/{config.iterations}  env steps "
+            f"{iteration * config.settings.samples_per_iteration:,}/run  {rate:,.0f} steps/s  "
             f"ETA {format_seconds(remaining)}  "
-            f"best {_best_cell(cells, chunk_metrics, normalizer)}",
+            f"best {_best_cell(run.cells, chunk_metrics, run.normalizer)}",
             flush=True,
         )
+        if logger is not None:
+            logger.log_chunk(run.cells, chunk_metrics, iteration - grid.iterations_per_chunk + 1)
         # Every process takes part in the gather and in orbax's save (it synchronises them).
         host_state = grid.fetch(state)
-        _save_checkpoint(checkpoint_dir, chunk + 1, host_state, metrics_so_far, timing, writer)
-        if writer and chunk + 1 < num_chunks:  # partial results; the last are written below
-            _write_outputs(out, args, cells, metrics_so_far, init_metrics, normalizer, grid, timing)
-
-    if not writer:
-        return out
-    metrics = {**metrics_so_far, **init_metrics}
-    summary = _write_outputs(
-        out, args, cells, metrics_so_far, init_metrics, normalizer, grid, timing
-    )
-    print()
-    markdown = report.summary_markdown(summary, cells, metrics, _title(args, len(cells)))
-    print(markdown.split("\n\nFinal return")[0])
-    print(
-        f"\ndone in {format_seconds(time.perf_counter() - start)} (+ compile); wrote "
-        f"{out}/{{config.json,metrics.csv,curves.png,summary.md,summary.json,checkpoints/}}"
-    )
-    return out
+        _save_checkpoint(out / "checkpoints", progress, host_state, writer)
+        if writer and progress.chunks_done < num_chunks:  # partial results; the last below
+            write_outputs(out, run, progress)
+    return grid.fetch(state) if host_state is None else host_state
 
 
-def _title(args, num_cells: int) -> str:
-    return f"{args.env}: {num_cells} runs, {args.iterations} iterations"
+def format_seconds(seconds: float) -> str:
+    seconds = int(round(seconds))
+    return f"{seconds // 60}m{seconds % 60:02d}s" if seconds >= 60 else f"{seconds}s"
 
 
 def _best_cell(cells, chunk_metrics, normalizer) -> str:
@@ -474,58 +616,147 @@ def _latest_checkpoint(directory: Path):
     return done[-1] if done else None
 
 
-def _save_checkpoint(directory, chunks_done, host_state, metrics, timing, writer: bool):
+def _save_checkpoint(directory: Path, progress: Progress, host_state, writer: bool):
     """Writes chunk_NNNN/ (state via orbax, metrics, progress last) and keeps the last two.
 
     Every process calls it (orbax synchronises processes); only the writer writes the rest.
     """
     from pngail_jax.checkpoint import save_tree
 
-    path = directory / f"chunk_{chunks_done:04d}"
+    path = directory / f"chunk_{progress.chunks_done:04d}"
     save_tree(path / "state", host_state)
     if not writer:
         return
-    np.savez(path / "metrics.npz", **{name.replace("/", ":"): v for name, v in metrics.items()})
-    progress = {"chunks_done": chunks_done, "timing": timing}
-    (path / "progress.json").write_text(json.dumps(progress))  # marks the checkpoint complete
+    metrics = {name.replace("/", ":"): value for name, value in progress.metrics.items()}
+    np.savez(path / "metrics.npz", **metrics)
+    done = {"chunks_done": progress.chunks_done, "timing": progress.timing}
+    (path / "progress.json").write_text(json.dumps(done))  # marks the checkpoint complete
     for old in sorted(directory.glob("chunk_*"))[:-2]:
         shutil.rmtree(old)
 
 
-def _write_outputs(out, args, cells, metrics_so_far, init_metrics, normalizer, grid, timing):
+# -- outputs ----------------------------------------------------------------------------------
+
+
+def _title(config: RunConfig, num_cells: int) -> str:
+    return f"{config.env}: {num_cells} runs, {config.iterations} iterations"
+
+
+def write_outputs(out: Path, run: SweepRun, progress: Progress) -> dict:
+    """metrics.csv, curves.png, summary.json and summary.md of the iterations done so far."""
     from pngail_jax import report
     from pngail_jax.grid import nonfinite_cells
 
-    metrics = {**metrics_so_far, **init_metrics}
-    report.write_metrics_csv(out / "metrics.csv", cells, metrics, normalizer)
-    title = _title(args, len(cells))
-    report.plot_curves(out / "curves.png", cells, metrics, normalizer, title)
-    diverged = nonfinite_cells(metrics_so_far, args.eval_every)
+    config, cells = run.config, run.cells
+    metrics = {**progress.metrics, **progress.init_metrics}
+    report.write_metrics_csv(out / "metrics.csv", cells, metrics, run.normalizer)
+    title = _title(config, len(cells))
+    report.plot_curves(out / "curves.png", cells, metrics, run.normalizer, title)
+    diverged = nonfinite_cells(progress.metrics, config.settings.eval_every)
     summary = report.summarize(
         cells,
         metrics,
-        normalizer,
-        timing["steps"] / timing["seconds"],
-        grid.compile_seconds,
+        run.normalizer,
+        progress.timing["steps"] / progress.timing["seconds"],
+        run.grid.compile_seconds,
         excluded=diverged,
     )
     done = metrics["env_steps"].shape[1]
     notes = [
-        f"Diverged (NaN/inf), left out of the means: {cells[i].method} seed {cells[i].seed} "
-        f"({cells[i].setting})."
+        f"Diverged (NaN/inf), left out of the statistics: {cells[i].method} seed "
+        f"{cells[i].seed} ({cells[i].setting})."
         for i in diverged
     ]
-    if done < args.iterations:
-        notes.append(f"Partial: {done} of {args.iterations} iterations so far.")
-    if args.preset is None and args.iterations < 1000:
+    if done < config.iterations:
+        notes.append(f"Partial: {done} of {config.iterations} iterations so far.")
+    if config.iterations < 1000:
         notes.append(
-            f"Smoke scale ({args.iterations} iterations); the paper's budget is "
+            f"Smoke scale ({config.iterations} iterations); the paper's budget is "
             "`--preset paper` (5,000 iterations, GPU)."
         )
     report.write_summary(
         out, summary, report.summary_markdown(summary, cells, metrics, title, notes)
     )
     return summary
+
+
+def export_policies(out: Path, run: SweepRun, host_state, final_returns) -> list[Path]:
+    """policies/<method>/ (and /<setting>/ when the grid has several): every seed's final
+    policy, loadable with ``pngail_jax.load_policy`` (best seed by default)."""
+    import jax
+
+    from pngail_jax.checkpoint import save_trpo_policies
+
+    trpo_state = run.trainer.policy_state(host_state)
+    settings = list(dict.fromkeys(cell.setting for cell in run.cells))
+    written = []
+    for setting in settings:
+        for method in run.config.methods:
+            rows = [
+                i for i, c in enumerate(run.cells) if c.method == method and c.setting == setting
+            ]
+            directory = out / "policies" / method
+            if len(settings) > 1:
+                directory = directory / setting
+            seeds_state = jax.tree.map(lambda x, rows=rows: x[np.asarray(rows)], trpo_state)
+            extra = {
+                "method": method,
+                "setting": setting,
+                "seeds": [run.cells[i].seed for i in rows],
+                "env_options": run.config.settings.env_options,
+            }
+            written.append(
+                save_trpo_policies(
+                    directory,
+                    run.env,
+                    run.trainer.config.trpo,
+                    seeds_state,
+                    final_returns[rows],
+                    extra,
+                )  # fmt: skip
+            )
+    return written
+
+
+def main(argv=None) -> Path:
+    invocation = parse_args(argv)
+    config, saved, writer = start(invocation)
+    out = invocation.out
+    run = build(config, saved)
+    if writer:
+        out.mkdir(parents=True, exist_ok=True)
+        if saved is None:
+            write_config(out, run, invocation.argv)
+    print(f"-> {out}", flush=True)
+    state, progress = initial_state(run, out / "checkpoints", invocation.resume)
+    logger = None
+    if writer and config.log:
+        from pngail_jax.tracking import open_logger
+
+        logger = open_logger(out, config.log, config.to_dict(), out.name)
+    start_time = time.perf_counter()
+    try:
+        host_state = run_chunks(run, out, state, progress, writer, logger)
+    finally:
+        if logger is not None:
+            logger.close()
+    if not writer:
+        return out
+    from pngail_jax import report
+
+    summary = write_outputs(out, run, progress)
+    final_returns = progress.metrics["eval/return"][:, -1]
+    export_policies(out, run, host_state, final_returns)
+    metrics = {**progress.metrics, **progress.init_metrics}
+    markdown = report.summary_markdown(summary, run.cells, metrics, _title(config, len(run.cells)))
+    print()
+    print(markdown.split("\n\nFinal return")[0])
+    print(
+        f"\ndone in {format_seconds(time.perf_counter() - start_time)} (+ compile); wrote "
+        f"{out}/{{config.json,metrics.csv,curves.png,summary.md,summary.json,policies/,"
+        "checkpoints/}"
+    )
+    return out
 
 
 if __name__ == "__main__":

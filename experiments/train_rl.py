@@ -22,10 +22,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from pngail_jax import compilation, envs
+from experiments.cli import ENV_HELP, check_env, check_positive
+from pngail_jax import compilation
 from pngail_jax import settings as run_settings
-from pngail_jax.checkpoint import save_policies
-from pngail_jax.rl import TRPOConfig, TRPOHyperparams, make_train
+from pngail_jax.checkpoint import save_trpo_policies
+from pngail_jax.grid import Grid
+from pngail_jax.rl import TRPOHyperparams, TRPOTrainer
 
 METRIC_COLUMNS = (
     "env_steps",
@@ -40,7 +42,7 @@ METRIC_COLUMNS = (
 
 def parse_args(argv=None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--env", default="Pendulum-v1", help=f"one of {', '.join(envs.ENV_NAMES)}")
+    parser.add_argument("--env", default="Pendulum-v1", help=ENV_HELP)
     parser.add_argument("--iterations", type=int, default=100)
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--seed", type=int, default=0, help="base PRNG seed")
@@ -61,15 +63,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     run_settings.add_arguments(parser)
     compilation.add_arguments(parser)
     args = parser.parse_args(argv)
-    if args.env not in envs.ENV_NAMES:
-        parser.error(f"unknown environment {args.env!r}; available: {', '.join(envs.ENV_NAMES)}")
+    check_env(parser, args.env)
     if args.fast_solver:
         if args.solver not in (None, "fast"):
             parser.error("--fast-solver and --solver disagree")
         args.solver = "fast"
-    for name in ("iterations", "seeds", "fisher_subsample"):
-        if getattr(args, name) < 1:
-            parser.error(f"--{name.replace('_', '-')} must be positive")
+    check_positive(parser, args, ("iterations", "seeds", "fisher_subsample"))
     try:
         args.settings = run_settings.from_arguments(args.env, args)
     except ValueError as error:
@@ -132,55 +131,38 @@ def plot_learning_curve(path: Path, metrics: dict[str, np.ndarray], title: str) 
     plt.close(figure)
 
 
-def save_trpo_policies(directory, env, config: TRPOConfig, state, eval_returns, extra=None):
-    """Saves the stacked per-seed policies of a TRPO state with what load_policy needs."""
-    return save_policies(
-        directory,
-        env_name=env.name,
-        observation_size=env.observation_size,
-        action_low=env.action_low,
-        action_high=env.action_high,
-        hidden_sizes=config.hidden_sizes,
-        policy_params=state.policy_params,
-        normalizer=state.normalizer,
-        normalize_observations=config.normalize_observations,
-        final_eval_returns=eval_returns,
-        extra=extra,
-    )
+def train_with_progress(trainer: TRPOTrainer, hyperparams, keys, on_block=None):
+    """Runs ``trainer`` for stacked seeds, one compiled block of ``eval_every`` iterations at a
+    time (``pngail_jax.grid.Grid``), printing progress after each.
 
-
-def train_with_progress(train, config: TRPOConfig, hyperparams, keys, on_block=None):
-    """Runs ``train`` (from ``make_train``) for stacked seeds in host-driven blocks.
-
-    Prints progress after every block of ``config.eval_every`` iterations and calls
-    ``on_block(iteration, state, block_metrics)`` if given (e.g. to keep checkpoints). The
-    numbers are those of the whole-scan ``train`` (same computation, in chunks).
-    Returns ``(final_state, metrics)`` with metrics float[seeds, num_iterations].
+    Calls ``on_block(iteration, trpo_state, block_metrics)`` if given (e.g. to keep
+    checkpoints). The numbers are those of the whole-scan ``trainer.train``. Returns
+    ``(final TRPOState, metrics)`` with metrics float[seeds, num_iterations].
     """
-    num_seeds = keys.shape[0]
-    state, eval_keys = jax.jit(jax.vmap(train.init))(keys)
-    block = jax.jit(jax.vmap(train.block))
+    config = trainer.config
+    grid = Grid(trainer, (hyperparams, keys), blocks_per_chunk=1)
+    print(f"compiled in {grid.compile_seconds:.1f} s", flush=True)
+    state, _ = grid.init()
     chunks = []
     for done_blocks in range(1, config.num_evaluations + 1):
         block_start = time.perf_counter()
-        state, metrics = block(hyperparams, state, eval_keys)
-        metrics = jax.device_get(metrics)
+        state, metrics = grid.run_chunk(state)
+        metrics = grid.fetch(metrics)
         chunks.append(metrics)
         seconds = time.perf_counter() - block_start
-        rate = num_seeds * config.eval_every * config.batch_size / seconds
-        note = " (includes compilation)" if done_blocks == 1 else ""
+        rate = grid.num_cells * config.eval_every * config.batch_size / seconds
         print(
             f"iter {done_blocks * config.eval_every:5d}  "
             f"eval {np.mean(metrics['eval/return'][:, -1]):9.1f} "
             f"[{', '.join(f'{r:.0f}' for r in metrics['eval/return'][:, -1])}]  "
             f"train {nanmean(metrics['train/episode_return'][:, -1]):9.1f}  "
-            f"{rate:10,.0f} steps/s{note}",
+            f"{rate:10,.0f} steps/s",
             flush=True,
         )
         if on_block is not None:
-            on_block(done_blocks * config.eval_every, state, metrics)
+            on_block(done_blocks * config.eval_every, trainer.policy_state(state), metrics)
     metrics = {name: np.concatenate([c[name] for c in chunks], axis=1) for name in chunks[0]}
-    return state, metrics
+    return trainer.policy_state(state), metrics
 
 
 def main(argv=None) -> None:
@@ -192,7 +174,7 @@ def main(argv=None) -> None:
         args.iterations, fisher=args.fisher, fisher_subsample=args.fisher_subsample
     )
     hyperparams = TRPOHyperparams.create(bootstrap_truncation=not args.truncation_as_terminal)
-    train = make_train(config, env)
+    trainer = TRPOTrainer(config, env)
     seeds_hyperparams = jax.tree.map(
         lambda x: jnp.broadcast_to(x, (args.seeds, *x.shape)), hyperparams
     )
@@ -215,7 +197,7 @@ def main(argv=None) -> None:
         flush=True,
     )
     start = time.perf_counter()
-    state, metrics = train_with_progress(train, config, seeds_hyperparams, keys)
+    state, metrics = train_with_progress(trainer, seeds_hyperparams, keys)
     final_returns = metrics["eval/return"][:, -1]
     write_metrics_csv(args.out / "metrics.csv", metrics)
     plot_learning_curve(

@@ -64,6 +64,24 @@ def save_policies(
     return directory
 
 
+def save_trpo_policies(directory, env, config, trpo_state, eval_returns, extra=None) -> Path:
+    """Saves the stacked per-seed policies of a ``TRPOState`` (``config``: its ``TRPOConfig``)
+    with what ``load_policy`` needs."""
+    return save_policies(
+        directory,
+        env_name=env.name,
+        observation_size=env.observation_size,
+        action_low=env.action_low,
+        action_high=env.action_high,
+        hidden_sizes=config.hidden_sizes,
+        policy_params=trpo_state.policy_params,
+        normalizer=trpo_state.normalizer,
+        normalize_observations=config.normalize_observations,
+        final_eval_returns=eval_returns,
+        extra=extra,
+    )
+
+
 def load_policy(
     directory: str | Path, seed: int | None = None, verbose: bool = True
 ) -> Callable[[np.ndarray], np.ndarray]:

@@ -47,7 +47,8 @@ def add_arguments(parser) -> None:
     parser.add_argument(
         "--no-compile-cache",
         action="store_true",
-        help="compile every program afresh (nothing read from or written to the cache)",
+        help="compile every program afresh (nothing read from or written to the cache) "
+        "(default: off)",
     )
 
 

@@ -1,8 +1,8 @@
 """Grids of runs (methods x seeds x settings) as one compiled, optionally sharded, program.
 
 A grid is a list of ``Cell``s. ``stack_cells`` turns it into stacked hyperparameters, method
-specs and keys with one leading grid axis; ``Grid`` compiles ``jit(vmap(train.init))`` and
-``jit(vmap(train.run_blocks))`` over that axis and, when more than one device is given,
+specs and keys with one leading grid axis; ``Grid`` compiles ``jit(vmap(trainer.init))`` and
+``jit(vmap(trainer.run_blocks))`` over that axis and, when more than one device is given,
 shards it over a one-axis ``Mesh`` (padding the grid to a multiple of the device count with
 copies of its last cell, which are dropped from every result).
 
@@ -26,7 +26,7 @@ from jax.sharding import NamedSharding, PartitionSpec
 
 from pngail_jax.checkpoint import is_key
 from pngail_jax.methods import MethodSpec, method_spec, stack
-from pngail_jax.train import Hyperparams, TrainState
+from pngail_jax.train import Hyperparams
 
 GRID_AXIS = "grid"
 
@@ -113,26 +113,30 @@ def _put_global(tree, sharding: NamedSharding):
 class Grid:
     """Compiled init and chunk programs for stacked cells, sharded over ``devices``.
 
+    ``trainer`` is any object with the trainer interface (``AdversarialTrainer``,
+    ``pngail_jax.rl.TRPOTrainer``); ``inputs`` are the arguments of its ``init``, each stacked
+    with a leading grid axis, the keys last: ``(hyperparams, specs, keys)`` from
+    ``stack_cells`` for adversarial training, ``(hyperparams, keys)`` for TRPO.
+
     ``run_chunk(state)`` advances every cell by ``blocks_per_chunk * eval_every`` iterations;
     ``unpad(tree)`` drops padding cells from a host copy of any grid-leading pytree.
     """
 
     def __init__(
         self,
-        train,
-        hyperparams: Hyperparams,
-        specs: MethodSpec,
-        keys: jax.Array,
+        trainer,
+        inputs: tuple,
         blocks_per_chunk: int,
         devices: Sequence[jax.Device] | None = None,
     ):
-        self.num_cells = keys.shape[0]
+        self.trainer = trainer
+        self.num_cells = inputs[-1].shape[0]
         devices = list(jax.devices() if devices is None else devices)
         self.num_devices = len(devices)
         self.num_padded = math.ceil(self.num_cells / self.num_devices) * self.num_devices
         self.blocks_per_chunk = blocks_per_chunk
-        self.iterations_per_chunk = blocks_per_chunk * train.config.trpo.eval_every
-        inputs = _pad((hyperparams, specs, keys), self.num_padded)
+        self.iterations_per_chunk = blocks_per_chunk * trainer.trpo.config.eval_every
+        inputs = _pad(tuple(inputs), self.num_padded)
         if self.num_devices > 1:
             mesh = jax.make_mesh(
                 (self.num_devices,),
@@ -146,18 +150,19 @@ class Grid:
             self.sharding = None
             inputs = jax.device_put(inputs, devices[0])
         self.devices = devices
-        self.hyperparams, self.specs, self.keys = inputs
+        self.cell_inputs, self.keys = tuple(inputs[:-1]), inputs[-1]
         jit = functools.partial(jax.jit, out_shardings=self.sharding)
-        init = jit(jax.vmap(train.init))
+        init = jit(jax.vmap(trainer.init))
         state_shape, _ = jax.eval_shape(init, *inputs)
         start = time.perf_counter()
         self.init_program = init.lower(*inputs).compile()
         self.init_compile_seconds = time.perf_counter() - start
-        chunk = jax.vmap(functools.partial(train.run_blocks, num_blocks=blocks_per_chunk))
+        chunk = jax.vmap(functools.partial(trainer.run_blocks, num_blocks=blocks_per_chunk))
         start = time.perf_counter()
+        state_index = len(self.cell_inputs)
         self.chunk_program = (
-            jit(chunk, donate_argnums=(2,))
-            .lower(self.hyperparams, self.specs, self._with_sharding(state_shape))
+            jit(chunk, donate_argnums=(state_index,))
+            .lower(*self.cell_inputs, self._with_sharding(state_shape))
             .compile()
         )
         self.chunk_compile_seconds = time.perf_counter() - start
@@ -173,15 +178,16 @@ class Grid:
             lambda s: jax.ShapeDtypeStruct(s.shape, s.dtype, sharding=self.sharding), state_shape
         )
 
-    def init(self) -> tuple[TrainState, dict]:
-        """Splits, classifier phase and initial networks of every cell (device arrays)."""
-        return self.init_program(self.hyperparams, self.specs, self.keys)
+    def init(self):
+        """``(state, init_metrics)`` of every cell (device arrays): for adversarial training,
+        the splits, classifier phase and initial networks."""
+        return self.init_program(*self.cell_inputs, self.keys)
 
-    def run_chunk(self, state: TrainState) -> tuple[TrainState, dict]:
+    def run_chunk(self, state):
         """The next chunk. ``state`` is donated (do not reuse it); metrics float[G, I]."""
-        return self.chunk_program(self.hyperparams, self.specs, state)
+        return self.chunk_program(*self.cell_inputs, state)
 
-    def place(self, state: TrainState) -> TrainState:
+    def place(self, state):
         """Pads an unpadded state (e.g. restored from a checkpoint, possibly written with a
         different device count) and puts it where ``run_chunk`` expects it."""
         state = _pad(state, self.num_padded)

@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pngail_jax import stats
+
 CSV_COLUMNS = (
     "method",
     "seed",
@@ -86,65 +88,161 @@ def _groups(cells):
     return settings, groups
 
 
-def _mean_std(values):
-    values = np.asarray(values, np.float64)
-    finite = values[np.isfinite(values)]
-    if len(finite) == 0:
-        return float("nan"), float("nan")
-    return float(finite.mean()), float(finite.std())
+def _per_cell(cells, metrics, normalizer, excluded):
+    """float64[G] per cell: final and training-averaged returns, raw and normalised; NaN for
+    excluded cells."""
+    returns = np.asarray(metrics["eval/return"], np.float64)
+    evaluated = ~np.isnan(returns).all(axis=0)
+    final = returns[:, -1].copy()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        average = np.nanmean(returns[:, evaluated], axis=1) if evaluated.any() else final * np.nan
+    values = {"final_return": final, "average_return": average}
+    for name in list(values):
+        values[name][list(excluded)] = np.nan
+        values[name.replace("_return", "_normalized_return")] = normalize(values[name], normalizer)
+    return values
 
 
 def summarize(cells, metrics, normalizer, train_env_steps_per_second, compile_seconds, excluded=()):
-    """The ``summary.json`` dictionary. Final return: the last iteration's evaluation.
+    """The ``summary.json`` dictionary (NaN where undefined; ``write_summary`` writes null).
 
-    Cells listed in ``excluded`` (diverged ones, ``pngail_jax.grid.nonfinite_cells``) and
-    non-finite final returns are left out of the means and of ``num_seeds``.
+    Per method (and setting): the final return (the last evaluation) and the average
+    evaluation return over training, raw and normalised, as mean, sample std (ddof 1) and
+    standard error over seeds, the normalised ones also as interquartile mean with a 95%
+    percentile-bootstrap interval (``pngail_jax.stats``, fixed seed: the same numbers on every
+    call), and a per-seed table. Cells in ``excluded`` (diverged,
+    ``pngail_jax.grid.nonfinite_cells``) and non-finite returns are left out of every
+    statistic and of ``num_seeds``. With PN-GAIL in the grid: the probability that a PN-GAIL
+    seed's final return beats a baseline seed's, per baseline, with its 95% interval.
     """
-    final = np.asarray(metrics["eval/return"], np.float64)[:, -1].copy()
-    final[list(excluded)] = np.nan
-    final_normalized = normalize(final, normalizer)
-    _, groups = _groups(cells)
+    values = _per_cell(cells, metrics, normalizer, excluded)
+    settings, groups = _groups(cells)
     methods = {}
     for label, indices in groups.items():
-        mean, std = _mean_std(final[indices])
-        normalized_mean, normalized_std = _mean_std(final_normalized[indices])
-        methods[label] = {
-            "final_return_mean": mean,
-            "final_return_std": std,
-            "final_normalized_return_mean": normalized_mean,
-            "final_normalized_return_std": normalized_std,
-            "num_seeds": int(np.isfinite(final[indices]).sum()),
-        }
+        row = {}
+        for name, per_cell in values.items():
+            summary = stats.seed_summary(per_cell[indices])
+            row[f"{name}_mean"], row[f"{name}_std"] = summary["mean"], summary["std"]
+            row[f"{name}_se"] = summary["se"]
+            if "normalized" in name:
+                row[f"{name}_iqm"], row[f"{name}_ci95"] = summary["iqm"], summary["ci95"]
+        row["num_seeds"] = int(np.isfinite(values["final_return"][indices]).sum())
+        row["per_seed"] = [
+            {"seed": cells[i].seed, **{name: float(v[i]) for name, v in values.items()}}
+            for i in indices
+        ]
+        methods[label] = row
     return {
         "methods": methods,
+        "probability_of_improvement": _improvement_over_baselines(
+            cells, settings, values["final_return"]
+        ),
         "train_env_steps_per_second": float(train_env_steps_per_second),
         "compile_seconds": float(compile_seconds),
     }
 
 
+def _improvement_over_baselines(cells, settings, final, method="pngail") -> dict:
+    """``{baseline label: {"estimate", "ci95"}}``: P(a ``method`` seed's final return beats a
+    baseline seed's) per setting (rliable's probability of improvement)."""
+    result = {}
+    for setting in settings:
+        rows = {}
+        for index, cell in enumerate(cells):
+            if cell.setting == setting:
+                rows.setdefault(cell.method, []).append(index)
+        if method not in rows:
+            continue
+        ours = final[rows[method]]
+        for baseline, indices in rows.items():
+            if baseline == method:
+                continue
+            label = group_label(cells[indices[0]], settings)
+            result[label] = {
+                "estimate": stats.probability_of_improvement(ours, final[indices]),
+                "ci95": list(stats.probability_of_improvement_ci(ours, final[indices])),
+            }
+    return result
+
+
+def _interval(row, name: str, digits: int = 2) -> str:
+    low, high = row[f"{name}_ci95"]
+    if not np.isfinite(row[f"{name}_iqm"]):
+        return "n/a"
+    return f"{row[f'{name}_iqm']:.{digits}f} [{low:.{digits}f}, {high:.{digits}f}]"
+
+
+def _mean_se(row, name: str, digits: int) -> str:
+    mean, se = row[f"{name}_mean"], row[f"{name}_se"]
+    if not np.isfinite(mean):
+        return "n/a"
+    return f"{mean:.{digits}f}" + (f" ± {se:.{digits}f}" if np.isfinite(se) else "")
+
+
 def summary_markdown(summary, cells, metrics, title: str, notes: Sequence[str] = ()) -> str:
-    """A Markdown table of ``summary`` plus the classifier's error per method."""
+    """Markdown tables of ``summary``: per method, per seed, and PN-GAIL's probability of
+    improvement over each baseline."""
     _, groups = _groups(cells)
     lines = [
         f"# {title}",
         "",
-        "| method | final return | normalised | seeds | confidence MAE (D_u) |",
-        "|---|---:|---:|---:|---:|",
+        "| method | final return | final normalised: IQM [95% CI] | mean ± s.e. | "
+        "average during training: IQM [95% CI] | seeds | confidence MAE (D_u) |",
+        "|---|---:|---:|---:|---:|---:|---:|",
     ]
     for label, row in summary["methods"].items():
         mae = np.asarray(metrics["confidence/mae"])[groups[label]]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            mae_text = f"{np.nanmean(mae):.3f}" if np.isfinite(mae).any() else "n/a"
         lines.append(
-            f"| {label} | {row['final_return_mean']:.1f} ± {row['final_return_std']:.1f} | "
-            f"{row['final_normalized_return_mean']:.2f} ± "
-            f"{row['final_normalized_return_std']:.2f} | {row['num_seeds']} | "
-            f"{np.nanmean(mae):.3f} |"
+            f"| {label} | {_mean_se(row, 'final_return', 1)} | "
+            f"{_interval(row, 'final_normalized_return')} | "
+            f"{_mean_se(row, 'final_normalized_return', 2)} | "
+            f"{_interval(row, 'average_normalized_return')} | {row['num_seeds']} | {mae_text} |"
         )
     lines += [
         "",
-        "Final return: deterministic (mean-action) evaluation at the last iteration, mean ± "
-        "std over seeds. Confidence MAE: the confidences the method's loss uses on the "
-        "unlabelled rows (GAIL and WGAIL read none; IC-GAIL reads only D_c's given ones, so "
-        "its value is that of the mean labelled confidence, which it never reads).",
+        "Final return: deterministic (mean-action) evaluation at the last iteration; average "
+        "during training: the mean of every evaluation of a seed (the paper's Table 4 "
+        "measure). Over seeds: interquartile mean with a 95% stratified-bootstrap interval "
+        "(2,000 resamples), and mean ± standard error. Confidence MAE: the confidences the "
+        "method's loss uses on the unlabelled rows (GAIL and WGAIL read none; IC-GAIL reads "
+        "only D_c's given ones, so its value is that of the mean labelled confidence, which it "
+        "never reads).",
+    ]
+    improvement = summary.get("probability_of_improvement", {})
+    if improvement:
+        lines += [
+            "",
+            "Probability of improvement: P(a PN-GAIL seed's final return > a baseline seed's), "
+            "95% bootstrap interval.",
+            "",
+            "| over | P(PN-GAIL > baseline) | 95% CI |",
+            "|---|---:|---:|",
+        ]
+        for label, value in improvement.items():
+            low, high = value["ci95"]
+            lines.append(f"| {label} | {value['estimate']:.2f} | [{low:.2f}, {high:.2f}] |")
+    lines += [
+        "",
+        "Per seed:",
+        "",
+        "| method | seed | final return | normalised | average return | normalised |",
+        "|---|---:|---:|---:|---:|---:|",
+    ]
+    for label, row in summary["methods"].items():
+        for seed in row["per_seed"]:
+            numbers = (
+                seed["final_return"],
+                seed["final_normalized_return"],
+                seed["average_return"],
+                seed["average_normalized_return"],
+            )
+            cells_text = " | ".join("n/a" if not np.isfinite(v) else f"{v:.2f}" for v in numbers)
+            lines.append(f"| {label} | {seed['seed']} | {cells_text} |")
+    lines += [
         "",
         f"Training throughput: {summary['train_env_steps_per_second']:,.0f} env steps/s "
         f"(adversarial phase, all cells); compile {summary['compile_seconds']:.1f} s.",
@@ -153,15 +251,27 @@ def summary_markdown(summary, cells, metrics, title: str, notes: Sequence[str] =
     return "\n".join(lines) + "\n"
 
 
+def json_safe(value):
+    """``value`` with every non-finite float replaced by None (JSON has no NaN)."""
+    if isinstance(value, dict):
+        return {key: json_safe(item) for key, item in value.items()}
+    if isinstance(value, list | tuple):
+        return [json_safe(item) for item in value]
+    if isinstance(value, float | np.floating) and not np.isfinite(value):
+        return None
+    return value
+
+
 def write_summary(directory: Path, summary: dict, markdown: str) -> None:
-    (Path(directory) / "summary.json").write_text(json.dumps(summary, indent=2))
+    text = json.dumps(json_safe(summary), indent=2, allow_nan=False)
+    (Path(directory) / "summary.json").write_text(text)
     (Path(directory) / "summary.md").write_text(markdown)
 
 
 def plot_curves(path: Path, cells, metrics, normalizer, title: str) -> None:
-    """Normalised evaluation return vs environment steps: mean ± std band per method (one
-    panel per setting), like the paper's Fig. 2. Falls back to raw returns without a
-    normaliser."""
+    """Normalised evaluation return vs environment steps: the mean over seeds with its 95%
+    bootstrap interval per method (one panel per setting), like the paper's Fig. 2. Falls
+    back to raw returns without a normaliser."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -183,9 +293,10 @@ def plot_curves(path: Path, cells, metrics, normalizer, title: str) -> None:
             curve = values[rows][:, evaluated]
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
-                mean, std = np.nanmean(curve, axis=0), np.nanstd(curve, axis=0)
+                mean = np.nanmean(curve, axis=0)
+            low, high = np.array([stats.bootstrap_ci(column, np.mean) for column in curve.T]).T
             axis.plot(steps, mean, color=colors[method], lw=1.8, label=method)
-            axis.fill_between(steps, mean - std, mean + std, color=colors[method], alpha=0.15)
+            axis.fill_between(steps, low, high, color=colors[method], alpha=0.15)
         if normalizer is not None:
             axis.axhline(1.0, color="grey", ls="--", lw=0.8)
             axis.axhline(0.0, color="grey", ls=":", lw=0.8)
@@ -196,7 +307,7 @@ def plot_curves(path: Path, cells, metrics, normalizer, title: str) -> None:
         )
         axis.grid(alpha=0.3)
     axes[0][-1].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9)
-    figure.suptitle(title)
+    figure.suptitle(f"{title}\nmean over seeds; shaded: 95% bootstrap interval of the mean")
     figure.tight_layout()
     figure.savefig(path, dpi=120)
     plt.close(figure)

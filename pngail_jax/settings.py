@@ -53,30 +53,35 @@ def add_arguments(parser) -> None:
     group.add_argument(
         "--settings",
         choices=("table", "reference"),
-        default="table",
-        help="start from the per-environment table (default) or from the reference code's "
-        "setting (25 envs x 200 steps, the task's own solver, 32 evaluation episodes every 10 "
-        "iterations); the flags below override either",
+        help="start from the per-environment table or from the reference code's setting (25 "
+        "envs x 200 steps, the task's own solver, 32 evaluation episodes every 10 iterations); "
+        "the flags below override either (default: the table, or a --config file's settings)",
     )
-    group.add_argument("--num-envs", type=int, help="parallel envs per run")
-    group.add_argument("--unroll-length", type=int, help="steps per env per iteration")
-    group.add_argument("--eval-every", type=int, help="iterations between evaluations")
-    group.add_argument("--num-eval-episodes", type=int, help="episodes per evaluation")
+    table = "(default: the table's)"
+    group.add_argument("--num-envs", type=int, help=f"parallel envs per run {table}")
+    group.add_argument("--unroll-length", type=int, help=f"steps per env per iteration {table}")
+    group.add_argument("--eval-every", type=int, help=f"iterations between evaluations {table}")
+    group.add_argument("--num-eval-episodes", type=int, help=f"episodes per evaluation {table}")
     group.add_argument(
-        "--solver", help="MJX solver: 'own' (the task's), 'fast' (1/4) or 'I/L' iterations"
+        "--solver",
+        help=f"MJX solver: 'own' (the task's), 'fast' (1/4) or 'I/L' iterations {table}",
     )
     group.add_argument(
         "--normalize-observations",
         action=argparse.BooleanOptionalAction,
         default=None,
-        help="running mean/std observation normalisation in TRPO",
+        help=f"running mean/std observation normalisation in TRPO {table}",
     )
 
 
-def from_arguments(env_name: str, args) -> RunSettings:
-    """The ``RunSettings`` that ``add_arguments``' flags select (raises ValueError naming the
-    flag on a bad value)."""
-    base = REFERENCE_SETTINGS if args.settings == "reference" else settings_for(env_name)
+def from_arguments(env_name: str, args, base: RunSettings | None = None) -> RunSettings:
+    """The ``RunSettings`` that ``add_arguments``' flags select, starting from ``base`` (e.g. a
+    saved run's) unless ``--settings`` names a starting point; ``base`` None: the table's row.
+    Raises ValueError naming the flag on a bad value."""
+    if args.settings == "reference":
+        base = REFERENCE_SETTINGS
+    elif args.settings == "table" or base is None:
+        base = settings_for(env_name)
     fields = {}
     for name in ("num_envs", "unroll_length", "eval_every", "num_eval_episodes"):
         value = getattr(args, name)
@@ -206,10 +211,15 @@ ENV_SETTINGS: dict[str, RunSettings] = {
 
 
 def settings_for(env_name: str, **overrides) -> RunSettings:
-    """The table's settings of ``env_name`` with ``overrides`` (``None`` = keep) applied."""
+    """The table's settings of ``env_name`` with ``overrides`` (``None`` = keep) applied.
+
+    An environment outside the table (one given to ``envs.register`` or named
+    ``"package.module:factory"``) gets ``REFERENCE_SETTINGS``; a name ``envs.make`` does not
+    know raises ValueError.
+    """
     if env_name not in ENV_SETTINGS:
-        raise ValueError(f"unknown environment {env_name!r}; available: {', '.join(ENV_SETTINGS)}")
-    return ENV_SETTINGS[env_name].replace(**overrides)
+        envs.check_name(env_name)
+    return ENV_SETTINGS.get(env_name, REFERENCE_SETTINGS).replace(**overrides)
 
 
 def make_env(env_name: str, settings: RunSettings) -> envs.Env:

@@ -1,6 +1,6 @@
-"""Adversarial imitation as one pure function: ``make_train(config, env, demos)``.
+"""Adversarial imitation as one pure program: ``AdversarialTrainer(config, env, demos)``.
 
-``train(hyperparams, spec, key)`` runs, for one method (``spec``, data) and one seed:
+``trainer.train(hyperparams, spec, key)`` runs, for one method (``spec``, data) and one seed:
 
 1. the split of the demonstrations into D_c (labelled) and D_u, and the confidence classifier
    where the method needs one (``spec.classifier_coef``), giving a confidence r per row;
@@ -12,16 +12,18 @@ The discriminator sees agent actions clipped to the action bounds (what the envi
 applies) and demonstrations in the environment's units. The reference compares unclipped agent
 torques with half-scale Pendulum demonstrations; we do not copy that mismatch.
 
-``train`` is ``init`` followed by ``run_blocks``; both are attached so a host loop can run the
-same computation in chunks (``pngail_jax.grid``).
+``train`` is ``init`` followed by ``run_blocks``, so a host loop can run the same computation
+in chunks (``pngail_jax.grid``).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 import optax
 from flax import struct
 
@@ -29,9 +31,15 @@ from pngail_jax import envs
 from pngail_jax.confidence import ClassifierConfig, confidence_errors, train_classifier
 from pngail_jax.demos import DemonstrationError, Demonstrations, make_split
 from pngail_jax.losses import ConfidenceStats, discriminator_loss, policy_reward
-from pngail_jax.methods import MethodSpec
+from pngail_jax.methods import PRESETS, MethodSpec
 from pngail_jax.networks import Discriminator
-from pngail_jax.rl.train import TRPO, TRPOConfig, TRPOHyperparams, TRPOState
+from pngail_jax.rl.train import (
+    TRPO,
+    TRPOConfig,
+    TRPOHyperparams,
+    TRPOState,
+    run_evaluated_blocks,
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -108,45 +116,65 @@ class TrainState:
     key: jax.Array
 
 
-def make_train(config: AdversarialConfig, env: envs.Env, demos: Demonstrations):
-    """Returns ``train(hyperparams, spec, key) -> (final_state, metrics)``, pure and jittable.
+class AdversarialTrainer:
+    """Adversarial imitation of ``demos`` in ``env``, one method (a ``MethodSpec``) per call.
 
-    ``metrics`` maps names to float[num_iterations] (``eval/return`` is NaN except every
-    ``eval_every`` iterations), plus the classifier phase's ``confidence/mae`` and
-    ``confidence/rmse`` (float[], on D_u against the noise-free confidences).
+    The trainer interface shared with ``pngail_jax.rl.TRPOTrainer`` (and used by
+    ``pngail_jax.grid.Grid``); the cell inputs here are ``(hyperparams, spec)``:
 
-    Attached: ``train.init(hyperparams, spec, key) -> (state, init_metrics)`` and
-    ``train.run_blocks(hyperparams, spec, state, num_blocks) -> (state, metrics)`` (num_blocks
-    static), whose composition is ``train``; ``train.trpo``; ``train.config``.
+    - ``init(hyperparams, spec, key) -> (state, init_metrics)``: the split, the classifier
+      phase and the initial networks; ``init_metrics`` holds ``confidence/mae`` and
+      ``confidence/rmse`` (float[], on D_u against the noise-free confidences; NaN when the
+      demonstrations carry no confidences);
+    - ``run_blocks(hyperparams, spec, state, num_blocks) -> (state, metrics)``: ``num_blocks``
+      (static) blocks of ``eval_every`` iterations, metrics float[num_blocks * eval_every]
+      (``eval/return`` NaN except at each block's end);
+    - ``train(hyperparams, spec, key)``: both, for the configured number of iterations.
+
+    Demonstrations without confidences serve only methods that read none (GAIL, WGAIL):
+    ``has_confidence`` says which case this is, and ``check_methods`` refuses the others.
     """
-    demos.check_env(env)
-    if demos.confidence is None:
-        raise DemonstrationError(
-            "adversarial training needs a confidence per demonstration row (for GAIL or WGAIL "
-            "alone, pass confidence=np.ones(n))"
-        )
-    num_demos = demos.num_rows if config.num_demos is None else config.num_demos
-    if num_demos > demos.num_rows:
-        raise DemonstrationError(
-            f"num_demos={num_demos} but the demonstrations have only {demos.num_rows} rows"
-        )
-    trpo_config = config.trpo
-    trpo = TRPO(trpo_config, env)
-    discriminator = Discriminator(config.discriminator_hidden_sizes)
-    optimizer = optax.scale_by_adam()
-    demo_inputs = jnp.asarray(demos.inputs)
-    all_confidence = jnp.asarray(demos.confidence)
-    action_low, action_high = jnp.asarray(env.action_low), jnp.asarray(env.action_high)
-    batch_size = trpo_config.batch_size
 
-    def init(hyperparams: Hyperparams, spec: MethodSpec, key: jax.Array):
+    def __init__(self, config: AdversarialConfig, env: envs.Env, demos: Demonstrations):
+        demos.check_env(env)
+        num_demos = demos.num_rows if config.num_demos is None else config.num_demos
+        if num_demos > demos.num_rows:
+            raise DemonstrationError(
+                f"num_demos={num_demos} but the demonstrations have only {demos.num_rows} rows"
+            )
+        self.config = config
+        self.env = env
+        self.num_demos = num_demos
+        self.has_confidence = demos.confidence is not None
+        self.trpo = TRPO(config.trpo, env)
+        self.discriminator = Discriminator(config.discriminator_hidden_sizes)
+        self.optimizer = optax.scale_by_adam()
+        self._demo_inputs = jnp.asarray(demos.inputs)
+        # Without confidences every row gets r = 1; no method that reads r may run then.
+        self._confidence = jnp.asarray(
+            demos.confidence if self.has_confidence else np.ones(demos.num_rows, np.float32)
+        )
+        self._action_bounds = jnp.asarray(env.action_low), jnp.asarray(env.action_high)
+
+    def check_methods(self, methods) -> None:
+        """Raises ``DemonstrationError`` naming the methods that need confidences the
+        demonstrations do not carry."""
+        needy = [name for name in methods if PRESETS[name].confidence_source != "none"]
+        if not self.has_confidence and needy:
+            raise DemonstrationError(
+                f"the demonstrations carry no confidences, which {', '.join(needy)} read; "
+                "give a confidence file, or run only methods that read none (gail, wgail)"
+            )
+
+    def init(self, hyperparams: Hyperparams, spec: MethodSpec, key: jax.Array):
         split_key, classifier_key, trpo_key, disc_key, eval_key, carry_key = jax.random.split(
             key, 6
         )
         split = make_split(
-            split_key, all_confidence, num_demos, hyperparams.label_ratio, hyperparams.noise_std
-        )
-        inputs = demo_inputs[split.indices]
+            split_key, self._confidence, self.num_demos, hyperparams.label_ratio,
+            hyperparams.noise_std,
+        )  # fmt: skip
+        inputs = self._demo_inputs[split.indices]
         num_labelled = split.labelled.sum()
         mean_labelled = jnp.where(split.labelled, split.confidence, 0.0).sum() / jnp.maximum(
             num_labelled, 1
@@ -155,7 +183,7 @@ def make_train(config: AdversarialConfig, env: envs.Env, demos: Demonstrations):
 
         def classify():
             predicted, _, _ = train_classifier(
-                config.classifier,
+                self.config.classifier,
                 spec.classifier,
                 inputs,
                 split.confidence,
@@ -171,50 +199,54 @@ def make_train(config: AdversarialConfig, env: envs.Env, demos: Demonstrations):
             split.confidence,
             spec.classifier_coef * predicted + (1 - spec.classifier_coef) * without_classifier,
         )
-        disc_params = discriminator.init(disc_key, inputs[0])
+        disc_params = self.discriminator.init(disc_key, inputs[0])
         state = TrainState(
-            trpo=trpo.init(trpo_key),
+            trpo=self.trpo.init(trpo_key),
             discriminator_params=disc_params,
-            discriminator_optimizer_state=optimizer.init(disc_params),
+            discriminator_optimizer_state=self.optimizer.init(disc_params),
             demo_rows=split.indices,
             confidence=confidence,
             labelled=split.labelled,
-            importance_weights=jnp.ones(num_demos),
+            importance_weights=jnp.ones(self.num_demos),
             stats=ConfidenceStats(
                 mean_confidence=confidence.mean(), mean_labelled_confidence=mean_labelled
             ),
             iteration=jnp.zeros((), jnp.int32),
-            eval_keys=jax.random.split(eval_key, trpo_config.num_eval_episodes),
+            eval_keys=jax.random.split(eval_key, self.config.trpo.num_eval_episodes),
             key=carry_key,
         )
         errors = confidence_errors(confidence, split.true_confidence, split.labelled)
+        if not self.has_confidence:
+            errors = jax.tree.map(lambda e: jnp.full_like(e, jnp.nan), errors)
         return state, {f"confidence/{name}": value for name, value in errors.items()}
 
-    def importance_weights(state: TrainState) -> jax.Array:
+    def _importance_weights(self, state: TrainState) -> jax.Array:
         """WGAIL's w = [exp(-z) pi(a|s)]^(1/2) on every split row; no gradient flows."""
-        inputs = demo_inputs[state.demo_rows]
-        logits = discriminator.apply(state.discriminator_params, inputs)
-        obs, action = inputs[:, : env.observation_size], inputs[:, env.observation_size :]
-        return jnp.exp(0.5 * (trpo.log_prob(state.trpo, obs, action) - logits))
+        inputs = self._demo_inputs[state.demo_rows]
+        logits = self.discriminator.apply(state.discriminator_params, inputs)
+        size = self.env.observation_size
+        log_prob = self.trpo.log_prob(state.trpo, inputs[:, :size], inputs[:, size:])
+        return jnp.exp(0.5 * (log_prob - logits))
 
-    def iteration(hyperparams: Hyperparams, spec: MethodSpec, state: TrainState):
-        trpo_state, transitions = trpo.rollout(state.trpo)
+    def _iteration(self, hyperparams: Hyperparams, spec: MethodSpec, state: TrainState):
+        config, trpo_config = self.config, self.config.trpo
+        trpo_state, transitions = self.trpo.rollout(state.trpo)
         refresh = (
             (state.iteration > 0)
             & (state.iteration % config.wgail_refresh_every == 0)
             & (state.iteration <= config.wgail_refresh_until)
         )
-        weights = jnp.where(refresh, importance_weights(state), state.importance_weights)
+        weights = jnp.where(refresh, self._importance_weights(state), state.importance_weights)
         agent_inputs = jnp.concatenate(
-            [transitions.obs, jnp.clip(transitions.action, action_low, action_high)], axis=-1
-        ).reshape(batch_size, -1)
+            [transitions.obs, jnp.clip(transitions.action, *self._action_bounds)], axis=-1
+        ).reshape(trpo_config.batch_size, -1)
         key, batch_key = jax.random.split(state.key)
-        rows = jax.random.randint(batch_key, (batch_size,), 0, num_demos)
-        demo_batch = demo_inputs[state.demo_rows[rows]]
+        rows = jax.random.randint(batch_key, (trpo_config.batch_size,), 0, self.num_demos)
+        demo_batch = self._demo_inputs[state.demo_rows[rows]]
 
         def loss_fn(params):
-            logits_agent = discriminator.apply(params, agent_inputs)
-            logits_demo = discriminator.apply(params, demo_batch)
+            logits_agent = self.discriminator.apply(params, agent_inputs)
+            logits_demo = self.discriminator.apply(params, demo_batch)
             loss, metrics = discriminator_loss(
                 spec,
                 logits_agent,
@@ -233,12 +265,16 @@ def make_train(config: AdversarialConfig, env: envs.Env, demos: Demonstrations):
         rewards = policy_reward(logits_agent).reshape(
             trpo_config.unroll_length, trpo_config.num_envs
         )
-        updates, disc_optimizer_state = optimizer.update(grads, state.discriminator_optimizer_state)
+        updates, disc_optimizer_state = self.optimizer.update(
+            grads, state.discriminator_optimizer_state
+        )
         disc_params = optax.apply_updates(
             state.discriminator_params,
             jax.tree.map(lambda u: -hyperparams.discriminator_learning_rate * u, updates),
         )
-        trpo_state, trpo_metrics = trpo.update(hyperparams.trpo, trpo_state, transitions, rewards)
+        trpo_state, trpo_metrics = self.trpo.update(
+            hyperparams.trpo, trpo_state, transitions, rewards
+        )
         state = state.replace(
             trpo=trpo_state,
             discriminator_params=disc_params,
@@ -249,31 +285,22 @@ def make_train(config: AdversarialConfig, env: envs.Env, demos: Demonstrations):
         )
         return state, {**trpo_metrics, **disc_metrics, "env_steps": trpo_state.env_steps}
 
-    def block(hyperparams: Hyperparams, spec: MethodSpec, state: TrainState):
-        state, metrics = jax.lax.scan(
-            lambda s, _: iteration(hyperparams, spec, s), state, None, length=trpo_config.eval_every
+    def run_blocks(self, hyperparams: Hyperparams, spec: MethodSpec, state: TrainState, num_blocks):
+        return run_evaluated_blocks(
+            self.trpo,
+            functools.partial(self._iteration, hyperparams, spec),
+            state,
+            self.policy_state,
+            state.eval_keys,
+            num_blocks,
         )
-        eval_return = trpo.evaluate(state.trpo, state.eval_keys)
-        metrics["eval/return"] = (
-            jnp.full((trpo_config.eval_every,), jnp.nan).at[-1].set(eval_return)
-        )
-        return state, metrics
 
-    def run_blocks(hyperparams: Hyperparams, spec: MethodSpec, state: TrainState, num_blocks):
-        """``num_blocks`` (static) blocks of ``eval_every`` iterations; metrics float[I]."""
-        state, metrics = jax.lax.scan(
-            lambda s, _: block(hyperparams, spec, s), state, None, length=num_blocks
-        )
-        return state, jax.tree.map(lambda x: x.reshape(-1, *x.shape[2:]), metrics)
-
-    def train(hyperparams: Hyperparams, spec: MethodSpec, key: jax.Array):
-        state, init_metrics = init(hyperparams, spec, key)
-        state, metrics = run_blocks(hyperparams, spec, state, trpo_config.num_evaluations)
+    def train(self, hyperparams: Hyperparams, spec: MethodSpec, key: jax.Array):
+        state, init_metrics = self.init(hyperparams, spec, key)
+        state, metrics = self.run_blocks(hyperparams, spec, state, self.config.trpo.num_evaluations)
         return state, {**metrics, **init_metrics}
 
-    train.init = init
-    train.run_blocks = run_blocks
-    train.trpo = trpo
-    train.config = config
-    train.num_demos = num_demos
-    return train
+    @staticmethod
+    def policy_state(state: TrainState) -> TRPOState:
+        """The learner's state inside a trainer state (for exporting its policy)."""
+        return state.trpo

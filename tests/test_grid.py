@@ -19,7 +19,7 @@ from pngail_jax.demos import DemonstrationError, Demonstrations
 from pngail_jax.grid import Grid, make_cells, nonfinite_cells, stack_cells
 from pngail_jax.methods import method_spec
 from pngail_jax.rl import TRPOConfig
-from pngail_jax.train import AdversarialConfig, Hyperparams, make_train
+from pngail_jax.train import AdversarialConfig, AdversarialTrainer, Hyperparams
 
 COMPARED = ("eval/return", "disc/loss", "disc/acc_agent", "train/reward", "trpo/kl")
 
@@ -57,10 +57,10 @@ def small_grid_inputs(methods=("gail", "pngail", "wgail"), num_seeds=2):
 def run_single_and_grid() -> dict:
     """3 methods x 2 seeds as one vmapped program and as six separate runs."""
     env, demos, config = small_setup()
-    train = make_train(config, env, demos)
+    trainer = AdversarialTrainer(config, env, demos)
     cells, (hyperparams, specs, keys) = small_grid_inputs()
-    _, grid_metrics = jax.jit(jax.vmap(train))(hyperparams, specs, keys)
-    single = jax.jit(train)
+    _, grid_metrics = jax.jit(jax.vmap(trainer.train))(hyperparams, specs, keys)
+    single = jax.jit(trainer.train)
     rows = []
     for index in range(len(cells)):
         pick = jax.tree.map(lambda x, i=index: x[i], (hyperparams, specs, keys))
@@ -82,9 +82,9 @@ def test_grid_matches_runs_one_at_a_time():
 
 def chunked_grid_results(devices=None, chunks=2):
     env, demos, config = small_setup()
-    train = make_train(config, env, demos)
+    trainer = AdversarialTrainer(config, env, demos)
     _, inputs = small_grid_inputs()
-    grid = Grid(train, *inputs, blocks_per_chunk=1, devices=devices)
+    grid = Grid(trainer, inputs, blocks_per_chunk=1, devices=devices)
     state, _ = grid.init()
     outputs = []
     for _ in range(chunks):
@@ -119,9 +119,9 @@ def test_sharded_over_four_devices_matches_one_device():
 
 def test_chunks_match_the_whole_scan_and_repeat_bit_identically():
     env, demos, config = small_setup()
-    train = make_train(config, env, demos)
+    trainer = AdversarialTrainer(config, env, demos)
     _, inputs = small_grid_inputs()
-    _, whole = jax.jit(jax.vmap(train))(*inputs)
+    _, whole = jax.jit(jax.vmap(trainer.train))(*inputs)
     _, _, first = chunked_grid_results()
     _, _, second = chunked_grid_results()
     for name in COMPARED:
@@ -135,9 +135,9 @@ def test_chunks_match_the_whole_scan_and_repeat_bit_identically():
 
 def test_resume_from_a_checkpoint_is_bit_exact(tmp_path):
     env, demos, config = small_setup()
-    train = make_train(config, env, demos)
+    trainer = AdversarialTrainer(config, env, demos)
     _, inputs = small_grid_inputs()
-    grid = Grid(train, *inputs, blocks_per_chunk=1)
+    grid = Grid(trainer, inputs, blocks_per_chunk=1)
     state, _ = grid.init()
     state, _ = grid.run_chunk(state)
     template = jax.eval_shape(lambda: grid.unpad(state))
@@ -151,13 +151,13 @@ def test_resume_from_a_checkpoint_is_bit_exact(tmp_path):
 
 def test_a_nan_cell_is_reported_and_leaves_the_others_alone():
     env, demos, config = small_setup()
-    train = make_train(config, env, demos)
+    trainer = AdversarialTrainer(config, env, demos)
     cells, (hyperparams, specs, keys) = small_grid_inputs(("pngail",), num_seeds=2)
     poisoned = hyperparams.replace(
         discriminator_learning_rate=hyperparams.discriminator_learning_rate.at[1].set(jnp.nan)
     )
-    _, clean = jax.jit(jax.vmap(train))(hyperparams, specs, keys)
-    _, mixed = jax.jit(jax.vmap(train))(poisoned, specs, keys)
+    _, clean = jax.jit(jax.vmap(trainer.train))(hyperparams, specs, keys)
+    _, mixed = jax.jit(jax.vmap(trainer.train))(poisoned, specs, keys)
     mixed = jax.device_get(mixed)
     assert nonfinite_cells(mixed, config.trpo.eval_every).tolist() == [1]
     assert nonfinite_cells(jax.device_get(clean), config.trpo.eval_every).tolist() == []
@@ -169,18 +169,18 @@ def test_wgail_weights_refresh_on_schedule():
     env, demos, config = small_setup(
         num_iterations=3, eval_every=1, wgail_refresh_every=2, wgail_refresh_until=2
     )
-    train = make_train(config, env, demos)
+    trainer = AdversarialTrainer(config, env, demos)
     hyperparams, spec, key = Hyperparams.create(), method_spec("wgail"), jax.random.key(1)
-    state, _ = jax.jit(train.init)(hyperparams, spec, key)
-    run = jax.jit(functools.partial(train.run_blocks, num_blocks=1))
+    state, _ = jax.jit(trainer.init)(hyperparams, spec, key)
+    run = jax.jit(functools.partial(trainer.run_blocks, num_blocks=1))
     state, _ = run(hyperparams, spec, state)
     state, _ = run(hyperparams, spec, state)
     np.testing.assert_array_equal(state.importance_weights, 1.0)  # before iteration 2: w = 1
     before = state
     state, _ = run(hyperparams, spec, state)  # iteration 2 refreshes from `before`
     inputs = demos.inputs[np.asarray(before.demo_rows)]
-    logits = train_discriminator_logits(train, before, inputs)
-    log_pi = train.trpo.log_prob(before.trpo, inputs[:, :3], inputs[:, 3:])
+    logits = train_discriminator_logits(trainer, before, inputs)
+    log_pi = trainer.trpo.log_prob(before.trpo, inputs[:, :3], inputs[:, 3:])
     expected = np.sqrt(np.exp(-np.asarray(logits, np.float64)) * np.exp(np.asarray(log_pi)))
     np.testing.assert_allclose(state.importance_weights, expected, rtol=1e-4)
     refreshed = state.importance_weights
@@ -192,37 +192,37 @@ def test_policy_reward_comes_from_the_discriminator_before_its_step():
     from pngail_jax.losses import policy_reward
 
     env, demos, config = small_setup(num_iterations=1)
-    train = make_train(config, env, demos)
+    trainer = AdversarialTrainer(config, env, demos)
     hyperparams, spec = Hyperparams.create(), method_spec("pngail")
-    state, _ = jax.jit(train.init)(hyperparams, spec, jax.random.key(2))
-    _, transitions = jax.jit(train.trpo.rollout)(state.trpo)  # the iteration's own rollout
+    state, _ = jax.jit(trainer.init)(hyperparams, spec, jax.random.key(2))
+    _, transitions = jax.jit(trainer.trpo.rollout)(state.trpo)  # the iteration's own rollout
     clipped = np.clip(transitions.action, env.action_low, env.action_high)
     agent_inputs = np.concatenate([transitions.obs, clipped], axis=-1)
-    run = jax.jit(functools.partial(train.run_blocks, num_blocks=1))
+    run = jax.jit(functools.partial(trainer.run_blocks, num_blocks=1))
     new_state, metrics = run(hyperparams, spec, state)
 
     def mean_reward(params):
         return float(
-            np.mean(policy_reward(train_discriminator_logits(train, params, agent_inputs)))
+            np.mean(policy_reward(train_discriminator_logits(trainer, params, agent_inputs)))
         )
 
     np.testing.assert_allclose(metrics["train/reward"][0], mean_reward(state), rtol=1e-5)
     assert abs(mean_reward(new_state) - mean_reward(state)) > 1e-4  # the step moved it
 
 
-def train_discriminator_logits(train, state, inputs):
+def train_discriminator_logits(trainer, state, inputs):
     from pngail_jax.networks import Discriminator
 
-    model = Discriminator(train.config.discriminator_hidden_sizes)
+    model = Discriminator(trainer.config.discriminator_hidden_sizes)
     return model.apply(state.discriminator_params, inputs)
 
 
 def test_given_confidences_need_no_classifier_and_classifier_fills_unlabelled_rows():
     env, demos, config = small_setup()
-    train = make_train(config, env, demos)
+    trainer = AdversarialTrainer(config, env, demos)
     hyperparams, key = Hyperparams.create(label_ratio=0.25), jax.random.key(3)
-    given, _ = jax.jit(train.init)(hyperparams, method_spec("icgail"), key)
-    classified, errors = jax.jit(train.init)(hyperparams, method_spec("pngail"), key)
+    given, _ = jax.jit(trainer.init)(hyperparams, method_spec("icgail"), key)
+    classified, errors = jax.jit(trainer.init)(hyperparams, method_spec("pngail"), key)
     labelled = np.asarray(given.labelled)
     assert labelled.sum() == 30  # round(0.25 * 120)
     np.testing.assert_array_equal(given.demo_rows, classified.demo_rows)  # same seed, same split
@@ -238,16 +238,29 @@ def test_given_confidences_need_no_classifier_and_classifier_fills_unlabelled_ro
     )
 
 
+def test_methods_that_read_no_confidences_run_without_them():
+    """GAIL without confidences is GAIL with any: the same numbers; PN-GAIL is refused."""
+    env, demos, config = small_setup()
+    with_confidence = AdversarialTrainer(config, env, demos)
+    without = AdversarialTrainer(config, env, Demonstrations(demos.observations, demos.actions))
+    args = (Hyperparams.create(), method_spec("gail"), jax.random.key(5))
+    _, expected = jax.jit(with_confidence.train)(*args)
+    _, metrics = jax.jit(without.train)(*args)
+    for name in COMPARED:
+        np.testing.assert_array_equal(metrics[name], expected[name], err_msg=name)
+    assert np.isnan(metrics["confidence/mae"])  # no confidences: no error to report
+    without.check_methods(["gail", "wgail"])
+    with pytest.raises(DemonstrationError, match="no confidences, which pngail, 2iwil read"):
+        without.check_methods(["gail", "pngail", "2iwil"])
+
+
 def test_bad_demonstrations_are_clear_errors():
     env, demos, config = small_setup()
-    no_confidence = Demonstrations(demos.observations, demos.actions)
-    with pytest.raises(DemonstrationError, match="confidence per demonstration row"):
-        make_train(config, env, no_confidence)
     with pytest.raises(DemonstrationError, match="only 120 rows"):
-        make_train(AdversarialConfig(trpo=config.trpo, num_demos=500), env, demos)
+        AdversarialTrainer(AdversarialConfig(trpo=config.trpo, num_demos=500), env, demos)
     wrong_size = Demonstrations(demos.observations[:, :2], demos.actions, demos.confidence)
     with pytest.raises(DemonstrationError, match="observations of size 2"):
-        make_train(config, env, wrong_size)
+        AdversarialTrainer(config, env, wrong_size)
     with pytest.raises(ValueError, match="label_ratio"):
         Hyperparams.create(label_ratio=1.0)
 

@@ -5,7 +5,7 @@ import json
 
 import numpy as np
 
-from pngail_jax import report
+from pngail_jax import report, stats
 from pngail_jax.grid import make_cells, nonfinite_cells
 
 NORMALIZER = (-1200.0, -200.0)
@@ -47,11 +47,29 @@ def test_summary_groups_by_method_and_setting_and_drops_diverged_cells(tmp_path)
     row = summary["methods"]["pngail [label_ratio=0.1,noise=0]"]
     assert row["num_seeds"] == 2
     np.testing.assert_allclose(row["final_return_mean"], final[[3, 5]].mean())
-    np.testing.assert_allclose(row["final_return_std"], final[[3, 5]].std())
-    np.testing.assert_allclose(
-        row["final_normalized_return_mean"], ((final[[3, 5]] + 1200) / 1000).mean()
+    np.testing.assert_allclose(row["final_return_std"], final[[3, 5]].std(ddof=1))
+    np.testing.assert_allclose(row["final_return_se"], final[[3, 5]].std(ddof=1) / np.sqrt(2))
+    normalized = (final[[3, 5]] + 1200) / 1000
+    np.testing.assert_allclose(row["final_normalized_return_mean"], normalized.mean())
+    assert row["final_normalized_return_iqm"] == stats.iqm(normalized)
+    assert row["final_normalized_return_ci95"] == list(stats.bootstrap_ci(normalized))
+    average = np.nanmean(metrics["eval/return"][[3, 5]], axis=1)  # every evaluation of a seed
+    np.testing.assert_allclose(row["average_return_mean"], average.mean())
+    per_seed = row["per_seed"]
+    assert [s["seed"] for s in per_seed] == [0, 1, 2] and np.isnan(per_seed[1]["final_return"])
+    assert per_seed[2]["final_return"] == final[5]
+    improvement = summary["probability_of_improvement"]
+    assert list(improvement) == ["gail [label_ratio=0.1,noise=0]", "gail [label_ratio=0.2,noise=0]"]
+    assert improvement["gail [label_ratio=0.1,noise=0]"]["estimate"] == (
+        stats.probability_of_improvement(final[[3, 5]], final[[0, 1, 2]])
     )
-    json.dumps(summary)  # serialisable as summary.json
+    text = json.dumps(report.json_safe(summary), allow_nan=False)  # summary.json: no bare NaN
+    assert (
+        json.loads(text)["methods"]["pngail [label_ratio=0.1,noise=0]"]["per_seed"][1][
+            "final_return"
+        ]
+        is None
+    )
 
     report.write_metrics_csv(tmp_path / "m.csv", cells, metrics, NORMALIZER)
     with open(tmp_path / "m.csv") as file:
@@ -67,7 +85,8 @@ def test_summary_groups_by_method_and_setting_and_drops_diverged_cells(tmp_path)
     report.plot_curves(tmp_path / "curves.png", cells, metrics, NORMALIZER, "test")
     assert (tmp_path / "curves.png").stat().st_size > 10_000
     markdown = report.summary_markdown(summary, cells, metrics, "test")
-    assert markdown.count("\n| ") == 1 + 4  # header + one row per method and setting
+    # per method and setting, PN-GAIL's improvement over each baseline, and per seed
+    assert markdown.count("\n| ") == (1 + 4) + (1 + 2) + (1 + 12)
 
 
 def test_no_normaliser_gives_nan_normalised_returns():

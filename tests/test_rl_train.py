@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from pngail_jax import envs
-from pngail_jax.rl import TRPOConfig, TRPOHyperparams, make_train
+from pngail_jax.rl import TRPOConfig, TRPOHyperparams, TRPOTrainer
 
 SMALL = TRPOConfig(
     num_envs=4,
@@ -30,7 +30,7 @@ def pendulum():
 
 
 def test_same_key_same_program_is_bit_identical(pendulum):
-    train = jax.jit(make_train(SMALL, pendulum))
+    train = jax.jit(TRPOTrainer(SMALL, pendulum).train)
     hyperparams = TRPOHyperparams.create()
     key = jax.random.key(3)
     _, first = train(hyperparams, key)
@@ -43,7 +43,7 @@ def test_same_key_same_program_is_bit_identical(pendulum):
 
 def test_vmapped_seeds_match_single_runs(pendulum):
     """Float32 reductions may be ordered differently under vmap: rtol 1e-4 over 2 iterations."""
-    train = make_train(SMALL, pendulum)
+    train = TRPOTrainer(SMALL, pendulum).train
     hyperparams = TRPOHyperparams.create()
     keys = jax.random.split(jax.random.key(0), 3)
     batched_state, batched = jax.jit(jax.vmap(train))(_stack(hyperparams, 3), keys)
@@ -55,15 +55,17 @@ def test_vmapped_seeds_match_single_runs(pendulum):
                 batched[name][seed], metrics[name], rtol=1e-4, atol=1e-6, err_msg=name
             )
         np.testing.assert_allclose(
-            jax.tree.leaves(batched_state.policy_params)[0][seed],
-            jax.tree.leaves(state.policy_params)[0],
+            jax.tree.leaves(batched_state.trpo.policy_params)[0][seed],
+            jax.tree.leaves(state.trpo.policy_params)[0],
             rtol=1e-4,
             atol=1e-6,
         )
 
 
 def test_metrics_and_counters(pendulum):
-    _, metrics = jax.jit(make_train(SMALL, pendulum))(TRPOHyperparams.create(), jax.random.key(0))
+    _, metrics = jax.jit(TRPOTrainer(SMALL, pendulum).train)(
+        TRPOHyperparams.create(), jax.random.key(0)
+    )
     np.testing.assert_array_equal(metrics["env_steps"], [200, 400])
     assert np.isnan(metrics["eval/return"][0]) and np.isfinite(metrics["eval/return"][1])
     assert set(metrics) >= {
@@ -98,7 +100,7 @@ def test_learns_pendulum_with_reference_defaults(pendulum):
     on 2 CPU cores.
     """
     config = TRPOConfig(num_iterations=100, eval_every=20)
-    train = jax.jit(jax.vmap(make_train(config, pendulum)))
+    train = jax.jit(jax.vmap(TRPOTrainer(config, pendulum).train))
     keys = jax.random.split(jax.random.key(0), 3)
     _, metrics = train(_stack(TRPOHyperparams.create(), 3), keys)
     final = np.asarray(metrics["eval/return"][:, -1])
@@ -124,10 +126,10 @@ def test_observation_normalizer_matches_numpy():
 
 def test_observation_normalization_option_trains(pendulum):
     config = dataclasses.replace(SMALL, normalize_observations=True)
-    state, metrics = jax.jit(make_train(config, pendulum))(
+    state, metrics = jax.jit(TRPOTrainer(config, pendulum).train)(
         TRPOHyperparams.create(), jax.random.key(0)
     )
-    assert float(state.normalizer.count) == 2 * config.batch_size
+    assert float(state.trpo.normalizer.count) == 2 * config.batch_size
     assert np.isfinite(metrics["eval/return"][-1])
 
 
@@ -136,17 +138,21 @@ def test_host_chunks_reuse_one_compiled_block(pendulum):
     import chex
 
     config = dataclasses.replace(SMALL, num_iterations=6)
-    train = make_train(config, pendulum)
-    block = jax.jit(chex.assert_max_traces(train.block, n=1))
-    state, eval_keys = jax.jit(train.init)(jax.random.key(0))
+    trainer = TRPOTrainer(config, pendulum)
+    hyperparams = TRPOHyperparams.create()
+    def run(hyperparams, state):
+        return trainer.run_blocks(hyperparams, state, num_blocks=1)
+
+    block = jax.jit(chex.assert_max_traces(run, n=1))
+    state, _ = jax.jit(trainer.init)(hyperparams, jax.random.key(0))
     for _ in range(config.num_evaluations):
-        state, _ = block(TRPOHyperparams.create(), state, eval_keys)
-    assert int(state.env_steps) == 6 * config.batch_size
+        state, _ = block(hyperparams, state)
+    assert int(state.trpo.env_steps) == 6 * config.batch_size
 
 
 def test_rewards_of_the_wrong_shape_are_rejected(pendulum):
-    train = make_train(SMALL, pendulum)
-    state = train.trpo.init(jax.random.key(0))
-    state, transitions = train.trpo.rollout(state)
+    trpo = TRPOTrainer(SMALL, pendulum).trpo
+    state = trpo.init(jax.random.key(0))
+    state, transitions = trpo.rollout(state)
     with pytest.raises(AssertionError, match="shape"):
-        train.trpo.update(TRPOHyperparams.create(), state, transitions, transitions.reward[:, :2])
+        trpo.update(TRPOHyperparams.create(), state, transitions, transitions.reward[:, :2])

@@ -111,12 +111,12 @@ def test_hopper_learns_with_the_table_settings():
     minute on 2 cores, mostly compiling."""
     import jax
 
-    from pngail_jax.rl import TRPOHyperparams, make_train
+    from pngail_jax.rl import TRPOHyperparams, TRPOTrainer
 
     row = settings_for("Hopper", eval_every=10)
     env = settings.make_env("Hopper", row)
     assert env.model_options["iterations"] == 1 and env.model_options["ls_iterations"] == 4
-    train = jax.jit(make_train(row.trpo_config(10, fisher="gauss_newton"), env))
+    train = jax.jit(TRPOTrainer(row.trpo_config(10, fisher="gauss_newton"), env).train)
     key = jax.random.split(jax.random.key(0), 3)[0]  # train_rl --seed 0's first seed
     _, metrics = train(TRPOHyperparams.create(), key)
     final = float(metrics["eval/return"][-1])

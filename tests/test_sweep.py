@@ -10,12 +10,14 @@ import pytest
 from experiments import sweep
 from pngail_jax.demos import Demonstrations, save_npz
 
-SUMMARY_KEYS = {
+SUMMARY_KEYS = {  # the fields of every earlier summary.json, and the new interval ones
     "final_return_mean",
     "final_return_std",
     "final_normalized_return_mean",
     "final_normalized_return_std",
     "num_seeds",
+    "final_normalized_return_iqm",
+    "final_normalized_return_ci95",
 }
 
 
@@ -56,10 +58,11 @@ def test_sweep_writes_every_output_and_resumes_exactly(demos_path, tmp_path):
     assert len(rows) == 2 * 2 * 4  # methods x seeds x iterations
     assert list(rows[0]) == list(sweep_columns())
     summary = json.loads((out / "summary.json").read_text())
-    assert set(summary) == {"methods", "train_env_steps_per_second", "compile_seconds"}
+    assert set(summary) >= {"methods", "train_env_steps_per_second", "compile_seconds"}
     assert set(summary["methods"]) == {"gail", "pngail"}
+    assert set(summary["probability_of_improvement"]) == {"gail"}
     for row in summary["methods"].values():
-        assert set(row) == SUMMARY_KEYS and row["num_seeds"] == 2
+        assert set(row) >= SUMMARY_KEYS and row["num_seeds"] == 2
         assert np.isfinite(row["final_return_mean"])
     final = [
         float(r["eval_return"]) for r in rows if r["iteration"] == "4" and r["method"] == "gail"
@@ -72,6 +75,15 @@ def test_sweep_writes_every_output_and_resumes_exactly(demos_path, tmp_path):
         summary["methods"]["gail"]["final_normalized_return_mean"], normalized, rtol=1e-5
     )
     assert summary["train_env_steps_per_second"] > 0
+    config = json.loads((out / "config.json").read_text())
+    assert config["provenance"]["libraries"]["jax"] and config["provenance"]["device_count"] == 1
+    assert config["resolved"]["adversarial"]["trpo"]["num_envs"] == 4
+    check_exported_policies(out, final)
+
+    # A new run from the saved config is the same run.
+    copy = tmp_path / "copy"
+    sweep.main(["--config", str(out / "config.json"), "--out", str(copy)])
+    assert (copy / "metrics.csv").read_text() == (out / "metrics.csv").read_text()
 
     # A kill after the first chunk: the second chunk's checkpoint and the outputs are lost.
     checkpoints = sorted((out / "checkpoints").iterdir())
@@ -88,6 +100,30 @@ def test_sweep_writes_every_output_and_resumes_exactly(demos_path, tmp_path):
             np.testing.assert_array_equal(stored[name], values, err_msg=name)
     with pytest.raises(SystemExit):  # a second run into the same directory
         sweep.parse_args(tiny_sweep_args(demos_path, out))
+
+
+def check_exported_policies(out, gail_final_returns):
+    """policies/<method>/ loads with load_policy (best seed by default) and drives gymnasium's
+    own Pendulum-v1."""
+    import gymnasium as gym
+
+    from pngail_jax import load_policy
+
+    assert sorted(p.name for p in (out / "policies").iterdir()) == ["gail", "pngail"]
+    best = load_policy(out / "policies" / "gail", verbose=False)
+    assert best.seed == int(np.argmax(gail_final_returns))
+    np.testing.assert_allclose(best.metadata["final_eval_returns"], gail_final_returns, rtol=1e-5)
+    other = load_policy(out / "policies" / "gail", seed=1 - best.seed)
+    env = gym.make("Pendulum-v1")
+    obs, _ = env.reset(seed=0)
+    assert not np.allclose(best(obs), other(obs))  # two different seeds' networks
+    total = 0.0
+    for _ in range(200):
+        action = best(obs)
+        assert action.shape == (1,) and -2 <= action[0] <= 2
+        obs, reward, terminated, truncated, _ = env.step(action)
+        total += reward
+    assert truncated and np.isfinite(total)
 
 
 def sweep_columns():
@@ -123,9 +159,16 @@ def test_bad_flags_are_named(demos_path, tmp_path, capsys):
     assert "--num-envs must be a positive integer" in capsys.readouterr().err
 
 
+def test_every_flag_has_help_and_its_default():
+    parser = sweep.build_parser()
+    for action in parser._actions:
+        if action.dest != "help":
+            assert action.help and "default" in action.help, action.option_strings
+
+
 def test_presets_and_chunking():
-    args = sweep.parse_args(["--preset", "paper", "--seeds", "2"])
-    assert (args.iterations, args.seeds) == (5000, 2)  # explicit flags beat the preset
+    config = sweep.parse_args(["--preset", "paper", "--seeds", "2"]).config
+    assert (config.iterations, config.seeds) == (5000, 2)  # explicit flags beat the preset
     assert sweep.blocks_per_chunk(30, 5) == 5
     assert sweep.blocks_per_chunk(30, 4) == 3
     assert sweep.blocks_per_chunk(7, 5) == 1

@@ -11,7 +11,7 @@ from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import Demonstrations, load_demonstrations
 from pngail_jax.grid import make_cells, stack_cells
 from pngail_jax.rl import TRPOConfig
-from pngail_jax.train import AdversarialConfig, make_train
+from pngail_jax.train import AdversarialConfig, AdversarialTrainer
 
 SHARED_PENDULUM = Path(__file__).resolve().parents[2] / "shared" / "data" / "pendulum"
 
@@ -36,9 +36,9 @@ def test_gail_learns_pendulum_from_the_optimal_trajectory():
         trpo=TRPOConfig(num_iterations=150, eval_every=10, fisher="gauss_newton"),
         classifier=ClassifierConfig(num_steps=100),  # GAIL reads no confidences
     )
-    train = make_train(config, env, optimal)
+    trainer = AdversarialTrainer(config, env, optimal)
     cells = make_cells(["gail"], num_seeds=4)
-    _, metrics = jax.jit(jax.vmap(train))(*stack_cells(cells, jax.random.key(0)))
+    _, metrics = jax.jit(jax.vmap(trainer.train))(*stack_cells(cells, jax.random.key(0)))
     final = np.asarray(metrics["eval/return"])[:, -1]
     assert np.median(final) > -600, final
     assert np.isfinite(np.asarray(metrics["disc/loss"])).all()

@@ -1,5 +1,12 @@
 """TRPO in pure JAX: rollouts, GAE, conjugate gradient, Fisher products, line search."""
 
-from pngail_jax.rl.train import TRPO, TRPOConfig, TRPOHyperparams, TRPOState, make_train
+from pngail_jax.rl.train import (
+    TRPO,
+    TRPOConfig,
+    TRPOHyperparams,
+    TRPOState,
+    TRPOTrainer,
+    TRPOTrainState,
+)
 
-__all__ = ["TRPO", "TRPOConfig", "TRPOHyperparams", "TRPOState", "make_train"]
+__all__ = ["TRPO", "TRPOConfig", "TRPOHyperparams", "TRPOState", "TRPOTrainState", "TRPOTrainer"]

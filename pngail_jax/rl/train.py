@@ -1,9 +1,10 @@
-"""TRPO as one pure function: ``make_train(config, env) -> train(hyperparams, key)``.
+"""TRPO in pure JAX, and ``TRPOTrainer``: TRPO on a fixed reward as one pure program.
 
 Static configuration (shapes, iteration counts, which Fisher product) lives in the frozen
 ``TRPOConfig``; everything a grid may vary (discount, KL bound, learning rate, whether to
 bootstrap through truncation) is a ``TRPOHyperparams`` pytree, so
-``jax.jit(jax.vmap(train))(stacked_hyperparams, keys)`` trains many runs in one program.
+``jax.jit(jax.vmap(TRPOTrainer(config, env).train))(stacked_hyperparams, keys)`` trains many
+runs in one program.
 Defaults are the paper's and the reference code's (``docs/trpo.md``), except
 that GAE bootstraps the value through time-limit truncation (``bootstrap_truncation``).
 """
@@ -11,6 +12,7 @@ that GAE bootstraps the value through time-limit truncation (``bootstrap_truncat
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable
 from typing import Literal, NamedTuple
 
@@ -442,50 +444,87 @@ def true_reward(transitions: Transitions) -> jax.Array:
     return transitions.reward
 
 
-def make_train(config: TRPOConfig, env: envs.Env, reward_fn: RewardFunction = true_reward):
-    """Returns ``train(hyperparams, key) -> (final_state, metrics)``, pure and jittable.
+@struct.dataclass
+class TRPOTrainState:
+    """A TRPO-only run's state: the learner plus its fixed evaluation episode keys."""
 
-    ``metrics`` maps names to float[num_iterations]; ``eval/return`` (the deterministic policy
-    on ``num_eval_episodes`` fixed-key episodes) is set every ``eval_every`` iterations, at
-    the end of each block, and NaN elsewhere.
+    trpo: TRPOState
+    eval_keys: jax.Array  # key[num_eval_episodes], the same every evaluation
 
-    ``train`` is ``init`` followed by ``num_evaluations`` calls of ``block``; both are
-    attached (``train.init(key) -> (state, eval_keys)``, ``train.block(hyperparams, state,
-    eval_keys) -> (state, metrics[eval_every])``) so a host loop can run the same computation
-    in chunks, with progress and checkpoints in between.
+
+class TRPOTrainer:
+    """TRPO on a fixed reward (the environment's by default), in blocks.
+
+    The trainer interface shared with ``pngail_jax.train.AdversarialTrainer`` (and used by
+    ``pngail_jax.grid.Grid``): ``init(*cell_inputs, key) -> (state, init_metrics)``,
+    ``run_blocks(*cell_inputs, state, num_blocks) -> (state, metrics)`` and
+    ``train(*cell_inputs, key)``, their composition. Here the cell inputs are one
+    ``TRPOHyperparams``. All three are pure and jittable; ``num_blocks`` is static.
+
+    ``metrics`` map names to float[num_blocks * eval_every]; ``eval/return`` (the
+    deterministic policy on ``num_eval_episodes`` fixed-key episodes) is set at the end of
+    each block of ``eval_every`` iterations and NaN elsewhere.
     """
-    trpo = TRPO(config, env)
 
-    def iteration(hyperparams, state):
-        state, transitions = trpo.rollout(state)
-        state, metrics = trpo.update(hyperparams, state, transitions, reward_fn(transitions))
-        metrics["env_steps"] = state.env_steps
-        return state, metrics
+    def __init__(self, config: TRPOConfig, env: envs.Env, reward_fn: RewardFunction = true_reward):
+        self.config = config
+        self.env = env
+        self.trpo = TRPO(config, env)
+        self.reward_fn = reward_fn
 
-    def init(key: jax.Array):
+    def init(self, hyperparams: TRPOHyperparams, key: jax.Array):
+        del hyperparams  # the same signature as every trainer's; TRPO's init reads none
         init_key, eval_key = jax.random.split(key)
-        return trpo.init(init_key), jax.random.split(eval_key, config.num_eval_episodes)
-
-    def block(hyperparams: TRPOHyperparams, state: TRPOState, eval_keys: jax.Array):
-        state, metrics = jax.lax.scan(
-            lambda s, _: iteration(hyperparams, s), state, None, length=config.eval_every
+        state = TRPOTrainState(
+            trpo=self.trpo.init(init_key),
+            eval_keys=jax.random.split(eval_key, self.config.num_eval_episodes),
         )
-        eval_return = trpo.evaluate(state, eval_keys)
-        metrics["eval/return"] = jnp.full((config.eval_every,), jnp.nan).at[-1].set(eval_return)
+        return state, {}
+
+    def _iteration(self, hyperparams: TRPOHyperparams, state: TRPOState):
+        state, transitions = self.trpo.rollout(state)
+        rewards = self.reward_fn(transitions)
+        state, metrics = self.trpo.update(hyperparams, state, transitions, rewards)
+        return state, {**metrics, "env_steps": state.env_steps}
+
+    def run_blocks(
+        self, hyperparams: TRPOHyperparams, state: TRPOTrainState, num_blocks: int
+    ) -> tuple[TRPOTrainState, dict]:
+        trpo_state, metrics = run_evaluated_blocks(
+            self.trpo,
+            functools.partial(self._iteration, hyperparams),
+            state.trpo,
+            lambda s: s,
+            state.eval_keys,
+            num_blocks,
+        )
+        return state.replace(trpo=trpo_state), metrics
+
+    def train(self, hyperparams: TRPOHyperparams, key: jax.Array):
+        state, init_metrics = self.init(hyperparams, key)
+        state, metrics = self.run_blocks(hyperparams, state, self.config.num_evaluations)
+        return state, {**metrics, **init_metrics}
+
+    @staticmethod
+    def policy_state(state: TRPOTrainState) -> TRPOState:
+        """The learner's state inside a trainer state (for exporting its policy)."""
+        return state.trpo
+
+
+def run_evaluated_blocks(trpo: TRPO, iteration, state, trpo_state_of, eval_keys, num_blocks):
+    """``num_blocks`` (static) scans of ``trpo.config.eval_every`` iterations, each followed by
+    a deterministic evaluation of ``trpo_state_of(state)`` on ``eval_keys``.
+
+    ``iteration(state) -> (state, metrics)``; returns the final state and the metrics flattened
+    to float[num_blocks * eval_every], with ``eval/return`` NaN except at each block's end.
+    """
+    eval_every = trpo.config.eval_every
+
+    def block(state, _):
+        state, metrics = jax.lax.scan(lambda s, _: iteration(s), state, None, length=eval_every)
+        eval_return = trpo.evaluate(trpo_state_of(state), eval_keys)
+        metrics["eval/return"] = jnp.full((eval_every,), jnp.nan).at[-1].set(eval_return)
         return state, metrics
 
-    def train(hyperparams: TRPOHyperparams, key: jax.Array):
-        state, eval_keys = init(key)
-        state, metrics = jax.lax.scan(
-            lambda s, _: block(hyperparams, s, eval_keys),
-            state,
-            None,
-            length=config.num_evaluations,
-        )
-        metrics = jax.tree.map(lambda x: x.reshape(config.num_iterations, *x.shape[2:]), metrics)
-        return state, metrics
-
-    train.init = init
-    train.block = block
-    train.trpo = trpo
-    return train
+    state, metrics = jax.lax.scan(block, state, None, length=num_blocks)
+    return state, jax.tree.map(lambda x: x.reshape(-1, *x.shape[2:]), metrics)
