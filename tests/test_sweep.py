@@ -80,10 +80,12 @@ def test_sweep_writes_every_output_and_resumes_exactly(demos_path, tmp_path):
     assert config["resolved"]["adversarial"]["trpo"]["num_envs"] == 4
     check_exported_policies(out, final)
 
-    # A new run from the saved config is the same run.
+    # A new run from the saved config is the same run (logging changes no number).
     copy = tmp_path / "copy"
-    sweep.main(["--config", str(out / "config.json"), "--out", str(copy)])
+    sweep.main(["--config", str(out / "config.json"), "--out", str(copy), "--log", "tensorboard"])
     assert (copy / "metrics.csv").read_text() == (out / "metrics.csv").read_text()
+    assert json.loads((copy / "config.json").read_text())["log"] == ["tensorboard"]
+    assert any((copy / "tensorboard").iterdir())
 
     # A kill after the first chunk: the second chunk's checkpoint and the outputs are lost.
     checkpoints = sorted((out / "checkpoints").iterdir())
