@@ -140,6 +140,7 @@ def test_host_chunks_reuse_one_compiled_block(pendulum):
     config = dataclasses.replace(SMALL, num_iterations=6)
     trainer = TRPOTrainer(config, pendulum)
     hyperparams = TRPOHyperparams.create()
+
     def run(hyperparams, state):
         return trainer.run_blocks(hyperparams, state, num_blocks=1)
 
