@@ -10,7 +10,7 @@ phases are timed warm in ``--rounds`` (5) interleaved rounds, every phase once p
 that a change of load on a shared machine hits all phases alike; a round's sample of a phase
 is the mean of back-to-back calls (each ended by ``block_until_ready``) lasting at least
 ``SAMPLE_SECONDS``, and a phase's milliseconds are the median over rounds. Phases, in the
-order of ``pngail_jax.train``'s iteration:
+order of ``pngail_jax.train.AdversarialTrainer``'s iteration:
 
 - ``rollout``: ``trpo.rollout``, the ``unroll_length``-step ``lax.scan`` over the envs.
 - ``importance_weights``: WGAIL's w on every split row (``--demo-rows``). ``train.py`` puts it
@@ -30,7 +30,7 @@ order of ``pngail_jax.train``'s iteration:
 - ``line_search``: ``backtracking_line_search`` over ``num_backtracks`` fractions (evaluated
   side by side, not as a chain) on the natural-gradient step of these inputs.
 - ``update``: the whole ``trpo.update``; ``iteration``: rollout, importance weights,
-  discriminator step and update, as ``pngail_jax.train``'s ``iteration``.
+  discriminator step and update, as ``AdversarialTrainer._iteration``.
 - ``evaluation``: ``trpo.evaluate`` on ``num_eval_episodes`` episodes; it stops once every
   episode has ended, so with a fresh policy a task that terminates (Ant, Hopper, Walker2d)
   costs little. ``evaluation/no_termination`` times it on the same task built with

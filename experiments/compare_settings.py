@@ -48,7 +48,6 @@ ARMS = {
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-
     parser = argparse.ArgumentParser(
         description=__doc__.split("\n\n")[0],
         epilog="arms:\n"

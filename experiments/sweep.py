@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import importlib.util
 import json
 import os
 import shutil
@@ -33,9 +34,17 @@ import numpy as np
 from experiments.cli import ENV_HELP, check_env, comma_floats, known_names
 from pngail_jax import compilation
 from pngail_jax import settings as run_settings
-from pngail_jax.run_config import LOG_BACKENDS, PRESETS_BY_NAME, RunConfig
+from pngail_jax.run_config import (
+    FISHER_FORMS,
+    LOG_BACKENDS,
+    PRESETS_BY_NAME,
+    RunConfig,
+    upgrade_saved_config,
+)
 
 DEMO_CACHE = Path("runs") / "demos-cache"
+MINARI_PREFIX = "minari:"
+TRACKING_MODULES = {"tensorboard": "tensorboardX", "wandb": "wandb"}
 SMOKE = RunConfig.preset("smoke")
 # Flags that --resume DIR accepts: the run's config.json has every other value.
 RESUME_FLAGS = (
@@ -57,7 +66,7 @@ class Invocation:
     out: Path
     resume: bool
     distributed: dict
-    compile_args: argparse.Namespace
+    args: argparse.Namespace  # the parsed flags (compilation cache, ...)
     argv: list[str]
 
 
@@ -124,7 +133,7 @@ def build_parser() -> argparse.ArgumentParser:
     add("--bsc-eps", type=float, help="BSC's clip (default 0.01; 0.05 on Walker2d, the paper's)")
     add(
         "--fisher",
-        choices=("hessian", "gauss_newton"),
+        choices=FISHER_FORMS,
         help="Fisher-vector product: the same matrix either way (the Hessian of the mean KL at "
         "the current policy); gauss_newton is 1.7x faster here (default gauss_newton)",
     )
@@ -206,18 +215,26 @@ def config_from_flags(parser, args) -> RunConfig:
         parser.error(f"--{'config' if args.config else 'preset'}: {error}")
     env = check_env(parser, args.env or base.env)
     demos = args.demos
-    if demos is not None and not demos.startswith("minari:"):
+    if demos is not None and not demos.startswith(MINARI_PREFIX):
         if not Path(demos).exists():
             parser.error(f"--demos {demos} does not exist")
         demos = str(Path(demos).absolute())
+    if args.conf is not None and not Path(args.conf).exists():
+        parser.error(f"--conf {args.conf} does not exist")
     conf = None if args.conf is None else str(Path(args.conf).absolute())
+    if args.log is not None:
+        for backend in known_names(parser, args.log, LOG_BACKENDS, "log backend"):
+            if importlib.util.find_spec(TRACKING_MODULES[backend]) is None:
+                parser.error(f"--log {backend} needs {TRACKING_MODULES[backend]}: pip install it")
+    if demos is not None and demos != base.demos:  # another data set: not the saved one's
+        base = dataclasses.replace(base, conf=None, confidence_field=None, action_scale=1.0)
     try:
         settings_base = base.settings if env == base.env else None
         settings = run_settings.from_arguments(env, args, base=settings_base)
         classifier = base.classifier
         if args.classifier_steps is not None:
             classifier = dataclasses.replace(classifier, num_steps=args.classifier_steps)
-        return base.replace(
+        overrides = dict(
             env=env,
             settings=settings,
             methods=None
@@ -243,6 +260,7 @@ def config_from_flags(parser, args) -> RunConfig:
             if args.log is None
             else tuple(known_names(parser, args.log, LOG_BACKENDS, "log backend")),
         )
+        return base.replace(**{key: value for key, value in overrides.items() if value is not None})
     except ValueError as error:
         parser.error(_flag_message(str(error)))
 
@@ -253,6 +271,8 @@ def _flag_message(message: str) -> str:
         ("label ratios", "--label-ratio values"),
         ("noise stds", "--noise values"),
         ("iterations (", "--iterations ("),
+        ("iterations must", "--iterations must"),
+        ("methods must", "--methods must"),
         ("seeds must", "--seeds must"),
         ("chunk_iterations", "--chunk-iterations"),
         ("fisher_subsample", "--fisher-subsample"),
@@ -271,7 +291,7 @@ def _flag_message(message: str) -> str:
 
 
 @dataclasses.dataclass
-class Saved:
+class SavedRun:
     """A resumed run's config.json: its config, the demonstrations it used, its devices."""
 
     config: RunConfig
@@ -281,56 +301,23 @@ class Saved:
     local_device_count: int
 
 
-def load_saved(directory: Path) -> Saved:
+def load_saved(directory: Path) -> SavedRun:
     path = directory / "config.json"
     if not path.exists():
         raise SystemExit(f"--resume {directory}: no config.json there")
-    data = json.loads(path.read_text())
-    data = _upgrade_saved(data)
+    data = upgrade_saved_config(json.loads(path.read_text()))
     try:
         config = RunConfig.from_dict(data)
     except (TypeError, ValueError) as error:
         raise SystemExit(f"--resume {directory}: {path} is not a run config ({error})") from None
-    where = data["provenance"]
-    return Saved(
+    devices = data["provenance"]
+    return SavedRun(
         config,
         data["resolved"]["demos_path"],
-        where["device_count"],
-        where["platform"],
-        where["local_device_count"],
+        devices["device_count"],
+        devices["platform"],
+        devices["local_device_count"],
     )
-
-
-def _upgrade_saved(data: dict) -> dict:
-    """A config.json from before RunConfig (flat keys) in today's layout."""
-    if "resolved" in data:
-        return data
-    from pngail_jax.settings import REFERENCE_SETTINGS
-
-    settings = data.get("settings") or dataclasses.asdict(
-        REFERENCE_SETTINGS.replace(
-            num_envs=data["num_envs"],
-            unroll_length=data["unroll_length"],
-            eval_every=data["eval_every"],
-        )
-    )
-    upgraded = {
-        key: data[key]
-        for key in (
-            "env methods seeds iterations label_ratios noise_stds seed action_scale num_demos "
-            "chunk_iterations fisher fisher_subsample cpu_devices demos conf"
-        ).split()
-        if key in data
-    }
-    return {
-        **upgraded,
-        "settings": settings,
-        "classifier": {"num_steps": data["classifier_steps"]},
-        "resolved": {"demos_path": data["demos"]},
-        "provenance": {
-            key: data[key] for key in ("platform", "device_count", "local_device_count")
-        },
-    }
 
 
 def configure_devices(requested: int | None) -> None:
@@ -345,7 +332,7 @@ def configure_devices(requested: int | None) -> None:
         jax.config.update("jax_num_cpu_devices", requested)
 
 
-def start(invocation: Invocation) -> tuple[RunConfig, Saved | None, bool]:
+def start(invocation: Invocation) -> tuple[RunConfig, SavedRun | None, bool]:
     """Reads a resumed run's config, sets up devices, compilation cache and multi-host.
 
     Returns the config, the saved run (None for a new one) and whether this process writes.
@@ -358,7 +345,7 @@ def start(invocation: Invocation) -> tuple[RunConfig, Saved | None, bool]:
     configure_devices(cpu_devices)
     import jax
 
-    compilation.from_arguments(invocation.compile_args)
+    compilation.from_arguments(invocation.args)
     if invocation.distributed["coordinator_address"] is not None:
         jax.config.update("jax_cpu_collectives_implementation", "gloo")
         jax.distributed.initialize(**invocation.distributed)
@@ -424,7 +411,7 @@ def blocks_per_chunk(num_evaluations: int, target_blocks: int) -> int:
     )
 
 
-def build(config: RunConfig, saved: Saved | None) -> SweepRun:
+def build(config: RunConfig, saved: SavedRun | None) -> SweepRun:
     """Environment, demonstrations, trainer and the compiled grid of ``config``."""
     import jax
 
@@ -433,7 +420,10 @@ def build(config: RunConfig, saved: Saved | None) -> SweepRun:
     from pngail_jax.train import AdversarialTrainer
 
     env = run_settings.make_env(config.env, config.settings)
-    demos, demos_path = load_or_make_demos(config, saved.demos_path if saved else None)
+    try:
+        demos, demos_path = load_or_make_demos(config, saved.demos_path if saved else None)
+    except (DemonstrationError, FileNotFoundError, ImportError) as error:
+        raise SystemExit(f"demonstrations: {error}") from None
     try:
         trainer = AdversarialTrainer(config.adversarial_config(), env, demos)
         trainer.check_methods(config.methods)
@@ -642,8 +632,9 @@ def _title(config: RunConfig, num_cells: int) -> str:
     return f"{config.env}: {num_cells} runs, {config.iterations} iterations"
 
 
-def write_outputs(out: Path, run: SweepRun, progress: Progress) -> dict:
-    """metrics.csv, curves.png, summary.json and summary.md of the iterations done so far."""
+def write_outputs(out: Path, run: SweepRun, progress: Progress) -> str:
+    """metrics.csv, curves.png, summary.json and summary.md of the iterations done so far;
+    returns summary.md's text."""
     from pngail_jax import report
     from pngail_jax.grid import nonfinite_cells
 
@@ -651,8 +642,8 @@ def write_outputs(out: Path, run: SweepRun, progress: Progress) -> dict:
     metrics = {**progress.metrics, **progress.init_metrics}
     report.write_metrics_csv(out / "metrics.csv", cells, metrics, run.normalizer)
     title = _title(config, len(cells))
-    report.plot_curves(out / "curves.png", cells, metrics, run.normalizer, title)
     diverged = nonfinite_cells(progress.metrics, config.settings.eval_every)
+    report.plot_curves(out / "curves.png", cells, metrics, run.normalizer, title, diverged)
     summary = report.summarize(
         cells,
         metrics,
@@ -674,15 +665,19 @@ def write_outputs(out: Path, run: SweepRun, progress: Progress) -> dict:
             f"Smoke scale ({config.iterations} iterations); the paper's budget is "
             "`--preset paper` (5,000 iterations, GPU)."
         )
-    report.write_summary(
-        out, summary, report.summary_markdown(summary, cells, metrics, title, notes)
-    )
-    return summary
+    markdown = report.summary_markdown(summary, cells, metrics, title, notes)
+    report.write_summary(out, summary, markdown)
+    return markdown
 
 
-def export_policies(out: Path, run: SweepRun, host_state, final_returns) -> list[Path]:
+def export_policies(out: Path, run: SweepRun, host_state, progress: Progress, writer: bool):
     """policies/<method>/ (and /<setting>/ when the grid has several): every seed's final
-    policy, loadable with ``pngail_jax.load_policy`` (best seed by default)."""
+    policy, loadable with ``pngail_jax.load_policy`` (best seed by default; diverged seeds
+    never are). Every process calls it (orbax synchronises them); the writer writes the JSON."""
+    from pngail_jax.grid import nonfinite_cells
+
+    final_returns = progress.metrics["eval/return"][:, -1].copy()
+    final_returns[nonfinite_cells(progress.metrics, run.config.settings.eval_every)] = np.nan
     import jax
 
     from pngail_jax.checkpoint import save_trpo_policies
@@ -740,15 +735,10 @@ def main(argv=None) -> Path:
     finally:
         if logger is not None:
             logger.close()
+    export_policies(out, run, host_state, progress, writer)
     if not writer:
         return out
-    from pngail_jax import report
-
-    summary = write_outputs(out, run, progress)
-    final_returns = progress.metrics["eval/return"][:, -1]
-    export_policies(out, run, host_state, final_returns)
-    metrics = {**progress.metrics, **progress.init_metrics}
-    markdown = report.summary_markdown(summary, run.cells, metrics, _title(config, len(run.cells)))
+    markdown = write_outputs(out, run, progress)
     print()
     print(markdown.split("\n\nFinal return")[0])
     print(

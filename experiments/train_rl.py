@@ -160,9 +160,10 @@ def train_with_progress(trainer: TRPOTrainer, hyperparams, keys, on_block=None):
             flush=True,
         )
         if on_block is not None:
-            on_block(done_blocks * config.eval_every, trainer.policy_state(state), metrics)
+            host_state = grid.fetch(trainer.policy_state(state))
+            on_block(done_blocks * config.eval_every, host_state, metrics)
     metrics = {name: np.concatenate([c[name] for c in chunks], axis=1) for name in chunks[0]}
-    return trainer.policy_state(state), metrics
+    return grid.fetch(trainer.policy_state(state)), metrics
 
 
 def main(argv=None) -> None:

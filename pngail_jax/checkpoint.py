@@ -36,8 +36,13 @@ def save_policies(
     normalize_observations: bool,
     final_eval_returns: np.ndarray,
     extra: dict | None = None,
+    write_metadata: bool = True,
 ) -> Path:
-    """Saves stacked per-seed policies (every leaf has a leading seed axis) to ``directory``."""
+    """Saves stacked per-seed policies (every leaf has a leading seed axis) to ``directory``.
+
+    In a multi-process run every process calls it (orbax synchronises them) and one, with
+    ``write_metadata``, writes ``policy.json``. A non-finite final return (a diverged seed) is
+    stored as null and never chosen as the best seed."""
     directory = Path(directory).absolute()
     directory.mkdir(parents=True, exist_ok=True)
     normalizer_fields = ("count", "mean", "sum_squares")
@@ -48,6 +53,8 @@ def save_policies(
     checkpointer = ocp.StandardCheckpointer()
     checkpointer.save(directory / "policy_params", jax.device_get(arrays), force=True)
     checkpointer.wait_until_finished()
+    if not write_metadata:
+        return directory
     metadata = {
         "format_version": POLICY_FORMAT_VERSION,
         "env": env_name,
@@ -57,16 +64,18 @@ def save_policies(
         "action_high": [float(x) for x in action_high],
         "hidden_sizes": list(hidden_sizes),
         "normalize_observations": bool(normalize_observations),
-        "final_eval_returns": [float(x) for x in final_eval_returns],
+        "final_eval_returns": [float(x) if np.isfinite(x) else None for x in final_eval_returns],
         **(extra or {}),
     }
     (directory / "policy.json").write_text(json.dumps(metadata, indent=2))
     return directory
 
 
-def save_trpo_policies(directory, env, config, trpo_state, eval_returns, extra=None) -> Path:
+def save_trpo_policies(
+    directory, env, config, trpo_state, eval_returns, extra=None, write_metadata=True
+) -> Path:
     """Saves the stacked per-seed policies of a ``TRPOState`` (``config``: its ``TRPOConfig``)
-    with what ``load_policy`` needs."""
+    with what ``load_policy`` needs (``write_metadata``: see ``save_policies``)."""
     return save_policies(
         directory,
         env_name=env.name,
@@ -79,6 +88,7 @@ def save_trpo_policies(directory, env, config, trpo_state, eval_returns, extra=N
         normalize_observations=config.normalize_observations,
         final_eval_returns=eval_returns,
         extra=extra,
+        write_metadata=write_metadata,
     )
 
 
@@ -100,8 +110,10 @@ def load_policy(
         raise ValueError(
             f"{metadata_path}: unsupported format_version {metadata.get('format_version')!r}"
         )
-    returns = metadata["final_eval_returns"]
+    returns = [np.nan if r is None else r for r in metadata["final_eval_returns"]]
     if seed is None:
+        if not np.isfinite(returns).any():
+            raise ValueError(f"{metadata_path}: no seed has a finite final return; pass seed=")
         seed = int(np.nanargmax(returns))
         if verbose and len(returns) > 1:
             print(

@@ -129,7 +129,6 @@ class Grid:
         blocks_per_chunk: int,
         devices: Sequence[jax.Device] | None = None,
     ):
-        self.trainer = trainer
         self.num_cells = inputs[-1].shape[0]
         devices = list(jax.devices() if devices is None else devices)
         self.num_devices = len(devices)

@@ -109,8 +109,8 @@ def summarize(cells, metrics, normalizer, train_env_steps_per_second, compile_se
 
     Per method (and setting): the final return (the last evaluation) and the average
     evaluation return over training, raw and normalised, as mean, sample std (ddof 1) and
-    standard error over seeds, the normalised ones also as interquartile mean with a 95%
-    percentile-bootstrap interval (``pngail_jax.stats``, fixed seed: the same numbers on every
+    standard error over seeds, and as interquartile mean with a 95% percentile-bootstrap
+    interval (``pngail_jax.stats``, fixed seed: the same numbers on every
     call), and a per-seed table. Cells in ``excluded`` (diverged,
     ``pngail_jax.grid.nonfinite_cells``) and non-finite returns are left out of every
     statistic and of ``num_seeds``. With PN-GAIL in the grid: the probability that a PN-GAIL
@@ -125,8 +125,7 @@ def summarize(cells, metrics, normalizer, train_env_steps_per_second, compile_se
             summary = stats.seed_summary(per_cell[indices])
             row[f"{name}_mean"], row[f"{name}_std"] = summary["mean"], summary["std"]
             row[f"{name}_se"] = summary["se"]
-            if "normalized" in name:
-                row[f"{name}_iqm"], row[f"{name}_ci95"] = summary["iqm"], summary["ci95"]
+            row[f"{name}_iqm"], row[f"{name}_ci95"] = summary["iqm"], summary["ci95"]
         row["num_seeds"] = int(np.isfinite(values["final_return"][indices]).sum())
         row["per_seed"] = [
             {"seed": cells[i].seed, **{name: float(v[i]) for name, v in values.items()}}
@@ -167,6 +166,9 @@ def _improvement_over_baselines(cells, settings, final, method="pngail") -> dict
 
 
 def _interval(row, name: str, digits: int = 2) -> str:
+    """IQM [95% CI] of the normalised ``name``, or of the raw one without a normaliser."""
+    if not np.isfinite(row[f"{name}_iqm"]):
+        name, digits = name.replace("_normalized", ""), 1
     low, high = row[f"{name}_ci95"]
     if not np.isfinite(row[f"{name}_iqm"]):
         return "n/a"
@@ -187,8 +189,8 @@ def summary_markdown(summary, cells, metrics, title: str, notes: Sequence[str] =
     lines = [
         f"# {title}",
         "",
-        "| method | final return | final normalised: IQM [95% CI] | mean ± s.e. | "
-        "average during training: IQM [95% CI] | seeds | confidence MAE (D_u) |",
+        "| method | final return | final normalised*: IQM [95% CI] | mean ± s.e. | "
+        "average during training*: IQM [95% CI] | seeds | confidence MAE (D_u) |",
         "|---|---:|---:|---:|---:|---:|---:|",
     ]
     for label, row in summary["methods"].items():
@@ -207,7 +209,8 @@ def summary_markdown(summary, cells, metrics, title: str, notes: Sequence[str] =
         "Final return: deterministic (mean-action) evaluation at the last iteration; average "
         "during training: the mean of every evaluation of a seed (the paper's Table 4 "
         "measure). Over seeds: interquartile mean with a 95% stratified-bootstrap interval "
-        "(2,000 resamples), and mean ± standard error. Confidence MAE: the confidences the "
+        "(2,000 resamples), and mean ± standard error. *Raw returns (one decimal) where the "
+        "demonstrations carry no random and optimal returns. Confidence MAE: the confidences the "
         "method's loss uses on the unlabelled rows (GAIL and WGAIL read none; IC-GAIL reads "
         "only D_c's given ones, so its value is that of the mean labelled confidence, which it "
         "never reads).",
@@ -268,10 +271,11 @@ def write_summary(directory: Path, summary: dict, markdown: str) -> None:
     (Path(directory) / "summary.md").write_text(markdown)
 
 
-def plot_curves(path: Path, cells, metrics, normalizer, title: str) -> None:
+def plot_curves(path: Path, cells, metrics, normalizer, title: str, excluded=()) -> None:
     """Normalised evaluation return vs environment steps: the mean over seeds with its 95%
     bootstrap interval per method (one panel per setting), like the paper's Fig. 2. Falls
-    back to raw returns without a normaliser."""
+    back to raw returns without a normaliser. Cells in ``excluded`` (diverged) are left out,
+    as from the summary."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -288,7 +292,13 @@ def plot_curves(path: Path, cells, metrics, normalizer, title: str) -> None:
     )
     for axis, setting in zip(axes[0], settings, strict=True):
         for method in methods:
-            rows = [i for i, c in enumerate(cells) if c.method == method and c.setting == setting]
+            rows = [
+                i
+                for i, c in enumerate(cells)
+                if c.method == method and c.setting == setting and i not in set(excluded)
+            ]
+            if not rows:
+                continue
             steps = np.asarray(metrics["env_steps"])[rows[0], evaluated]
             curve = values[rows][:, evaluated]
             with warnings.catch_warnings():

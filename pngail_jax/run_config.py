@@ -64,12 +64,13 @@ class RunConfig:
     preset_name: str | None = None  # the preset this config started from, for the record
 
     def __post_init__(self):
-        set_ = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731
+        # Frozen: fields are normalised through object.__setattr__ (lists from JSON -> tuples).
         for name in ("methods", "label_ratios", "noise_stds", "log", "discriminator_hidden_sizes"):
             value = getattr(self, name)
-            set_(name, tuple(value) if isinstance(value, list | tuple) else (value,))
+            value = tuple(value) if isinstance(value, list | tuple) else (value,)
+            object.__setattr__(self, name, value)
         if self.settings is None:  # the environment's row (raises for an unknown environment)
-            set_("settings", settings_for(self.env))
+            object.__setattr__(self, "settings", settings_for(self.env))
         self._validate()
 
     def _validate(self) -> None:
@@ -115,22 +116,29 @@ class RunConfig:
             )
         if self.conf is not None and self.demos is None:
             fail("a confidence file needs demos (made demonstrations carry their own)")
+        is_minari = self.demos is not None and self.demos.startswith("minari:")
+        if self.confidence_field is not None and not is_minari:
+            fail("confidence_field reads a Minari dataset's episode metadata: demos minari:<id>")
+        if (
+            self.demos is not None
+            and self.demos.endswith(".npz")
+            and (self.conf is not None or self.action_scale != 1.0)
+        ):
+            fail("an .npz set carries its confidences and units: no conf or action_scale")
 
     @classmethod
     def preset(cls, name: str, **overrides) -> RunConfig:
-        """The named preset (``PRESETS``) with ``overrides`` (``None`` values ignored)."""
+        """The named preset (``PRESETS_BY_NAME``) with ``overrides``."""
         if name not in PRESETS_BY_NAME:
             raise ValueError(f"unknown preset {name!r}; available: {', '.join(PRESETS_BY_NAME)}")
-        given = {key: value for key, value in overrides.items() if value is not None}
-        return cls(**{**PRESETS_BY_NAME[name], "preset_name": name, **given})
+        return cls(**{**PRESETS_BY_NAME[name], "preset_name": name, **overrides})
 
     def replace(self, **overrides) -> RunConfig:
-        """A validated copy with ``overrides`` (``None`` values ignored). A new environment
-        gets its own settings row unless ``settings`` is given too."""
-        given = {key: value for key, value in overrides.items() if value is not None}
-        if "env" in given and given["env"] != self.env and "settings" not in given:
-            given["settings"] = None
-        return dataclasses.replace(self, **given)
+        """A validated copy with ``overrides``. A new environment gets its own settings row
+        unless ``settings`` is given too."""
+        if overrides.get("env", self.env) != self.env and "settings" not in overrides:
+            overrides["settings"] = None
+        return dataclasses.replace(self, **overrides)
 
     @property
     def task_bsc_eps(self) -> float:
@@ -158,13 +166,15 @@ class RunConfig:
     def from_dict(cls, data: dict[str, Any]) -> RunConfig:
         """The config of ``to_dict`` (or of a ``config.json``: its other keys, such as
         ``resolved`` and ``provenance``, are ignored)."""
+        data = upgrade_saved_config(data)
         fields = {field.name for field in dataclasses.fields(cls)}
         values = {key: value for key, value in data.items() if key in fields}
         if values.get("settings") is not None:
             values["settings"] = RunSettings(**values["settings"])
         if values.get("classifier") is not None:
             classifier = dict(values["classifier"])
-            classifier["hidden_sizes"] = tuple(classifier.get("hidden_sizes", (40, 40)))
+            if "hidden_sizes" in classifier:
+                classifier["hidden_sizes"] = tuple(classifier["hidden_sizes"])
             values["classifier"] = ClassifierConfig(**classifier)
         return cls(**values)
 
@@ -186,6 +196,35 @@ PRESETS_BY_NAME: dict[str, dict[str, Any]] = {
     # The paper's budget: 5,000 TRPO iterations, 5 seeds (a GPU run).
     "paper": {"iterations": 5_000, "seeds": 5, "chunk_iterations": 250},
 }
+
+
+def upgrade_saved_config(data: dict[str, Any]) -> dict[str, Any]:
+    """A config.json written before ``RunConfig`` (flat keys) in today's layout; today's
+    unchanged."""
+    if "classifier_steps" not in data:  # the old layout's mark
+        return data
+    from pngail_jax.settings import REFERENCE_SETTINGS
+
+    settings = data.get("settings") or dataclasses.asdict(
+        REFERENCE_SETTINGS.replace(
+            num_envs=data["num_envs"],
+            unroll_length=data["unroll_length"],
+            eval_every=data["eval_every"],
+        )
+    )
+    kept = (
+        "env methods seeds iterations label_ratios noise_stds seed action_scale num_demos "
+        "chunk_iterations fisher fisher_subsample cpu_devices demos conf"
+    ).split()
+    return {
+        **{key: data[key] for key in kept if key in data},
+        "settings": settings,
+        "classifier": {"num_steps": data["classifier_steps"]},
+        "resolved": {"demos_path": data["demos"]},
+        "provenance": {
+            key: data[key] for key in ("platform", "device_count", "local_device_count")
+        },
+    }
 
 
 def _finite(value) -> bool:
@@ -224,6 +263,15 @@ def _git_commit() -> str | None:
     """The checkout's commit (with ``+dirty`` when files differ), or None outside git."""
     root = Path(__file__).resolve().parent.parent
     try:
+        toplevel = subprocess.run(
+            ["git", "rev-parse", "--show-toplevel"],
+            cwd=root,
+            capture_output=True,
+            text=True,
+            timeout=5,
+        )
+        if toplevel.returncode != 0 or Path(toplevel.stdout.strip()).resolve() != root:
+            return None  # an installed copy, possibly inside another project's checkout
         commit = subprocess.run(
             ["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=5
         )
