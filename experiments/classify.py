@@ -18,7 +18,7 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 
-from experiments.cli import check_positive, known_names
+from experiments.cli import HelpFormatter, check_positive, known_names
 from pngail_jax.confidence import ClassifierConfig, ClassifierSpec, split_and_train
 from pngail_jax.demos import load_demonstrations
 
@@ -26,7 +26,9 @@ METHODS = {"sc": ClassifierSpec.sc, "bsc": ClassifierSpec.bsc}
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
+    )
     parser.add_argument(
         "--demos", type=Path, required=True, help="*_mixture.npy (released layout) or our .npz"
     )
@@ -43,12 +45,12 @@ def parse_args(argv=None) -> argparse.Namespace:
         help="multiply stored actions (2 for the released Pendulum set)",
     )
     parser.add_argument("--traj-size", type=int, default=None, help="rows per seed (all)")
-    parser.add_argument("--label-ratio", type=float, default=0.2)
+    parser.add_argument("--label-ratio", type=float, default=0.2, help="labelled share, n_c")
     parser.add_argument("--noise", type=float, default=0.0, help="confidence noise std")
-    parser.add_argument("--methods", default="sc,bsc")
-    parser.add_argument("--seeds", type=int, default=5)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--steps", type=int, default=25_000)
+    parser.add_argument("--methods", default="sc,bsc", help="classifiers, comma-separated")
+    parser.add_argument("--seeds", type=int, default=5, help="seeds (splits and inits)")
+    parser.add_argument("--seed", type=int, default=0, help="base PRNG seed")
+    parser.add_argument("--steps", type=int, default=25_000, help="classifier training steps")
     parser.add_argument(
         "--batch-size",
         type=int,
@@ -56,7 +58,7 @@ def parse_args(argv=None) -> argparse.Namespace:
         help="labelled rows per step (unlabelled: this x n_u / n_c)",
     )
     parser.add_argument("--eps", type=float, default=0.01, help="BSC clip")
-    parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--json", type=Path, default=None, help="also write the results here")
     args = parser.parse_args(argv)
     args.methods = known_names(parser, args.methods, METHODS, "method")
     if not 0 < args.label_ratio < 1:

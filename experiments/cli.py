@@ -6,6 +6,17 @@ import argparse
 from collections.abc import Sequence
 
 
+class HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
+    """Every flag's help ends with its default, unless the help already names it; epilogs and
+    descriptions keep their line breaks."""
+
+    def _get_help_string(self, action):
+        help_text = action.help or ""
+        if "default" in help_text or action.required:
+            return help_text
+        return super()._get_help_string(action)
+
+
 def known_names(parser: argparse.ArgumentParser, text: str, known: Sequence[str], kind: str):
     """The comma-separated names in ``text`` (a flag's value), in order; exits through
     ``parser.error`` naming the unknown ones (and what is available) when any name is not in

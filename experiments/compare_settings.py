@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.cli import ENV_HELP, check_env, check_positive, known_names
+from experiments.cli import ENV_HELP, HelpFormatter, check_env, check_positive, known_names
 
 # train_rl flags of each arm (the common flags are added by run_arm).
 ARMS = {
@@ -52,17 +52,17 @@ def parse_args(argv=None) -> argparse.Namespace:
         description=__doc__.split("\n\n")[0],
         epilog="arms:\n"
         + "\n".join(f"  {name:18s} train_rl {' '.join(flags)}" for name, flags in ARMS.items()),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     parser.add_argument("--env", required=True, help=ENV_HELP)
     parser.add_argument("--arms", default="reference-fast,table", help="comma-separated")
     parser.add_argument("--baseline", help="the arm others are judged against (default: first)")
-    parser.add_argument("--seeds", type=int, default=5)
-    parser.add_argument("--iterations", type=int, default=400)
-    parser.add_argument("--eval-every", type=int, default=50)
+    parser.add_argument("--seeds", type=int, default=5, help="seeds per arm (the same in each)")
+    parser.add_argument("--iterations", type=int, default=400, help="TRPO iterations per arm")
+    parser.add_argument("--eval-every", type=int, default=50, help="iterations between evaluations")
     parser.add_argument("--eval-episodes", type=int, default=32, help="of the final evaluation")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--seed", type=int, default=0, help="base PRNG seed")
+    parser.add_argument("--out", type=Path, required=True, help="output directory (required)")
     args = parser.parse_args(argv)
     check_env(parser, args.env)
     args.arms = known_names(parser, args.arms, list(ARMS), "arm")

@@ -28,7 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from experiments.cli import ENV_HELP, check_env
+from experiments.cli import ENV_HELP, HelpFormatter, check_env
 from experiments.train_rl import train_with_progress
 from pngail_jax import compilation
 from pngail_jax import settings as run_settings
@@ -47,15 +47,24 @@ class Checkpoint(NamedTuple):
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
+    )
     parser.add_argument("--env", default="Pendulum-v1", help=ENV_HELP)
-    parser.add_argument("--out", type=Path, required=True)
-    parser.add_argument("--iterations", type=int, default=150)
-    parser.add_argument("--seeds", type=int, default=3)
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", type=Path, required=True, help="output directory (required)")
+    parser.add_argument("--iterations", type=int, default=150, help="TRPO iterations")
+    parser.add_argument("--seeds", type=int, default=3, help="TRPO seeds; the best is optimal")
+    parser.add_argument("--seed", type=int, default=0, help="base PRNG seed")
     parser.add_argument("--ratio", default="1:4", help="optimal:intermediate trajectories")
-    parser.add_argument("--num-trajectories", type=int, default=5)
-    parser.add_argument("--intermediate-target", type=float, default=0.45)
+    parser.add_argument(
+        "--num-trajectories", type=int, default=5, help="trajectories in the mixture"
+    )
+    parser.add_argument(
+        "--intermediate-target",
+        type=float,
+        default=0.45,
+        help="normalised return the intermediate policy is picked near",
+    )
     parser.add_argument(
         "--measure-episodes",
         type=int,

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.cli import ENV_HELP, check_env, comma_floats, known_names
+from experiments.cli import ENV_HELP, HelpFormatter, check_env, comma_floats, known_names
 from pngail_jax import compilation
 from pngail_jax import settings as run_settings
 from pngail_jax.run_config import (
@@ -80,7 +80,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         description=__doc__.split("\n\n")[0],
         epilog=f"methods:\n{methods_help}",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     add = parser.add_argument
     add("--env", help=f"{ENV_HELP} (default {SMOKE.env})")

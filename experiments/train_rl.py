@@ -22,7 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from experiments.cli import ENV_HELP, check_env, check_positive
+from experiments.cli import ENV_HELP, HelpFormatter, check_env, check_positive
 from pngail_jax import compilation
 from pngail_jax import settings as run_settings
 from pngail_jax.checkpoint import save_trpo_policies
@@ -41,10 +41,12 @@ METRIC_COLUMNS = (
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
+    )
     parser.add_argument("--env", default="Pendulum-v1", help=ENV_HELP)
-    parser.add_argument("--iterations", type=int, default=100)
-    parser.add_argument("--seeds", type=int, default=3)
+    parser.add_argument("--iterations", type=int, default=100, help="TRPO iterations")
+    parser.add_argument("--seeds", type=int, default=3, help="seeds, trained side by side")
     parser.add_argument("--seed", type=int, default=0, help="base PRNG seed")
     parser.add_argument(
         "--out",
@@ -52,8 +54,15 @@ def parse_args(argv=None) -> argparse.Namespace:
         default=None,
         help="output directory (default runs/trpo-<env>-<timestamp>)",
     )
-    parser.add_argument("--fisher", choices=("hessian", "gauss_newton"), default="hessian")
-    parser.add_argument("--fisher-subsample", type=int, default=1)
+    parser.add_argument(
+        "--fisher",
+        choices=("hessian", "gauss_newton"),
+        default="hessian",
+        help="Fisher-vector product form (the same matrix)",
+    )
+    parser.add_argument(
+        "--fisher-subsample", type=int, default=1, help="Fisher products on every k-th step"
+    )
     parser.add_argument(
         "--truncation-as-terminal",
         action="store_true",
