@@ -52,9 +52,9 @@ measuring process compiles its own grid again, without the cache. Peak memory is
 aliased; per device when sharded).
 
 Demonstrations (their contents do not change the throughput): ``--demos``, by default the
-authors' Pendulum set ``../shared/data/pendulum/Pendulum-v1_mixture.npy`` from the repository
-root (actions x 2) for Pendulum-v1 and none for the MuJoCo tasks; without a file, 1000 random
-rows of the task's shapes (the run says so).
+authors' Pendulum set ``data/pendulum/Pendulum-v1_mixture.npy`` in the repository (a download,
+see docs/demonstrations.md; actions x 2) for Pendulum-v1 and none for the MuJoCo tasks;
+without a file, 1000 random rows of the task's shapes (the run says so).
 
     python benchmarks/grid_throughput.py --quick                  # Pendulum-v1, 1 and 7 cells
     python benchmarks/grid_throughput.py --json rows.json         # Pendulum-v1, 1, 7, 35 cells
@@ -111,7 +111,7 @@ from pngail_jax.train import AdversarialConfig, AdversarialTrainer, TrainState
 
 DEFAULT_ENV = "Pendulum-v1"
 REPO_ROOT = Path(__file__).resolve().parents[1]
-PENDULUM_DEMOS = REPO_ROOT.parent / "shared" / "data" / "pendulum" / "Pendulum-v1_mixture.npy"
+PENDULUM_DEMOS = REPO_ROOT / "data" / "pendulum" / "Pendulum-v1_mixture.npy"
 PENDULUM_ACTION_SCALE = 2.0  # the released Pendulum set stores torques / 2
 SYNTHETIC_ROWS = 1000
 # Brax tasks that end an episode when the body falls (terminate_when_unhealthy).
@@ -463,7 +463,7 @@ def parse_args(argv=None) -> argparse.Namespace:
         type=Path,
         default=None,
         help="demonstration file (default for Pendulum-v1: "
-        "../shared/data/pendulum/Pendulum-v1_mixture.npy from the repository root; random rows "
+        "data/pendulum/Pendulum-v1_mixture.npy in the repository, if downloaded; random rows "
         "without a file)",
     )
     parser.add_argument("--json", type=Path, default=None, help="write the rows here")
@@ -491,7 +491,7 @@ def parse_args(argv=None) -> argparse.Namespace:
             parser.error(f"--{name.replace('_', '-')} must be a positive integer")
     if args.devices is not None and args.devices < 1:
         parser.error("--devices must be a positive integer")
-    if args.demos is None and args.env == "Pendulum-v1":
+    if args.demos is None and args.env == "Pendulum-v1" and PENDULUM_DEMOS.exists():
         args.demos = PENDULUM_DEMOS
     try:
         args.run_settings = run_settings.from_arguments(args.env, args)
