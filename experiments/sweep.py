@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import importlib.util
 import json
 import os
 import shutil
@@ -41,10 +40,10 @@ from pngail_jax.run_config import (
     RunConfig,
     upgrade_saved_config,
 )
+from pngail_jax.tracking import check_backends
 
 DEMO_CACHE = Path("runs") / "demos-cache"
 MINARI_PREFIX = "minari:"
-TRACKING_MODULES = {"tensorboard": "tensorboardX", "wandb": "wandb"}
 SMOKE = RunConfig.preset("smoke")
 # Flags that --resume DIR accepts: the run's config.json has every other value.
 RESUME_FLAGS = (
@@ -222,10 +221,13 @@ def config_from_flags(parser, args) -> RunConfig:
     if args.conf is not None and not Path(args.conf).exists():
         parser.error(f"--conf {args.conf} does not exist")
     conf = None if args.conf is None else str(Path(args.conf).absolute())
+    log = None
     if args.log is not None:
-        for backend in known_names(parser, args.log, LOG_BACKENDS, "log backend"):
-            if importlib.util.find_spec(TRACKING_MODULES[backend]) is None:
-                parser.error(f"--log {backend} needs {TRACKING_MODULES[backend]}: pip install it")
+        log = tuple(known_names(parser, args.log, LOG_BACKENDS, "log backend"))
+        try:
+            check_backends(log)
+        except ImportError as error:
+            parser.error(f"--log: {error}")
     if demos is not None and demos != base.demos:  # another data set: not the saved one's
         base = dataclasses.replace(base, conf=None, confidence_field=None, action_scale=1.0)
     try:
@@ -256,9 +258,7 @@ def config_from_flags(parser, args) -> RunConfig:
             fisher=args.fisher,
             fisher_subsample=args.fisher_subsample,
             cpu_devices=args.cpu_devices,
-            log=None
-            if args.log is None
-            else tuple(known_names(parser, args.log, LOG_BACKENDS, "log backend")),
+            log=log,
         )
         return base.replace(**{key: value for key, value in overrides.items() if value is not None})
     except ValueError as error:
@@ -674,42 +674,40 @@ def export_policies(out: Path, run: SweepRun, host_state, progress: Progress, wr
     """policies/<method>/ (and /<setting>/ when the grid has several): every seed's final
     policy, loadable with ``pngail_jax.load_policy`` (best seed by default; diverged seeds
     never are). Every process calls it (orbax synchronises them); the writer writes the JSON."""
-    from pngail_jax.grid import nonfinite_cells
-
-    final_returns = progress.metrics["eval/return"][:, -1].copy()
-    final_returns[nonfinite_cells(progress.metrics, run.config.settings.eval_every)] = np.nan
     import jax
 
     from pngail_jax.checkpoint import save_trpo_policies
+    from pngail_jax.grid import nonfinite_cells
+    from pngail_jax.report import group_cells
 
+    final_returns = progress.metrics["eval/return"][:, -1].copy()
+    final_returns[nonfinite_cells(progress.metrics, run.config.settings.eval_every)] = np.nan
     trpo_state = run.trainer.policy_state(host_state)
-    settings = list(dict.fromkeys(cell.setting for cell in run.cells))
+    settings, groups = group_cells(run.cells)
     written = []
-    for setting in settings:
-        for method in run.config.methods:
-            rows = [
-                i for i, c in enumerate(run.cells) if c.method == method and c.setting == setting
-            ]
-            directory = out / "policies" / method
-            if len(settings) > 1:
-                directory = directory / setting
-            seeds_state = jax.tree.map(lambda x, rows=rows: x[np.asarray(rows)], trpo_state)
-            extra = {
-                "method": method,
-                "setting": setting,
-                "seeds": [run.cells[i].seed for i in rows],
-                "env_options": run.config.settings.env_options,
-            }
-            written.append(
-                save_trpo_policies(
-                    directory,
-                    run.env,
-                    run.trainer.config.trpo,
-                    seeds_state,
-                    final_returns[rows],
-                    extra,
-                )  # fmt: skip
-            )
+    for rows in groups.values():
+        method, setting = run.cells[rows[0]].method, run.cells[rows[0]].setting
+        directory = out / "policies" / method
+        if len(settings) > 1:
+            directory = directory / setting
+        seeds_state = jax.tree.map(lambda x, rows=rows: x[np.asarray(rows)], trpo_state)
+        extra = {
+            "method": method,
+            "setting": setting,
+            "seeds": [run.cells[i].seed for i in rows],
+            "env_options": run.config.settings.env_options,
+        }
+        written.append(
+            save_trpo_policies(
+                directory,
+                run.env,
+                run.trainer.config.trpo,
+                seeds_state,
+                final_returns[rows],
+                extra,
+                write_metadata=writer,
+            )  # fmt: skip
+        )
     return written
 
 

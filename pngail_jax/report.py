@@ -80,7 +80,8 @@ def group_label(cell, settings: Sequence[str]) -> str:
     return cell.method if len(settings) == 1 else f"{cell.method} [{cell.setting}]"
 
 
-def _groups(cells):
+def group_cells(cells) -> tuple[list[str], dict[str, list[int]]]:
+    """The grid's settings, and each group's cell indices by its ``group_label``, in order."""
     settings = list(dict.fromkeys(cell.setting for cell in cells))
     groups: dict[str, list[int]] = {}
     for index, cell in enumerate(cells):
@@ -117,7 +118,7 @@ def summarize(cells, metrics, normalizer, train_env_steps_per_second, compile_se
     seed's final return beats a baseline seed's, per baseline, with its 95% interval.
     """
     values = _per_cell(cells, metrics, normalizer, excluded)
-    settings, groups = _groups(cells)
+    settings, groups = group_cells(cells)
     methods = {}
     for label, indices in groups.items():
         row = {}
@@ -185,7 +186,7 @@ def _mean_se(row, name: str, digits: int) -> str:
 def summary_markdown(summary, cells, metrics, title: str, notes: Sequence[str] = ()) -> str:
     """Markdown tables of ``summary``: per method, per seed, and PN-GAIL's probability of
     improvement over each baseline."""
-    _, groups = _groups(cells)
+    _, groups = group_cells(cells)
     lines = [
         f"# {title}",
         "",
@@ -286,6 +287,7 @@ def plot_curves(path: Path, cells, metrics, normalizer, title: str, excluded=())
     evaluated = ~np.isnan(returns).all(axis=0)
     settings = list(dict.fromkeys(cell.setting for cell in cells))
     methods = list(dict.fromkeys(cell.method for cell in cells))
+    excluded = set(excluded)
     colors = dict(zip(methods, plt.get_cmap("tab10").colors, strict=False))
     figure, axes = plt.subplots(
         1, len(settings), figsize=(7 * len(settings), 4.8), squeeze=False, sharey=True
@@ -295,7 +297,7 @@ def plot_curves(path: Path, cells, metrics, normalizer, title: str, excluded=())
             rows = [
                 i
                 for i, c in enumerate(cells)
-                if c.method == method and c.setting == setting and i not in set(excluded)
+                if c.method == method and c.setting == setting and i not in excluded
             ]
             if not rows:
                 continue

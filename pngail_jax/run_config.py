@@ -22,10 +22,10 @@ from typing import Any
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.methods import METHOD_NAMES, PRESETS
 from pngail_jax.settings import RunSettings, settings_for
+from pngail_jax.tracking import BACKENDS as LOG_BACKENDS
 from pngail_jax.train import AdversarialConfig
 
 FISHER_FORMS = ("gauss_newton", "hessian")
-LOG_BACKENDS = ("tensorboard", "wandb")
 # BSC's clip per task where the paper departs from 0.01 (appendix C.2: 0.05 on Walker2d).
 TASK_BSC_EPS = {"Walker2d": 0.05}
 

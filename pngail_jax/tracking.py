@@ -14,17 +14,21 @@ setting reads ``gail_label_ratio_0.2_noise_0``, the same in both backends.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import re
+import sys
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 
-from pngail_jax.report import group_label
+from pngail_jax.report import group_cells
 
-BACKENDS = ("tensorboard", "wandb")
+# Each backend and the module it needs.
+BACKEND_MODULES = {"tensorboard": "tensorboardX", "wandb": "wandb"}
+BACKENDS = tuple(BACKEND_MODULES)
 PER_SEED_METRICS = ("eval/return",)
 WANDB_PROJECT = "pngail-jax"
 
@@ -45,10 +49,7 @@ def chunk_scalars(
     ``first_iteration``: the 1-based iteration number of column 0, so column ``j`` is logged at
     step ``first_iteration + j``. Non-finite values are left out of every mean.
     """
-    settings = list(dict.fromkeys(cell.setting for cell in cells))
-    groups: dict[str, list[int]] = {}
-    for index, cell in enumerate(cells):
-        groups.setdefault(_tag_part(group_label(cell, settings)), []).append(index)
+    groups = {_tag_part(label): rows for label, rows in group_cells(cells)[1].items()}
     scalars: Scalars = {}
 
     def add(tag: str, values: np.ndarray) -> None:
@@ -148,6 +149,24 @@ class RunLogger:
         self.close()
 
 
+def check_backends(backends: Sequence[str]) -> None:
+    """Raises ValueError naming unknown backends and ImportError naming a backend whose module
+    is not installed (before anything is opened or written)."""
+    unknown = [name for name in backends if name not in BACKENDS]
+    if unknown:
+        raise ValueError(f"unknown tracking backend(s) {unknown}; choose from {list(BACKENDS)}")
+    for name in backends:
+        module = BACKEND_MODULES[name]
+        # A module already imported (or blocked with None) is decided by sys.modules.
+        installed = (
+            sys.modules[module] is not None
+            if module in sys.modules
+            else importlib.util.find_spec(module) is not None
+        )
+        if not installed:
+            raise ImportError(f"the {name!r} tracking backend needs {module}: pip install {module}")
+
+
 def open_logger(
     directory: str | Path, backends: Sequence[str], config: dict, run_name: str
 ) -> RunLogger | None:
@@ -157,18 +176,9 @@ def open_logger(
     ``"pngail-jax"``, named ``run_name``) keeps its local files under ``directory``. ``config``
     (JSON-serialisable) is the wandb run config and a TensorBoard text summary.
     """
-    unknown = [name for name in backends if name not in BACKENDS]
-    if unknown:
-        raise ValueError(f"unknown tracking backend(s) {unknown}; choose from {list(BACKENDS)}")
+    check_backends(backends)
     if not backends:
         return None
-    if "wandb" in backends:
-        try:
-            import wandb  # noqa: F401
-        except ImportError as error:
-            raise ImportError(
-                "the 'wandb' tracking backend needs Weights & Biases: pip install wandb"
-            ) from error
     directory = Path(directory)
     writers: list[_TensorBoard | _Wandb] = []
     try:

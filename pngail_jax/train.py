@@ -159,10 +159,10 @@ class AdversarialTrainer:
     def check_methods(self, methods) -> None:
         """Raises ``DemonstrationError`` naming the methods that need confidences the
         demonstrations do not carry."""
-        needy = [name for name in methods if PRESETS[name].confidence_source != "none"]
-        if not self.has_confidence and needy:
+        readers = [name for name in methods if PRESETS[name].confidence_source != "none"]
+        if not self.has_confidence and readers:
             raise DemonstrationError(
-                f"the demonstrations carry no confidences, which {', '.join(needy)} read; "
+                f"the demonstrations carry no confidences, which {', '.join(readers)} read; "
                 "give a confidence file, or run only methods that read none (gail, wgail)"
             )
 
