@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import os
 import shutil
 import sys
@@ -48,6 +47,7 @@ SMOKE = RunConfig.preset("smoke")
 # Flags that --resume DIR accepts: the run's config.json has every other value.
 RESUME_FLAGS = (
     "--resume",
+    "--allow-changed-inputs",
     "--coordinator",
     "--num-processes",
     "--process-id",
@@ -154,6 +154,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add("--out", type=Path, help="output directory (default runs/<timestamp>)")
     add("--resume", type=Path, metavar="DIR", help="continue DIR's run (default: a new run)")
+    add(
+        "--allow-changed-inputs",
+        action="store_true",
+        help="with --resume: go on although a demonstration, confidence or cache file differs "
+        "from the one the run began with (the run then mixes two data sets) (default: refuse)",
+    )
     run_settings.add_arguments(parser)
     compilation.add_arguments(parser)
     multihost = parser.add_argument_group(
@@ -180,6 +186,8 @@ def parse_args(argv=None) -> Invocation:
     given = [value is not None for value in distributed.values()]
     if any(given) and not all(given):
         parser.error("--coordinator, --num-processes and --process-id go together")
+    if args.allow_changed_inputs and args.resume is None:
+        parser.error("--allow-changed-inputs goes with --resume DIR")
     if args.resume is not None:
         flags = [a.split("=")[0] for a in argv if a.startswith("--")]
         if any(flag not in RESUME_FLAGS for flag in flags):
@@ -299,25 +307,65 @@ class SavedRun:
     device_count: int
     platform: str
     local_device_count: int
+    inputs: dict  # {role: integrity.file_record} of the input files; {} from older versions
 
 
 def load_saved(directory: Path) -> SavedRun:
+    from pngail_jax.integrity import IntegrityError, read_json
+
     path = directory / "config.json"
     if not path.exists():
         raise SystemExit(f"--resume {directory}: no config.json there")
-    data = upgrade_saved_config(json.loads(path.read_text()))
     try:
+        data = upgrade_saved_config(read_json(path, "run config"))
         config = RunConfig.from_dict(data)
-    except (TypeError, ValueError) as error:
-        raise SystemExit(f"--resume {directory}: {path} is not a run config ({error})") from None
-    devices = data["provenance"]
-    return SavedRun(
-        config,
-        data["resolved"]["demos_path"],
-        devices["device_count"],
-        devices["platform"],
-        devices["local_device_count"],
-    )
+        devices = data["provenance"]
+        return SavedRun(
+            config,
+            data["resolved"]["demos_path"],
+            devices["device_count"],
+            devices["platform"],
+            devices["local_device_count"],
+            data["resolved"].get("inputs", {}),
+        )
+    except IntegrityError as error:
+        raise SystemExit(f"--resume {directory}: {error}") from None
+    except (TypeError, ValueError, KeyError, AttributeError) as error:
+        raise SystemExit(
+            f"--resume {directory}: {path} is damaged or not a run config ({error!r})"
+        ) from None
+
+
+def check_inputs(saved: SavedRun, allow_changed: bool) -> None:
+    """Refuses to resume on input files that differ from those the run began with."""
+    from pngail_jax.integrity import changed_inputs
+
+    changes = changed_inputs(saved.inputs)
+    if not changes:
+        return
+    listing = "; ".join(changes)
+    if not allow_changed:
+        raise SystemExit(
+            f"cannot resume: {listing}. The rest of the run would train on other data than "
+            "its start. Restore the file, or pass --allow-changed-inputs to go on anyway."
+        )
+    print(f"WARNING: {listing}; going on (--allow-changed-inputs): the run mixes data sets")
+
+
+def input_files(config: RunConfig, demos_path: str) -> dict:
+    """``{role: integrity.file_record}`` of the files a run reads its demonstrations from
+    (a Minari dataset is named by its id only)."""
+    from pngail_jax.integrity import file_record
+
+    if demos_path.startswith(MINARI_PREFIX):
+        files = {"confidence file": config.conf} if config.conf else {}
+    else:
+        files = {"demonstrations": demos_path}
+        if demos_path.endswith("_mixture.npy"):
+            files["confidence file"] = config.conf or demos_path.replace(
+                "_mixture.npy", "_mixture_conf.npy"
+            )
+    return {role: file_record(path) for role, path in files.items()}
 
 
 def configure_devices(requested: int | None) -> None:
@@ -386,14 +434,23 @@ def load_or_make_demos(config: RunConfig, saved_path: str | None = None):
             source, config.conf, config.action_scale, confidence_field=config.confidence_field
         )
         return demos, source
+    from pngail_jax.demos import DemonstrationError
+
     cached = DEMO_CACHE / config.env / "demos.npz"
+    remake = []
     if cached.exists():
-        print(f"reusing demonstrations {cached}", flush=True)
+        try:
+            demos = load_demonstrations(cached)
+            print(f"reusing demonstrations {cached}", flush=True)
+            return demos, str(cached.absolute())
+        except DemonstrationError as error:
+            print(f"the cached demonstrations are damaged ({error}): making them again")
+            remake = ["--overwrite"]
     else:
         print(f"no --demos: making them with experiments.make_demos into {cached.parent}")
-        from experiments import make_demos
+    from experiments import make_demos
 
-        make_demos.main(["--env", config.env, "--out", str(cached.parent)])
+    make_demos.main(["--env", config.env, "--out", str(cached.parent), *remake])
     return load_demonstrations(cached), str(cached.absolute())
 
 
@@ -465,7 +522,9 @@ def build(config: RunConfig, saved: SavedRun | None) -> SweepRun:
 
 
 def write_config(out: Path, run: SweepRun, argv: list[str]) -> None:
-    """config.json: the RunConfig, what it resolved to, and provenance."""
+    """config.json: the RunConfig, what it resolved to (with the SHA-256 of every input file,
+    which ``--resume`` checks), and provenance."""
+    from pngail_jax.integrity import write_json
     from pngail_jax.run_config import provenance
 
     document = {
@@ -476,10 +535,11 @@ def write_config(out: Path, run: SweepRun, argv: list[str]) -> None:
             "num_demos": run.trainer.num_demos,
             "bsc_eps": run.config.task_bsc_eps,
             "adversarial": dataclasses.asdict(run.trainer.config),
+            "inputs": input_files(run.config, run.demos_path),
         },
         "provenance": provenance(argv),
     }
-    (out / "config.json").write_text(json.dumps(document, indent=2))
+    write_json(out / "config.json", document)
 
 
 # -- running chunks with progress and checkpoints --------------------------------------------
@@ -494,31 +554,34 @@ class Progress:
     metrics: dict | None
     timing: dict
 
+    def iterations_done(self, grid) -> int:
+        return self.chunks_done * grid.iterations_per_chunk
 
-def initial_state(run: SweepRun, checkpoint_dir: Path, resume: bool):
-    """The grid's state and progress: from the last checkpoint when resuming, else fresh."""
+
+def initial_state(run: SweepRun, checkpoint: Path | None):
+    """The grid's state and progress: from ``checkpoint`` (an intact ``chunk_*`` directory,
+    ``intact_checkpoint``) when resuming, else fresh."""
     import jax
 
     from pngail_jax.checkpoint import restore_tree
+    from pngail_jax.integrity import read_json
 
     grid = run.grid
     start = time.perf_counter()
     state, init_metrics = grid.init()
     progress = Progress(0, grid.fetch(init_metrics), None, {"seconds": 0.0, "steps": 0})
-    latest = _latest_checkpoint(checkpoint_dir)
-    if resume and latest is not None:
+    if checkpoint is not None:
         template = jax.eval_shape(lambda: grid.unpad(state))
-        state = grid.place(restore_tree(latest / "state", template))
-        with np.load(latest / "metrics.npz") as stored:
+        try:
+            state = grid.place(restore_tree(checkpoint / "state", template))
+        except ValueError as error:  # intact, but of another grid
+            raise SystemExit(f"cannot resume from {checkpoint}: {error}") from None
+        with np.load(checkpoint / "metrics.npz") as stored:
             progress.metrics = {name.replace(":", "/"): stored[name] for name in stored.files}
-        done = json.loads((latest / "progress.json").read_text())
+        done = read_json(checkpoint / "progress.json", "progress record")
         progress.chunks_done, progress.timing = done["chunks_done"], done["timing"]
-        print(
-            f"resumed from {latest} (iteration {progress.chunks_done * grid.iterations_per_chunk})"
-        )
+        print(f"resumed from {checkpoint} (iteration {progress.iterations_done(grid)})")
         return state, progress
-    if resume:
-        print(f"no checkpoint in {checkpoint_dir}: starting from the beginning")
     mae = progress.init_metrics["confidence/mae"]
     print(
         f"classifier phase done in {time.perf_counter() - start:.1f} s (confidence MAE on D_u: "
@@ -556,7 +619,7 @@ def run_chunks(run: SweepRun, out: Path, state, progress: Progress, writer: bool
                 for name in chunk_metrics
             }
         progress.chunks_done = chunk + 1
-        iteration = progress.chunks_done * grid.iterations_per_chunk
+        iteration = progress.iterations_done(grid)
         bad = set(nonfinite_cells(progress.metrics, config.settings.eval_every).tolist())
         for index in sorted(bad - reported_bad):
             cell = run.cells[index]
@@ -599,28 +662,47 @@ def _best_cell(cells, chunk_metrics, normalizer) -> str:
     return f"{cell.method}/seed {cell.seed} {final[index]:.1f}{extra}"
 
 
-def _latest_checkpoint(directory: Path):
-    if not directory.exists():
-        return None
-    done = sorted(p for p in directory.glob("chunk_*") if (p / "progress.json").exists())
-    return done[-1] if done else None
+def intact_checkpoint(directory: Path) -> Path | None:
+    """The newest ``chunk_*`` checkpoint in ``directory`` whose files match their digests,
+    saying which newer ones are damaged or incomplete and left aside; None if there is none."""
+    from pngail_jax.integrity import IntegrityError, verify_manifest
+
+    candidates = sorted(directory.glob("chunk_*"), reverse=True) if directory.exists() else []
+    for index, candidate in enumerate(candidates):
+        try:
+            verify_manifest(candidate)
+        except IntegrityError as error:
+            following = candidates[index + 1].name if index + 1 < len(candidates) else None
+            print(
+                f"checkpoint {candidate.name} is damaged or incomplete: {error}; "
+                + (f"trying {following}" if following else "no older checkpoint to fall back on")
+            )
+            continue
+        return candidate
+    print(f"no intact checkpoint in {directory}: starting from the beginning")
+    return None
 
 
 def _save_checkpoint(directory: Path, progress: Progress, host_state, writer: bool):
-    """Writes chunk_NNNN/ (state via orbax, metrics, progress last) and keeps the last two.
+    """Writes chunk_NNNN/ (state via orbax, metrics, progress, then the digests that mark it
+    complete) and keeps the last two, so a damaged newest one leaves an older one to resume.
 
     Every process calls it (orbax synchronises processes); only the writer writes the rest.
     """
     from pngail_jax.checkpoint import save_tree
+    from pngail_jax.integrity import atomic_path, write_json, write_manifest
 
     path = directory / f"chunk_{progress.chunks_done:04d}"
     save_tree(path / "state", host_state)
     if not writer:
         return
     metrics = {name.replace("/", ":"): value for name, value in progress.metrics.items()}
-    np.savez(path / "metrics.npz", **metrics)
-    done = {"chunks_done": progress.chunks_done, "timing": progress.timing}
-    (path / "progress.json").write_text(json.dumps(done))  # marks the checkpoint complete
+    with atomic_path(path / "metrics.npz") as temporary:
+        np.savez(temporary, **metrics)
+    write_json(
+        path / "progress.json", {"chunks_done": progress.chunks_done, "timing": progress.timing}
+    )
+    write_manifest(path)
     for old in sorted(directory.glob("chunk_*"))[:-2]:
         shutil.rmtree(old)
 
@@ -633,8 +715,9 @@ def _title(config: RunConfig, num_cells: int) -> str:
 
 
 def write_outputs(out: Path, run: SweepRun, progress: Progress) -> str:
-    """metrics.csv, curves.png, summary.json and summary.md of the iterations done so far;
-    returns summary.md's text."""
+    """metrics.csv, curves.png, summary.json and summary.md of the iterations done so far
+    (summary.json's ``complete`` is false and ``iterations_done`` says how far until the run
+    ends); returns summary.md's text."""
     from pngail_jax import report
     from pngail_jax.grid import nonfinite_cells
 
@@ -644,15 +727,20 @@ def write_outputs(out: Path, run: SweepRun, progress: Progress) -> str:
     title = _title(config, len(cells))
     diverged = nonfinite_cells(progress.metrics, config.settings.eval_every)
     report.plot_curves(out / "curves.png", cells, metrics, run.normalizer, title, diverged)
-    summary = report.summarize(
-        cells,
-        metrics,
-        run.normalizer,
-        progress.timing["steps"] / progress.timing["seconds"],
-        run.grid.compile_seconds,
-        excluded=diverged,
-    )
-    done = metrics["env_steps"].shape[1]
+    done = progress.iterations_done(run.grid)
+    summary = {
+        "complete": done == config.iterations,
+        "iterations_done": done,
+        "iterations": config.iterations,
+        **report.summarize(
+            cells,
+            metrics,
+            run.normalizer,
+            progress.timing["steps"] / progress.timing["seconds"],
+            run.grid.compile_seconds,
+            excluded=diverged,
+        ),
+    }
     notes = [
         f"Diverged (NaN/inf), left out of the statistics: {cells[i].method} seed "
         f"{cells[i].seed} ({cells[i].setting})."
@@ -715,13 +803,17 @@ def main(argv=None) -> Path:
     invocation = parse_args(argv)
     config, saved, writer = start(invocation)
     out = invocation.out
+    checkpoint = None
+    if saved is not None:  # both checks before the minutes of compiling
+        check_inputs(saved, invocation.args.allow_changed_inputs)
+        checkpoint = intact_checkpoint(out / "checkpoints")
     run = build(config, saved)
     if writer:
         out.mkdir(parents=True, exist_ok=True)
         if saved is None:
             write_config(out, run, invocation.argv)
     print(f"-> {out}", flush=True)
-    state, progress = initial_state(run, out / "checkpoints", invocation.resume)
+    state, progress = initial_state(run, checkpoint)
     logger = None
     if writer and config.log:
         from pngail_jax.tracking import open_logger

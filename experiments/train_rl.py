@@ -13,7 +13,6 @@ from __future__ import annotations
 import argparse
 import csv
 import dataclasses
-import json
 import time
 import warnings
 from pathlib import Path
@@ -27,6 +26,7 @@ from pngail_jax import compilation
 from pngail_jax import settings as run_settings
 from pngail_jax.checkpoint import save_trpo_policies
 from pngail_jax.grid import Grid
+from pngail_jax.integrity import atomic_path, write_json
 from pngail_jax.rl import TRPOHyperparams, TRPOTrainer
 
 METRIC_COLUMNS = (
@@ -53,6 +53,11 @@ def parse_args(argv=None) -> argparse.Namespace:
         type=Path,
         default=None,
         help="output directory (default runs/trpo-<env>-<timestamp>)",
+    )
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace a trained policy already in --out (default: refuse)",
     )
     parser.add_argument(
         "--fisher",
@@ -89,6 +94,14 @@ def parse_args(argv=None) -> argparse.Namespace:
         )
     if args.out is None:
         args.out = Path("runs") / f"trpo-{args.env}-{time.strftime('%Y%m%d-%H%M%S')}"
+    if args.out.exists() and not args.out.is_dir():
+        parser.error(f"--out {args.out} is a file, not a directory")
+    finished = [name for name in ("policy.json", "config.json") if (args.out / name).exists()]
+    if finished and not args.overwrite:
+        parser.error(
+            f"--out {args.out} already holds a run ({', '.join(finished)}): choose another "
+            "--out, or pass --overwrite to replace it"
+        )
     return args
 
 
@@ -101,7 +114,7 @@ def nanmean(values, axis=None):
 
 def write_metrics_csv(path: Path, metrics: dict[str, np.ndarray]) -> None:
     num_seeds, num_iterations = metrics["env_steps"].shape
-    with path.open("w", newline="") as file:
+    with atomic_path(path) as temporary, temporary.open("w", newline="") as file:
         writer = csv.writer(file)
         writer.writerow(["seed", "iteration", *METRIC_COLUMNS])
         for seed in range(num_seeds):
@@ -136,7 +149,8 @@ def plot_learning_curve(path: Path, metrics: dict[str, np.ndarray], title: str) 
     axis.grid(alpha=0.3)
     axis.legend()
     figure.tight_layout()
-    figure.savefig(path, dpi=120)
+    with atomic_path(path) as temporary:
+        figure.savefig(temporary, dpi=120)
     plt.close(figure)
 
 
@@ -199,7 +213,7 @@ def main(argv=None) -> None:
         "trpo": dataclasses.asdict(config),
         "hyperparams": jax.tree.map(lambda x: x.item(), hyperparams).__dict__,
     }
-    (args.out / "config.json").write_text(json.dumps(run_config, indent=2))
+    write_json(args.out / "config.json", run_config)
 
     print(
         f"TRPO on {args.env}: {args.seeds} seeds x {args.iterations} iterations x "

@@ -2,12 +2,13 @@
 
 ``load_policy(path)`` needs neither the training code nor the environment: the directory holds
 ``policy.json`` (architecture, action bounds, observation normaliser flag, per-seed final
-evaluation returns) and ``policy_params/`` (orbax), with a leading seed axis on every array.
+evaluation returns), ``policy_params/`` (orbax), with a leading seed axis on every array, and
+``digests.json`` (every file's SHA-256, written last: ``load_policy`` refuses a damaged or
+incomplete directory and names the file at fault).
 """
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Callable
 from pathlib import Path
@@ -17,10 +18,20 @@ import jax.numpy as jnp
 import numpy as np
 import orbax.checkpoint as ocp
 
+from pngail_jax.integrity import (
+    MANIFEST_NAME,
+    IntegrityError,
+    read_json,
+    verify_manifest,
+    write_json,
+    write_manifest,
+)
 from pngail_jax.networks import GaussianPolicy
 from pngail_jax.rl.train import ObservationNormalizer
 
-POLICY_FORMAT_VERSION = 1
+# 2 added digests.json; version 1 directories (no digests) still load, unverified.
+POLICY_FORMAT_VERSION = 2
+READABLE_POLICY_FORMATS = (1, 2)
 
 
 def save_policies(
@@ -41,10 +52,11 @@ def save_policies(
     """Saves stacked per-seed policies (every leaf has a leading seed axis) to ``directory``.
 
     In a multi-process run every process calls it (orbax synchronises them) and one, with
-    ``write_metadata``, writes ``policy.json``. A non-finite final return (a diverged seed) is
-    stored as null and never chosen as the best seed."""
+    ``write_metadata``, writes ``policy.json`` and ``digests.json``. A non-finite final return
+    (a diverged seed) is stored as null and never chosen as the best seed."""
     directory = Path(directory).absolute()
     directory.mkdir(parents=True, exist_ok=True)
+    (directory / MANIFEST_NAME).unlink(missing_ok=True)  # incomplete until written again
     normalizer_fields = ("count", "mean", "sum_squares")
     arrays = {
         "policy_params": policy_params,
@@ -67,7 +79,8 @@ def save_policies(
         "final_eval_returns": [float(x) if np.isfinite(x) else None for x in final_eval_returns],
         **(extra or {}),
     }
-    (directory / "policy.json").write_text(json.dumps(metadata, indent=2))
+    write_json(directory / "policy.json", metadata)
+    write_manifest(directory)
     return directory
 
 
@@ -105,11 +118,14 @@ def load_policy(
     metadata_path = directory / "policy.json"
     if not metadata_path.exists():
         raise FileNotFoundError(f"no policy.json in {directory}: not a saved policy directory")
-    metadata = json.loads(metadata_path.read_text())
-    if metadata.get("format_version") != POLICY_FORMAT_VERSION:
-        raise ValueError(
-            f"{metadata_path}: unsupported format_version {metadata.get('format_version')!r}"
-        )
+    metadata = read_json(metadata_path, "policy description")
+    version = metadata.get("format_version") if isinstance(metadata, dict) else None
+    if version not in READABLE_POLICY_FORMATS:
+        raise IntegrityError(f"{metadata_path}: unsupported format_version {version!r}")
+    if version >= 2:
+        verify_manifest(directory)
+    elif verbose:
+        print(f"load_policy: {directory} was saved without digests (format 1): not verified")
     returns = [np.nan if r is None else r for r in metadata["final_eval_returns"]]
     if seed is None:
         if not np.isfinite(returns).any():

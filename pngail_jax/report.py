@@ -7,7 +7,6 @@ iterations, as ``pngail_jax.grid`` returns them) and ``cells`` lists the G ``Cel
 from __future__ import annotations
 
 import csv
-import json
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
@@ -15,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from pngail_jax import stats
+from pngail_jax.integrity import atomic_path, atomic_write_text, write_json
 
 CSV_COLUMNS = (
     "method",
@@ -41,6 +41,13 @@ _METRIC_OF_COLUMN = {
 }
 
 
+# summary.json's reading of null: JSON has no NaN, and a statistic can be undefined.
+NULL_MEANS = (
+    "undefined: no finite value to compute it from (every seed diverged, see diverged_seeds), "
+    "a normalised return without random/optimal returns, or a spread of fewer than two seeds"
+)
+
+
 def normalize(returns, normalizer: tuple[float, float] | None):
     """(R - R_random) / (R_optimal - R_random); NaN when no normaliser is known."""
     returns = np.asarray(returns, np.float64)
@@ -58,7 +65,7 @@ def write_metrics_csv(path: Path, cells, metrics, normalizer) -> None:
     """One row per cell and iteration; empty fields where a value is undefined (NaN)."""
     normalized = normalize(metrics["eval/return"], normalizer)
     num_iterations = metrics["env_steps"].shape[1]
-    with Path(path).open("w", newline="") as file:
+    with atomic_path(path) as temporary, temporary.open("w", newline="") as file:
         writer = csv.writer(file)
         writer.writerow(CSV_COLUMNS)
         for index, cell in enumerate(cells):
@@ -117,6 +124,7 @@ def summarize(cells, metrics, normalizer, train_env_steps_per_second, compile_se
     statistic and of ``num_seeds``. With PN-GAIL in the grid: the probability that a PN-GAIL
     seed's final return beats a baseline seed's, per baseline, with its 95% interval.
     """
+    excluded = set(excluded)
     values = _per_cell(cells, metrics, normalizer, excluded)
     settings, groups = group_cells(cells)
     methods = {}
@@ -128,12 +136,16 @@ def summarize(cells, metrics, normalizer, train_env_steps_per_second, compile_se
             row[f"{name}_se"] = summary["se"]
             row[f"{name}_iqm"], row[f"{name}_ci95"] = summary["iqm"], summary["ci95"]
         row["num_seeds"] = int(np.isfinite(values["final_return"][indices]).sum())
+        row["diverged_seeds"] = [cells[i].seed for i in indices if i in excluded]
+        if row["num_seeds"] == 0:
+            row["note"] = "no seed has a finite return (diverged, NaN/inf): statistics are null"
         row["per_seed"] = [
             {"seed": cells[i].seed, **{name: float(v[i]) for name, v in values.items()}}
             for i in indices
         ]
         methods[label] = row
     return {
+        "null_means": NULL_MEANS,
         "methods": methods,
         "probability_of_improvement": _improvement_over_baselines(
             cells, settings, values["final_return"]
@@ -267,9 +279,9 @@ def json_safe(value):
 
 
 def write_summary(directory: Path, summary: dict, markdown: str) -> None:
-    text = json.dumps(json_safe(summary), indent=2, allow_nan=False)
-    (Path(directory) / "summary.json").write_text(text)
-    (Path(directory) / "summary.md").write_text(markdown)
+    """summary.json (non-finite numbers as null) and summary.md, each written atomically."""
+    write_json(Path(directory) / "summary.json", json_safe(summary))
+    atomic_write_text(Path(directory) / "summary.md", markdown)
 
 
 def plot_curves(path: Path, cells, metrics, normalizer, title: str, excluded=()) -> None:
@@ -321,5 +333,6 @@ def plot_curves(path: Path, cells, metrics, normalizer, title: str, excluded=())
     axes[0][-1].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9)
     figure.suptitle(f"{title}\nmean over seeds; shaded: 95% bootstrap interval of the mean")
     figure.tight_layout()
-    figure.savefig(path, dpi=120)
+    with atomic_path(path) as temporary:
+        figure.savefig(temporary, dpi=120)
     plt.close(figure)

@@ -1,6 +1,7 @@
 """End to end: a tiny sweep writes every output; a killed run resumes to the same numbers."""
 
 import csv
+import dataclasses
 import json
 import shutil
 
@@ -49,9 +50,22 @@ def read_csv(path):
         return list(csv.DictReader(file))
 
 
-def test_sweep_writes_every_output_and_resumes_exactly(demos_path, tmp_path):
-    out = tmp_path / "run"
+@pytest.fixture(scope="module")
+def finished(demos_path, tmp_path_factory):
+    """One uninterrupted tiny run, shared by the tests below (they damage copies of it)."""
+    out = tmp_path_factory.mktemp("runs") / "run"
     sweep.main(tiny_sweep_args(demos_path, out))
+    return out
+
+
+def copy_run(finished, tmp_path):
+    copy = tmp_path / "copy"
+    shutil.copytree(finished, copy)
+    return copy
+
+
+def test_sweep_writes_every_output(finished, tmp_path):
+    out = finished
     for name in ("config.json", "metrics.csv", "curves.png", "summary.md", "summary.json"):
         assert (out / name).stat().st_size > 0, name
     rows = read_csv(out / "metrics.csv")
@@ -59,6 +73,7 @@ def test_sweep_writes_every_output_and_resumes_exactly(demos_path, tmp_path):
     assert list(rows[0]) == list(sweep_columns())
     summary = json.loads((out / "summary.json").read_text())
     assert set(summary) >= {"methods", "train_env_steps_per_second", "compile_seconds"}
+    assert summary["complete"] and summary["iterations_done"] == summary["iterations"] == 4
     assert set(summary["methods"]) == {"gail", "pngail"}
     assert set(summary["probability_of_improvement"]) == {"gail"}
     for row in summary["methods"].values():
@@ -78,6 +93,7 @@ def test_sweep_writes_every_output_and_resumes_exactly(demos_path, tmp_path):
     config = json.loads((out / "config.json").read_text())
     assert config["provenance"]["libraries"]["jax"] and config["provenance"]["device_count"] == 1
     assert config["resolved"]["adversarial"]["trpo"]["num_envs"] == 4
+    assert config["resolved"]["inputs"]["demonstrations"]["sha256"].startswith("sha256:")
     check_exported_policies(out, final)
 
     # A new run from the saved config is the same run (logging changes no number).
@@ -86,22 +102,118 @@ def test_sweep_writes_every_output_and_resumes_exactly(demos_path, tmp_path):
     assert (copy / "metrics.csv").read_text() == (out / "metrics.csv").read_text()
     assert json.loads((copy / "config.json").read_text())["log"] == ["tensorboard"]
     assert any((copy / "tensorboard").iterdir())
+    with pytest.raises(SystemExit):  # a second run into the same directory
+        sweep.parse_args(tiny_sweep_args(demos_path=finished, out=out))
 
-    # A kill after the first chunk: the second chunk's checkpoint and the outputs are lost.
-    checkpoints = sorted((out / "checkpoints").iterdir())
-    assert [p.name for p in checkpoints] == ["chunk_0001", "chunk_0002"]
-    with np.load(checkpoints[-1] / "metrics.npz") as stored:
-        uninterrupted = dict(stored)
-    shutil.rmtree(checkpoints[-1])
-    original = (out / "metrics.csv").read_text()
+
+class Killed(BaseException):
+    """A kill -9 stand-in: nothing after it runs."""
+
+
+def test_a_killed_run_says_partial_and_resumes_exactly(finished, demos_path, tmp_path, monkeypatch):
+    out = tmp_path / "run"
+    save = sweep._save_checkpoint
+
+    def killed_at_the_second_checkpoint(directory, progress, host_state, writer):
+        if progress.chunks_done == 2:
+            raise Killed
+        save(directory, progress, host_state, writer)
+
+    monkeypatch.setattr(sweep, "_save_checkpoint", killed_at_the_second_checkpoint)
+    with pytest.raises(Killed):
+        sweep.main(tiny_sweep_args(demos_path, out))
+    monkeypatch.undo()
+    summary = json.loads((out / "summary.json").read_text())
+    assert not summary["complete"] and summary["iterations_done"] == 2
+    assert "Partial: 2 of 4 iterations" in (out / "summary.md").read_text()
+    assert not (out / "policies").exists()
+    sweep.main(["--resume", str(out)])
+    assert (out / "metrics.csv").read_text() == (finished / "metrics.csv").read_text()
+    assert json.loads((out / "summary.json").read_text())["complete"]
+    with np.load(finished / "checkpoints" / "chunk_0002" / "metrics.npz") as uninterrupted:
+        with np.load(out / "checkpoints" / "chunk_0002" / "metrics.npz") as resumed:
+            for name in uninterrupted.files:  # the same program: bit for bit
+                np.testing.assert_array_equal(resumed[name], uninterrupted[name], err_msg=name)
+
+
+def flip_a_bit(path, position=None):
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2 if position is None else position] ^= 0x10
+    path.write_bytes(bytes(data))
+
+
+def largest_file(directory):
+    return max((p for p in directory.rglob("*") if p.is_file()), key=lambda p: p.stat().st_size)
+
+
+def test_a_damaged_checkpoint_is_named_and_the_older_one_resumes(finished, tmp_path, capsys):
+    out = copy_run(finished, tmp_path)
+    damaged = largest_file(out / "checkpoints" / "chunk_0002" / "state")
+    flip_a_bit(damaged)
     (out / "metrics.csv").unlink()
     sweep.main(["--resume", str(out)])
-    assert (out / "metrics.csv").read_text() == original
-    with np.load(checkpoints[-1] / "metrics.npz") as stored:  # rewritten by the resumed run
-        for name, values in uninterrupted.items():
-            np.testing.assert_array_equal(stored[name], values, err_msg=name)
-    with pytest.raises(SystemExit):  # a second run into the same directory
-        sweep.parse_args(tiny_sweep_args(demos_path, out))
+    printed = capsys.readouterr().out
+    assert f"checkpoint chunk_0002 is damaged or incomplete: {damaged}: damaged" in printed
+    assert "trying chunk_0001" in printed and "chunk_0001 (iteration 2)" in printed
+    assert (out / "metrics.csv").read_text() == (finished / "metrics.csv").read_text()
+
+
+@pytest.mark.parametrize("file", ["progress.json", "metrics.npz", "digests.json", "truncated"])
+def test_checkpoint_damage_of_every_kind_falls_back(finished, tmp_path, capsys, file):
+    checkpoints = copy_run(finished, tmp_path) / "checkpoints"
+    newest = checkpoints / "chunk_0002"
+    if file == "truncated":
+        target = largest_file(newest / "state")
+        target.write_bytes(target.read_bytes()[:100])
+    else:
+        target = newest / file
+        flip_a_bit(target, position=2)
+    assert sweep.intact_checkpoint(checkpoints) == checkpoints / "chunk_0001"
+    assert f"chunk_0002 is damaged or incomplete: {newest}" in capsys.readouterr().out
+    flip_a_bit(largest_file(checkpoints / "chunk_0001" / "state"))
+    assert sweep.intact_checkpoint(checkpoints) is None
+    assert "no older checkpoint to fall back on" in capsys.readouterr().out
+
+
+def test_resume_refuses_changed_inputs_and_damaged_configs(finished, tmp_path, capsys):
+    from pngail_jax.demos import load_npz
+    from pngail_jax.integrity import file_record
+
+    out = copy_run(finished, tmp_path)
+    config = json.loads((out / "config.json").read_text())
+    demos = tmp_path / "own_demos.npz"  # the copy gets a demonstrations file of its own
+    shutil.copy(config["resolved"]["demos_path"], demos)
+    config["resolved"]["demos_path"] = str(demos)
+    config["resolved"]["inputs"]["demonstrations"] = file_record(demos)
+    (out / "config.json").write_text(json.dumps(config))
+    original = load_npz(demos)
+    actions = original.actions.copy()
+    actions[0] += 0.5
+    save_npz(demos, dataclasses.replace(original, actions=actions))
+    with pytest.raises(SystemExit, match=f"demonstrations {demos} has changed"):
+        sweep.main(["--resume", str(out)])
+    assert "compiling" not in capsys.readouterr().out  # refused before the compile
+    assert sweep.parse_args(["--resume", str(out), "--allow-changed-inputs"]).resume
+    demos.unlink()
+    with pytest.raises(SystemExit, match=f"demonstrations {demos} is gone"):
+        sweep.main(["--resume", str(out)])
+    (out / "config.json").write_text(json.dumps(config)[:-20])
+    with pytest.raises(SystemExit, match="config.json: damaged run config, not valid JSON"):
+        sweep.main(["--resume", str(out)])
+
+
+def test_a_damaged_policy_is_refused_naming_the_file(finished, tmp_path):
+    from pngail_jax import load_policy
+    from pngail_jax.integrity import IntegrityError
+
+    policies = copy_run(finished, tmp_path) / "policies" / "gail"
+    damaged = largest_file(policies / "policy_params")
+    flip_a_bit(damaged)
+    with pytest.raises(IntegrityError, match=f"{damaged}: damaged"):
+        load_policy(policies)
+    (policies / "policy.json").write_text("{")
+    with pytest.raises(IntegrityError, match="policy.json: damaged policy description"):
+        load_policy(policies)
 
 
 def check_exported_policies(out, gail_final_returns):

@@ -101,3 +101,16 @@ def test_cli_rejects_bad_arguments():
         train_rl.parse_args(["--env", "CartPole-v1"])
     with pytest.raises(SystemExit):
         train_rl.parse_args(["--iterations", "15", "--eval-every", "10"])
+
+
+def test_finished_work_is_not_overwritten_without_the_flag(run_dir, tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        train_rl.parse_args(["--out", str(run_dir)])
+    assert "already holds a run (policy.json, config.json)" in capsys.readouterr().err
+    assert train_rl.parse_args(["--out", str(run_dir), "--overwrite"]).overwrite
+    a_file = tmp_path / "notes.txt"
+    a_file.write_text("mine")
+    with pytest.raises(SystemExit):
+        train_rl.parse_args(["--out", str(a_file)])
+    assert f"--out {a_file} is a file, not a directory" in capsys.readouterr().err
+    assert a_file.read_text() == "mine"
