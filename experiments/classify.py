@@ -5,6 +5,7 @@
 Reads raw [s, a] rows (no environment needed), draws per seed a split of ``--traj-size`` rows
 with ``--label-ratio`` of them labelled, trains each classifier and prints MAE / RMSE over the
 unlabelled rows (mean +- population std over seeds), against the confidences before noise.
+Only rows that a ``.npz`` file's ``labelled`` mask allows are labelled.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import jax.numpy as jnp
 
 from experiments.cli import HelpFormatter, check_positive, known_names
 from pngail_jax.confidence import ClassifierConfig, ClassifierSpec, split_and_train
-from pngail_jax.demos import load_demonstrations
+from pngail_jax.demos import DemonstrationError, Demonstrations, load_demonstrations
 
 METHODS = {"sc": ClassifierSpec.sc, "bsc": ClassifierSpec.bsc}
 
@@ -61,20 +62,54 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--json", type=Path, default=None, help="also write the results here")
     args = parser.parse_args(argv)
     args.methods = known_names(parser, args.methods, METHODS, "method")
-    if not 0 < args.label_ratio < 1:
+    if not 0 < args.label_ratio < 1:  # also refuses nan
         parser.error(f"--label-ratio must be in (0, 1), got {args.label_ratio}")
     check_positive(parser, args, ("seeds", "steps", "batch_size"))
-    if args.noise < 0 or args.eps <= 0:
-        parser.error("--noise must be >= 0 and --eps > 0")
+    if args.traj_size is not None and args.traj_size < 2:
+        parser.error(
+            f"--traj-size must be at least 2 (one labelled and one unlabelled row), "
+            f"got {args.traj_size}"
+        )
+    for flag, value, minimum in (
+        ("--noise", args.noise, ">= 0"),
+        ("--eps", args.eps, "> 0"),
+        ("--action-scale", args.action_scale, "> 0"),
+    ):
+        in_range = value >= 0 if minimum == ">= 0" else value > 0
+        if not (math.isfinite(value) and in_range):
+            parser.error(f"{flag} must be a finite number {minimum}, got {value}")
+    if args.json is not None and args.json.is_dir():
+        parser.error(f"--json {args.json} is a directory; give the path of a file to write")
     return args
+
+
+def load(args: argparse.Namespace) -> Demonstrations:
+    """The demonstrations of ``--demos``, which must carry confidences; raises
+    ``DemonstrationError`` or ``FileNotFoundError`` naming the file."""
+    demos = load_demonstrations(args.demos, args.conf, args.action_scale)
+    if demos.confidence is None:
+        raise DemonstrationError(f"{args.demos}: these demonstrations carry no confidence")
+    return demos
+
+
+def check_labelled_mask(demos: Demonstrations, path: Path, num_labelled: int) -> None:
+    """Raises ``DemonstrationError`` when the file's ``labelled`` mask allows fewer rows than
+    the ``num_labelled`` asked for (the split labels only rows the mask allows)."""
+    if demos.labelled is not None and demos.labelled.sum() < num_labelled:
+        raise DemonstrationError(
+            f"{path}: its labelled mask allows only {int(demos.labelled.sum())} of "
+            f"{demos.num_rows} rows to be labelled, fewer than the {num_labelled} asked for "
+            "(lower --label-ratio or --traj-size)"
+        )
 
 
 def main(argv=None) -> dict:
     args = parse_args(argv)
-    demos = load_demonstrations(args.demos, args.conf, args.action_scale)
-    if demos.confidence is None:
-        raise SystemExit(f"{args.demos}: these demonstrations carry no confidence")
-    traj_size = args.traj_size or demos.num_rows
+    try:
+        demos = load(args)
+    except (DemonstrationError, FileNotFoundError) as error:
+        raise SystemExit(f"classify: {error}") from None
+    traj_size = demos.num_rows if args.traj_size is None else args.traj_size
     if not 2 <= traj_size <= demos.num_rows:
         raise SystemExit(f"--traj-size must be in [2, {demos.num_rows}], got {traj_size}")
     num_labelled = round(args.label_ratio * traj_size)
@@ -83,6 +118,10 @@ def main(argv=None) -> dict:
             f"label ratio {args.label_ratio} of {traj_size} rows leaves "
             f"{num_labelled} labelled: need at least one of each kind"
         )
+    try:
+        check_labelled_mask(demos, args.demos, num_labelled)
+    except DemonstrationError as error:
+        raise SystemExit(f"classify: {error}") from None
     unlabelled_per_labelled = math.ceil((traj_size - num_labelled) / num_labelled)
     config = ClassifierConfig(
         num_steps=args.steps,
@@ -103,11 +142,17 @@ def main(argv=None) -> dict:
             args.label_ratio,
             args.noise,
             key,
+            allowed=None if demos.labelled is None else jnp.asarray(demos.labelled),
         )
 
+    mask_note = (
+        ""
+        if demos.labelled is None
+        else f" (at most, from the {int(demos.labelled.sum())} rows the file's mask allows)"
+    )
     print(
         f"{demos.num_rows} rows from {args.demos}; {traj_size} per seed, {num_labelled} "
-        f"labelled; {len(specs)} method(s) x {args.seeds} seeds x {args.steps} steps of "
+        f"labelled{mask_note}; {len(specs)} method(s) x {args.seeds} seeds x {args.steps} steps of "
         f"{config.labelled_batch_size} + {config.unlabelled_batch_size} rows",
         flush=True,
     )

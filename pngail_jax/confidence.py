@@ -212,18 +212,21 @@ def split_and_train(
     label_ratio,
     noise_std,
     key: jax.Array,
+    allowed: jax.Array | None = None,
 ) -> dict[str, jax.Array]:
     """One seed of Table 1: draw the split, train, score the unlabelled rows.
 
     The seed's key draws the rows, the split, the noise, the initialisation, dropout and
-    batches, so SC and BSC run with the same key see the same split. Returns float[] metrics:
+    batches, so SC and BSC run with the same key see the same split. ``allowed`` (bool[N],
+    None = all) marks the rows whose confidence may be labelled (``make_split``). Returns
+    float[] metrics:
     ``mae``, ``rmse`` and ``clip_active`` (fraction of steps where BSC's clip was active; also
     computed, unused, for SC).
     """
     from pngail_jax.demos import make_split
 
     split_key, train_key = jax.random.split(key)
-    split = make_split(split_key, confidence, traj_size, label_ratio, noise_std)
+    split = make_split(split_key, confidence, traj_size, label_ratio, noise_std, allowed)
     variance_key = jax.random.fold_in(key, 1)  # leaves the training draws as they were
     predicted, logits, metrics = train_classifier(
         config, spec, inputs[split.indices], split.confidence, split.labelled, train_key

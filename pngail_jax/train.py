@@ -132,7 +132,9 @@ class AdversarialTrainer:
     - ``train(hyperparams, spec, key)``: both, for the configured number of iterations.
 
     Demonstrations without confidences serve only methods that read none (GAIL, WGAIL):
-    ``has_confidence`` says which case this is, and ``check_methods`` refuses the others.
+    ``has_confidence`` says which case this is, and ``check_methods`` refuses the others. Only
+    rows the demonstrations' ``labelled`` mask allows are labelled (``make_split``);
+    ``check_label_ratios`` refuses ratios that ask for more labelled rows than it allows.
     """
 
     def __init__(self, config: AdversarialConfig, env: envs.Env, demos: Demonstrations):
@@ -155,6 +157,22 @@ class AdversarialTrainer:
             demos.confidence if self.has_confidence else np.ones(demos.num_rows, np.float32)
         )
         self._action_bounds = jnp.asarray(env.action_low), jnp.asarray(env.action_high)
+        # The rows whose confidence a learner may see (the file's ``labelled`` mask; None: all).
+        has_mask = self.has_confidence and demos.labelled is not None
+        self._allowed = jnp.asarray(demos.labelled) if has_mask else None
+        self.num_allowed = int(demos.labelled.sum()) if has_mask else demos.num_rows
+
+    def check_label_ratios(self, label_ratios) -> None:
+        """Raises ``DemonstrationError`` when the demonstrations' ``labelled`` mask allows
+        fewer rows than the largest ratio labels, ``round(label_ratio * num_demos)``; call it on
+        the host before building a grid (the split itself labels at most the allowed rows)."""
+        largest = max(float(ratio) for ratio in label_ratios)
+        requested = round(largest * self.num_demos)
+        if self.has_confidence and requested > self.num_allowed:
+            raise DemonstrationError(
+                f"label ratio {largest:g} of {self.num_demos} rows asks for {requested} labelled "
+                f"rows, but the demonstrations' labelled mask allows only {self.num_allowed}"
+            )
 
     def check_methods(self, methods) -> None:
         """Raises ``DemonstrationError`` naming the methods that need confidences the
@@ -172,7 +190,7 @@ class AdversarialTrainer:
         )
         split = make_split(
             split_key, self._confidence, self.num_demos, hyperparams.label_ratio,
-            hyperparams.noise_std,
+            hyperparams.noise_std, self._allowed,
         )  # fmt: skip
         inputs = self._demo_inputs[split.indices]
         num_labelled = split.labelled.sum()

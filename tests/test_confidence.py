@@ -9,7 +9,7 @@ import pytest
 
 from pngail_jax.confidence import bsc_loss, logistic_loss, sc_loss
 
-SHARED_PENDULUM = Path(__file__).resolve().parents[2] / "shared" / "data" / "pendulum"
+AUTHORS_PENDULUM = Path(__file__).resolve().parents[1] / "data" / "pendulum"
 
 
 def f32(x):
@@ -114,7 +114,7 @@ def test_sc_non_negative_correction_zeroes_a_negative_risk():
 
 
 @pytest.mark.skipif(
-    not SHARED_PENDULUM.exists(), reason=f"the authors' Pendulum set is not at {SHARED_PENDULUM}"
+    not AUTHORS_PENDULUM.exists(), reason=f"the authors' Pendulum set is not at {AUTHORS_PENDULUM}"
 )
 def test_table1_pendulum_bsc_beats_sc():
     """Label ratio 0.2, 5 seeds, the reference's 25,000 steps (paper: BSC 0.097, SC 0.126).
@@ -123,7 +123,7 @@ def test_table1_pendulum_bsc_beats_sc():
     from experiments import classify
 
     summary = classify.main(
-        ["--demos", str(SHARED_PENDULUM / "Pendulum-v1_mixture.npy"), "--seeds", "5"]
+        ["--demos", str(AUTHORS_PENDULUM / "Pendulum-v1_mixture.npy"), "--seeds", "5"]
     )
     assert summary["bsc"]["mae_mean"] <= 0.11, summary
     assert summary["bsc"]["mae_mean"] < summary["sc"]["mae_mean"], summary
@@ -157,3 +157,35 @@ def test_risk_estimator_variance_matches_the_bootstrap_formula():
         num_resamples=4000,
     )
     assert not np.isclose(balanced, variance, rtol=0.1)
+
+
+def test_split_and_train_labels_only_allowed_rows(monkeypatch):
+    """``allowed`` reaches the split: the classifier is given labels only on allowed rows."""
+    from pngail_jax import confidence as confidence_module
+    from pngail_jax.confidence import ClassifierConfig, ClassifierSpec, split_and_train
+
+    def labels_seen(config, spec, inputs, confidence, labelled, key):
+        # In place of training (seconds of compilation): predict each row's own input column,
+        # 1 for rows outside the mask, so MAE over D_u would show any labelled such row.
+        metrics = {"bsc/clip_active": jnp.zeros(config.num_steps)}
+        return inputs[:, 0], inputs[:, 0], metrics
+
+    monkeypatch.setattr(confidence_module, "train_classifier", labels_seen)
+    monkeypatch.setattr(confidence_module, "risk_estimator_variance", lambda *_: jnp.zeros(()))
+    allowed = np.arange(30) % 3 == 0  # 10 allowed rows
+    inputs = jnp.asarray(np.stack([~allowed, np.zeros(30)], axis=1), jnp.float32)
+    run = jax.jit(
+        jax.vmap(
+            lambda key, mask: split_and_train(
+                ClassifierConfig(num_steps=2), ClassifierSpec.bsc(), inputs, jnp.zeros(30), 30,
+                0.3, 0.0, key, allowed=mask,
+            ),
+            in_axes=(0, None),
+        )
+    )  # fmt: skip
+    keys = jax.random.split(jax.random.key(0), 4)
+    # MAE over D_u of |marker - 0|: the 20 rows outside the mask are all unlabelled, so the
+    # mean is 20 / 21 with 9 of 30 labelled (round(0.3 * 30)), whatever the draw.
+    np.testing.assert_allclose(run(keys, jnp.asarray(allowed))["mae"], 20 / 21, rtol=1e-6)
+    unmasked = run(keys, jnp.ones(30, bool))["mae"]
+    assert np.all(np.asarray(unmasked) < 20 / 21)  # without the mask, some are labelled

@@ -16,7 +16,7 @@ from pngail_jax.demos import (
     save_npz,
 )
 
-SHARED_PENDULUM = Path(__file__).resolve().parents[2] / "shared" / "data" / "pendulum"
+AUTHORS_PENDULUM = Path(__file__).resolve().parents[1] / "data" / "pendulum"
 
 
 def _valid(**overrides):
@@ -102,10 +102,10 @@ def test_check_env_sizes():
 
 
 @pytest.mark.skipif(
-    not SHARED_PENDULUM.exists(), reason=f"the authors' Pendulum set is not at {SHARED_PENDULUM}"
+    not AUTHORS_PENDULUM.exists(), reason=f"the authors' Pendulum set is not at {AUTHORS_PENDULUM}"
 )
 def test_released_pendulum_set_loads():
-    path = SHARED_PENDULUM / "Pendulum-v1_mixture.npy"
+    path = AUTHORS_PENDULUM / "Pendulum-v1_mixture.npy"
     stored = load_released(path)
     scaled = load_released(path, action_scale=2.0)
     assert stored.num_rows == 1000 and stored.observations.shape == (1000, 3)

@@ -1,6 +1,7 @@
 """Imperfect demonstrations: the ``Demonstrations`` type, loaders, savers and splits."""
 
 from pngail_jax.demos.data import (
+    ACTION_BOUND_MULTIPLE,
     DemonstrationError,
     Demonstrations,
     Split,
@@ -13,6 +14,7 @@ from pngail_jax.demos.data import (
 )
 
 __all__ = [
+    "ACTION_BOUND_MULTIPLE",
     "DemonstrationError",
     "Demonstrations",
     "Split",

@@ -13,16 +13,23 @@ Two on-disk layouts:
 ``load_demonstrations`` also reads a local Minari dataset, ``"minari:<dataset_id>"``, with
 per-episode confidences from a file or an episode metadata field (``load_minari``).
 
-Everything is loaded with ``allow_pickle=False``.
+Every file is read through one helper (``_load_numpy``) with ``allow_pickle=False``; an
+empty, truncated or corrupt file, pickled objects, strings or a missing array end in a
+``DemonstrationError`` that names the file, its role and the problem.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import math
+import warnings
+import zipfile
+import zlib
 from pathlib import Path
 from typing import Any
 
+import chex
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -42,6 +49,25 @@ RELEASED_OBSERVATION_SIZES = {
     "Swimmer-v2": 8,
     "Walker2d-v2": 17,
 }
+
+# Action sizes of the same files: a row holds observation + action columns.
+RELEASED_ACTION_SIZES = {
+    "Pendulum-v1": 1,
+    "Ant-v2": 8,
+    "HalfCheetah-v2": 6,
+    "Hopper-v2": 3,
+    "Swimmer-v2": 2,
+    "Walker2d-v2": 6,
+}
+
+# ``check_env`` refuses actions beyond this multiple of the bound's magnitude: a unit or file
+# mix-up, not exploration noise. The authors' MuJoCo files store unclipped policy actions, with
+# 19-58% of entries outside [-1, 1] and values up to 6.65, so a small excess is normal.
+ACTION_BOUND_MULTIPLE = 10.0
+
+# The first bytes of a .npy file and of a .npz (zip) archive.
+NPY_MAGIC = b"\x93NUMPY"
+ZIP_MAGICS = (b"PK\x03\x04", b"PK\x05\x06")
 
 # The paper's Table 3: (random policy, optimal policy) returns, the normaliser of its figures.
 PAPER_NORMALIZERS = {
@@ -92,22 +118,7 @@ class Demonstrations:
         object.__setattr__(self, "observations", obs)
         object.__setattr__(self, "actions", actions)
         if self.confidence is not None:
-            confidence = np.asarray(self.confidence)
-            if confidence.ndim == 2 and confidence.shape[1] == 1:
-                confidence = confidence[:, 0]
-            _check_rows("confidence", confidence, len(obs), ndim=1)
-            if not np.issubdtype(confidence.dtype, np.floating):
-                raise DemonstrationError(
-                    f"confidence must be floating point, got {confidence.dtype}"
-                )
-            if not np.isfinite(confidence).all():
-                raise DemonstrationError("confidence contains NaN or infinite values")
-            if confidence.min() < 0 or confidence.max() > 1:
-                raise DemonstrationError(
-                    f"confidence must lie in [0, 1], got values in "
-                    f"[{confidence.min():.3g}, {confidence.max():.3g}]"
-                )
-            object.__setattr__(self, "confidence", confidence.astype(np.float32))
+            object.__setattr__(self, "confidence", _confidence_vector(self.confidence, len(obs)))
         if self.labelled is not None:
             labelled = np.asarray(self.labelled)
             _check_rows("labelled", labelled, len(obs), ndim=1)
@@ -115,6 +126,7 @@ class Demonstrations:
                 raise DemonstrationError(f"labelled must be a bool mask, got {labelled.dtype}")
             if self.confidence is None and labelled.any():
                 raise DemonstrationError("labelled rows given but no confidence")
+            object.__setattr__(self, "labelled", labelled)
         if self.trajectory_ids is not None:
             ids = np.asarray(self.trajectory_ids)
             _check_rows("trajectory_ids", ids, len(obs), ndim=1)
@@ -132,7 +144,10 @@ class Demonstrations:
         return np.concatenate([self.observations, self.actions], axis=1)
 
     def check_env(self, env) -> None:
-        """Raises ``DemonstrationError`` unless the sizes match ``env``'s."""
+        """Raises ``DemonstrationError`` unless the sizes match ``env``'s and no action lies
+        beyond ``ACTION_BOUND_MULTIPLE`` times the magnitude of ``env``'s action bound
+        (``max(|low|, |high|)`` per dimension). Actions a little outside the bounds pass: the
+        released MuJoCo sets store unclipped policy actions."""
         if self.observations.shape[1] != env.observation_size:
             raise DemonstrationError(
                 f"demonstrations have observations of size "
@@ -144,6 +159,16 @@ class Demonstrations:
                 f"demonstrations have actions of size "
                 f"{self.actions.shape[1]}, {env.name} has {env.action_size}"
             )
+        bound = np.maximum(np.abs(env.action_low), np.abs(env.action_high)).astype(np.float64)
+        magnitude = np.abs(self.actions)
+        beyond = magnitude > ACTION_BOUND_MULTIPLE * bound
+        if beyond.any():
+            row, column = np.unravel_index(np.argmax(np.where(beyond, magnitude, -1)), beyond.shape)
+            raise DemonstrationError(
+                f"actions reach {self.actions[row, column]:.4g} (row {row}, dimension {column}), "
+                f"more than {ACTION_BOUND_MULTIPLE:g} x the action bound {bound[column]:.4g} of "
+                f"{env.name}: wrong --action-scale, or actions stored in other units?"
+            )
 
 
 def _float_matrix(name: str, values) -> np.ndarray:
@@ -152,17 +177,156 @@ def _float_matrix(name: str, values) -> np.ndarray:
         raise DemonstrationError(f"{name} must be 2-D (rows, features), got shape {values.shape}")
     if not np.issubdtype(values.dtype, np.floating):
         raise DemonstrationError(f"{name} must be floating point, got {values.dtype}")
-    if not np.isfinite(values).all():
-        bad = np.argwhere(~np.isfinite(values))[0]
+    with np.errstate(over="ignore"):  # values beyond float32's range become inf: refused
+        stored = values.astype(np.float32)
+    if not np.isfinite(stored).all():
+        row, column = np.argwhere(~np.isfinite(stored))[0]
+        beyond = np.isfinite(values[row, column])
         raise DemonstrationError(
-            f"{name} contains NaN or infinite values (first at row {bad[0]}, column {bad[1]})"
+            f"{name} contains NaN or infinite values (first at row {row}, column {column}"
+            f"{f': {values[row, column]:.3g}, beyond float32' if beyond else ''})"
         )
-    return values.astype(np.float32)
+    return stored
 
 
 def _check_rows(name: str, values: np.ndarray, num_rows: int, ndim: int) -> None:
     if values.ndim != ndim or len(values) != num_rows:
         raise DemonstrationError(f"{name} must have shape ({num_rows},), got {values.shape}")
+
+
+def _confidence_vector(values, num_rows: int) -> np.ndarray:
+    """float32[num_rows] confidences in [0, 1] from float[num_rows] or float[num_rows, 1]."""
+    confidence = np.asarray(values)
+    if confidence.ndim == 2 and confidence.shape[1] == 1:
+        confidence = confidence[:, 0]
+    _check_rows("confidence", confidence, num_rows, ndim=1)
+    if not np.issubdtype(confidence.dtype, np.floating):
+        raise DemonstrationError(f"confidence must be floating point, got {confidence.dtype}")
+    if not np.isfinite(confidence).all():
+        raise DemonstrationError("confidence contains NaN or infinite values")
+    if confidence.min() < 0 or confidence.max() > 1:
+        raise DemonstrationError(
+            f"confidence must lie in [0, 1], got values in "
+            f"[{confidence.min():.3g}, {confidence.max():.3g}]"
+        )
+    return confidence.astype(np.float32)
+
+
+def _load_numpy(path: str | Path, role: str, *, archive: bool = False):
+    """The array of a ``.npy`` file (``archive=False``) or the arrays of a ``.npz`` archive (a
+    dict by name), read with ``allow_pickle=False``.
+
+    Raises ``FileNotFoundError`` for a missing file and ``DemonstrationError`` for anything
+    else that is not a clean NumPy file (empty, truncated, corrupt, pickled objects; for a
+    ``.npy`` file also values that are not real numbers), each message naming ``role`` (e.g.
+    ``"mixture file"``) and ``path``.
+    """
+    path = Path(path)
+    where = f"{role} {path}"
+    if not path.exists():
+        raise FileNotFoundError(f"{role} not found: {path}")
+    if path.is_dir():
+        raise DemonstrationError(f"{where}: is a directory, not a file")
+    num_bytes = path.stat().st_size
+    if num_bytes == 0:
+        raise DemonstrationError(f"{where}: is empty (0 bytes)")
+    with path.open("rb") as stream:
+        start = stream.read(len(NPY_MAGIC))
+        stream.seek(0)
+        if start.startswith(ZIP_MAGICS) != archive:
+            raise DemonstrationError(f"{where}: {_wrong_container(start, archive)}")
+        problem = None if archive else _npy_problem(stream, num_bytes)
+    if problem:
+        raise DemonstrationError(f"{where}: {problem}")
+    try:
+        return _read_npz(path, where) if archive else _read_npy(path, where)
+    except DemonstrationError:
+        raise
+    except (
+        OSError,
+        EOFError,
+        ValueError,
+        KeyError,
+        NotImplementedError,
+        RuntimeError,
+        zipfile.BadZipFile,
+        zlib.error,
+    ) as error:
+        kind = "NumPy .npz archive" if archive else "NumPy .npy file"
+        detail = (str(error).splitlines() or [type(error).__name__])[0][:200]
+        raise DemonstrationError(
+            f"{where}: not a readable {kind}, truncated or corrupt ({detail})"
+        ) from None
+
+
+def _wrong_container(start: bytes, archive: bool) -> str:
+    if not archive:
+        return "is a .npz archive, expected a .npy file"
+    kind = "a .npy file" if start == NPY_MAGIC else "not a zip archive"
+    return f"not a NumPy .npz archive ({kind})"
+
+
+def _read_npy(path: Path, where: str) -> np.ndarray:
+    array = np.load(path, allow_pickle=False)
+    if array.dtype.kind not in "biuf":
+        raise DemonstrationError(f"{where}: {_not_numbers(array)}")
+    return array
+
+
+def _read_npz(path: Path, where: str) -> dict[str, np.ndarray]:
+    """Every ``.npy`` member of the archive, each checked by its header before it is read."""
+    arrays = {}
+    with np.load(path, allow_pickle=False) as npz:
+        for info in npz.zip.infolist():
+            if not info.filename.endswith(".npy"):
+                continue  # np.savez writes only .npy members; others are not ours
+            name = info.filename.removesuffix(".npy")
+            with npz.zip.open(info) as member:
+                problem = _npy_problem(member, info.file_size)
+            if problem:
+                raise DemonstrationError(f"{where}: array {name!r} {problem}")
+            arrays[name] = npz[name]
+    return arrays
+
+
+def _npy_problem(stream, num_bytes: int) -> str | None:
+    """What is wrong with the ``.npy`` data of ``num_bytes`` bytes at ``stream``'s start, read
+    from its header alone (no data is read), or None when the header is sound."""
+    try:
+        version = np.lib.format.read_magic(stream)
+    except ValueError:
+        return "is not a NumPy .npy file (bad header)"
+    if version not in ((1, 0), (2, 0), (3, 0)):
+        return f"is not a NumPy .npy file (unknown format version {version[0]}.{version[1]})"
+    # Version 3.0 differs from 2.0 only in decoding non-ASCII field names, which no array of
+    # numbers has.
+    read_header = (
+        np.lib.format.read_array_header_1_0
+        if version == (1, 0)
+        else np.lib.format.read_array_header_2_0
+    )
+    try:
+        shape, _, dtype = read_header(stream)
+    except Exception:  # untrusted bytes: any failure to parse the header means a corrupt one
+        return "is not a NumPy .npy file (corrupt header)"
+    if dtype.hasobject:
+        return "holds pickled Python objects, which are not loaded for safety"
+    if any(size < 0 for size in shape):
+        return f"is not a NumPy .npy file (corrupt header: shape {shape})"
+    expected = math.prod(shape) * dtype.itemsize
+    found = num_bytes - stream.tell()
+    if found < expected:
+        return (
+            f"is truncated: expected {expected} bytes of data for shape {shape} "
+            f"{dtype}, found {found}"
+        )
+    return None
+
+
+def _not_numbers(array: np.ndarray) -> str:
+    kinds = {"U": "strings", "S": "bytes", "c": "complex numbers", "M": "dates", "m": "times"}
+    what = kinds.get(array.dtype.kind, "values")
+    return f"holds {what} (dtype {array.dtype}), expected real numbers"
 
 
 def load_released(
@@ -176,31 +340,43 @@ def load_released(
     ``conf_path`` defaults to the sibling ``*_mixture_conf.npy``. ``action_scale`` multiplies
     the stored action columns (2 for the released Pendulum set, whose torques are stored / 2).
     ``observation_size`` splits [s, a]; by default it is looked up from the file name's
-    environment (``RELEASED_OBSERVATION_SIZES``).
+    environment (``RELEASED_OBSERVATION_SIZES``), and the rows must then also hold that
+    environment's number of action columns (``RELEASED_ACTION_SIZES``). Errors name the
+    mixture or confidence file they are about.
     """
     mixture_path = Path(mixture_path)
     if not mixture_path.name.endswith("_mixture.npy"):
         raise DemonstrationError(f"{mixture_path}: expected a file named {{env}}_mixture.npy")
+    if not (math.isfinite(action_scale) and action_scale > 0):
+        raise DemonstrationError(f"action_scale must be positive and finite, got {action_scale!r}")
     env_name = mixture_path.name.removesuffix("_mixture.npy")
     if conf_path is None:
         conf_path = mixture_path.with_name(f"{env_name}_mixture_conf.npy")
-    rows = np.load(mixture_path, allow_pickle=False)
-    confidence = np.load(conf_path, allow_pickle=False)
+    where = f"mixture file {mixture_path}"
+    action_size = None
     if observation_size is None:
         if env_name not in RELEASED_OBSERVATION_SIZES:
             raise DemonstrationError(
-                f"{mixture_path}: unknown environment {env_name!r}; pass "
+                f"{where}: unknown environment {env_name!r}; pass "
                 f"observation_size (known: "
                 f"{', '.join(RELEASED_OBSERVATION_SIZES)})"
             )
         observation_size = RELEASED_OBSERVATION_SIZES[env_name]
+        action_size = RELEASED_ACTION_SIZES[env_name]
+    rows = _load_numpy(mixture_path, "mixture file")
+    confidence = _load_numpy(conf_path, "confidence file")
+    if rows.ndim == 2 and action_size is not None:
+        if rows.shape[1] != observation_size + action_size:
+            raise DemonstrationError(
+                f"{where}: rows have {rows.shape[1]} columns, but {env_name} rows [s, a] have "
+                f"{observation_size} + {action_size} columns (observation + action)"
+            )
     if rows.ndim != 2 or not 0 < observation_size < rows.shape[1]:
         raise DemonstrationError(
-            f"{mixture_path}: rows of shape {rows.shape} cannot be split "
+            f"{where}: rows of shape {rows.shape} cannot be split "
             f"into {observation_size} observation columns and actions"
         )
-    if not action_scale > 0:
-        raise DemonstrationError(f"action_scale must be positive, got {action_scale!r}")
+    confidence = _released_confidence(confidence, conf_path, mixture_path, len(rows))
     metadata = {
         "env": env_name,
         "action_scale": float(action_scale),
@@ -213,12 +389,39 @@ def load_released(
             "optimal_return": optimal_return,
             "normalizer_source": "paper Table 3",
         }
-    return Demonstrations(
-        observations=rows[:, :observation_size],
-        actions=rows[:, observation_size:] * action_scale,
-        confidence=confidence,
-        metadata=metadata,
-    )
+    with np.errstate(over="ignore"):  # an overflow to inf is refused below, naming the file
+        actions = rows[:, observation_size:] * action_scale
+    try:
+        return Demonstrations(
+            observations=rows[:, :observation_size],
+            actions=actions,
+            confidence=confidence,
+            metadata=metadata,
+        )
+    except DemonstrationError as error:
+        raise DemonstrationError(f"{where}: {error}") from None
+
+
+def _released_confidence(
+    confidence: np.ndarray, conf_path: Path, mixture_path: Path, num_rows: int
+) -> np.ndarray:
+    """float32[num_rows] from a confidence file's float[num_rows(, 1)], or raises naming it."""
+    where = f"confidence file {conf_path}"
+    if confidence.ndim == 2 and confidence.shape[1] == 1:
+        confidence = confidence[:, 0]
+    if confidence.ndim != 1:
+        raise DemonstrationError(
+            f"{where}: expected shape (N,) or (N, 1), one confidence per row, "
+            f"got {confidence.shape}"
+        )
+    if len(confidence) != num_rows:
+        raise DemonstrationError(
+            f"{where}: has {len(confidence)} rows, but mixture file {mixture_path} has {num_rows}"
+        )
+    try:
+        return _confidence_vector(confidence, num_rows)
+    except DemonstrationError as error:
+        raise DemonstrationError(f"{where}: {error}") from None
 
 
 def save_npz(path: str | Path, demos: Demonstrations) -> None:
@@ -235,24 +438,79 @@ def save_npz(path: str | Path, demos: Demonstrations) -> None:
 
 
 def load_npz(path: str | Path) -> Demonstrations:
-    with np.load(path, allow_pickle=False) as data:
-        version = int(data["format_version"]) if "format_version" in data else None
-        if version != NPZ_FORMAT_VERSION:
-            raise DemonstrationError(
-                f"{path}: unsupported format_version {version!r} "
-                f"(this version reads {NPZ_FORMAT_VERSION})"
-            )
-        optional = {
-            name: data[name]
-            for name in ("confidence", "labelled", "trajectory_ids")
-            if name in data
-        }
-        return Demonstrations(
-            observations=data["observations"],
-            actions=data["actions"],
-            metadata=json.loads(str(data["metadata_json"])),
-            **optional,
+    """Loads our ``.npz`` schema (module docstring); errors name the file."""
+    where = f"demonstrations .npz {path}"
+    arrays = _load_numpy(path, "demonstrations .npz", archive=True)
+    if "format_version" not in arrays:
+        raise DemonstrationError(
+            f"{where}: has no array 'format_version' (not written by save_npz? this version "
+            f"reads format_version {NPZ_FORMAT_VERSION})"
         )
+    version = arrays["format_version"]
+    if version.shape != () or version.dtype.kind not in "iu":
+        raise DemonstrationError(
+            f"{where}: format_version must be one integer, got {version.dtype} of shape "
+            f"{version.shape}"
+        )
+    version = int(version)
+    if version != NPZ_FORMAT_VERSION:
+        raise DemonstrationError(
+            f"{where}: unsupported format_version {version!r} "
+            f"(this version reads {NPZ_FORMAT_VERSION})"
+        )
+    for name in ("observations", "actions"):
+        if name not in arrays:
+            raise DemonstrationError(
+                f"{where}: has no array {name!r} (it has {', '.join(sorted(arrays))})"
+            )
+    fields = {
+        name: arrays[name]
+        for name in ("observations", "actions", "confidence", "labelled", "trajectory_ids")
+        if name in arrays
+    }
+    for name, array in fields.items():
+        if array.dtype.kind not in "biuf":
+            raise DemonstrationError(f"{where}: array {name!r} {_not_numbers(array)}")
+    metadata = _npz_metadata(arrays.get("metadata_json"), where)
+    try:
+        return Demonstrations(metadata=metadata, **fields)
+    except DemonstrationError as error:
+        raise DemonstrationError(f"{where}: {error}") from None
+
+
+def _npz_metadata(metadata_json: np.ndarray | None, where: str) -> dict[str, Any]:
+    """The metadata dict of an ``.npz`` file's ``metadata_json`` (empty when absent), with
+    usable random / optimal returns when it has both; raises naming ``where``."""
+    if metadata_json is None:
+        return {}
+    if metadata_json.shape != () or metadata_json.dtype.kind != "U":
+        raise DemonstrationError(
+            f"{where}: metadata_json must be one string, got {metadata_json.dtype} of shape "
+            f"{metadata_json.shape}"
+        )
+    try:
+        metadata = json.loads(str(metadata_json))
+    except ValueError as error:
+        raise DemonstrationError(f"{where}: metadata_json is not valid JSON ({error})") from None
+    if not isinstance(metadata, dict):
+        raise DemonstrationError(f"{where}: metadata_json must be a JSON object")
+    if "random_return" in metadata and "optimal_return" in metadata:
+        returns = metadata["random_return"], metadata["optimal_return"]
+        numbers = all(isinstance(x, int | float) and not isinstance(x, bool) for x in returns)
+        if not (numbers and all(math.isfinite(x) for x in returns) and returns[0] != returns[1]):
+            raise DemonstrationError(
+                f"{where}: metadata random_return {returns[0]!r} and optimal_return "
+                f"{returns[1]!r} must be two different finite numbers (normalised returns "
+                "divide by their difference)"
+            )
+        if returns[0] > returns[1]:  # make_demos at a tiny budget: usable, but say so
+            warnings.warn(
+                f"{where}: its optimal_return {returns[1]:.1f} is below its random_return "
+                f"{returns[0]:.1f}: normalised returns run backwards (make it with more "
+                "--iterations)",
+                stacklevel=3,
+            )
+    return metadata
 
 
 def load_demonstrations(
@@ -303,18 +561,31 @@ def make_split(
     traj_size: int,
     label_ratio: float | jax.Array,
     noise_std: float | jax.Array = 0.0,
+    allowed: jax.Array | None = None,
 ) -> Split:
     """Draws ``traj_size`` rows; the first ``round(label_ratio * traj_size)`` are labelled.
 
+    ``allowed`` (bool[N], None = every row) marks the rows whose confidence a learner may see
+    (``Demonstrations.labelled``). The rows are drawn uniformly as without it; the drawn
+    allowed rows then come first, each group in drawn order, and only they are labelled: the
+    first ``min(round(label_ratio * traj_size), allowed rows drawn)``. With every row allowed
+    the split is the one drawn without ``allowed``, bit for bit.
+
     Confidence noise ``clip(r + N(0, noise_std^2), 0, 1)`` as the paper's robustness test.
-    ``traj_size`` is static (a shape); ``label_ratio`` and ``noise_std`` are values, so a grid
-    can vmap over them.
+    ``traj_size`` is static (a shape); ``label_ratio``, ``noise_std`` and ``allowed`` are
+    values, so a grid can vmap over them.
     """
     order_key, noise_key = jax.random.split(key)
     indices = jax.random.permutation(order_key, confidence.shape[0])[:traj_size]
+    num_labelled = jnp.round(label_ratio * traj_size)
+    if allowed is not None:
+        chex.assert_shape(allowed, confidence.shape[:1])
+        allowed_drawn = jnp.asarray(allowed, bool)[indices]
+        # A stable sort keeps the drawn order within each group: all allowed = no reordering.
+        indices = indices[jnp.argsort((~allowed_drawn).astype(jnp.int32), stable=True)]
+        num_labelled = jnp.minimum(num_labelled, allowed_drawn.sum())
     true_confidence = confidence[indices]
     noise = noise_std * jax.random.normal(noise_key, true_confidence.shape)
-    num_labelled = jnp.round(label_ratio * traj_size)
     return Split(
         indices=indices.astype(jnp.int32),
         confidence=jnp.clip(true_confidence + noise, 0.0, 1.0),
@@ -350,8 +621,8 @@ def load_minari(
         raise ImportError("load_minari needs minari: pip install 'pngail-jax[minari]'") from error
     if confidence is not None and confidence_field is not None:
         raise DemonstrationError("give confidence or confidence_field, not both")
-    if not action_scale > 0:
-        raise DemonstrationError(f"action_scale must be positive, got {action_scale!r}")
+    if not (math.isfinite(action_scale) and action_scale > 0):
+        raise DemonstrationError(f"action_scale must be positive and finite, got {action_scale!r}")
     try:
         dataset = minari.load_dataset(dataset_id, download=False)
     except FileNotFoundError as error:
@@ -390,11 +661,13 @@ def _read_numbers(path: str | Path) -> np.ndarray:
     """The numbers of a ``.npy`` file, or of a text file with one number per line."""
     path = Path(path)
     if path.suffix == ".npy":
-        return np.load(path, allow_pickle=False)
+        return _load_numpy(path, "confidence file")
     try:
         return np.loadtxt(path, ndmin=1)
     except ValueError as error:
-        raise DemonstrationError(f"{path}: expected one number per line: {error}") from None
+        raise DemonstrationError(
+            f"confidence file {path}: expected one number per line: {error}"
+        ) from None
 
 
 def _metadata_field(dataset, dataset_id: str, field: str) -> list:
