@@ -1,9 +1,16 @@
-"""Command-line helpers shared by the programs in ``experiments``."""
+"""Command-line helpers shared by the programs in ``experiments``.
+
+Every check exits through ``parser.error`` (status 2, the usage line, then the message) with a
+message that names the flag, so a bad value never reaches the program as a traceback.
+"""
 
 from __future__ import annotations
 
 import argparse
+import math
+import numbers
 from collections.abc import Sequence
+from pathlib import Path
 
 
 class HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
@@ -17,26 +24,53 @@ class HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefau
         return super()._get_help_string(action)
 
 
-def known_names(parser: argparse.ArgumentParser, text: str, known: Sequence[str], kind: str):
+def _items(parser: argparse.ArgumentParser, prefix: str, text: str, what: str) -> list[str]:
+    """The stripped comma-separated items of a flag's value; an empty one (``"a,,b"``,
+    ``"a,"``, ``""``) exits with ``prefix`` (the flag) leading the message."""
+    items = [item.strip() for item in str(text).split(",")]
+    if not all(items):
+        parser.error(f"{prefix}empty item in {text!r} (expected comma-separated {what})")
+    return items
+
+
+def known_names(
+    parser: argparse.ArgumentParser,
+    text: str,
+    known: Sequence[str],
+    kind: str,
+    flag: str | None = None,
+) -> list[str]:
     """The comma-separated names in ``text`` (a flag's value), in order; exits through
     ``parser.error`` naming the unknown ones (and what is available) when any name is not in
-    ``known`` or none is given. ``kind`` names one item, e.g. ``"method"``."""
-    names = [name.strip() for name in text.split(",") if name.strip()]
+    ``known``, and on an empty item or a repeated name. ``kind`` names one item, e.g.
+    ``"method"``; ``flag`` (e.g. ``"--methods"``) starts each message when given."""
+    prefix = f"{flag}: " if flag else ""
+    names = _items(parser, prefix, text, f"{kind} names")
     unknown = [name for name in names if name not in known]
-    if unknown or not names:
-        parser.error(f"unknown {kind}(s) {unknown}; available: {', '.join(known)}")
+    if unknown:
+        parser.error(f"{prefix}unknown {kind}(s) {unknown}; available: {', '.join(known)}")
+    repeated = sorted({name for name in names if names.count(name) > 1})
+    if repeated:
+        parser.error(f"{prefix}{kind}(s) {repeated} given more than once")
     return names
 
 
 def comma_floats(parser: argparse.ArgumentParser, flag: str, text: str | None):
-    """The comma-separated numbers of a flag's value as a tuple (None when not given); exits
-    through ``parser.error`` naming ``flag`` when one is not a number."""
+    """The comma-separated finite numbers of a flag's value as a tuple of floats (None when
+    not given); exits through ``parser.error`` naming ``flag`` on an empty item, an item that
+    is not a number, or a NaN or infinity (``"nan"``, ``"inf"``, ``"1e999"``)."""
     if text is None:
         return None
-    try:
-        return tuple(float(x) for x in str(text).split(","))
-    except ValueError:
-        parser.error(f"{flag} must be comma-separated numbers, got {text!r}")
+    values = []
+    for item in _items(parser, f"{flag}: ", text, "numbers"):
+        try:
+            value = float(item)
+        except ValueError:
+            parser.error(f"{flag} must be comma-separated numbers, got {text!r}")
+        if not math.isfinite(value):
+            parser.error(f"{flag} values must be finite numbers, got {item!r}")
+        values.append(value)
+    return tuple(values)
 
 
 ENV_HELP = (
@@ -45,20 +79,67 @@ ENV_HELP = (
 )
 
 
-def check_env(parser: argparse.ArgumentParser, name: str) -> str:
+def check_env(parser: argparse.ArgumentParser, name: str, flag: str = "--env") -> str:
     """``name`` when ``pngail_jax.envs.make`` knows it; else exits through ``parser.error``
-    naming what is available."""
+    naming ``flag`` and what is available."""
     from pngail_jax import envs
 
     try:
         envs.check_name(name)
-    except ValueError as error:
-        parser.error(str(error))
+    except (ValueError, TypeError) as error:  # TypeError: a relative module name (".x:f")
+        parser.error(f"{flag}: {error}")
     return name
 
 
+def _flag(name: str) -> str:
+    return f"--{name.replace('_', '-')}"
+
+
 def check_positive(parser: argparse.ArgumentParser, args, names) -> None:
-    """Exits through ``parser.error`` naming the first flag (``args`` attribute) below 1."""
+    """Exits through ``parser.error`` naming the first flag (``args`` attribute) whose value
+    is not a positive integer (below 1, or not an integer); flags left at None (not given,
+    no default) are skipped."""
     for name in names:
-        if getattr(args, name) < 1:
-            parser.error(f"--{name.replace('_', '-')} must be positive")
+        value = getattr(args, name)
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            parser.error(f"{_flag(name)} must be a positive integer, got {value!r}")
+
+
+def check_finite(parser: argparse.ArgumentParser, args, names) -> None:
+    """Exits through ``parser.error`` naming the first flag (``args`` attribute) whose number
+    is NaN or infinite (``type=float`` accepts ``nan``, ``inf`` and ``1e999``); flags left at
+    None are skipped."""
+    for name in names:
+        value = getattr(args, name)
+        if value is None:
+            continue
+        # Not a number: argparse turns the value "--" into [] (it drops "--" from values).
+        if not isinstance(value, numbers.Real) or not math.isfinite(value):
+            parser.error(f"{_flag(name)} must be a finite number, got {value!r}")
+
+
+def check_output_directory(
+    parser: argparse.ArgumentParser,
+    directory: Path,
+    finished: str,
+    overwrite: bool,
+    flag: str = "--out",
+) -> None:
+    """Exits through ``parser.error`` naming ``flag`` when ``directory`` cannot be an output
+    directory (it, or the nearest existing folder above it, is a file), or when it already
+    holds finished work (its file ``finished``) and ``overwrite`` is not set."""
+    directory = Path(directory)
+    if directory.exists() and not directory.is_dir():
+        parser.error(f"{flag} {directory} is a file, not a directory")
+    for parent in directory.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                parser.error(f"{flag} {directory}: {parent} is a file, not a directory")
+            break
+    if not overwrite and (directory / finished).exists():
+        parser.error(
+            f"{flag} {directory} already holds finished work ({directory / finished}); "
+            f"pass --overwrite to replace it, or choose another {flag}"
+        )

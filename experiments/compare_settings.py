@@ -11,6 +11,10 @@ on the task's own MJX solver and on the fast one, so a policy trained on the fas
 also judged on the accurate one. Writes ``comparison.json``, ``comparison.md`` and
 ``comparison.png`` (evaluation return vs environment steps, mean and standard error band).
 
+``comparison.json`` is written last (each output atomically), so it marks a finished
+comparison: running into the same ``--out`` again refuses unless ``--overwrite`` is given
+(which rewrites the comparison; finished arms are still reused).
+
 The verdict follows docs/performance.md: an arm is "not worse" than ``--baseline`` when its
 mean final return is at least the baseline's mean minus one standard error.
 """
@@ -25,7 +29,17 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.cli import ENV_HELP, HelpFormatter, check_env, check_positive, known_names
+from experiments.cli import (
+    ENV_HELP,
+    HelpFormatter,
+    check_env,
+    check_output_directory,
+    check_positive,
+    known_names,
+)
+from pngail_jax.integrity import atomic_path, atomic_write_text
+
+COMPARISON_FILE = "comparison.json"  # written last: its presence marks a finished comparison
 
 # train_rl flags of each arm (the common flags are added by run_arm).
 ARMS = {
@@ -63,9 +77,16 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--eval-episodes", type=int, default=32, help="of the final evaluation")
     parser.add_argument("--seed", type=int, default=0, help="base PRNG seed")
     parser.add_argument("--out", type=Path, required=True, help="output directory (required)")
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="rewrite a finished comparison in --out (its finished arms are reused; "
+        "default: refuse)",
+    )
     args = parser.parse_args(argv)
+    check_output_directory(parser, args.out, COMPARISON_FILE, args.overwrite)
     check_env(parser, args.env)
-    args.arms = known_names(parser, args.arms, list(ARMS), "arm")
+    args.arms = known_names(parser, args.arms, list(ARMS), "arm", flag="--arms")
     if args.env == "Pendulum-v1" and any("--solver" in ARMS[arm] for arm in args.arms):
         parser.error("Pendulum-v1 has no MJX solver: choose arms without --solver")
     args.baseline = args.baseline or args.arms[0]
@@ -164,7 +185,8 @@ def plot(path: Path, curves: dict, title: str) -> None:
     axis.grid(alpha=0.3)
     axis.legend()
     figure.tight_layout()
-    figure.savefig(path, dpi=120)
+    with atomic_path(path) as temporary:  # keeps the .png suffix savefig takes the format from
+        figure.savefig(temporary, dpi=120)
     plt.close(figure)
 
 
@@ -226,10 +248,10 @@ def main(argv=None) -> dict:
         "eval_episodes": args.eval_episodes,
         "arms": results,
     }
-    (args.out / "comparison.json").write_text(json.dumps(summary, indent=2))
     markdown = comparison_markdown(summary)
-    (args.out / "comparison.md").write_text(markdown + "\n")
+    atomic_write_text(args.out / "comparison.md", markdown + "\n")
     plot(args.out / "comparison.png", curves, f"TRPO on {args.env}, true reward")
+    atomic_write_text(args.out / COMPARISON_FILE, json.dumps(summary, indent=2))
     print(f"\n{markdown}\n\nwrote {args.out}/comparison.{{json,md,png}}")
     return summary
 

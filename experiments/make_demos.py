@@ -14,12 +14,17 @@
    with its return normalised between random and optimal (clipped to [0, 1]) and saves
    ``demos.npz`` (our schema; actions clipped to the bounds, as the environment applies them)
    with the normaliser in its metadata.
+
+``demos.npz`` is written last and atomically (a temporary sibling renamed onto it), so its
+presence means the run finished; a second run into the same ``--out`` refuses to replace it
+unless ``--overwrite`` is given (``experiments.sweep`` only calls this for a missing cache).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import time
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -28,14 +33,24 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from experiments.cli import ENV_HELP, HelpFormatter, check_env
+from experiments.cli import (
+    ENV_HELP,
+    HelpFormatter,
+    check_env,
+    check_finite,
+    check_output_directory,
+    check_positive,
+)
 from experiments.train_rl import train_with_progress
 from pngail_jax import compilation
 from pngail_jax import settings as run_settings
 from pngail_jax.checkpoint import save_trpo_policies
 from pngail_jax.demos import Demonstrations, save_npz
 from pngail_jax.demos.generate import normalized_return, rollout_episodes, uniform_random_actions
+from pngail_jax.integrity import atomic_path, atomic_write_text
 from pngail_jax.rl import TRPOHyperparams, TRPOTrainer
+
+DEMOS_FILE = "demos.npz"  # written last: its presence marks a finished run
 
 
 class Checkpoint(NamedTuple):
@@ -52,6 +67,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     )
     parser.add_argument("--env", default="Pendulum-v1", help=ENV_HELP)
     parser.add_argument("--out", type=Path, required=True, help="output directory (required)")
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an earlier run's demos.npz, normalizer.json and checkpoints in --out "
+        "(default: refuse)",
+    )
     parser.add_argument("--iterations", type=int, default=150, help="TRPO iterations")
     parser.add_argument("--seeds", type=int, default=3, help="TRPO seeds; the best is optimal")
     parser.add_argument("--seed", type=int, default=0, help="base PRNG seed")
@@ -77,7 +98,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.set_defaults(eval_every=10)
     compilation.add_arguments(parser)
     args = parser.parse_args(argv)
+    check_output_directory(parser, args.out, DEMOS_FILE, args.overwrite)
     check_env(parser, args.env)
+    check_positive(parser, args, ("iterations", "seeds", "num_trajectories", "measure_episodes"))
+    check_finite(parser, args, ("intermediate_target",))
     try:
         args.settings = run_settings.from_arguments(args.env, args)
     except ValueError as error:
@@ -86,21 +110,33 @@ def parse_args(argv=None) -> argparse.Namespace:
         optimal_part, intermediate_part = (float(x) for x in args.ratio.split(":"))
     except ValueError:
         parser.error(f"--ratio must look like 1:4, got {args.ratio!r}")
-    if optimal_part < 0 or intermediate_part < 0 or optimal_part + intermediate_part == 0:
-        parser.error(f"--ratio parts must be non-negative and not both 0, got {args.ratio!r}")
-    args.num_optimal = round(
-        args.num_trajectories * optimal_part / (optimal_part + intermediate_part)
-    )
+    total = optimal_part + intermediate_part
+    if not (optimal_part >= 0 and intermediate_part >= 0 and 0 < total < math.inf):  # no NaN
+        parser.error(
+            f"--ratio parts must be finite, non-negative and not both 0, got {args.ratio!r}"
+        )
+    args.num_optimal = round(args.num_trajectories * optimal_part / total)
     if args.iterations % args.settings.eval_every:
         parser.error("--iterations must be a multiple of --eval-every")
     if not 0 < args.intermediate_target < 1:
-        parser.error("--intermediate-target must be in (0, 1)")
+        parser.error(f"--intermediate-target must be in (0, 1), got {args.intermediate_target}")
     return args
+
+
+def write_outputs(out: Path, demos: Demonstrations, normalizer: dict) -> Path:
+    """``normalizer.json``, then ``demos.npz`` (the mark of a finished run), each written to
+    a temporary sibling and renamed, so a kill never leaves a truncated file behind."""
+    atomic_write_text(out / "normalizer.json", json.dumps(normalizer, indent=2))
+    path = out / DEMOS_FILE
+    with atomic_path(path) as temporary:  # keeps the .npz suffix np.savez would append
+        save_npz(temporary, demos)
+    return path
 
 
 def main(argv=None) -> Path:
     args = parse_args(argv)
     compilation.from_arguments(args)
+    args.out.mkdir(parents=True, exist_ok=True)
     env = run_settings.make_env(args.env, args.settings)
     config = args.settings.trpo_config(args.iterations)
     trainer = TRPOTrainer(config, env)
@@ -234,9 +270,8 @@ def main(argv=None) -> Path:
     }
     demos = Demonstrations(**{k: np.concatenate(v) for k, v in rows.items()}, metadata=metadata)
     demos.check_env(env)
-    save_npz(args.out / "demos.npz", demos)
-    (args.out / "normalizer.json").write_text(
-        json.dumps({k: metadata[k] for k in ("env", "random_return", "optimal_return")}, indent=2)
+    path = write_outputs(
+        args.out, demos, {k: metadata[k] for k in ("env", "random_return", "optimal_return")}
     )
     print(
         f"\n| policy | return | normalised |\n|---|---:|---:|\n"
@@ -249,10 +284,10 @@ def main(argv=None) -> Path:
     confidences = [float(c[0]) for c in rows["confidence"]]
     print(
         f"\n{demos.num_rows} rows in {len(confidences)} trajectories, confidences "
-        f"{[round(c, 2) for c in confidences]}; wrote {args.out}/demos.npz "
+        f"{[round(c, 2) for c in confidences]}; wrote {path} "
         f"in {time.perf_counter() - start:.0f} s"
     )
-    return args.out / "demos.npz"
+    return path
 
 
 if __name__ == "__main__":

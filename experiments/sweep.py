@@ -231,7 +231,7 @@ def config_from_flags(parser, args) -> RunConfig:
     conf = None if args.conf is None else str(Path(args.conf).absolute())
     log = None
     if args.log is not None:
-        log = tuple(known_names(parser, args.log, LOG_BACKENDS, "log backend"))
+        log = tuple(known_names(parser, args.log, LOG_BACKENDS, "log backend", flag="--log"))
         try:
             check_backends(log)
         except ImportError as error:
@@ -249,7 +249,7 @@ def config_from_flags(parser, args) -> RunConfig:
             settings=settings,
             methods=None
             if args.methods is None
-            else tuple(known_names(parser, args.methods, METHOD_NAMES, "method")),
+            else tuple(known_names(parser, args.methods, METHOD_NAMES, "method", flag="--methods")),
             seeds=args.seeds,
             iterations=args.iterations,
             label_ratios=comma_floats(parser, "--label-ratio", args.label_ratio),
@@ -289,6 +289,10 @@ def _flag_message(message: str) -> str:
         ("action_scale", "--action-scale"),
         ("bsc_eps", "--bsc-eps"),
         ("ClassifierConfig.num_steps", "--classifier-steps"),
+        ("seed must", "--seed must"),
+        ("conf:", "--conf:"),
+        ("confidence_field", "--confidence-field"),
+        ("demos:", "--demos:"),
     ):
         if message.startswith(field):
             return flag + message[len(field) :]
@@ -444,7 +448,7 @@ def load_or_make_demos(config: RunConfig, saved_path: str | None = None):
             print(f"reusing demonstrations {cached}", flush=True)
             return demos, str(cached.absolute())
         except DemonstrationError as error:
-            print(f"the cached demonstrations are damaged ({error}): making them again")
+            print(f"the cached demonstrations are damaged: {error}; making them again")
             remake = ["--overwrite"]
     else:
         print(f"no --demos: making them with experiments.make_demos into {cached.parent}")
@@ -484,6 +488,7 @@ def build(config: RunConfig, saved: SavedRun | None) -> SweepRun:
     try:
         trainer = AdversarialTrainer(config.adversarial_config(), env, demos)
         trainer.check_methods(config.methods)
+        trainer.check_label_ratios(config.label_ratios)
     except DemonstrationError as error:
         raise SystemExit(f"{demos_path}: {error}") from None
     for ratio in config.label_ratios:

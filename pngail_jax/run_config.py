@@ -2,9 +2,13 @@
 
 The command line (``python -m experiments.sweep``) only fills one in; Python users build it
 directly (``RunConfig(env="Hopper", methods=("gail", "pngail"))``) or from a preset
-(``RunConfig.preset("paper", demos="...")``). ``to_json`` / ``from_json`` round-trip it, so a
-saved ``config.json`` starts a new run (``--config FILE``) or continues one (``--resume DIR``).
-``provenance()`` adds what a saved run should remember of where it ran.
+(``RunConfig.preset("paper", demos="...")``). ``to_dict`` / ``from_dict`` (and ``from_json``)
+round-trip it, so a saved ``config.json`` starts a new run (``--config FILE``) or continues one
+(``--resume DIR``). ``provenance()`` adds what a saved run should remember of where it ran.
+
+Every field is checked when a config is made, from Python or from a file: a wrong type, a NaN
+or infinite number, a count below 1 or an unknown key raises ValueError naming the field (the
+sweep turns the name into its flag), so a valid config holds exactly its annotated types.
 """
 
 from __future__ import annotations
@@ -12,12 +16,14 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import numbers
 import platform
 import subprocess
 import sys
+from collections.abc import Mapping
 from importlib import metadata
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.methods import METHOD_NAMES, PRESETS
@@ -26,6 +32,11 @@ from pngail_jax.tracking import BACKENDS as LOG_BACKENDS
 from pngail_jax.train import AdversarialConfig
 
 FISHER_FORMS = ("gauss_newton", "hessian")
+# What a saved config.json holds besides the config's fields (experiments.sweep writes them);
+# RunConfig.from_dict ignores these and refuses any other key that is not a field.
+RECORD_KEYS = ("resolved", "provenance")
+# jax.random.key takes a seed below 2**63.
+SEED_LIMIT = 2**63
 # BSC's clip per task where the paper departs from 0.01 (appendix C.2: 0.05 on Walker2d).
 TASK_BSC_EPS = {"Walker2d": 0.05}
 
@@ -64,67 +75,96 @@ class RunConfig:
     preset_name: str | None = None  # the preset this config started from, for the record
 
     def __post_init__(self):
-        # Frozen: fields are normalised through object.__setattr__ (lists from JSON -> tuples).
-        for name in ("methods", "label_ratios", "noise_stds", "log", "discriminator_hidden_sizes"):
-            value = getattr(self, name)
-            value = tuple(value) if isinstance(value, list | tuple) else (value,)
+        # Frozen: fields are normalised through object.__setattr__ (lists from JSON -> tuples,
+        # NumPy numbers -> Python ones, ints in float fields -> floats), so a valid config holds
+        # exactly the types its annotations name and its JSON reads back equal.
+        def set_field(name: str, value) -> None:
             object.__setattr__(self, name, value)
+
+        for name in _TUPLE_FIELDS:
+            value = getattr(self, name)
+            set_field(name, tuple(value) if isinstance(value, list | tuple) else (value,))
+        if not isinstance(self.env, str) or not self.env:
+            _fail(f"env must be an environment name, got {self.env!r}")
         if self.settings is None:  # the environment's row (raises for an unknown environment)
-            object.__setattr__(self, "settings", settings_for(self.env))
+            set_field("settings", _env_settings(self.env))
+        elif not isinstance(self.settings, RunSettings):
+            _fail(
+                "settings must be a pngail_jax.settings.RunSettings (None: the environment's "
+                f"row), got {type(self.settings).__name__}"
+            )
+        else:
+            _env_settings(self.env)  # the name must be known even when settings are given
+        for name in ("seeds", "iterations", "chunk_iterations", "fisher_subsample"):
+            set_field(name, _integer(name, getattr(self, name), minimum=1))
+        set_field("seed", _integer("seed", self.seed, minimum=0, below=SEED_LIMIT))
+        if self.num_demos is not None:
+            set_field("num_demos", _integer("num_demos", self.num_demos, minimum=2))
+        if self.cpu_devices is not None:
+            set_field("cpu_devices", _integer("cpu_devices", self.cpu_devices, minimum=1))
+        set_field(
+            "discriminator_hidden_sizes",
+            _layer_sizes("discriminator_hidden_sizes", self.discriminator_hidden_sizes),
+        )
+        set_field(
+            "label_ratios",
+            _float_axis("label ratios", self.label_ratios, "lie in (0, 1)", lambda r: 0 < r < 1),
+        )
+        set_field(
+            "noise_stds",
+            _float_axis("noise stds", self.noise_stds, "be finite and >= 0", lambda s: s >= 0),
+        )
+        set_field("action_scale", _real("action_scale", self.action_scale))
+        if self.action_scale <= 0:
+            _fail(f"action_scale must be finite and positive, got {self.action_scale!r}")
+        if self.bsc_eps is not None:
+            set_field("bsc_eps", _real("bsc_eps", self.bsc_eps, "lie in (0, 0.5)"))
+            if not 0 < self.bsc_eps < 0.5:
+                _fail(f"bsc_eps must lie in (0, 0.5), got {self.bsc_eps!r}")
+        for name in ("demos", "conf", "confidence_field", "preset_name"):
+            value = getattr(self, name)
+            if value is not None and (not isinstance(value, str) or not value):
+                _fail(f"{name} must be a non-empty string or None, got {value!r}")
+        if not isinstance(self.classifier, ClassifierConfig):
+            _fail(
+                "classifier must be a pngail_jax.confidence.ClassifierConfig, "
+                f"got {type(self.classifier).__name__}"
+            )
+        set_field("classifier", ClassifierConfig(**_classifier_fields(_fields_of(self.classifier))))
         self._validate()
 
     def _validate(self) -> None:
-        def fail(message: str):
-            raise ValueError(message)
-
-        unknown = [name for name in self.methods if name not in PRESETS]
-        if unknown or not self.methods:
-            fail(f"unknown method(s) {unknown}; available: {', '.join(METHOD_NAMES)}")
+        """The checks between fields, and the names each field must be among."""
+        if not self.methods:
+            _fail(f"methods must name at least one method; available: {', '.join(METHOD_NAMES)}")
+        unknown = [name for name in self.methods if not _is_among(name, PRESETS)]
+        if unknown:
+            _fail(f"unknown method(s) {unknown}; available: {', '.join(METHOD_NAMES)}")
         if len(set(self.methods)) != len(self.methods):
-            fail(f"methods must not repeat, got {list(self.methods)}")
-        for name in ("seeds", "iterations", "chunk_iterations", "fisher_subsample"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                fail(f"{name} must be a positive integer, got {value!r}")
-        if self.cpu_devices is not None and (
-            isinstance(self.cpu_devices, bool)
-            or not isinstance(self.cpu_devices, int)
-            or self.cpu_devices < 1
-        ):
-            fail(f"cpu_devices must be a positive integer, got {self.cpu_devices!r}")
-        if self.num_demos is not None and (
-            not isinstance(self.num_demos, int) or self.num_demos < 2
-        ):
-            fail(f"num_demos must be an integer >= 2, got {self.num_demos!r}")
-        if not all(_finite(r) and 0 < r < 1 for r in self.label_ratios) or not self.label_ratios:
-            fail(f"label ratios must lie in (0, 1), got {list(self.label_ratios)}")
-        if not all(_finite(s) and s >= 0 for s in self.noise_stds) or not self.noise_stds:
-            fail(f"noise stds must be finite and >= 0, got {list(self.noise_stds)}")
-        if not (_finite(self.action_scale) and self.action_scale > 0):
-            fail(f"action_scale must be finite and positive, got {self.action_scale!r}")
-        if self.bsc_eps is not None and not (_finite(self.bsc_eps) and 0 < self.bsc_eps < 0.5):
-            fail(f"bsc_eps must lie in (0, 0.5), got {self.bsc_eps!r}")
-        if self.fisher not in FISHER_FORMS:
-            fail(f"fisher must be one of {FISHER_FORMS}, got {self.fisher!r}")
-        bad_backends = [name for name in self.log if name not in LOG_BACKENDS]
+            _fail(f"methods must not repeat, got {list(self.methods)}")
+        if not _is_among(self.fisher, FISHER_FORMS):
+            _fail(f"fisher must be one of {FISHER_FORMS}, got {self.fisher!r}")
+        bad_backends = [name for name in self.log if not _is_among(name, LOG_BACKENDS)]
         if bad_backends:
-            fail(f"unknown log backend(s) {bad_backends}; available: {', '.join(LOG_BACKENDS)}")
+            _fail(f"unknown log backend(s) {bad_backends}; available: {', '.join(LOG_BACKENDS)}")
+        if len(set(self.log)) != len(self.log):
+            _fail(f"log backends must not repeat, got {list(self.log)}")
         if self.iterations % self.settings.eval_every:
-            fail(
+            _fail(
                 f"iterations ({self.iterations}) must be a multiple of the evaluation interval "
                 f"({self.settings.eval_every}; set it with --eval-every)"
             )
         if self.conf is not None and self.demos is None:
-            fail("a confidence file needs demos (made demonstrations carry their own)")
+            _fail("conf: a confidence file needs demos (made demonstrations carry their own)")
         is_minari = self.demos is not None and self.demos.startswith("minari:")
         if self.confidence_field is not None and not is_minari:
-            fail("confidence_field reads a Minari dataset's episode metadata: demos minari:<id>")
+            _fail("confidence_field reads a Minari dataset's episode metadata: demos minari:<id>")
         if (
             self.demos is not None
             and self.demos.endswith(".npz")
             and (self.conf is not None or self.action_scale != 1.0)
         ):
-            fail("an .npz set carries its confidences and units: no conf or action_scale")
+            _fail("demos: an .npz set carries its confidences and units: no conf or action_scale")
 
     @classmethod
     def preset(cls, name: str, **overrides) -> RunConfig:
@@ -164,18 +204,28 @@ class RunConfig:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> RunConfig:
-        """The config of ``to_dict`` (or of a ``config.json``: its other keys, such as
-        ``resolved`` and ``provenance``, are ignored)."""
+        """The config of ``to_dict`` (or of a ``config.json``, whose ``RECORD_KEYS`` sections,
+        ``resolved`` and ``provenance``, are ignored; an old layout is upgraded first).
+
+        Strict, because a hand-edited file is easy to get wrong: ValueError naming the key on
+        a key that is not a field (a typo would otherwise be dropped silently) and on a value
+        of the wrong type (``"3"`` for ``seeds``, a number for ``methods``). A missing key
+        takes the field's default, and missing ``settings`` keys ``RunSettings``' defaults
+        (the reference setting), as in files written before the field existed.
+        """
+        if not isinstance(data, Mapping):
+            _fail(f"a run config is a JSON object of fields, got {type(data).__name__}")
         data = upgrade_saved_config(data)
         fields = {field.name for field in dataclasses.fields(cls)}
+        unknown = sorted((key for key in data if key not in fields | set(RECORD_KEYS)), key=str)
+        if unknown:
+            _fail(f"unknown key(s) {unknown}; a run config's keys: {', '.join(sorted(fields))}")
         values = {key: value for key, value in data.items() if key in fields}
-        if values.get("settings") is not None:
-            values["settings"] = RunSettings(**values["settings"])
-        if values.get("classifier") is not None:
-            classifier = dict(values["classifier"])
-            if "hidden_sizes" in classifier:
-                classifier["hidden_sizes"] = tuple(classifier["hidden_sizes"])
-            values["classifier"] = ClassifierConfig(**classifier)
+        if isinstance(values.get("settings"), Mapping):
+            values["settings"] = _nested(RunSettings, "settings", values["settings"])
+        if isinstance(values.get("classifier"), Mapping):
+            classifier = _nested_fields(ClassifierConfig, "classifier", values["classifier"])
+            values["classifier"] = ClassifierConfig(**_classifier_fields(classifier))
         return cls(**values)
 
     @classmethod
@@ -205,6 +255,13 @@ def upgrade_saved_config(data: dict[str, Any]) -> dict[str, Any]:
         return data
     from pngail_jax.settings import REFERENCE_SETTINGS
 
+    needed = ["demos", "platform", "device_count", "local_device_count"]
+    if not data.get("settings"):
+        needed += ["num_envs", "unroll_length", "eval_every"]
+    missing = [key for key in needed if key not in data]
+    if missing:
+        _fail(f"a config.json of the old layout (classifier_steps) lacks key(s) {missing}")
+
     settings = data.get("settings") or dataclasses.asdict(
         REFERENCE_SETTINGS.replace(
             num_envs=data["num_envs"],
@@ -227,8 +284,136 @@ def upgrade_saved_config(data: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def _finite(value) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+# -- field checks: each returns the value in its stored type or raises ValueError naming it --
+
+_TUPLE_FIELDS = ("methods", "label_ratios", "noise_stds", "log", "discriminator_hidden_sizes")
+
+
+def _fail(message: str) -> NoReturn:
+    raise ValueError(message)
+
+
+def _env_settings(env: str) -> RunSettings:
+    """The table's settings of ``env``; ValueError naming it when ``envs.make`` does not
+    know it."""
+    try:
+        return settings_for(env)
+    except TypeError as error:  # a relative module name (".x:f") reaches importlib
+        _fail(f"env {env!r}: {error}")
+
+
+def _integer(name: str, value, minimum: int, below: int | None = None) -> int:
+    """``value`` as a Python int (a NumPy integer converted) when it is an integer (not a
+    bool) in ``[minimum, below)``."""
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, numbers.Integral)
+        or value < minimum
+        or (below is not None and value >= below)
+    ):
+        if below is not None:
+            power = below.bit_length() - 1
+            limit = f"2**{power}" if below == 2**power else str(below)
+            what = f"an integer in [{minimum}, {limit})"
+        else:
+            what = "a positive integer" if minimum == 1 else f"an integer >= {minimum}"
+        _fail(f"{name} must be {what}, got {value!r}")
+    return int(value)
+
+
+def _real(name: str, value, requirement: str = "be finite and positive") -> float:
+    """``value`` as a Python float when it is a finite real number (not a bool); else
+    ValueError "``name`` must ``requirement``"."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        _fail(f"{name} must {requirement}, got {value!r}")
+    try:
+        number = float(value)
+    except OverflowError:  # an int beyond float's range
+        _fail(f"{name} must {requirement}, got {value!r}")
+    if not math.isfinite(number):
+        _fail(f"{name} must {requirement}, got {value!r}")
+    return number
+
+
+def _float_axis(label: str, values: tuple, requirement: str, valid) -> tuple[float, ...]:
+    """A grid axis (label ratios, noise stds): finite floats meeting ``valid``, not empty,
+    none repeated."""
+    if not values:
+        _fail(f"{label} must not be empty")
+    numbers_ = tuple(_real(label, value, requirement) for value in values)
+    if not all(valid(value) for value in numbers_):
+        _fail(f"{label} must {requirement}, got {list(values)}")
+    if len(set(numbers_)) != len(numbers_):
+        _fail(f"{label} must not repeat, got {list(values)}")
+    return numbers_
+
+
+def _layer_sizes(name: str, values) -> tuple[int, ...]:
+    """Hidden-layer widths: a tuple of positive ints (empty: no hidden layer)."""
+    values = tuple(values) if isinstance(values, list | tuple) else (values,)
+    if not all(
+        isinstance(size, numbers.Integral) and not isinstance(size, bool) and size >= 1
+        for size in values
+    ):
+        _fail(f"{name} must be positive integers (layer widths), got {list(values)}")
+    return tuple(int(size) for size in values)
+
+
+def _is_among(name, known) -> bool:
+    """Whether ``name`` is one of the strings ``known`` (False for a list or dict, which a
+    membership test of a dict would raise TypeError on)."""
+    return isinstance(name, str) and name in known
+
+
+def _fields_of(instance) -> dict[str, Any]:
+    return {field.name: getattr(instance, field.name) for field in dataclasses.fields(instance)}
+
+
+def _classifier_fields(values: dict[str, Any]) -> dict[str, Any]:
+    """``ClassifierConfig`` keyword arguments checked and in their stored types (its own
+    checks let a bool, a float learning rate of NaN or a negative width through)."""
+    checked = dict(values)
+    for name in ("num_steps", "labelled_batch_size", "unlabelled_batch_size"):
+        if name in checked:
+            checked[name] = _integer(f"ClassifierConfig.{name}", checked[name], minimum=1)
+    if "learning_rate" in checked:
+        checked["learning_rate"] = _real("ClassifierConfig.learning_rate", checked["learning_rate"])
+        if checked["learning_rate"] <= 0:
+            _fail(
+                "ClassifierConfig.learning_rate must be finite and positive, "
+                f"got {values['learning_rate']!r}"
+            )
+    if "dropout_rate" in checked:
+        requirement = "lie in [0, 1)"
+        checked["dropout_rate"] = _real(
+            "ClassifierConfig.dropout_rate", checked["dropout_rate"], requirement
+        )
+        if not 0 <= checked["dropout_rate"] < 1:
+            _fail(
+                f"ClassifierConfig.dropout_rate must {requirement}, got {values['dropout_rate']!r}"
+            )
+    if "hidden_sizes" in checked:
+        checked["hidden_sizes"] = _layer_sizes(
+            "ClassifierConfig.hidden_sizes", checked["hidden_sizes"]
+        )
+    return checked
+
+
+def _nested_fields(cls, where: str, data: Mapping) -> dict[str, Any]:
+    """The keys of a nested config's JSON object (``settings``, ``classifier``); ValueError
+    naming ``where`` and the key on a key that is not one of ``cls``' fields."""
+    fields = {field.name for field in dataclasses.fields(cls)}
+    unknown = sorted((key for key in data if key not in fields), key=str)
+    if unknown:
+        _fail(f"{where}: unknown key(s) {unknown}; known: {', '.join(sorted(fields))}")
+    return dict(data)
+
+
+def _nested(cls, where: str, data: Mapping):
+    try:
+        return cls(**_nested_fields(cls, where, data))
+    except TypeError as error:
+        _fail(f"{where}: {error}")
 
 
 def provenance(argv: list[str] | None = None) -> dict[str, Any]:

@@ -17,14 +17,18 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import numbers
 
 from pngail_jax import envs
 from pngail_jax.rl.train import TRPOConfig
 
 
-def _check_positive_int(name: str, value) -> None:
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+def _positive_int(name: str, value) -> int:
+    """``value`` as a Python int (a NumPy integer is converted, so the settings stay JSON);
+    ValueError naming ``RunSettings.<name>`` unless it is an integer >= 1 (a bool is not)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
         raise ValueError(f"RunSettings.{name} must be a positive integer, got {value!r}")
+    return int(value)
 
 
 def parse_solver(text: str) -> dict[str, int | None]:
@@ -35,8 +39,9 @@ def parse_solver(text: str) -> dict[str, int | None]:
         return {"solver_iterations": None, "ls_iterations": None}
     if text == "fast":
         return dict(envs.FAST_SOLVER)
-    parts = text.split("/")
-    if len(parts) == 2 and all(part.strip().isdigit() and int(part) > 0 for part in parts):
+    parts = [part.strip() for part in text.split("/")]
+    # isascii: str.isdigit also accepts digits int() cannot read ("²").
+    if len(parts) == 2 and all(p.isascii() and p.isdigit() and int(p) > 0 for p in parts):
         return {"solver_iterations": int(parts[0]), "ls_iterations": int(parts[1])}
     raise ValueError(
         f"solver must be 'own', 'fast' or 'I/L' (positive Newton / line-search iteration "
@@ -94,7 +99,7 @@ def from_arguments(env_name: str, args, base: RunSettings | None = None) -> RunS
             solver = parse_solver(args.solver)
         except ValueError as error:
             raise ValueError(f"--solver: {error}") from None
-        if env_name == "Pendulum-v1" and args.solver != "own":
+        if env_name == "Pendulum-v1" and any(value is not None for value in solver.values()):
             raise ValueError("--solver: Pendulum-v1 has no MJX solver (use 'own' or omit it)")
         settings = dataclasses.replace(settings, **solver)
     return settings
@@ -124,11 +129,12 @@ class RunSettings:
     normalize_observations: bool = False
 
     def __post_init__(self):
+        # Frozen: counts are normalised to Python ints through object.__setattr__.
         for name in ("num_envs", "unroll_length", "eval_every", "num_eval_episodes"):
-            _check_positive_int(name, getattr(self, name))
+            object.__setattr__(self, name, _positive_int(name, getattr(self, name)))
         for name in ("solver_iterations", "ls_iterations"):
             if getattr(self, name) is not None:
-                _check_positive_int(name, getattr(self, name))
+                object.__setattr__(self, name, _positive_int(name, getattr(self, name)))
         if not isinstance(self.normalize_observations, bool):
             raise ValueError(
                 "RunSettings.normalize_observations must be True or False, "

@@ -83,10 +83,8 @@ def test_any_single_bit_flip_is_found(tmp_path_factory, position, bit):
     files = sorted(p for p in directory.rglob("*") if p.is_file() and p.name != MANIFEST_NAME)
     sizes = [p.stat().st_size for p in files]
     position %= sum(sizes)
-    for path, size in zip(files, sizes, strict=True):  # the file holding byte `position`
-        if position < size:
-            break
-        position -= size
+    index = int(np.searchsorted(np.cumsum(sizes), position, side="right"))  # its file
+    path, position = files[index], position - sum(sizes[:index])
     data = bytearray(path.read_bytes())
     data[position] ^= 1 << bit
     path.write_bytes(bytes(data))

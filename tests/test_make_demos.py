@@ -1,8 +1,11 @@
 """experiments.make_demos end to end on a tiny budget, and the rollout helpers."""
 
+import warnings
+
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import pngail_jax
 from experiments import make_demos
@@ -34,7 +37,15 @@ def test_make_demos_tiny_pendulum(tmp_path):
             "4",
         ]
     )
-    demos = load_demonstrations(path)
+    # Written through temporary siblings that were renamed: none is left behind.
+    names = ["checkpoints", "demos.npz", "normalizer.json"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == names
+    # Finished work is not replaced by a second run without --overwrite.
+    with pytest.raises(SystemExit):
+        make_demos.parse_args(["--out", str(tmp_path)])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        demos = load_demonstrations(path)
     assert demos.num_rows == 5 * 200 and demos.observations.shape[1] == 3
     assert np.all((demos.confidence >= 0) & (demos.confidence <= 1))
     assert np.all(np.abs(demos.actions) <= 2.0)
@@ -42,6 +53,8 @@ def test_make_demos_tiny_pendulum(tmp_path):
     meta = demos.metadata
     # 4 tiny iterations do not beat the random policy; the run says so instead of hiding it.
     assert meta["optimal_beats_random"] == (meta["optimal_return"] > meta["random_return"])
+    backwards = any("normalised returns run backwards" in str(w.message) for w in caught)
+    assert backwards == (not meta["optimal_beats_random"])  # and loading says so again
     # Each trajectory's label is its own normalised return, clipped.
     expected = np.clip(
         normalized_return(
@@ -61,6 +74,44 @@ def test_make_demos_tiny_pendulum(tmp_path):
             tmp_path / "checkpoints" / f"iter_{iteration:04d}", verbose=False
         )
         assert policy(demos.observations[:3]).shape == (3, 1)
+
+
+def test_bad_output_directories_fail_before_any_training(tmp_path, capsys):
+    file = tmp_path / "file"
+    file.write_text("")
+    for out, message in (
+        (file, f"--out {file} is a file, not a directory"),
+        (file / "sub", f"--out {file / 'sub'}: {file} is a file, not a directory"),
+    ):
+        with pytest.raises(SystemExit):
+            make_demos.parse_args(["--out", str(out)])
+        assert message in capsys.readouterr().err
+    (tmp_path / "demos.npz").write_bytes(b"finished")
+    with pytest.raises(SystemExit):
+        make_demos.parse_args(["--out", str(tmp_path)])
+    err = capsys.readouterr().err
+    assert f"({tmp_path / 'demos.npz'})" in err and "pass --overwrite" in err
+    assert make_demos.parse_args(["--out", str(tmp_path), "--overwrite"]).overwrite
+    assert make_demos.parse_args(["--out", str(tmp_path / "new" / "dir")]).out.name == "dir"
+
+
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--seeds", "0"], "--seeds must be a positive integer, got 0"),
+        (["--num-trajectories", "-1"], "--num-trajectories must be a positive integer, got -1"),
+        (["--measure-episodes", "0"], "--measure-episodes must be a positive integer"),
+        (["--ratio", "inf:1"], "--ratio parts must be finite"),
+        (["--ratio", "nan:1"], "--ratio parts must be finite"),
+        (["--ratio", "1e308:1e308"], "--ratio parts must be finite"),  # the sum overflows
+        (["--intermediate-target", "nan"], "--intermediate-target must be a finite number"),
+        (["--env", "CartPole"], "--env: unknown environment 'CartPole'"),
+    ],
+)
+def test_bad_flags_are_named(flags, message, tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        make_demos.parse_args(["--out", str(tmp_path), *flags])
+    assert message in capsys.readouterr().err
 
 
 def test_rollout_episodes_stop_counting_after_termination():

@@ -92,3 +92,28 @@ def test_summary_groups_by_method_and_setting_and_drops_diverged_cells(tmp_path)
 def test_no_normaliser_gives_nan_normalised_returns():
     assert np.isnan(report.normalize([-300.0], None)).all()
     np.testing.assert_allclose(report.normalize([-700.0], NORMALIZER), [0.5])
+
+
+def test_a_method_whose_seeds_all_diverge_is_null_with_a_reason(tmp_path):
+    cells = make_cells(["gail", "pngail"], 2)
+    metrics = synthetic_metrics(cells)
+    metrics["disc/loss"][2:, 4] = np.inf  # both pngail seeds
+    metrics["eval/return"][2:, 5] = np.nan
+    summary = report.summarize(
+        cells, metrics, NORMALIZER, 1.0, 1.0, excluded=nonfinite_cells(metrics, 3)
+    )
+    report.write_summary(tmp_path, summary, "# summary\n")
+
+    def no_bare_constants(name):
+        raise AssertionError(f"summary.json holds a bare {name}")
+
+    written = json.loads((tmp_path / "summary.json").read_text(), parse_constant=no_bare_constants)
+    row = written["methods"]["pngail"]
+    assert row["num_seeds"] == 0 and row["diverged_seeds"] == [0, 1]
+    assert row["final_return_mean"] is None and "diverged" in row["note"]
+    assert (
+        written["methods"]["gail"]["diverged_seeds"] == []
+        and "note" not in written["methods"]["gail"]
+    )
+    assert "every seed diverged" in written["null_means"]
+    assert written["probability_of_improvement"]["gail"]["estimate"] is None

@@ -1,12 +1,15 @@
-"""RunConfig: validation naming the field, JSON round trips, presets, old config.json files."""
+"""RunConfig: validation naming the field, JSON round trips, presets, old config.json files.
+(tests/test_config_properties.py tries arbitrary values for every field.)"""
 
 import dataclasses
 import json
 
+import numpy as np
 import pytest
 
+from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.run_config import RunConfig, upgrade_saved_config
-from pngail_jax.settings import settings_for
+from pngail_jax.settings import RunSettings, settings_for
 
 
 def test_json_round_trip_and_presets(tmp_path):
@@ -34,6 +37,42 @@ def test_json_round_trip_and_presets(tmp_path):
         ({"log": ("mlflow",)}, r"unknown log backend\(s\) \['mlflow'\]"),
         ({"confidence_field": "r"}, "Minari dataset"),
         ({"demos": "/x/demos.npz", "action_scale": 2.0}, "no conf or action_scale"),
+        ({"noise_stds": (0.0, float("nan"))}, "noise stds must be finite"),
+        ({"noise_stds": (0.1, 0.1)}, "noise stds must not repeat"),
+        ({"label_ratios": ()}, "label ratios must not be empty"),
+        ({"label_ratios": ("0.2",)}, r"label ratios must lie in \(0, 1\), got '0.2'"),
+        ({"action_scale": float("inf")}, "action_scale must be finite and positive"),
+        ({"action_scale": 10**400}, "action_scale must be finite and positive"),  # no float
+        ({"bsc_eps": float("nan")}, r"bsc_eps must lie in \(0, 0.5\)"),
+        ({"cpu_devices": 0}, "cpu_devices must be a positive integer, got 0"),
+        ({"cpu_devices": True}, "cpu_devices must be a positive integer, got True"),
+        ({"seeds": "3"}, "seeds must be a positive integer, got '3'"),
+        ({"iterations": 300.0}, "iterations must be a positive integer, got 300.0"),
+        ({"seed": -1}, r"seed must be an integer in \[0, 2\*\*63\)"),
+        ({"num_demos": 1}, "num_demos must be an integer >= 2"),
+        ({"methods": ()}, "methods must name at least one method"),
+        ({"methods": (["gail"],)}, r"unknown method\(s\) \[\['gail'\]\]"),  # no TypeError
+        ({"log": ("tensorboard", "tensorboard")}, "log backends must not repeat"),
+        ({"fisher": ["hessian"]}, "fisher must be one of"),
+        ({"discriminator_hidden_sizes": (100, 0)}, "discriminator_hidden_sizes must be positive"),
+        ({"demos": 5}, "demos must be a non-empty string or None, got 5"),
+        ({"env": 5}, "env must be an environment name, got 5"),
+        ({"env": "CartPole", "settings": RunSettings()}, "unknown environment 'CartPole'"),
+        ({"settings": {"num_envs": 4}}, "settings must be a pngail_jax.settings.RunSettings"),
+        ({"classifier": {"num_steps": 5}}, "classifier must be a pngail_jax.confidence"),
+        (
+            {"classifier": ClassifierConfig(learning_rate=float("nan"))},
+            "ClassifierConfig.learning_rate must be finite and positive, got nan",
+        ),
+        (
+            {"classifier": ClassifierConfig(dropout_rate=1.0)},
+            r"ClassifierConfig.dropout_rate must lie in \[0, 1\)",
+        ),
+        (
+            {"classifier": ClassifierConfig(num_steps=True)},
+            "ClassifierConfig.num_steps must be a positive integer, got True",
+        ),
+        ({"conf": "/x/conf.npy"}, "conf: a confidence file needs demos"),
     ],
 )
 def test_bad_values_are_named(overrides, message):
@@ -56,3 +95,88 @@ def test_a_config_json_from_before_run_config_still_reads():
     assert (config.settings.num_envs, config.settings.unroll_length) == (4, 50)
     assert upgrade_saved_config(old)["resolved"]["demos_path"] == "/d/mix.npy"
     assert dataclasses.asdict(config)["methods"] == ("gail",)
+
+
+def test_numbers_are_stored_in_their_annotated_types():
+    config = RunConfig(
+        seeds=np.int64(2),
+        label_ratios=[np.float32(0.5), 0.25],
+        noise_stds=[0, 1],
+        action_scale=2,
+        cpu_devices=np.int32(2),
+        discriminator_hidden_sizes=[np.int64(8)],
+        classifier=ClassifierConfig(learning_rate=1, hidden_sizes=[4]),
+    )
+    assert type(config.seeds) is int and type(config.cpu_devices) is int
+    assert config.label_ratios == (0.5, 0.25) and config.noise_stds == (0.0, 1.0)
+    assert all(type(value) is float for value in (*config.label_ratios, *config.noise_stds))
+    assert type(config.action_scale) is float and config.discriminator_hidden_sizes == (8,)
+    assert config.classifier.hidden_sizes == (4,)
+    assert type(config.classifier.learning_rate) is float
+    assert RunConfig.from_dict(json.loads(json.dumps(config.to_dict()))) == config
+
+
+def _saved(**changes):
+    """A config.json document (the config's fields and the sweep's records) with changes
+    (``...``: the key removed)."""
+    document = {**RunConfig().to_dict(), "resolved": {}, "provenance": {}}
+    for key, value in changes.items():
+        if value is ...:
+            del document[key]
+        else:
+            document[key] = value
+    return json.loads(json.dumps(document))
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"seedz": 4}, r"unknown key\(s\) \['seedz'\]; a run config's keys: action_scale"),
+        ({"seeds": "3"}, "seeds must be a positive integer, got '3'"),
+        ({"noise_stds": [0.0, "0.1"]}, "noise stds must be finite and >= 0"),
+        ({"methods": {"gail": 1}}, r"unknown method\(s\) \[\{'gail': 1\}\]"),
+        ({"settings": [25, 200]}, "settings must be a pngail_jax.settings.RunSettings"),
+        (
+            {"settings": {**dataclasses.asdict(RunSettings()), "num_env": 4}},
+            r"settings: unknown key\(s\) \['num_env'\]",
+        ),
+        (
+            {"settings": {**dataclasses.asdict(RunSettings()), "num_envs": "25"}},
+            "RunSettings.num_envs must be a positive integer, got '25'",
+        ),
+        ({"classifier": "fast"}, "classifier must be a pngail_jax.confidence.ClassifierConfig"),
+        ({"classifier": None}, "classifier must be a pngail_jax.confidence.ClassifierConfig"),
+        ({"classifier": {"num_steps": 10, "lr": 1}}, r"classifier: unknown key\(s\) \['lr'\]"),
+        ({"classifier": {"hidden_sizes": "40"}}, "ClassifierConfig.hidden_sizes must be positive"),
+        ({"classifier": {"num_steps": 2.5}}, "ClassifierConfig.num_steps must be a positive int"),
+        ({"cpu_devices": -1}, "cpu_devices must be a positive integer, got -1"),
+    ],
+)
+def test_from_dict_names_the_key_of_a_bad_file(changes, message, tmp_path):
+    with pytest.raises(ValueError, match=message):
+        RunConfig.from_dict(_saved(**changes))
+    path = tmp_path / "config.json"
+    path.write_text(json.dumps(_saved(**changes)))
+    with pytest.raises(ValueError, match=f"{path}: "):
+        RunConfig.from_json(path)
+
+
+def test_from_dict_fills_missing_keys_with_defaults_and_refuses_what_is_not_an_object(tmp_path):
+    assert RunConfig.from_dict({"env": "Hopper", "seeds": 2}) == RunConfig(env="Hopper", seeds=2)
+    partial = RunConfig.from_dict({"settings": {"num_envs": 4}, "classifier": {"num_steps": 7}})
+    assert partial.settings == RunSettings(num_envs=4) and partial.classifier.num_steps == 7
+    assert RunConfig.from_dict(_saved(log=..., preset_name=...)) == RunConfig()
+    with pytest.raises(ValueError, match="a run config is a JSON object of fields, got list"):
+        RunConfig.from_dict([["seeds", 3]])
+    path = tmp_path / "config.json"
+    for text, message in (("[1, 2]", "JSON object"), ('{"seeds": 3', "not a run config")):
+        path.write_text(text)
+        with pytest.raises(ValueError, match=message):
+            RunConfig.from_json(path)
+
+
+def test_an_old_config_json_missing_keys_is_named():
+    with pytest.raises(
+        ValueError, match=r"old layout \(classifier_steps\) lacks key\(s\) \['demos'"
+    ):
+        RunConfig.from_dict({"classifier_steps": 5, "num_envs": 4})

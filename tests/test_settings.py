@@ -71,9 +71,21 @@ def test_parse_solver():
     assert parse_solver("own") == {"solver_iterations": None, "ls_iterations": None}
     assert parse_solver("fast") == envs.FAST_SOLVER
     assert parse_solver("4/50") == {"solver_iterations": 4, "ls_iterations": 50}
-    for bad in ("4", "0/4", "a/b", "4/50/1", ""):
+    assert parse_solver(" 4 / 50 ") == {"solver_iterations": 4, "ls_iterations": 50}
+    # Only ASCII digits: "²" is a str.isdigit digit that int() cannot read.
+    for bad in ("4", "0/4", "a/b", "4/50/1", "", "²/4", "4/٤", "-1/4", "4/+5"):
         with pytest.raises(ValueError, match="solver must be"):
             parse_solver(bad)
+
+
+def test_counts_are_stored_as_python_ints():
+    import numpy as np
+
+    row = RunSettings(num_envs=np.int64(4), solver_iterations=np.int32(2))
+    assert (row.num_envs, row.solver_iterations) == (4, 2)
+    assert type(row.num_envs) is int and type(row.solver_iterations) is int
+    with pytest.raises(ValueError, match="RunSettings.eval_every must be a positive integer"):
+        RunSettings(eval_every=np.float64(10))
 
 
 def flags(*argv):
@@ -93,6 +105,7 @@ def test_flags_override_the_table_or_the_reference():
     assert reference.env_options == envs.FAST_SOLVER and reference.normalize_observations
     with pytest.raises(ValueError, match="Pendulum-v1 has no MJX solver"):
         settings.from_arguments("Pendulum-v1", flags("--solver", "fast"))
+    assert settings.from_arguments("Pendulum-v1", flags("--solver", " own")) == REFERENCE_SETTINGS
     with pytest.raises(ValueError, match="--unroll-length must be a positive integer"):
         settings.from_arguments("Hopper", flags("--unroll-length", "0"))
 

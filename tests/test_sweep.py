@@ -286,3 +286,36 @@ def test_presets_and_chunking():
     assert sweep.blocks_per_chunk(30, 5) == 5
     assert sweep.blocks_per_chunk(30, 4) == 3
     assert sweep.blocks_per_chunk(7, 5) == 1
+
+
+def test_a_damaged_demonstration_cache_is_made_again(demos_path, tmp_path, monkeypatch, capsys):
+    from experiments import make_demos
+    from pngail_jax.run_config import RunConfig
+
+    monkeypatch.setattr(sweep, "DEMO_CACHE", tmp_path)
+    cached = tmp_path / "Pendulum-v1" / "demos.npz"
+    cached.parent.mkdir()
+    cached.write_bytes(demos_path.read_bytes()[:300])  # a truncated copy
+    calls = []
+
+    def fake_make_demos(argv):  # stands in for minutes of TRPO
+        calls.append(argv)
+        shutil.copy(demos_path, cached)
+
+    monkeypatch.setattr(make_demos, "main", fake_make_demos)
+    demos, path = sweep.load_or_make_demos(RunConfig(env="Pendulum-v1"))
+    printed = capsys.readouterr().out
+    assert "the cached demonstrations are damaged" in printed and str(cached) in printed
+    assert calls == [
+        ["--env", "Pendulum-v1", "--out", str(tmp_path / "Pendulum-v1"), "--overwrite"]
+    ]
+    assert demos.num_rows == 100 and path == str(cached.absolute())
+
+
+def test_out_naming_a_file_is_refused(tmp_path, capsys):
+    a_file = tmp_path / "results.txt"
+    a_file.write_text("mine")
+    with pytest.raises(SystemExit):
+        sweep.parse_args(["--out", str(a_file)])
+    assert f"--out {a_file} is a file, not a directory" in capsys.readouterr().err
+    assert a_file.read_text() == "mine"

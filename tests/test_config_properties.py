@@ -1,0 +1,344 @@
+"""Inputs you can trust: arbitrary values for every config field and flag give either a valid
+result or an error naming the field or flag, never another exception (hypothesis).
+
+No JAX compilation here: configs and parsers only. Then the command-line programs' explicit
+cases: NaN and infinite numbers, non-positive counts and bad output directories fail while
+the flags are parsed, before anything runs.
+"""
+
+import argparse
+import contextlib
+import dataclasses
+import io
+import json
+
+import pytest
+from hypothesis import given
+from hypothesis import settings as hypothesis_settings
+from hypothesis import strategies as st
+
+from experiments import cli, compare_settings, sweep
+from pngail_jax.confidence import ClassifierConfig
+from pngail_jax.methods import METHOD_NAMES
+from pngail_jax.run_config import FISHER_FORMS, LOG_BACKENDS, RunConfig
+from pngail_jax.settings import RunSettings
+
+PROPERTY = hypothesis_settings(max_examples=50, deadline=None, database=None)
+
+# -- values ----------------------------------------------------------------------------------
+
+# JSON's scalars, with the numbers JSON cannot hold but Python callers can pass (NaN, inf,
+# ints beyond float's range). Texts hold no ":" (an env "module:factory" would import it).
+SCALARS = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(min_value=-3, max_value=400),
+    st.integers(),
+    st.just(10**400),
+    st.floats(),
+    st.text(max_size=6).filter(lambda text: ":" not in text),
+)
+JUNK = st.recursive(
+    SCALARS,
+    lambda children: (
+        st.lists(children, max_size=3) | st.dictionaries(st.text(max_size=4), children, max_size=2)
+    ),
+    max_leaves=6,
+)
+COUNTS = st.integers(min_value=-2, max_value=600) | JUNK
+FLOATS = st.floats() | st.integers(min_value=-2, max_value=2) | st.floats(0, 1) | JUNK
+PATHS = st.sampled_from(["/x/demos.npz", "/x/a_mixture.npy", "minari:pen", ""]) | JUNK
+
+
+def tuples_of(items):
+    return st.lists(items, max_size=4) | st.lists(items, max_size=3).map(tuple) | JUNK
+
+
+FIELD_VALUES = {
+    "env": st.sampled_from(["Pendulum-v1", "Hopper", "Walker2d", "CartPole", ""]) | SCALARS,
+    "methods": tuples_of(st.sampled_from(METHOD_NAMES) | SCALARS)
+    | st.lists(st.sampled_from(METHOD_NAMES), min_size=1, max_size=3, unique=True),
+    "seeds": COUNTS,
+    "iterations": COUNTS | st.integers(1, 60).map(lambda n: 10 * n),
+    "label_ratios": tuples_of(FLOATS),
+    "noise_stds": tuples_of(FLOATS),
+    "seed": COUNTS | st.integers(min_value=2**63 - 2, max_value=2**63 + 2),
+    "demos": PATHS,
+    "conf": PATHS,
+    "confidence_field": PATHS,
+    "action_scale": FLOATS,
+    "num_demos": COUNTS,
+    "chunk_iterations": COUNTS,
+    "settings": st.builds(
+        RunSettings,
+        num_envs=st.integers(1, 50),
+        eval_every=st.sampled_from([1, 7, 10, 50]),
+        solver_iterations=st.none() | st.integers(1, 4),
+    )
+    | JUNK,
+    "classifier": st.builds(
+        ClassifierConfig,
+        num_steps=st.integers(1, 100),
+        learning_rate=st.floats(1e-6, 1) | FLOATS,
+        hidden_sizes=st.lists(st.integers(1, 64), max_size=2) | tuples_of(COUNTS),
+        dropout_rate=st.floats(0, 0.9) | FLOATS,
+    )
+    | JUNK,
+    "bsc_eps": FLOATS,
+    "fisher": st.sampled_from(FISHER_FORMS) | JUNK,
+    "fisher_subsample": COUNTS,
+    "discriminator_hidden_sizes": tuples_of(COUNTS),
+    "cpu_devices": COUNTS,
+    "log": tuples_of(st.sampled_from(LOG_BACKENDS) | SCALARS),
+    "preset_name": PATHS,
+}
+# What an error about a field may call it besides its name.
+ALSO_CALLED = {
+    "methods": ("method",),
+    "label_ratios": ("label ratios",),
+    "noise_stds": ("noise stds",),
+    "settings": ("eval-every",),  # "a multiple of the evaluation interval (7; --eval-every)"
+    "classifier": ("ClassifierConfig.",),
+}
+
+
+def test_every_field_has_values_to_try():
+    assert set(FIELD_VALUES) == {field.name for field in dataclasses.fields(RunConfig)}
+
+
+def assert_names(error: Exception, *names: str) -> None:
+    message = str(error)
+    assert any(name in message for name in names), (names, message)
+
+
+def assert_stored_types(config: RunConfig) -> None:
+    """A valid config holds exactly its annotated types, so its JSON reads back equal."""
+
+    def kinds(values, kind):
+        return type(values) is tuple and all(type(value) is kind for value in values)
+
+    assert type(config.env) is str and kinds(config.methods, str) and kinds(config.log, str)
+    assert kinds(config.label_ratios, float) and kinds(config.noise_stds, float)
+    assert kinds(config.discriminator_hidden_sizes, int)
+    for name in ("seeds", "iterations", "seed", "chunk_iterations", "fisher_subsample"):
+        assert type(getattr(config, name)) is int, name
+    for name in ("num_demos", "cpu_devices"):
+        assert getattr(config, name) is None or type(getattr(config, name)) is int, name
+    for name in ("demos", "conf", "confidence_field", "preset_name"):
+        assert getattr(config, name) is None or type(getattr(config, name)) is str, name
+    assert type(config.action_scale) is float and type(config.fisher) is str
+    assert config.bsc_eps is None or type(config.bsc_eps) is float
+    assert type(config.settings) is RunSettings and type(config.classifier) is ClassifierConfig
+    classifier = config.classifier
+    assert kinds(classifier.hidden_sizes, int) and type(classifier.learning_rate) is float
+
+
+def assert_round_trips(config: RunConfig) -> None:
+    assert_stored_types(config)
+    assert RunConfig.from_dict(config.to_dict()) == config
+    document = json.dumps(config.to_dict(), allow_nan=False)  # strict JSON: nothing non-finite
+    assert RunConfig.from_dict(json.loads(document)) == config
+
+
+# -- RunConfig -------------------------------------------------------------------------------
+
+
+@PROPERTY
+@given(data=st.data())
+def test_any_field_value_gives_a_valid_config_or_an_error_naming_the_field(data):
+    name = data.draw(st.sampled_from(sorted(FIELD_VALUES)), label="field")
+    value = data.draw(FIELD_VALUES[name], label="value")
+    try:
+        config = RunConfig(**{name: value})
+    except ValueError as error:  # only ValueError: the sweep turns it into a flag's message
+        assert_names(error, name, *ALSO_CALLED.get(name, ()))
+        return
+    assert_round_trips(config)
+
+
+SETTINGS_KEYS = [field.name for field in dataclasses.fields(RunSettings)]
+CLASSIFIER_KEYS = [field.name for field in dataclasses.fields(ClassifierConfig)]
+
+
+@PROPERTY
+@given(data=st.data())
+def test_a_json_file_with_any_value_anywhere_loads_right_or_names_the_key(data):
+    """One key of a saved config.json (a field, a settings or classifier key, or a stray
+    key) set to any JSON value."""
+    document = json.loads(json.dumps(RunConfig().to_dict()))
+    where = data.draw(st.sampled_from(["field", "settings", "classifier", "stray"]))
+    value = data.draw(JUNK.filter(lambda v: v != 10**400), label="value")  # beyond JSON
+    if where == "field":
+        key = data.draw(st.sampled_from(sorted(FIELD_VALUES)), label="key")
+        document[key] = value
+        names = (key, *ALSO_CALLED.get(key, ()))
+    elif where == "stray":
+        key = data.draw(st.text(min_size=1, max_size=5).filter(lambda k: k not in document))
+        document[key] = value
+        names = (repr(key),)
+    else:
+        known = SETTINGS_KEYS if where == "settings" else CLASSIFIER_KEYS
+        key = data.draw(st.sampled_from(known) | st.text(max_size=5), label="key")
+        document[where][key] = value
+        names = (key, repr(key), "eval-every")
+    document = json.loads(json.dumps(document))  # what a file holds: lists, NaN allowed
+    try:
+        config = RunConfig.from_dict(document)
+    except ValueError as error:
+        assert_names(error, *names)
+        return
+    assert_round_trips(config)
+
+
+@PROPERTY
+@given(name=st.sampled_from(SETTINGS_KEYS), value=COUNTS | st.booleans())
+def test_any_settings_value_is_valid_or_named(name, value):
+    try:
+        settings = RunSettings(**{name: value})
+    except ValueError as error:
+        assert_names(error, f"RunSettings.{name}")
+        return
+    stored = getattr(settings, name)
+    assert stored == value
+    if name == "normalize_observations":
+        assert type(stored) is bool
+    else:  # a count; the solver caps may be None (the task's own)
+        solver_cap = name in ("solver_iterations", "ls_iterations")
+        assert (type(stored) is int and stored >= 1) or (stored is None and solver_cap)
+
+
+# -- command-line helpers: a value, or an exit naming the flag -------------------------------
+
+
+def parse(parser: argparse.ArgumentParser, argv: list[str], then=lambda args: args):
+    """(result, stderr) of parsing ``argv`` and calling ``then``; result None on an exit."""
+    stderr = io.StringIO()
+    with contextlib.redirect_stderr(stderr):
+        try:
+            return then(parser.parse_args(argv)), stderr.getvalue()
+        except SystemExit as exit_:
+            assert exit_.code == 2
+            return None, stderr.getvalue()
+
+
+NUMBER_ITEMS = st.one_of(
+    st.floats().map(repr),
+    st.integers().map(str),
+    st.sampled_from(["", " ", "nan", "-inf", "Infinity", "1e999", "0x10", "1_0", "--1", "x"]),
+)
+# "--": argparse hands the value "--" over as [] (it drops "--" from values).
+NUMBER_TEXTS = (
+    st.text(max_size=12) | st.just("--") | st.lists(NUMBER_ITEMS, max_size=4).map(",".join)
+)
+
+
+@PROPERTY
+@given(text=NUMBER_TEXTS)
+def test_comma_floats_gives_finite_numbers_or_names_the_flag(text):
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--noise")
+    values, stderr = parse(
+        parser, [f"--noise={text}"], lambda args: cli.comma_floats(parser, "--noise", args.noise)
+    )
+    if values is None:
+        assert "--noise" in stderr
+    else:
+        assert values and all(type(v) is float and abs(v) < float("inf") for v in values)
+        assert len(values) == len(text.split(","))
+
+
+NAME_TEXTS = st.text(max_size=12) | st.lists(
+    st.sampled_from([*METHOD_NAMES, "", " gail ", "pu-gail"]), max_size=4
+).map(",".join)
+
+
+@PROPERTY
+@given(text=NAME_TEXTS)
+def test_known_names_gives_known_names_once_each_or_names_the_flag(text):
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--methods")
+    names, stderr = parse(
+        parser,
+        [f"--methods={text}"],
+        lambda args: cli.known_names(parser, args.methods, METHOD_NAMES, "method", "--methods"),
+    )
+    if names is None:
+        assert "--methods" in stderr
+    else:
+        assert names and set(names) <= set(METHOD_NAMES) and len(set(names)) == len(names)
+
+
+@PROPERTY
+@given(text=st.text(max_size=8) | st.integers().map(str) | st.floats().map(repr) | st.just("--"))
+def test_check_positive_and_check_finite_give_a_valid_number_or_name_the_flag(text):
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--seeds", type=int)
+    parser.add_argument("--scale", type=float)
+
+    def check(args):
+        cli.check_positive(parser, args, ("seeds",))
+        cli.check_finite(parser, args, ("scale",))
+        return args
+
+    for flag in ("--seeds", "--scale"):
+        args, stderr = parse(parser, [f"{flag}={text}"], check)
+        if args is None:
+            assert flag in stderr
+        elif flag == "--seeds":
+            assert type(args.seeds) is int and args.seeds >= 1
+        else:
+            assert abs(args.scale) < float("inf")
+    assert parse(parser, [], check)[0] is not None  # a flag not given is not checked
+
+
+# -- the programs: bad values fail while parsing, naming the flag ----------------------------
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--noise", "inf"], "--noise values must be finite numbers, got 'inf'"),
+        (["--noise", "nan"], "--noise values must be finite numbers, got 'nan'"),
+        (["--noise", "0,,0.1"], "--noise: empty item in '0,,0.1'"),
+        (["--label-ratio", "0.2,1e999"], "--label-ratio values must be finite numbers"),
+        (["--cpu-devices", "0"], "--cpu-devices must be a positive integer, got 0"),
+        (["--cpu-devices", "-1"], "--cpu-devices must be a positive integer, got -1"),
+        (["--action-scale", "inf"], "--action-scale must be finite and positive, got inf"),
+        (["--bsc-eps", "nan"], "--bsc-eps must lie in (0, 0.5), got nan"),
+        (["--env", ".relative:make"], "--env: "),
+        # These three need experiments.sweep to name the flag (its _flag_message mapping
+        # "seed must" -> "--seed must", and known_names(..., flag="--methods")).
+        (["--seed", "-1"], "--seed must be an integer in [0, 2**63), got -1"),
+        (["--methods", "gail,gail"], "--methods: method(s) ['gail'] given more than once"),
+        (["--methods", "gail,"], "--methods: empty item in 'gail,'"),
+    ],
+)
+def test_sweep_flags_are_refused_while_parsing(argv, message, capsys):
+    with pytest.raises(SystemExit):
+        sweep.parse_args(argv)
+    assert message in capsys.readouterr().err
+
+
+def test_sweep_conf_without_demos_names_the_flags(tmp_path, capsys):
+    conf = tmp_path / "conf.npy"
+    conf.write_bytes(b"")
+    with pytest.raises(SystemExit):
+        sweep.parse_args(["--conf", str(conf)])  # needs "conf:" -> "--conf:" in _flag_message
+    assert "--conf: a confidence file needs demos" in capsys.readouterr().err
+
+
+def test_compare_settings_refuses_a_file_and_finished_work(tmp_path, capsys):
+    file = tmp_path / "file"
+    file.write_text("")
+    flags = ["--env", "Hopper", "--out"]
+    with pytest.raises(SystemExit):
+        compare_settings.parse_args([*flags, str(file)])
+    assert f"--out {file} is a file, not a directory" in capsys.readouterr().err
+    (tmp_path / "comparison.json").write_text("{}")
+    with pytest.raises(SystemExit):
+        compare_settings.parse_args([*flags, str(tmp_path)])
+    assert "comparison.json); pass --overwrite" in capsys.readouterr().err
+    assert compare_settings.parse_args([*flags, str(tmp_path), "--overwrite"]).overwrite
+    with pytest.raises(SystemExit):
+        compare_settings.parse_args([*flags, str(tmp_path / "new"), "--arms", "table,table"])
+    assert "--arms: arm(s) ['table'] given more than once" in capsys.readouterr().err
