@@ -212,12 +212,19 @@ class Grid:
 
 
 def nonfinite_cells(metrics: dict[str, np.ndarray], eval_every: int) -> np.ndarray:
-    """Indices of cells with a NaN or inf discriminator loss or evaluated return.
+    """Indices of cells that went non-finite: a NaN or inf evaluated return or discriminator
+    loss, or any rollout step that applied a NaN or inf action (a nonzero
+    ``rollout/nonfinite_actions``, ``pngail_jax.rl.rollout.rollout_metrics``).
 
     metrics float[G, I] from whole chunks (which start at multiples of ``eval_every``), so
     ``eval/return`` is defined at every ``eval_every``-th column and NaN by design elsewhere.
+    Of the other two, those a trainer does not produce are skipped (TRPO alone has no
+    ``disc/loss``; metrics saved before the action count existed have no count).
     """
     evaluations = np.asarray(metrics["eval/return"])[:, eval_every - 1 :: eval_every]
-    losses = np.asarray(metrics["disc/loss"])
-    bad = ~np.isfinite(evaluations).all(axis=1) | ~np.isfinite(losses).all(axis=1)
+    bad = ~np.isfinite(evaluations).all(axis=1)
+    if "disc/loss" in metrics:
+        bad |= ~np.isfinite(np.asarray(metrics["disc/loss"])).all(axis=1)
+    if "rollout/nonfinite_actions" in metrics:
+        bad |= (np.asarray(metrics["rollout/nonfinite_actions"]) != 0).any(axis=1)
     return np.flatnonzero(bad)

@@ -1,8 +1,11 @@
 """The adversarial train function and grids: vmap, sharding, chunking, resume, NaN isolation.
 
-Small configs throughout (Pendulum, 4 envs x 50 steps, a 50-step classifier); tolerances:
-float32 programs that differ (vmapped vs single, sharded vs not, chunked vs whole) agree to
-rtol 1e-4; the same program with the same key is bit-identical.
+Small configs throughout (Pendulum, 4 envs x 50 steps, a 50-step classifier). Tolerances:
+the same compiled program run twice (repeat, resume) is bit-identical; two programs XLA
+compiles differently (vmapped vs single, sharded vs not, chunked vs whole, several
+processes vs one, other constants) agree to ``CROSS_PROGRAM_RTOL``, as the float error of
+each metric allows: XLA may order float32 reductions differently in each program, and
+differently on each machine.
 """
 
 import functools
@@ -22,6 +25,27 @@ from pngail_jax.rl import TRPOConfig
 from pngail_jax.train import AdversarialConfig, AdversarialTrainer, Hyperparams
 
 COMPARED = ("eval/return", "disc/loss", "disc/acc_agent", "train/reward", "trpo/kl")
+
+# Worst relative differences measured between two programs on an Intel Xeon, with its
+# default and with SSE4.2-only code: eval/return 1.2e-5 (1.2e-5 on an AMD EPYC), trpo/kl
+# 5e-5, the others 1e-7 or less.
+CROSS_PROGRAM_RTOL = {
+    # Pendulum's dynamics amplify last-bit differences of the policy over 200 steps.
+    "eval/return": 1e-3,
+    # A KL near max_kl = 0.01 is a small difference of O(1) terms after a conjugate-gradient
+    # solve: its float error is relative to those terms, 100 times its own size.
+    "trpo/kl": 1e-3,
+    # Means over one batch of networks' outputs: a few float32 ulps.
+    "disc/loss": 1e-4,
+    "disc/acc_agent": 1e-4,
+    "train/reward": 1e-4,
+}
+
+
+def assert_close_across_programs(actual, expected, name):
+    np.testing.assert_allclose(
+        actual, expected, rtol=CROSS_PROGRAM_RTOL[name], atol=1e-6, err_msg=name
+    )
 
 
 def small_setup(num_iterations=2, eval_every=1, **config_overrides):
@@ -77,7 +101,7 @@ def run_single_and_grid() -> dict:
 def test_grid_matches_runs_one_at_a_time():
     results = run_single_and_grid()
     for name, (grid_values, single_values) in results.items():
-        np.testing.assert_allclose(grid_values, single_values, rtol=1e-4, atol=1e-6, err_msg=name)
+        assert_close_across_programs(grid_values, single_values, name)
 
 
 def chunked_grid_results(devices=None, chunks=2):
@@ -114,7 +138,7 @@ def test_sharded_over_four_devices_matches_one_device():
     )
     assert results.pop("num_padded") == 8  # 6 cells padded to a multiple of 4 devices
     for name, (sharded, unsharded) in results.items():
-        np.testing.assert_allclose(sharded, unsharded, rtol=1e-4, atol=1e-6, err_msg=name)
+        assert_close_across_programs(sharded, unsharded, name)
 
 
 def test_chunks_match_the_whole_scan_and_repeat_bit_identically():
@@ -125,11 +149,8 @@ def test_chunks_match_the_whole_scan_and_repeat_bit_identically():
     _, _, first = chunked_grid_results()
     _, _, second = chunked_grid_results()
     for name in COMPARED:
-        # Chunked and whole are different programs: XLA may fuse and order their float32
-        # reductions differently, by machine (1.2e-5 relative seen on an AMD EPYC), and
-        # Pendulum's dynamics amplify last-bit differences. The same program repeated is
-        # bit-identical.
-        np.testing.assert_allclose(first[name], whole[name], rtol=1e-4, atol=1e-6, err_msg=name)
+        # Chunked and whole are different programs; the chunked one repeated is the same.
+        assert_close_across_programs(first[name], whole[name], name)
         np.testing.assert_array_equal(first[name], second[name], err_msg=name)
 
 
@@ -161,6 +182,7 @@ def test_a_nan_cell_is_reported_and_leaves_the_others_alone():
     mixed = jax.device_get(mixed)
     assert nonfinite_cells(mixed, config.trpo.eval_every).tolist() == [1]
     assert nonfinite_cells(jax.device_get(clean), config.trpo.eval_every).tolist() == []
+    np.testing.assert_array_equal(clean["rollout/nonfinite_actions"], 0)  # the count is there
     for name in COMPARED:
         np.testing.assert_array_equal(mixed[name][0], np.asarray(clean[name])[0], err_msg=name)
 
@@ -206,7 +228,9 @@ def test_policy_reward_comes_from_the_discriminator_before_its_step():
             np.mean(policy_reward(train_discriminator_logits(trainer, params, agent_inputs)))
         )
 
-    np.testing.assert_allclose(metrics["train/reward"][0], mean_reward(state), rtol=1e-5)
+    # The block's program against an eager apply on another batch shape: float32 sums in
+    # another order (1e-7 seen); the step moves the mean by 5e-3.
+    np.testing.assert_allclose(metrics["train/reward"][0], mean_reward(state), rtol=1e-4)
     assert abs(mean_reward(new_state) - mean_reward(state)) > 1e-4  # the step moved it
 
 
@@ -227,19 +251,21 @@ def test_given_confidences_need_no_classifier_and_classifier_fills_unlabelled_ro
     assert labelled.sum() == 30  # round(0.25 * 120)
     np.testing.assert_array_equal(given.demo_rows, classified.demo_rows)  # same seed, same split
     np.testing.assert_array_equal(given.confidence[labelled], classified.confidence[labelled])
+    # An in-program mean against NumPy's: float32 sums of 30 terms in another order.
     np.testing.assert_allclose(
-        given.confidence[~labelled], np.mean(np.asarray(given.confidence)[labelled]), rtol=1e-6
+        given.confidence[~labelled], np.mean(np.asarray(given.confidence)[labelled]), rtol=1e-5
     )
     assert not np.allclose(classified.confidence[~labelled], given.confidence[~labelled])
     assert 0 <= float(errors["confidence/mae"]) <= 1
-    # 2IWIL's mean(r) is over the whole split, not a batch.
+    # 2IWIL's mean(r) is over the whole split, not a batch (rtol: 120 terms, as above).
     np.testing.assert_allclose(
-        classified.stats.mean_confidence, np.mean(classified.confidence), rtol=1e-6
+        classified.stats.mean_confidence, np.mean(classified.confidence), rtol=1e-5
     )
 
 
 def test_methods_that_read_no_confidences_run_without_them():
-    """GAIL without confidences is GAIL with any: the same numbers; PN-GAIL is refused."""
+    """GAIL without confidences is GAIL with any: the same numbers up to the float error
+    between two programs; PN-GAIL is refused."""
     env, demos, config = small_setup()
     with_confidence = AdversarialTrainer(config, env, demos)
     without = AdversarialTrainer(config, env, Demonstrations(demos.observations, demos.actions))
@@ -247,7 +273,8 @@ def test_methods_that_read_no_confidences_run_without_them():
     _, expected = jax.jit(with_confidence.train)(*args)
     _, metrics = jax.jit(without.train)(*args)
     for name in COMPARED:
-        np.testing.assert_array_equal(metrics[name], expected[name], err_msg=name)
+        # Two trainers, so two programs (their demonstration constants differ); equal here.
+        assert_close_across_programs(metrics[name], expected[name], name)
     assert np.isnan(metrics["confidence/mae"])  # no confidences: no error to report
     without.check_methods(["gail", "wgail"])
     with pytest.raises(DemonstrationError, match="no confidences, which pngail, 2iwil read"):
@@ -314,5 +341,5 @@ def test_two_processes_match_one():
     assert results[0] == results[1]  # both processes see the whole gathered grid
     _, _, single = chunked_grid_results(chunks=2)
     for name in COMPARED:
-        np.testing.assert_allclose(results[0][name], single[name], rtol=1e-4, atol=1e-6)
+        assert_close_across_programs(results[0][name], single[name], name)
     assert results[0]["env_steps"] == [2 * 200] * 6

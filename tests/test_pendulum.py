@@ -76,7 +76,9 @@ def test_single_transitions_match_float32():
     out = jax.jit(jax.vmap(one))(jnp.asarray(states), jnp.asarray(actions))
     assert out.obs.dtype == jnp.float32
     np.testing.assert_allclose(out.obs, expected_obs, rtol=0, atol=1e-5)
-    np.testing.assert_allclose(out.reward, expected_rewards, rtol=0, atol=1e-5)
+    # float32 costs up to 16 from angles of tens of radians: each rounding is 1e-6 to 2e-6
+    # (up to 8.6e-6 seen from other seeds' states against gymnasium's float64): atol 3e-5.
+    np.testing.assert_allclose(out.reward, expected_rewards, rtol=0, atol=3e-5)
 
 
 def x64_episode_errors() -> dict:

@@ -41,8 +41,18 @@ def test_same_key_same_program_is_bit_identical(pendulum):
     assert not np.array_equal(first["train/episode_return"], other["train/episode_return"])
 
 
+# Vmapped and single runs are two programs: XLA may order their float32 reductions
+# differently, and differently by machine. Each tolerance is what the quantity's float error
+# allows; worst seen on an Intel Xeon (its default and SSE4.2-only code) in the comments.
+VMAP_RTOL = {
+    "train/episode_return": 1e-3,  # Pendulum's dynamics amplify last-bit policy differences
+    "eval/return": 1e-3,  # as above, over 200 steps: 4.9e-5 seen
+    "value/loss": 1e-4,  # a mean of squares over the batch: 1.3e-7 seen
+    "trpo/kl": 1e-3,  # a small difference of O(1) terms after a CG solve: 5.8e-5 seen
+}
+
+
 def test_vmapped_seeds_match_single_runs(pendulum):
-    """Float32 reductions may be ordered differently under vmap: rtol 1e-4 over 2 iterations."""
     train = TRPOTrainer(SMALL, pendulum).train
     hyperparams = TRPOHyperparams.create()
     keys = jax.random.split(jax.random.key(0), 3)
@@ -50,15 +60,17 @@ def test_vmapped_seeds_match_single_runs(pendulum):
     single = jax.jit(train)
     for seed in range(3):
         state, metrics = single(hyperparams, keys[seed])
-        for name in ("train/episode_return", "eval/return", "value/loss", "trpo/kl"):
+        for name, rtol in VMAP_RTOL.items():
             np.testing.assert_allclose(
-                batched[name][seed], metrics[name], rtol=1e-4, atol=1e-6, err_msg=name
+                batched[name][seed], metrics[name], rtol=rtol, atol=1e-6, err_msg=name
             )
+        # The first layer's biases start at 0, so they hold two TRPO steps (3e-3 to 1e-2),
+        # which float32 conjugate gradient solves to a few 1e-4 of that (1.8e-6 seen).
         np.testing.assert_allclose(
             jax.tree.leaves(batched_state.trpo.policy_params)[0][seed],
             jax.tree.leaves(state.trpo.policy_params)[0],
             rtol=1e-4,
-            atol=1e-6,
+            atol=5e-5,
         )
 
 
@@ -76,7 +88,9 @@ def test_metrics_and_counters(pendulum):
         "value/loss",
         "trpo/accepted",
         "env_steps",
+        "rollout/nonfinite_actions",
     }
+    np.testing.assert_array_equal(metrics["rollout/nonfinite_actions"], 0)
 
 
 def test_bad_configuration_is_a_clear_error():

@@ -1,4 +1,5 @@
-"""Deterministic evaluation: returns counted up to termination, and the early exit."""
+"""Deterministic evaluation (returns counted up to termination, the early exit) and the
+count of non-finite actions in rollouts."""
 
 import jax
 import jax.numpy as jnp
@@ -83,3 +84,48 @@ def test_pendulum_runs_its_full_time_limit(policy_inputs):
     params = policy.init(jax.random.key(0), jnp.zeros(3))
     _, num_steps = evaluate_episodes(env, policy, params, lambda obs: obs, keys)
     assert int(num_steps) == 7
+
+
+def test_nan_actions_are_counted_and_their_cell_reported():
+    """A NaN observation makes the policy's action NaN; that action makes Pendulum's state
+    NaN, so every later action of the episode is NaN too, until the time limit resets it.
+
+    Slot 1 starts 2 steps before its 4-step limit with a NaN observation: steps 0 and 1
+    apply NaN actions and step 1 truncates, so steps 2-4 run a fresh, finite episode.
+    Count: 2 of the 2 x 5 steps.
+    """
+    from pngail_jax.grid import nonfinite_cells
+    from pngail_jax.rl.rollout import collect, rollout_metrics
+
+    env = envs.AutoReset(envs.make("Pendulum-v1", max_episode_steps=4))
+    policy = GaussianPolicy(1, (4,))
+    params = policy.init(jax.random.key(0), jnp.zeros(3))
+    state = jax.vmap(env.reset)(jax.random.split(jax.random.key(1), 2))
+    state = state.replace(
+        obs=state.obs.at[1].set(jnp.nan), episode_length=state.episode_length.at[1].set(2)
+    )
+
+    def run(state):
+        _, transitions = collect(env, policy, params, lambda obs: obs, state, 5, jax.random.key(2))
+        return transitions, rollout_metrics(transitions)
+
+    transitions, metrics = jax.jit(run)(state)
+    finite_action = np.isfinite(transitions.action).all(axis=-1)  # [T, N]
+    np.testing.assert_array_equal(finite_action[:, 0], True)
+    np.testing.assert_array_equal(finite_action[:, 1], [False, False, True, True, True])
+    np.testing.assert_array_equal(np.isfinite(transitions.reward[:, 1]), finite_action[:, 1])
+    assert int(metrics["rollout/nonfinite_actions"]) == 2
+
+    # Two cells of a one-iteration grid whose returns and losses are all finite: the count
+    # alone reports cell 1.
+    grid_metrics = {
+        "eval/return": np.array([[-900.0], [-800.0]]),
+        "disc/loss": np.array([[1.4], [1.3]]),
+        "rollout/nonfinite_actions": np.array([[0], [int(metrics["rollout/nonfinite_actions"])]]),
+    }
+    assert nonfinite_cells(grid_metrics, eval_every=1).tolist() == [1]
+    # A TRPO-only grid has no discriminator loss; metrics saved before the count have none.
+    del grid_metrics["disc/loss"]
+    assert nonfinite_cells(grid_metrics, eval_every=1).tolist() == [1]
+    del grid_metrics["rollout/nonfinite_actions"]
+    assert nonfinite_cells(grid_metrics, eval_every=1).tolist() == []

@@ -84,7 +84,8 @@ def test_load_policy_matches_saved_parameters(tmp_path):
     loaded = pngail_jax.load_policy(tmp_path, seed=0, verbose=False)
     obs = np.array([[3.0, -1.0, 2.0]], np.float32)
     expected, _ = policy.apply(jax.tree.map(lambda x: x[0], params), normalizer(obs))
-    np.testing.assert_allclose(loaded(obs), np.clip(expected, -5, 5), rtol=1e-6, atol=1e-6)
+    # jitted vs eager: two programs, float32 sums may round differently in the last bits
+    np.testing.assert_allclose(loaded(obs), np.clip(expected, -5, 5), rtol=1e-5, atol=1e-5)
 
 
 def test_load_policy_errors(run_dir, tmp_path):

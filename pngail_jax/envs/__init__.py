@@ -20,7 +20,7 @@ from collections.abc import Callable
 from typing import Any
 
 from pngail_jax.envs.autoreset import AutoReset, AutoResetState
-from pngail_jax.envs.base import Env, EnvState
+from pngail_jax.envs.base import Env, EnvState, check_positive_int
 from pngail_jax.envs.mjx_tasks import BRAX_TASKS, FAST_SOLVER, from_brax
 
 __all__ = [
@@ -55,6 +55,11 @@ def make(name: str, **options) -> Env:
     ``solver_iterations`` and ``ls_iterations`` (MJX solver overrides, see ``FAST_SOLVER``) for
     the MuJoCo tasks, plus any Brax environment keyword for the Brax ones. Building a MuJoCo
     task loads the model (a second or two); compiling its step takes 10-60 s on a CPU.
+
+    Options are checked before anything is built: ``max_episode_steps``, ``solver_iterations``
+    and ``ls_iterations`` must be positive integers and ``g`` a finite number > 0, else a
+    ValueError names the option and the value. Whatever the factory, the environment made
+    must have a positive integer ``max_episode_steps``.
     """
     if name == "Pendulum-v1":
         from pngail_jax.envs.pendulum import Pendulum
@@ -68,7 +73,10 @@ def make(name: str, **options) -> Env:
         from pngail_jax.envs.mjx_tasks import Swimmer
 
         return _build(Swimmer, name, options)
-    return _as_env(name, _build(_factory(name), name, options))
+    factory = _factory(name)
+    if "max_episode_steps" in options:  # refused before the factory runs, as the built-ins do
+        check_positive_int(name, "max_episode_steps", options["max_episode_steps"])
+    return _as_env(name, _build(factory, name, options))
 
 
 def register(name: str, factory: Callable[..., Any], *, overwrite: bool = False) -> None:
@@ -149,4 +157,5 @@ def _as_env(name: str, env: Any) -> Env:
     missing = [attribute for attribute in Env.__annotations__ if not hasattr(env, attribute)]
     if missing:
         raise ValueError(f"{name}: the environment does not set {', '.join(missing)}")
+    check_positive_int(name, "max_episode_steps", env.max_episode_steps)
     return env

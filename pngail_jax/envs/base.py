@@ -13,6 +13,8 @@ next episode.
 from __future__ import annotations
 
 import abc
+import math
+import numbers
 from typing import Any
 
 import jax
@@ -50,7 +52,9 @@ class Env(abc.ABC):
     """Base class of all environments: static attributes plus pure ``reset`` and ``step``.
 
     Subclasses set the attributes below in ``__init__`` and implement ``_reset`` and
-    ``_step``; the public methods add input checks and the episode bookkeeping.
+    ``_step``; the public methods add input checks and the episode bookkeeping. Constructors
+    check their options before building anything (``check_positive_int``,
+    ``check_positive_finite``), so a bad option fails at once with a message naming it.
 
     Attributes:
       name: the registry name (``"Pendulum-v1"``, ``"Hopper"``, ...).
@@ -83,7 +87,16 @@ class Env(abc.ABC):
         )
 
     def step(self, state: EnvState, action: jax.Array) -> EnvState:
-        """Advances one environment by one step. ``action``: float[action_size]."""
+        """Advances one environment by one step. ``action``: float[action_size].
+
+        The action's shape and dtype are checked when traced; its values cannot be (they are
+        traced), so a NaN or inf action is applied as given. As in gymnasium's Pendulum-v1,
+        it makes the reward and the state non-finite, and they stay so until the episode
+        ends (at the time limit, or at once where a health check fails on NaN, as in Brax's
+        Hopper); ``AutoReset`` then starts a finite one. Rollouts count such steps
+        (``rollout/nonfinite_actions``, ``pngail_jax.rl.rollout.rollout_metrics``) and
+        ``pngail_jax.grid.nonfinite_cells`` reports the runs that had any.
+        """
         action = check_action(self, action)
         obs, reward, terminated, internal = self._step(state.internal, action)
         episode_length = state.episode_length + 1
@@ -133,6 +146,28 @@ def check_action(env: Env, action: Any) -> jax.Array:
     # Float actions keep their width, as in gymnasium: a float32 action applied to a float64
     # state is combined with NumPy's (and JAX's) promotion rules, so the x64 equality holds.
     return action
+
+
+def check_positive_int(env_name: str, option: str, value: Any) -> int:
+    """``value`` as an ``int``, or a ValueError naming the option and the value: counts such as
+    ``max_episode_steps`` must be integers >= 1 (a bool or an integral float is refused, as
+    it is more likely a mistake than a count)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
+        raise ValueError(f"{env_name}: {option} must be a positive integer, got {value!r}")
+    return int(value)
+
+
+def check_positive_finite(env_name: str, option: str, value: Any) -> float:
+    """``value`` as a ``float``, or a ValueError naming the option and the value: physical
+    constants such as gravity must be finite real numbers > 0."""
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, numbers.Real)
+        or not math.isfinite(value)
+        or value <= 0
+    ):
+        raise ValueError(f"{env_name}: {option} must be a finite number > 0, got {value!r}")
+    return float(value)
 
 
 def float_dtype() -> jnp.dtype:

@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from pngail_jax.envs.base import Env
+from pngail_jax.envs.base import Env, check_positive_int
 
 # Newton solver capped at 1 iteration and 4 line-search iterations: Brax's own setting for
 # Ant on mjx. An opt-in speed option for the other tasks; its accuracy cost is measured in
@@ -50,15 +50,20 @@ def _import_mjx():
     return mjx
 
 
-def _solver_options(solver_iterations: int | None, ls_iterations: int | None) -> dict[str, int]:
-    options = {}
-    for option, value in (("iterations", solver_iterations), ("ls_iterations", ls_iterations)):
-        if value is None:
-            continue
-        if not isinstance(value, int | np.integer) or value < 1:
-            raise ValueError(f"{option} must be a positive integer or None, got {value!r}")
-        options[option] = int(value)
-    return options
+def _check_options(
+    name: str, max_episode_steps: Any, solver_iterations: Any, ls_iterations: Any
+) -> tuple[int, dict[str, int]]:
+    """The checked time limit and the MJX solver overrides (``mujoco.MjOption`` field names
+    to values), or a ValueError naming the bad option; called before any model is loaded."""
+    max_episode_steps = check_positive_int(name, "max_episode_steps", max_episode_steps)
+    solver = {}
+    for field, option, value in (
+        ("iterations", "solver_iterations", solver_iterations),
+        ("ls_iterations", "ls_iterations", ls_iterations),
+    ):
+        if value is not None:
+            solver[field] = check_positive_int(name, option, value)
+    return max_episode_steps, solver
 
 
 class BraxTask(Env):
@@ -68,8 +73,9 @@ class BraxTask(Env):
     Args:
       name: one of ``BRAX_TASKS`` (``"Ant"``, ``"HalfCheetah"``, ``"Hopper"``, ``"Walker2d"``),
         or with ``brax_env`` any name for reports.
-      max_episode_steps: time limit (1000, as gymnasium's versions).
-      solver_iterations, ls_iterations: MJX solver overrides; None keeps the task's own.
+      max_episode_steps: time limit, a positive integer (1000, as gymnasium's versions).
+      solver_iterations, ls_iterations: MJX solver overrides, positive integers; None keeps
+        the task's own.
       brax_env: a Brax environment to wrap instead of building the task ``name``. Its
         observations must be flat arrays; its action bounds are its actuators' control range,
         or [-1, 1] (Brax's convention) when it has no ``sys``.
@@ -87,7 +93,9 @@ class BraxTask(Env):
         brax_env: Any = None,
         **brax_options: Any,
     ):
-        solver = _solver_options(solver_iterations, ls_iterations)
+        max_episode_steps, solver = _check_options(
+            name, max_episode_steps, solver_iterations, ls_iterations
+        )
         if brax_env is None:
             brax_env = _brax_task(name, brax_options)
         elif brax_options:
@@ -112,7 +120,7 @@ class BraxTask(Env):
             low, high = -np.ones(self.action_size), np.ones(self.action_size)
         self.action_low = np.asarray(low, np.float32)
         self.action_high = np.asarray(high, np.float32)
-        self.max_episode_steps = int(max_episode_steps)
+        self.max_episode_steps = max_episode_steps
 
     @property
     def dt(self) -> float:
@@ -177,7 +185,8 @@ class Swimmer(Env):
     ``x_velocity`` the finite difference of ``qpos[0]`` over ``dt = 4 * 0.01``, reset
     ``qpos0 + U(-0.1, 0.1)``, ``U(-0.1, 0.1)`` velocities, no termination, 1000-step limit.
     As in gymnasium the control cost uses the action as given, while the simulator clamps
-    the control to [-1, 1].
+    the control to [-1, 1]. Options (positive integers): ``max_episode_steps``,
+    ``solver_iterations`` and ``ls_iterations``.
     """
 
     frame_skip = 4
@@ -191,12 +200,15 @@ class Swimmer(Env):
         solver_iterations: int | None = None,
         ls_iterations: int | None = None,
     ):
+        max_episode_steps, solver = _check_options(
+            "Swimmer", max_episode_steps, solver_iterations, ls_iterations
+        )
         import mujoco
 
         mjx = _import_mjx()
         mj_model = mujoco.MjModel.from_xml_path(_gymnasium_asset("swimmer.xml"))
-        for option, value in _solver_options(solver_iterations, ls_iterations).items():
-            setattr(mj_model.opt, option, value)
+        for field, value in solver.items():
+            setattr(mj_model.opt, field, value)
         self._mjx = mjx
         self._model = mjx.put_model(mj_model)
         self._init_qpos = np.asarray(mj_model.qpos0, np.float32)
@@ -205,7 +217,7 @@ class Swimmer(Env):
         self.action_size = mj_model.nu
         self.action_low = np.asarray(mj_model.actuator_ctrlrange[:, 0], np.float32)
         self.action_high = np.asarray(mj_model.actuator_ctrlrange[:, 1], np.float32)
-        self.max_episode_steps = int(max_episode_steps)
+        self.max_episode_steps = max_episode_steps
         self.dt = float(mj_model.opt.timestep) * self.frame_skip
         self.model_options = {
             "solver": int(mj_model.opt.solver),

@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from pngail_jax.envs.base import Env, float_dtype
+from pngail_jax.envs.base import Env, check_positive_finite, check_positive_int, float_dtype
 
 
 @struct.dataclass
@@ -24,7 +24,8 @@ class PendulumInternal:
 
 
 class Pendulum(Env):
-    """gymnasium's Pendulum-v1. Options: ``g`` (gravity, default 10.0), ``max_episode_steps``."""
+    """gymnasium's Pendulum-v1. Options: ``g`` (gravity, default 10.0; finite and > 0) and
+    ``max_episode_steps`` (a positive integer, default 200)."""
 
     max_speed = 8.0
     max_torque = 2.0
@@ -34,12 +35,14 @@ class Pendulum(Env):
 
     def __init__(self, g: float = 10.0, max_episode_steps: int = 200):
         self.name = "Pendulum-v1"
-        self.g = float(g)
+        self.g = check_positive_finite(self.name, "g", g)
+        self.max_episode_steps = check_positive_int(
+            self.name, "max_episode_steps", max_episode_steps
+        )
         self.observation_size = 3
         self.action_size = 1
         self.action_low = np.full((1,), -self.max_torque, np.float32)
         self.action_high = np.full((1,), self.max_torque, np.float32)
-        self.max_episode_steps = int(max_episode_steps)
 
     def _reset(self, key):
         dtype = float_dtype()

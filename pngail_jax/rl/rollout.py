@@ -42,7 +42,8 @@ def collect(
     """Steps N parallel envs (``env_state`` leaves are [N, ...]) ``unroll_length`` times.
 
     Actions are sampled from the Gaussian policy and passed unclipped (the environment
-    clips, as the reference does).
+    clips, as the reference does), non-finite ones included: ``rollout_metrics`` counts
+    those.
     """
     step = jax.vmap(env.step)
 
@@ -64,6 +65,19 @@ def collect(
         return next_state, transition
 
     return jax.lax.scan(body, env_state, jax.random.split(key, unroll_length))
+
+
+def rollout_metrics(transitions: Transitions) -> dict[str, jax.Array]:
+    """Health of one iteration's rollout, added to the training metrics of every trainer.
+
+    ``rollout/nonfinite_actions``: int32[], how many of the T * N steps applied an action
+    with a NaN or inf entry. The environment takes such an action as it is and its state
+    turns non-finite for the rest of the episode (``Env.step``); the count names that cause
+    in the run's own metrics, whatever the learner makes of the NaN rewards that follow, and
+    ``pngail_jax.grid.nonfinite_cells`` reports every run with a nonzero count.
+    """
+    finite = jnp.isfinite(transitions.action).all(axis=-1)
+    return {"rollout/nonfinite_actions": jnp.sum(~finite, dtype=jnp.int32)}
 
 
 def evaluate(

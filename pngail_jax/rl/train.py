@@ -32,7 +32,7 @@ from pngail_jax.networks import (
     gaussian_log_prob,
 )
 from pngail_jax.rl.gae import GAEForm, generalized_advantages
-from pngail_jax.rl.rollout import Transitions, collect, evaluate
+from pngail_jax.rl.rollout import Transitions, collect, evaluate, rollout_metrics
 from pngail_jax.rl.trpo import hessian_vector_product, natural_gradient_step
 
 RewardFunction = Callable[[Transitions], jax.Array]
@@ -251,7 +251,11 @@ class TRPO:
         transitions: Transitions,
         rewards: jax.Array,
     ) -> tuple[TRPOState, dict[str, jax.Array]]:
-        """Value regression then one natural-gradient policy step, on ``rewards`` float[T, N]."""
+        """Value regression then one natural-gradient policy step, on ``rewards`` float[T, N].
+
+        Returns the new state and scalar metrics of the step and of the rollout it learnt
+        from (``rollout_metrics``: every trainer's metrics carry them).
+        """
         config = self.config
         chex.assert_shape(rewards, (config.unroll_length, config.num_envs))
         normalizer = state.normalizer
@@ -303,6 +307,7 @@ class TRPO:
             "train/reward": rewards.mean(),
             "value/loss": value_loss,
             **policy_metrics,
+            **rollout_metrics(transitions),
         }
         state = state.replace(
             policy_params=policy_params,
@@ -463,7 +468,8 @@ class TRPOTrainer:
 
     ``metrics`` map names to float[num_blocks * eval_every]; ``eval/return`` (the
     deterministic policy on ``num_eval_episodes`` fixed-key episodes) is set at the end of
-    each block of ``eval_every`` iterations and NaN elsewhere.
+    each block of ``eval_every`` iterations and NaN elsewhere; ``rollout/nonfinite_actions``
+    counts each iteration's steps that applied a NaN or inf action (0 in a healthy run).
     """
 
     def __init__(self, config: TRPOConfig, env: envs.Env, reward_fn: RewardFunction = true_reward):
