@@ -11,7 +11,6 @@ Only rows that a ``.npz`` file's ``labelled`` mask allows are labelled.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import time
 from pathlib import Path
@@ -22,6 +21,8 @@ import jax.numpy as jnp
 from experiments.cli import HelpFormatter, check_positive, known_names
 from pngail_jax.confidence import ClassifierConfig, ClassifierSpec, split_and_train
 from pngail_jax.demos import DemonstrationError, Demonstrations, load_demonstrations
+from pngail_jax.integrity import write_json
+from pngail_jax.report import json_safe
 
 METHODS = {"sc": ClassifierSpec.sc, "bsc": ClassifierSpec.bsc}
 
@@ -60,6 +61,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     )
     parser.add_argument("--eps", type=float, default=0.01, help="BSC clip")
     parser.add_argument("--json", type=Path, default=None, help="also write the results here")
+    parser.add_argument(
+        "--overwrite", action="store_true", help="replace an existing --json file (default: refuse)"
+    )
     args = parser.parse_args(argv)
     args.methods = known_names(parser, args.methods, METHODS, "method")
     if not 0 < args.label_ratio < 1:  # also refuses nan
@@ -80,6 +84,8 @@ def parse_args(argv=None) -> argparse.Namespace:
             parser.error(f"{flag} must be a finite number {minimum}, got {value}")
     if args.json is not None and args.json.is_dir():
         parser.error(f"--json {args.json} is a directory; give the path of a file to write")
+    if args.json is not None and args.json.exists() and not args.overwrite:
+        parser.error(f"--json {args.json} exists: choose another file, or pass --overwrite")
     return args
 
 
@@ -196,7 +202,7 @@ def main(argv=None) -> dict:
     )
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(summary, indent=2))
+        write_json(args.json, json_safe(summary))
         print(f"wrote {args.json}")
     return summary
 

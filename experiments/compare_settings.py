@@ -37,7 +37,8 @@ from experiments.cli import (
     check_positive,
     known_names,
 )
-from pngail_jax.integrity import atomic_path, atomic_write_text
+from pngail_jax.integrity import atomic_path, atomic_write_text, write_json
+from pngail_jax.report import json_safe
 
 COMPARISON_FILE = "comparison.json"  # written last: its presence marks a finished comparison
 
@@ -251,7 +252,7 @@ def main(argv=None) -> dict:
     markdown = comparison_markdown(summary)
     atomic_write_text(args.out / "comparison.md", markdown + "\n")
     plot(args.out / "comparison.png", curves, f"TRPO on {args.env}, true reward")
-    atomic_write_text(args.out / COMPARISON_FILE, json.dumps(summary, indent=2))
+    write_json(args.out / COMPARISON_FILE, json_safe(summary))  # null, never a bare NaN
     print(f"\n{markdown}\n\nwrote {args.out}/comparison.{{json,md,png}}")
     return summary
 

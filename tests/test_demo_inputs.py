@@ -554,6 +554,7 @@ def test_the_trainer_passes_the_mask_to_the_split_and_checks_ratios(tmp_path, mo
         ["--action-scale", "-2"],
         ["--action-scale", "nan"],
         ["--json", "."],
+        ["--json", "pyproject.toml"],  # finished work: replaced only with --overwrite
     ],
 )
 def test_classify_refuses_bad_flags_naming_them(capsys, flags):
@@ -563,6 +564,8 @@ def test_classify_refuses_bad_flags_naming_them(capsys, flags):
         classify.parse_args(["--demos", "any.npy", *flags])
     assert exit_info.value.code == 2
     assert f"error: {flags[0]}" in capsys.readouterr().err
+    if flags[1] == "pyproject.toml":
+        assert classify.parse_args(["--demos", "any.npy", *flags, "--overwrite"]).overwrite
 
 
 def test_classify_load_errors_are_one_line_naming_the_file(tmp_path):
