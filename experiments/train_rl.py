@@ -21,7 +21,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from experiments.cli import ENV_HELP, HelpFormatter, check_env, check_positive
+from experiments.cli import (
+    ENV_HELP,
+    HelpFormatter,
+    check_env,
+    check_output_directory,
+    check_positive,
+)
 from pngail_jax import compilation
 from pngail_jax import settings as run_settings
 from pngail_jax.checkpoint import save_trpo_policies
@@ -94,14 +100,7 @@ def parse_args(argv=None) -> argparse.Namespace:
         )
     if args.out is None:
         args.out = Path("runs") / f"trpo-{args.env}-{time.strftime('%Y%m%d-%H%M%S')}"
-    if args.out.exists() and not args.out.is_dir():
-        parser.error(f"--out {args.out} is a file, not a directory")
-    finished = [name for name in ("policy.json", "config.json") if (args.out / name).exists()]
-    if finished and not args.overwrite:
-        parser.error(
-            f"--out {args.out} already holds a run ({', '.join(finished)}): choose another "
-            "--out, or pass --overwrite to replace it"
-        )
+    check_output_directory(parser, args.out, "policy.json", args.overwrite)
     return args
 
 
