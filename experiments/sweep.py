@@ -359,6 +359,7 @@ def check_inputs(saved: SavedRun, allow_changed: bool) -> None:
 def input_files(config: RunConfig, demos_path: str) -> dict:
     """``{role: integrity.file_record}`` of the files a run reads its demonstrations from
     (a Minari dataset is named by its id only)."""
+    from pngail_jax.demos import released_confidence_path
     from pngail_jax.integrity import file_record
 
     if demos_path.startswith(MINARI_PREFIX):
@@ -366,9 +367,7 @@ def input_files(config: RunConfig, demos_path: str) -> dict:
     else:
         files = {"demonstrations": demos_path}
         if demos_path.endswith("_mixture.npy"):
-            files["confidence file"] = config.conf or demos_path.replace(
-                "_mixture.npy", "_mixture_conf.npy"
-            )
+            files["confidence file"] = config.conf or released_confidence_path(demos_path)
     return {role: file_record(path) for role, path in files.items()}
 
 

@@ -10,6 +10,7 @@ from pngail_jax.demos.data import (
     load_npz,
     load_released,
     make_split,
+    released_confidence_path,
     save_npz,
 )
 
@@ -23,5 +24,6 @@ __all__ = [
     "load_npz",
     "load_released",
     "make_split",
+    "released_confidence_path",
     "save_npz",
 ]

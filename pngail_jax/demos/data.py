@@ -329,6 +329,12 @@ def _not_numbers(array: np.ndarray) -> str:
     return f"holds {what} (dtype {array.dtype}), expected real numbers"
 
 
+def released_confidence_path(mixture_path: str | Path) -> Path:
+    """The confidence file beside an ``{env}_mixture.npy``: ``{env}_mixture_conf.npy``."""
+    mixture_path = Path(mixture_path)
+    return mixture_path.with_name(mixture_path.name.replace("_mixture.npy", "_mixture_conf.npy"))
+
+
 def load_released(
     mixture_path: str | Path,
     conf_path: str | Path | None = None,
@@ -351,7 +357,7 @@ def load_released(
         raise DemonstrationError(f"action_scale must be positive and finite, got {action_scale!r}")
     env_name = mixture_path.name.removesuffix("_mixture.npy")
     if conf_path is None:
-        conf_path = mixture_path.with_name(f"{env_name}_mixture_conf.npy")
+        conf_path = released_confidence_path(mixture_path)
     where = f"mixture file {mixture_path}"
     action_size = None
     if observation_size is None:
