@@ -166,27 +166,25 @@ def main(argv=None) -> Path:
         trainer, hyperparams, jax.random.split(train_key, args.seeds), on_block=keep
     )
 
-    def act_with(params, normalizer):
+    @jax.jit  # one program for every policy (its parameters are arguments, not constants)
+    def policy_episodes(params, normalizer, keys):
         def act(obs, key):
             return policy.apply(params, normalizer(obs))[0]
 
-        return act
+        return rollout_episodes(env, act, keys)
 
-    def measure(act, key, num_episodes):
-        run = jax.jit(lambda keys: rollout_episodes(env, act, keys))
-        return run(jax.random.split(key, num_episodes))
+    def measure(snapshot, key, num_episodes):
+        keys = jax.random.split(key, num_episodes)
+        return policy_episodes(snapshot.policy_params, snapshot.normalizer, keys)
 
     print("2/3 measuring random and optimal returns", flush=True)
     random_key, optimal_key, intermediate_key = jax.random.split(measure_key, 3)
+    random_episodes = jax.jit(lambda keys: rollout_episodes(env, uniform_random_actions(env), keys))
     random_return = float(
-        measure(uniform_random_actions(env), random_key, args.measure_episodes).returns.mean()
+        random_episodes(jax.random.split(random_key, args.measure_episodes)).returns.mean()
     )
     best = max(snapshots, key=lambda snapshot: snapshot.eval_return)
-    optimal_return = float(
-        measure(
-            act_with(best.policy_params, best.normalizer), optimal_key, args.measure_episodes
-        ).returns.mean()
-    )
+    optimal_return = float(measure(best, optimal_key, args.measure_episodes).returns.mean())
     beats_random = optimal_return > random_return
     if not beats_random:
         print(
@@ -212,11 +210,7 @@ def main(argv=None) -> Path:
         ),
     )
     intermediate_return = float(
-        measure(
-            act_with(intermediate.policy_params, intermediate.normalizer),
-            intermediate_key,
-            args.measure_episodes,
-        ).returns.mean()
+        measure(intermediate, intermediate_key, args.measure_episodes).returns.mean()
     )
 
     print(
@@ -229,11 +223,7 @@ def main(argv=None) -> Path:
         (best, optimal_key, args.num_optimal),
         (intermediate, intermediate_key, args.num_trajectories - args.num_optimal),
     ]
-    parts = [
-        measure(act_with(snapshot.policy_params, snapshot.normalizer), key, count)
-        for snapshot, key, count in sources
-        if count > 0
-    ]
+    parts = [measure(snapshot, key, count) for snapshot, key, count in sources if count > 0]
     rows = {"observations": [], "actions": [], "confidence": [], "trajectory_ids": []}
     trajectory_returns = []
     for episodes in parts:
@@ -263,6 +253,8 @@ def main(argv=None) -> Path:
         "optimal_checkpoint": {"iteration": best.iteration, "seed": best.seed},
         "intermediate_checkpoint": {"iteration": intermediate.iteration, "seed": intermediate.seed},
         "ratio": args.ratio,
+        # The optimal policy's trajectories come first (ids 0 .. num_optimal - 1).
+        "num_optimal_trajectories": args.num_optimal,
         "trajectory_returns": trajectory_returns,
         "optimal_beats_random": beats_random,
         "source": "experiments.make_demos (deterministic TRPO policies)",

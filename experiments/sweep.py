@@ -37,6 +37,7 @@ from pngail_jax.run_config import (
     LOG_BACKENDS,
     PRESETS_BY_NAME,
     RunConfig,
+    task_classifier,
     upgrade_saved_config,
 )
 from pngail_jax.tracking import check_backends
@@ -82,7 +83,11 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=HelpFormatter,
     )
     add = parser.add_argument
-    add("--env", help=f"{ENV_HELP} (default {SMOKE.env})")
+    add(
+        "--env",
+        help=f"{ENV_HELP} (default: the task of an authors' --demos file, e.g. Hopper for "
+        f"Hopper-v2_mixture.npy; else {SMOKE.env})",
+    )
     add("--methods", help=f"comma-separated, from {', '.join(METHOD_NAMES)} (default: all)")
     add("--seeds", type=int, help=f"seeds per method and setting (default {SMOKE.seeds})")
     add("--iterations", type=int, help=f"TRPO iterations per run (default {SMOKE.iterations})")
@@ -114,7 +119,12 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         help="multiplies stored actions, 2 for the authors' Pendulum set (default 1)",
     )
-    add("--num-demos", type=int, help="rows per split, n_c + n_u (default: all rows)")
+    add(
+        "--num-demos",
+        type=int,
+        help="rows per split, n_c + n_u (default: the task's Table 3 size, capped at the "
+        "demonstrations' rows; every row for a task without one)",
+    )
     add("--label-ratio", help="comma-separated values: a grid axis (default 0.2)")
     add("--noise", help="confidence noise std, comma-separated: a grid axis (default 0)")
     add("--seed", type=int, help="base PRNG seed (default 0)")
@@ -127,7 +137,8 @@ def build_parser() -> argparse.ArgumentParser:
     add(
         "--classifier-steps",
         type=int,
-        help=f"confidence classifier steps (default {SMOKE.classifier.num_steps:,}, the paper's)",
+        help=f"confidence classifier steps (default {SMOKE.classifier.num_steps:,}; "
+        f"{task_classifier('Walker2d').num_steps:,} on Walker2d, the paper's)",
     )
     add("--bsc-eps", type=float, help="BSC's clip (default 0.01; 0.05 on Walker2d, the paper's)")
     add(
@@ -220,8 +231,8 @@ def config_from_flags(parser, args) -> RunConfig:
             base = RunConfig.preset(args.preset or "smoke")
     except ValueError as error:
         parser.error(f"--{'config' if args.config else 'preset'}: {error}")
-    env = check_env(parser, args.env or base.env)
     demos = args.demos
+    env = check_env(parser, args.env or _task_of(demos) or base.env)
     if demos is not None and not demos.startswith(MINARI_PREFIX):
         if not Path(demos).exists():
             parser.error(f"--demos {demos} does not exist")
@@ -241,7 +252,8 @@ def config_from_flags(parser, args) -> RunConfig:
     try:
         settings_base = base.settings if env == base.env else None
         settings = run_settings.from_arguments(env, args, base=settings_base)
-        classifier = base.classifier
+        # Another task: its own settings row and classifier, as RunConfig.replace gives.
+        classifier = base.classifier if env == base.env else task_classifier(env)
         if args.classifier_steps is not None:
             classifier = dataclasses.replace(classifier, num_steps=args.classifier_steps)
         overrides = dict(
@@ -271,6 +283,14 @@ def config_from_flags(parser, args) -> RunConfig:
         return base.replace(**{key: value for key, value in overrides.items() if value is not None})
     except ValueError as error:
         parser.error(_flag_message(str(error)))
+
+
+def _task_of(demos: str | None) -> str | None:
+    """The task of an authors' released file (``Hopper-v2_mixture.npy``: Hopper), so
+    ``--demos`` alone picks it."""
+    from pngail_jax.demos import released_task
+
+    return None if demos is None else released_task(demos)
 
 
 def _flag_message(message: str) -> str:
@@ -485,7 +505,7 @@ def build(config: RunConfig, saved: SavedRun | None) -> SweepRun:
     except (DemonstrationError, FileNotFoundError, ImportError) as error:
         raise SystemExit(f"demonstrations: {error}") from None
     try:
-        trainer = AdversarialTrainer(config.adversarial_config(), env, demos)
+        trainer = AdversarialTrainer(config.adversarial_config(demos.num_rows), env, demos)
         trainer.check_methods(config.methods)
         trainer.check_label_ratios(config.label_ratios)
     except DemonstrationError as error:

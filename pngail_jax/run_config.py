@@ -39,6 +39,25 @@ RECORD_KEYS = ("resolved", "provenance")
 SEED_LIMIT = 2**63
 # BSC's clip per task where the paper departs from 0.01 (appendix C.2: 0.05 on Walker2d).
 TASK_BSC_EPS = {"Walker2d": 0.05}
+# Classifier steps per task where the paper departs from 25,000 (appendix C.2).
+TASK_CLASSIFIER_STEPS = {"Walker2d": 50_000}
+# Rows per split, n_c + n_u, per task (the paper's Table 3): ``num_demos=None`` takes these,
+# capped at the demonstrations' row count.
+TASK_NUM_DEMOS = {
+    "Pendulum-v1": 1000,
+    "Ant": 600,
+    "HalfCheetah": 2500,
+    "Hopper": 100,
+    "Swimmer": 25,
+    "Walker2d": 2000,
+}
+
+
+def task_classifier(env: str) -> ClassifierConfig:
+    """The paper's classifier settings for ``env`` (``TASK_CLASSIFIER_STEPS``, else the
+    reference code's 25,000 steps)."""
+    default = ClassifierConfig()
+    return ClassifierConfig(num_steps=TASK_CLASSIFIER_STEPS.get(env, default.num_steps))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -62,10 +81,12 @@ class RunConfig:
     conf: str | None = None  # confidence file (default: the mixture's sibling)
     confidence_field: str | None = None  # Minari: the per-episode field holding confidences
     action_scale: float = 1.0  # multiplies stored actions (2 for the authors' Pendulum set)
-    num_demos: int | None = None  # rows per split, n_c + n_u (None: every row)
+    # Rows per split, n_c + n_u. None: the task's paper size (TASK_NUM_DEMOS) capped at the
+    # demonstrations' rows; every row for a task without one.
+    num_demos: int | None = None
     chunk_iterations: int = 50  # iterations per compiled chunk (progress + checkpoint)
     settings: RunSettings | None = None
-    classifier: ClassifierConfig = ClassifierConfig()
+    classifier: ClassifierConfig | None = None  # None: the task's (task_classifier)
     bsc_eps: float | None = None  # None: the task's (TASK_BSC_EPS, else 0.01)
     fisher: str = "gauss_newton"
     fisher_subsample: int = 1
@@ -125,6 +146,8 @@ class RunConfig:
             value = getattr(self, name)
             if value is not None and (not isinstance(value, str) or not value):
                 _fail(f"{name} must be a non-empty string or None, got {value!r}")
+        if self.classifier is None:
+            set_field("classifier", task_classifier(self.env))
         if not isinstance(self.classifier, ClassifierConfig):
             _fail(
                 "classifier must be a pngail_jax.confidence.ClassifierConfig, "
@@ -175,9 +198,10 @@ class RunConfig:
 
     def replace(self, **overrides) -> RunConfig:
         """A validated copy with ``overrides``. A new environment gets its own settings row
-        unless ``settings`` is given too."""
-        if overrides.get("env", self.env) != self.env and "settings" not in overrides:
-            overrides["settings"] = None
+        and classifier unless ``settings`` / ``classifier`` are given too."""
+        if overrides.get("env", self.env) != self.env:
+            overrides.setdefault("settings", None)
+            overrides.setdefault("classifier", None)
         return dataclasses.replace(self, **overrides)
 
     @property
@@ -188,14 +212,23 @@ class RunConfig:
     def num_settings(self) -> int:
         return len(self.label_ratios) * len(self.noise_stds)
 
-    def adversarial_config(self) -> AdversarialConfig:
-        """The static configuration of the trainer this run builds."""
+    def task_num_demos(self, num_rows: int) -> int:
+        """Rows per split for demonstrations of ``num_rows`` rows: ``num_demos``, or the
+        task's paper size (``TASK_NUM_DEMOS``) capped at ``num_rows``, or every row."""
+        if self.num_demos is not None:
+            return self.num_demos
+        return min(num_rows, TASK_NUM_DEMOS.get(self.env, num_rows))
+
+    def adversarial_config(self, num_rows: int | None = None) -> AdversarialConfig:
+        """The static configuration of the trainer this run builds on demonstrations of
+        ``num_rows`` rows (None: ``num_demos`` as given, every row when None)."""
+        num_demos = self.num_demos if num_rows is None else self.task_num_demos(num_rows)
         return AdversarialConfig(
             trpo=self.settings.trpo_config(
                 self.iterations, fisher=self.fisher, fisher_subsample=self.fisher_subsample
             ),
             classifier=self.classifier,
-            num_demos=self.num_demos,
+            num_demos=num_demos,
             discriminator_hidden_sizes=self.discriminator_hidden_sizes,
         )
 

@@ -97,8 +97,11 @@ def test_released_layout_errors(tmp_path):
 def test_check_env_sizes():
     demos = Demonstrations(**_valid())
     demos.check_env(envs.make("Pendulum-v1"))
-    with pytest.raises(DemonstrationError, match="Swimmer has 8"):
+    with pytest.raises(DemonstrationError, match="of Pendulum-v1 do not fit Swimmer"):
         demos.check_env(envs.make("Swimmer"))
+    unnamed = Demonstrations(**{**_valid(), "metadata": {}})  # sizes are all there is to check
+    with pytest.raises(DemonstrationError, match="Swimmer has 8"):
+        unnamed.check_env(envs.make("Swimmer"))
 
 
 @pytest.mark.skipif(

@@ -145,7 +145,7 @@ def _saved(**changes):
             "RunSettings.num_envs must be a positive integer, got '25'",
         ),
         ({"classifier": "fast"}, "classifier must be a pngail_jax.confidence.ClassifierConfig"),
-        ({"classifier": None}, "classifier must be a pngail_jax.confidence.ClassifierConfig"),
+        ({"classifier": 3}, "classifier must be a pngail_jax.confidence.ClassifierConfig"),
         ({"classifier": {"num_steps": 10, "lr": 1}}, r"classifier: unknown key\(s\) \['lr'\]"),
         ({"classifier": {"hidden_sizes": "40"}}, "ClassifierConfig.hidden_sizes must be positive"),
         ({"classifier": {"num_steps": 2.5}}, "ClassifierConfig.num_steps must be a positive int"),

@@ -2,6 +2,8 @@
 
 from pngail_jax.demos.data import (
     ACTION_BOUND_MULTIPLE,
+    RELEASED_ACTION_SCALES,
+    RELEASED_TASKS,
     DemonstrationError,
     Demonstrations,
     Split,
@@ -11,11 +13,14 @@ from pngail_jax.demos.data import (
     load_released,
     make_split,
     released_confidence_path,
+    released_task,
     save_npz,
 )
 
 __all__ = [
     "ACTION_BOUND_MULTIPLE",
+    "RELEASED_ACTION_SCALES",
+    "RELEASED_TASKS",
     "DemonstrationError",
     "Demonstrations",
     "Split",
@@ -25,5 +30,6 @@ __all__ = [
     "load_released",
     "make_split",
     "released_confidence_path",
+    "released_task",
     "save_npz",
 ]

@@ -35,6 +35,8 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
+from pngail_jax.envs import ENV_NAMES
+
 NPZ_FORMAT_VERSION = 1
 
 # ``load_demonstrations("minari:<dataset_id>")`` loads a local Minari dataset.
@@ -59,6 +61,31 @@ RELEASED_ACTION_SIZES = {
     "Swimmer-v2": 2,
     "Walker2d-v2": 6,
 }
+
+# Our task of each released file's environment. The authors' Ant-v2 file has none: gym v2's
+# Ant observations (111: positions, velocities and contact forces) are not our Ant's (27).
+RELEASED_TASKS = {
+    "Pendulum-v1": "Pendulum-v1",
+    "HalfCheetah-v2": "HalfCheetah",
+    "Hopper-v2": "Hopper",
+    "Swimmer-v2": "Swimmer",
+    "Walker2d-v2": "Walker2d",
+}
+
+# What the stored actions of a released file must be multiplied by to be in the environment's
+# units (the authors' Pendulum file stores torque / 2); 1 for the others.
+RELEASED_ACTION_SCALES = {"Pendulum-v1": 2.0}
+
+
+def released_task(path: str | Path) -> str | None:
+    """Our task of a released ``{env}_mixture.npy`` file (``RELEASED_TASKS``), else None."""
+    name = Path(path).name
+    return (
+        RELEASED_TASKS.get(name.removesuffix("_mixture.npy"))
+        if name.endswith("_mixture.npy")
+        else None
+    )
+
 
 # ``check_env`` refuses actions beyond this multiple of the bound's magnitude: a unit or file
 # mix-up, not exploration noise. The authors' MuJoCo files store unclipped policy actions, with
@@ -147,7 +174,21 @@ class Demonstrations:
         """Raises ``DemonstrationError`` unless the sizes match ``env``'s and no action lies
         beyond ``ACTION_BOUND_MULTIPLE`` times the magnitude of ``env``'s action bound
         (``max(|low|, |high|)`` per dimension). Actions a little outside the bounds pass: the
-        released MuJoCo sets store unclipped policy actions."""
+        released MuJoCo sets store unclipped policy actions. A released file of another task
+        than ``env`` (``RELEASED_TASKS``), or the unusable Ant-v2 file, is named as such."""
+        made_for = self.metadata.get("env")
+        if made_for == "Ant-v2":
+            raise DemonstrationError(
+                "the authors' Ant-v2 file cannot serve: gym v2's Ant observations have 111 "
+                "columns (with contact forces), our Ant's have "
+                f"{env.observation_size}; make Ant demonstrations with experiments.make_demos"
+            )
+        task = RELEASED_TASKS.get(made_for, made_for)
+        if task in ENV_NAMES and task != env.name:
+            raise DemonstrationError(
+                f"demonstrations of {made_for} do not fit {env.name}: pick the task {task} "
+                "(--env), or demonstrations of this one"
+            )
         if self.observations.shape[1] != env.observation_size:
             raise DemonstrationError(
                 f"demonstrations have observations of size "

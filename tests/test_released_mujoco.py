@@ -1,0 +1,85 @@
+"""The authors' released MuJoCo files (synthetic stand-ins of the right shapes: the real files
+are not in this repository) and the paper's per-task settings (Table 3, appendix C.2)."""
+
+import numpy as np
+import pytest
+
+from experiments import sweep
+from pngail_jax import envs
+from pngail_jax.demos import DemonstrationError, load_released
+from pngail_jax.run_config import RunConfig
+
+# The released files' shapes, [s, a] columns, and the paper's Table 3 for each task.
+RELEASED = {
+    # file env: (our task, observation columns, action columns, n_c + n_u, random, optimal)
+    "HalfCheetah-v2": ("HalfCheetah", 17, 6, 2500, -288.44, 3467.32),
+    "Hopper-v2": ("Hopper", 11, 3, 100, 18.04, 3250.67),
+    "Swimmer-v2": ("Swimmer", 8, 2, 25, 2.31, 348.99),
+    "Walker2d-v2": ("Walker2d", 17, 6, 2000, 1.91, 3694.13),
+}
+
+
+def write_released(directory, name: str, num_rows: int, num_columns: int, seed: int = 0):
+    """``{name}_mixture.npy`` of rows [s, a] in [-1.5, 1.5] (the authors' actions go a little
+    beyond the bounds) and its ``_mixture_conf.npy`` of shape (N, 1)."""
+    rng = np.random.default_rng(seed)
+    mixture = directory / f"{name}_mixture.npy"
+    np.save(mixture, rng.uniform(-1.5, 1.5, (num_rows, num_columns)).astype(np.float32))
+    np.save(directory / f"{name}_mixture_conf.npy", rng.uniform(0, 1, (num_rows, 1)))
+    return mixture
+
+
+@pytest.mark.parametrize("file_env", list(RELEASED))
+def test_each_released_mujoco_file_fits_its_task_with_the_papers_settings(tmp_path, file_env):
+    task, num_obs, num_actions, num_demos, random_return, optimal_return = RELEASED[file_env]
+    mixture = write_released(tmp_path, file_env, 3000, num_obs + num_actions)
+    demos = load_released(mixture)
+    assert demos.observations.shape == (3000, num_obs) and demos.actions.shape[1] == num_actions
+    assert (demos.metadata["random_return"], demos.metadata["optimal_return"]) == (
+        random_return,
+        optimal_return,
+    )
+    demos.check_env(envs.make(task))  # sizes and units fit our task
+    # --demos alone picks the task, and the split takes the paper's n_c + n_u, capped at the
+    # file's 3,000 rows (HalfCheetah's 2,500 and Walker2d's 2,000 fit; so do the others).
+    config = sweep.parse_args(["--demos", str(mixture), "--out", str(tmp_path / "run")]).config
+    assert config.env == task
+    assert config.task_num_demos(demos.num_rows) == min(num_demos, 3000)
+    assert config.task_num_demos(40) == min(num_demos, 40)
+    assert config.adversarial_config(demos.num_rows).num_demos == num_demos
+
+
+def test_walker2d_takes_the_papers_classifier_and_clip():
+    walker = RunConfig(env="Walker2d")
+    assert walker.classifier.num_steps == 50_000 and walker.task_bsc_eps == 0.05
+    assert RunConfig(env="Hopper").classifier.num_steps == 25_000
+    # Another task through replace or the command line gets that task's classifier ...
+    assert RunConfig().replace(env="Walker2d").classifier.num_steps == 50_000
+    assert walker.replace(env="Hopper").classifier.num_steps == 25_000
+    parsed = sweep.parse_args(["--env", "Walker2d", "--out", "unused"]).config
+    assert parsed.classifier.num_steps == 50_000
+    # ... unless one is given; and a given num_demos is used as it is.
+    parsed = sweep.parse_args(["--env", "Walker2d", "--classifier-steps", "7", "--out", "x"])
+    assert parsed.config.classifier.num_steps == 7
+    assert RunConfig(env="Hopper", num_demos=5).task_num_demos(10_000) == 5
+
+
+def test_a_released_file_of_another_task_is_named(tmp_path):
+    hopper = load_released(write_released(tmp_path, "Hopper-v2", 10, 14))
+    with pytest.raises(DemonstrationError, match="demonstrations of Hopper-v2 do not fit Swimmer"):
+        hopper.check_env(envs.make("Swimmer"))
+    ant = load_released(write_released(tmp_path, "Ant-v2", 10, 119))
+    with pytest.raises(DemonstrationError, match="Ant-v2 file cannot serve: .* 111 columns"):
+        ant.check_env(envs.make("Ant"))
+
+
+@pytest.mark.parametrize("file_env", ["Hopper-v2", "Walker2d-v2"])
+def test_a_column_count_that_does_not_fit_names_both_numbers(tmp_path, file_env):
+    _, num_obs, num_actions, *_ = RELEASED[file_env]
+    mixture = write_released(tmp_path, file_env, 4, num_obs + num_actions + 1)
+    message = (
+        f"rows have {num_obs + num_actions + 1} columns, but {file_env} rows \\[s, a\\] have "
+        f"{num_obs} \\+ {num_actions} columns"
+    )
+    with pytest.raises(DemonstrationError, match=message):
+        load_released(mixture)
