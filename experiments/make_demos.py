@@ -118,6 +118,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     args.num_optimal = round(args.num_trajectories * optimal_part / total)
     if args.iterations % args.settings.eval_every:
         parser.error("--iterations must be a multiple of --eval-every")
+    try:
+        args.settings.trpo_config(args.iterations)
+    except ValueError as error:
+        parser.error(str(error))
     if not 0 < args.intermediate_target < 1:
         parser.error(f"--intermediate-target must be in (0, 1), got {args.intermediate_target}")
     return args

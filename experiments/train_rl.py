@@ -98,6 +98,10 @@ def parse_args(argv=None) -> argparse.Namespace:
             f"--iterations ({args.iterations}) must be a multiple of the evaluation interval "
             f"({args.settings.eval_every}; set it with --eval-every)"
         )
+    try:
+        args.settings.trpo_config(args.iterations)
+    except ValueError as error:
+        parser.error(str(error))
     if args.out is None:
         args.out = Path("runs") / f"trpo-{args.env}-{time.strftime('%Y%m%d-%H%M%S')}"
     check_output_directory(parser, args.out, "policy.json", args.overwrite)

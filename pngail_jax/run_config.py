@@ -177,6 +177,7 @@ class RunConfig:
                 f"iterations ({self.iterations}) must be a multiple of the evaluation interval "
                 f"({self.settings.eval_every}; set it with --eval-every)"
             )
+        self.adversarial_config()  # the trainer's own checks (e.g. samples per iteration)
         if self.conf is not None and self.demos is None:
             _fail("conf: a confidence file needs demos (made demonstrations carry their own)")
         is_minari = self.demos is not None and self.demos.startswith("minari:")

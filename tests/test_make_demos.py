@@ -76,6 +76,30 @@ def test_make_demos_tiny_pendulum(tmp_path):
         assert policy(demos.observations[:3]).shape == (3, 1)
 
 
+def test_make_demos_tiny_mujoco_task(tmp_path):
+    """A MuJoCo task (early terminations, so trajectories of any length) at a tiny budget."""
+    flags = "--iterations 2 --eval-every 1 --seeds 1 --num-envs 2 --unroll-length 16 "
+    flags += "--num-eval-episodes 1 --measure-episodes 1 --num-trajectories 3 --ratio 1:2"
+    path = make_demos.main(["--env", "Hopper", "--out", str(tmp_path), *flags.split()])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # 2 iterations may not beat the random policy
+        demos = load_demonstrations(path)
+    demos.check_env(envs.make("Hopper"))
+    meta = demos.metadata
+    assert meta["env"] == "Hopper" and meta["num_optimal_trajectories"] == 1
+    lengths = np.bincount(demos.trajectory_ids)
+    assert len(lengths) == 3 and lengths.sum() == demos.num_rows and lengths.max() <= 1000
+    # Each trajectory's rows carry its own normalised return, clipped to [0, 1].
+    starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
+    np.testing.assert_array_equal(demos.trajectory_ids[starts], [0, 1, 2])
+    expected = normalized_return(
+        np.array(meta["trajectory_returns"]), meta["random_return"], meta["optimal_return"]
+    )
+    np.testing.assert_allclose(demos.confidence[starts], np.clip(expected, 0, 1), rtol=1e-5)
+    for trajectory in range(3):
+        assert np.ptp(demos.confidence[demos.trajectory_ids == trajectory]) == 0
+
+
 def test_bad_output_directories_fail_before_any_training(tmp_path, capsys):
     file = tmp_path / "file"
     file.write_text("")

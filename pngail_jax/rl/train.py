@@ -92,7 +92,11 @@ class TRPOConfig:
                 f"TRPOConfig.gae_form must be 'sequential' or 'associative', got {self.gae_form!r}"
             )
         if self.batch_size < self.num_value_minibatches:
-            raise ValueError("TRPOConfig: fewer samples per iteration than value minibatches")
+            raise ValueError(
+                f"samples per iteration (num_envs x unroll_length = {self.num_envs} x "
+                f"{self.unroll_length} = {self.batch_size}) must be at least the "
+                f"{self.num_value_minibatches} value minibatches"
+            )
 
     @property
     def batch_size(self) -> int:
