@@ -117,7 +117,8 @@ def summarize(cells, metrics, normalizer, train_env_steps_per_second, compile_se
 
     Per method (and setting): the final return (the last evaluation) and the average
     evaluation return over training, raw and normalised, as mean, sample std (ddof 1) and
-    standard error over seeds, and as interquartile mean with a 95% percentile-bootstrap
+    standard error over seeds (and the confidence classifier's MAE and RMSE on D_u, mean and
+    std, when ``metrics`` has them), and as interquartile mean with a 95% percentile-bootstrap
     interval (``pngail_jax.stats``, fixed seed: the same numbers on every
     call), and a per-seed table. Cells in ``excluded`` (diverged,
     ``pngail_jax.grid.nonfinite_cells``) and non-finite returns are left out of every
@@ -135,6 +136,11 @@ def summarize(cells, metrics, normalizer, train_env_steps_per_second, compile_se
             row[f"{name}_mean"], row[f"{name}_std"] = summary["mean"], summary["std"]
             row[f"{name}_se"] = summary["se"]
             row[f"{name}_iqm"], row[f"{name}_ci95"] = summary["iqm"], summary["ci95"]
+        for name in ("mae", "rmse"):  # the classifier's error on D_u (NaN: no classifier)
+            if f"confidence/{name}" in metrics:
+                error = stats.seed_summary(np.asarray(metrics[f"confidence/{name}"])[indices])
+                row[f"confidence_{name}_mean"] = error["mean"]
+                row[f"confidence_{name}_std"] = error["std"]
         row["num_seeds"] = int(np.isfinite(values["final_return"][indices]).sum())
         row["diverged_seeds"] = [cells[i].seed for i in indices if i in excluded]
         if row["num_seeds"] == 0:

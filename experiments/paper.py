@@ -1,0 +1,844 @@
+"""Reproduce the paper's figures and tables: the grids behind them and one results page.
+
+    python -m experiments.paper --budget smoke     # all of it on a 2-core CPU (under an hour)
+    python -m experiments.paper --budget paper --released-demos data/released   # a GPU
+    python -m experiments.paper --only fig2,table1 --envs Hopper,Pendulum-v1
+    python -m experiments.paper --resume results/paper-20261123-120000
+
+Each figure is a set of ``experiments.sweep`` grids, one compiled program per task and
+demonstration set (a task's Fig. 2 and Fig. 3 share one grid of the seven methods). The
+demonstrations come from ``--released-demos DIR`` where it holds the authors' file for a task
+(``Hopper-v2_mixture.npy`` ...; each file's known action scale applied), else from one
+``experiments.make_demos`` run per task, whose trajectories are mixed at each ratio a figure
+asks for. Writes ``DIR/README.md`` (every figure's plot and table beside the paper's numbers,
+each with the command that makes it alone), ``DIR/<figure>.png``, ``DIR/results.json``,
+``DIR/demos/`` and one sweep directory per grid in ``DIR/grids/``. An interrupted run continues
+with ``--resume DIR``: finished grids are kept, an unfinished one resumes from its checkpoint.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from experiments.cli import HelpFormatter, check_output_directory, known_names
+from pngail_jax import compilation, envs
+from pngail_jax.integrity import atomic_write_text, read_json, write_json
+
+FIG2_METHODS = ("gail", "2iwil", "icgail", "wgail", "pngail")
+FIG3_METHODS = ("pngail", "pngail-no-bsc", "pngail-no-pn")
+SEVEN_METHODS = ("gail", "2iwil", "icgail", "wgail", "pngail", "pngail-no-bsc", "pngail-no-pn")
+MUJOCO_TASKS = ("Ant", "HalfCheetah", "Hopper", "Walker2d", "Swimmer")
+FIGURES = ("fig2", "fig3", "fig4", "fig6", "fig7", "fig8", "fig9", "fig10", "table1", "table4")
+# The appendix baselines of Fig. 5 / Table 4 (T-REX, D-REX, CAIL, f-IRL) are not built yet.
+NOT_IMPLEMENTED = {"table4": "needs the appendix baselines (CAIL, T-REX, D-REX, f-IRL)"}
+LABEL_RATIOS = (0.2, 0.1, 0.05, 0.03)  # Fig. 4 (a), (b)
+NOISE_STDS = (0.0, 0.2, 0.4)  # Fig. 4 (c)
+# Fig. 6 and Fig. 10 name proportions in their legends but not in the text: ours.
+UNLABELLED_FRACTIONS = (1.0, 0.5, 0.25)
+INTERMEDIATE_FRACTIONS = (1.0, 0.5, 0.25)
+PAPER_TABLE1 = {  # task: (SC MAE, SC RMSE, BSC MAE, BSC RMSE), means over the paper's seeds
+    "Ant": (0.213, 0.345, 0.056, 0.212),
+    "HalfCheetah": (0.184, 0.272, 0.057, 0.175),
+    "Hopper": (0.307, 0.519, 0.169, 0.371),
+    "Pendulum-v1": (0.126, 0.164, 0.097, 0.138),
+    "Swimmer": (0.362, 0.595, 0.286, 0.472),
+    "Walker2d": (0.132, 0.246, 0.014, 0.101),
+}
+
+
+def _flags(text: str) -> list[str]:
+    return text.split()
+
+
+@dataclasses.dataclass(frozen=True)
+class Budget:
+    """How long every grid and demonstration run is; ``settings`` are sweep flags per task
+    kind (None: the task's row of ``pngail_jax.settings``)."""
+
+    iterations: int
+    seeds: int
+    chunk_iterations: int
+    classifier_steps: int | None  # None: the task's (25,000; 50,000 on Walker2d)
+    demo_iterations: dict[str, int]  # per task kind: "pendulum" / "mujoco"
+    demo_seeds: int
+    measure_episodes: int
+    settings: dict[str, list[str]]  # sweep / make_demos flags per task kind
+    demo_settings: dict[str, list[str]]
+
+
+BUDGETS = {
+    # Every figure on a 2-core CPU: a check that everything runs, not a result.
+    "smoke": Budget(
+        iterations=20,
+        seeds=2,
+        chunk_iterations=10,
+        classifier_steps=500,
+        demo_iterations={"pendulum": 40, "mujoco": 10},
+        demo_seeds=1,
+        measure_episodes=2,
+        settings={
+            "pendulum": ["--eval-every", "10", "--num-eval-episodes", "8"],
+            "mujoco": _flags(
+                "--num-envs 5 --unroll-length 100 --eval-every 10 --num-eval-episodes 1"
+            ),
+        },
+        demo_settings={
+            "pendulum": ["--eval-every", "10"],
+            "mujoco": _flags(
+                "--num-envs 5 --unroll-length 100 --eval-every 5 --num-eval-episodes 1"
+            ),
+        },
+    ),
+    # The paper's budget: 5,000 TRPO iterations of about 5,000 steps, 5 seeds (a GPU).
+    "paper": Budget(
+        iterations=5_000,
+        seeds=5,
+        chunk_iterations=250,
+        classifier_steps=None,
+        demo_iterations={"pendulum": 300, "mujoco": 2_000},
+        demo_seeds=3,
+        measure_episodes=64,
+        settings={"pendulum": [], "mujoco": []},
+        demo_settings={"pendulum": [], "mujoco": []},
+    ),
+    # The test suite's: Pendulum-v1 in seconds.
+    "test": Budget(
+        iterations=4,
+        seeds=2,
+        chunk_iterations=2,
+        classifier_steps=50,
+        demo_iterations={"pendulum": 4, "mujoco": 2},
+        demo_seeds=1,
+        measure_episodes=2,
+        settings={
+            "pendulum": _flags(
+                "--num-envs 4 --unroll-length 50 --eval-every 2 --num-eval-episodes 2"
+            ),
+            "mujoco": _flags(
+                "--num-envs 2 --unroll-length 16 --eval-every 2 --num-eval-episodes 1"
+            ),
+        },
+        demo_settings={
+            "pendulum": _flags("--num-envs 4 --unroll-length 50 --eval-every 2"),
+            "mujoco": _flags(
+                "--num-envs 2 --unroll-length 16 --eval-every 1 --num-eval-episodes 1"
+            ),
+        },
+    ),
+}
+
+
+def task_kind(task: str) -> str:
+    return "pendulum" if task == "Pendulum-v1" else "mujoco"
+
+
+@dataclasses.dataclass(frozen=True)
+class DemoSet:
+    """A task's demonstrations: the authors' file (``ratio`` None) or a mixture of the made
+    optimal and intermediate trajectories at ``ratio``, keeping ``intermediate_fraction`` of
+    the intermediate ones (Fig. 10)."""
+
+    task: str
+    ratio: tuple[int, int] | None
+    intermediate_fraction: float = 1.0
+
+    @property
+    def name(self) -> str:
+        if self.ratio is None:
+            return "released"
+        name = f"made-{self.ratio[0]}to{self.ratio[1]}"
+        return name if self.intermediate_fraction == 1 else f"{name}-{self.intermediate_fraction:g}"
+
+    @property
+    def description(self) -> str:
+        if self.ratio is None:
+            return "the authors' file"
+        text = f"made, {self.ratio[0]}:{self.ratio[1]}"
+        if self.intermediate_fraction != 1:
+            text += f", {self.intermediate_fraction:g} of the intermediate trajectories"
+        return text
+
+    def trajectory_counts(self, min_rows: int, episode_steps: int) -> tuple[int, int]:
+        """(optimal, intermediate) trajectories: the ratio scaled up until full-length
+        episodes give ``min_rows`` rows, then the intermediate fraction applied."""
+        optimal, intermediate = self.ratio
+        scale = max(1, math.ceil(min_rows / (episode_steps * (optimal + intermediate))))
+        return optimal * scale, max(1, round(intermediate * scale * self.intermediate_fraction))
+
+
+@dataclasses.dataclass(frozen=True)
+class GridSpec:
+    """One sweep: a task, a demonstration set, methods and the grid axes."""
+
+    name: str
+    task: str
+    demos: DemoSet
+    methods: tuple[str, ...]
+    label_ratios: tuple[float, ...] = (0.2,)
+    noise_stds: tuple[float, ...] = (0.0,)
+    unlabelled_fraction: float = 1.0  # Fig. 6: n_c kept, n_u scaled
+
+
+@dataclasses.dataclass(frozen=True)
+class Series:
+    """One curve / table row of a figure: a method (at a setting) of a grid."""
+
+    label: str
+    grid: str
+    method: str
+    setting: str | None = None  # the sweep's setting label; None: the grid's only one
+
+
+@dataclasses.dataclass(frozen=True)
+class Figure:
+    name: str
+    title: str
+    paper: str  # what the paper reports
+    panels: dict[str, list[Series]]  # per task
+
+
+def main_grid(task: str, released: bool) -> GridSpec:
+    demos = DemoSet(task, None if released else (1, 4))
+    return GridSpec(f"{task}-main", task, demos, SEVEN_METHODS)
+
+
+def plan(figures: Sequence[str], tasks: Sequence[str], released: set[str]):
+    """The figures asked for (on the tasks asked for) and the grids behind them."""
+    grids: dict[str, GridSpec] = {}
+    made: list[Figure] = []
+
+    def add(grid: GridSpec) -> str:
+        grids.setdefault(grid.name, grid)
+        return grid.name
+
+    def per_method(grid: GridSpec, methods) -> list[Series]:
+        name = add(grid)
+        return [Series(method, name, method) for method in methods]
+
+    def main_of(task):
+        return main_grid(task, task in released)
+
+    def pick(names):
+        return [task for task in names if task in tasks]
+
+    for figure in figures:
+        if figure in ("fig2", "fig3"):
+            methods = FIG2_METHODS if figure == "fig2" else FIG3_METHODS
+            what = "PN-GAIL and the baselines" if figure == "fig2" else "the ablations"
+            claim = "every baseline" if figure == "fig2" else "both ablations"
+            made.append(
+                Figure(
+                    figure,
+                    f"Fig. {figure[3:]}: {what}, every task",
+                    f"PN-GAIL above {claim} on all six tasks (the figure is a plot; its values "
+                    "are not in the text)",
+                    {task: per_method(main_of(task), methods) for task in tasks},
+                )
+            )
+        elif figure == "table1":
+            made.append(
+                Figure(
+                    figure,
+                    "Table 1: the confidence classifiers' error on D_u (SC vs BSC)",
+                    "BSC's MAE and RMSE below SC's on every task",
+                    {
+                        task: per_method(main_of(task), ("pngail-no-bsc", "pngail"))
+                        for task in tasks
+                    },
+                )
+            )
+        elif figure == "fig4":
+            panels = {}
+            for task in pick(("Ant", "Hopper")):
+                grid = dataclasses.replace(
+                    main_of(task), name=f"{task}-label-ratios", methods=("pngail",),
+                    label_ratios=LABEL_RATIOS,
+                )  # fmt: skip
+                name = add(grid)
+                panels[task] = [
+                    Series(f"label ratio {r:g}", name, "pngail", f"label_ratio={r:g},noise=0")
+                    for r in LABEL_RATIOS
+                ]
+            if "Pendulum-v1" in tasks:
+                grid = dataclasses.replace(
+                    main_of("Pendulum-v1"), name="Pendulum-v1-noise", methods=("pngail",),
+                    noise_stds=NOISE_STDS,
+                )  # fmt: skip
+                name = add(grid)
+                panels["Pendulum-v1"] = [
+                    Series(f"noise {s:g}", name, "pngail", f"label_ratio=0.2,noise={s:g}")
+                    for s in NOISE_STDS
+                ]
+            made.append(
+                Figure(
+                    figure,
+                    "Fig. 4: label ratios 0.2-0.03 (Ant, Hopper), confidence noise (Pendulum-v1)",
+                    "only a marginal decline as the label ratio falls; robust to noise",
+                    panels,
+                )
+            )
+        elif figure == "fig6":
+            panels = {}
+            for task in pick(("Pendulum-v1",)):
+                panels[task] = []
+                for fraction in UNLABELLED_FRACTIONS:
+                    grid = dataclasses.replace(
+                        main_of(task), name=f"{task}-unlabelled-{fraction:g}",
+                        methods=("pngail",), unlabelled_fraction=fraction,
+                    )  # fmt: skip
+                    name = add(grid) if fraction != 1 else add(main_of(task))
+                    panels[task].append(Series(f"{fraction:g} of D_u", name, "pngail"))
+            made.append(
+                Figure(
+                    figure,
+                    "Fig. 6: fewer unlabelled rows (the paper does not name its task: ours is "
+                    "Pendulum-v1)",
+                    "returns rise with the amount of unlabelled data",
+                    panels,
+                )
+            )
+        elif figure == "fig7":
+            panels = {}
+            for task in pick(("Pendulum-v1",)):
+                panels[task] = []
+                for ratio in ((2, 3), (1, 4), (1, 9)):
+                    grid = GridSpec(
+                        f"{task}-made-{ratio[0]}to{ratio[1]}-pngail", task, DemoSet(task, ratio),
+                        ("pngail",),
+                    )  # fmt: skip
+                    if main_of(task).demos == grid.demos:  # the main grid has these cells
+                        grid = main_of(task)
+                    panels[task].append(Series(f"{ratio[0]}:{ratio[1]}", add(grid), "pngail"))
+            made.append(
+                Figure(
+                    figure,
+                    "Fig. 7: optimal:intermediate 2:3, 1:4, 1:9 (Pendulum-v1, made sets)",
+                    "the more optimal demonstrations, the higher the return",
+                    panels,
+                )
+            )
+        elif figure in ("fig8", "fig9"):
+            ratio = (1, 10) if figure == "fig8" else (2, 1)
+            task_names = ("Ant",) if figure == "fig8" else ("Ant", "Pendulum-v1")
+            panels = {
+                task: per_method(
+                    GridSpec(
+                        f"{task}-made-{ratio[0]}to{ratio[1]}",
+                        task,
+                        DemoSet(task, ratio),
+                        FIG2_METHODS,
+                    ),
+                    FIG2_METHODS,
+                )  # fmt: skip
+                for task in pick(task_names)
+            }
+            made.append(
+                Figure(
+                    figure,
+                    f"Fig. {figure[3:]}: optimal:intermediate {ratio[0]}:{ratio[1]} "
+                    f"({', '.join(task_names)}, made sets)",
+                    "only PN-GAIL learns from the extreme 1:10 mixture"
+                    if figure == "fig8"
+                    else "PN-GAIL stays best when optimal demonstrations dominate",
+                    panels,
+                )
+            )
+        elif figure == "fig10":
+            panels = {}
+            for task in pick(("Ant",)):
+                panels[task] = []
+                for fraction in INTERMEDIATE_FRACTIONS:
+                    demos = DemoSet(task, (1, 4), fraction)
+                    grid = GridSpec(f"{task}-{demos.name}-pngail", task, demos, ("pngail",))
+                    name = add(grid) if fraction != 1 else add(main_grid(task, False))
+                    panels[task].append(Series(f"{fraction:g} of non-optimal", name, "pngail"))
+            made.append(
+                Figure(
+                    figure,
+                    "Fig. 10: fewer non-optimal demonstrations (Ant, made 1:4 set)",
+                    "no significant decline with fewer non-optimal demonstrations",
+                    panels,
+                )
+            )
+    made = [figure for figure in made if figure.panels]
+    return made, grids
+
+
+# -- demonstrations --------------------------------------------------------------------------
+
+
+def released_files(directory: Path | None) -> dict[str, Path]:
+    """Our task -> the authors' file in ``directory`` for each task that has a usable one."""
+    from pngail_jax.demos import RELEASED_TASKS
+
+    if directory is None:
+        return {}
+    found = {}
+    for file_env, task in RELEASED_TASKS.items():
+        path = directory / f"{file_env}_mixture.npy"
+        if path.exists():
+            found[task] = path
+    return found
+
+
+def demo_paths(grids, out: Path, budget: Budget, released: dict[str, Path], cache_flags):
+    """The demonstrations file of every grid's set (made, mixed and saved when missing)."""
+    from pngail_jax.demos import RELEASED_ACTION_SCALES, RELEASED_TASKS, load_npz, save_npz
+    from pngail_jax.integrity import atomic_path
+    from pngail_jax.run_config import TASK_NUM_DEMOS
+
+    sets = list(dict.fromkeys(grid.demos for grid in grids.values()))
+    paths = {}
+    file_env_of = {task: file_env for file_env, task in RELEASED_TASKS.items()}
+    for demo_set in sets:
+        if demo_set.ratio is None:
+            scale = RELEASED_ACTION_SCALES.get(file_env_of[demo_set.task], 1.0)
+            paths[demo_set] = (released[demo_set.task], scale)
+    made = [s for s in sets if s.ratio is not None]
+    for task in dict.fromkeys(s.task for s in made):
+        episode_steps = envs.make(task).max_episode_steps
+        counts = {
+            s: s.trajectory_counts(TASK_NUM_DEMOS.get(task, 1), episode_steps)
+            for s in made
+            if s.task == task
+        }
+        num_optimal = max(c[0] for c in counts.values())
+        num_intermediate = max(c[1] for c in counts.values())
+        directory = out / "demos" / task
+        full = directory / "demos.npz"
+        if not full.exists():
+            from experiments import make_demos
+
+            kind = task_kind(task)
+            print(f"\n== demonstrations for {task}: make_demos into {directory}", flush=True)
+            make_demos.main(
+                [
+                    "--env", task, "--out", str(directory), "--overwrite",
+                    "--iterations", str(budget.demo_iterations[kind]),
+                    "--seeds", str(budget.demo_seeds),
+                    "--num-trajectories", str(num_optimal + num_intermediate),
+                    "--ratio", f"{num_optimal}:{num_intermediate}",
+                    "--measure-episodes", str(budget.measure_episodes),
+                    *budget.demo_settings[kind], *cache_flags,
+                ]
+            )  # fmt: skip
+        source = load_npz(full)
+        for demo_set, (optimal, intermediate) in counts.items():
+            path = directory / f"{demo_set.name}.npz"
+            if not path.exists():
+                with atomic_path(path) as temporary:
+                    save_npz(temporary, mixture(source, optimal, intermediate, demo_set))
+            paths[demo_set] = (path, 1.0)
+    return paths
+
+
+def mixture(source, num_optimal: int, num_intermediate: int, demo_set: DemoSet):
+    """The first ``num_optimal`` optimal and ``num_intermediate`` intermediate trajectories
+    of a made set (optimal ones first, as ``make_demos`` writes them), ids renumbered."""
+    from pngail_jax.demos import Demonstrations
+
+    made_optimal = source.metadata["num_optimal_trajectories"]
+    made_total = len(source.metadata["trajectory_returns"])
+    if num_optimal > made_optimal or num_intermediate > made_total - made_optimal:
+        raise ValueError(
+            f"{demo_set.name}: needs {num_optimal} optimal + {num_intermediate} intermediate "
+            f"trajectories, the made set has {made_optimal} + {made_total - made_optimal}"
+        )
+    kept = [*range(num_optimal), *range(made_optimal, made_optimal + num_intermediate)]
+    rows = np.isin(source.trajectory_ids, kept)
+    renumber = np.zeros(made_total, np.int64)
+    renumber[kept] = np.arange(len(kept))
+    returns = source.metadata["trajectory_returns"]
+    return Demonstrations(
+        observations=source.observations[rows],
+        actions=source.actions[rows],
+        confidence=source.confidence[rows],
+        trajectory_ids=renumber[source.trajectory_ids[rows]],
+        metadata={
+            **source.metadata,
+            "ratio": f"{num_optimal}:{num_intermediate}",
+            "num_optimal_trajectories": num_optimal,
+            "trajectory_returns": [returns[i] for i in kept],
+            "source": f"experiments.paper: {demo_set.description}, from the made set",
+        },
+    )
+
+
+# -- grids -----------------------------------------------------------------------------------
+
+
+def sweep_arguments(grid: GridSpec, demos: tuple[Path, float], budget: Budget, num_rows: int):
+    """The ``experiments.sweep`` flags of a grid (without ``--out``)."""
+    from pngail_jax.run_config import RunConfig
+
+    path, scale = demos
+    label_ratios = ",".join(f"{r:g}" for r in grid.label_ratios)
+    flags = []
+    if grid.unlabelled_fraction != 1:  # the same n_c labelled rows, fewer unlabelled ones
+        num_demos = RunConfig(env=grid.task).task_num_demos(num_rows)
+        num_labelled = round(grid.label_ratios[0] * num_demos)
+        reduced = num_labelled + round(grid.unlabelled_fraction * (num_demos - num_labelled))
+        flags += ["--num-demos", str(reduced)]
+        label_ratios = f"{num_labelled / reduced:.6g}"
+    flags += [
+        "--env", grid.task, "--demos", str(path), "--methods", ",".join(grid.methods),
+        "--seeds", str(budget.seeds), "--iterations", str(budget.iterations),
+        "--chunk-iterations", str(budget.chunk_iterations), "--label-ratio", label_ratios,
+        "--noise", ",".join(f"{s:g}" for s in grid.noise_stds),
+        *budget.settings[task_kind(grid.task)],
+    ]  # fmt: skip
+    if scale != 1.0:
+        flags += ["--action-scale", f"{scale:g}"]
+    if budget.classifier_steps is not None:
+        flags += ["--classifier-steps", str(budget.classifier_steps)]
+    return flags
+
+
+def run_grid(grid: GridSpec, directory: Path, flags: list[str], cache_flags) -> float:
+    """Runs (or resumes, or keeps) one grid; its wall-clock seconds in this call."""
+    from experiments import sweep
+
+    summary = directory / "summary.json"
+    if summary.exists() and read_json(summary).get("complete"):
+        print(f"\n== {grid.name}: done, kept ({directory})", flush=True)
+        return 0.0
+    start = time.perf_counter()
+    if (directory / "config.json").exists():
+        print(f"\n== {grid.name}: resuming {directory}", flush=True)
+        sweep.main(["--resume", str(directory), *cache_flags])
+    else:
+        print(f"\n== {grid.name}: {grid.demos.description}", flush=True)
+        sweep.main([*flags, "--out", str(directory), *cache_flags])
+    return time.perf_counter() - start
+
+
+# -- the results page ------------------------------------------------------------------------
+
+
+def read_curves(directory: Path) -> dict[tuple[str, str], dict[str, np.ndarray]]:
+    """(method, setting) -> {"steps": int[T], "normalized": float[seeds, T]} from a grid's
+    metrics.csv, evaluated iterations only."""
+    import csv
+
+    rows: dict[tuple[str, str], dict[int, dict[int, float]]] = {}
+    steps: dict[int, int] = {}
+    with (directory / "metrics.csv").open() as file:
+        for row in csv.DictReader(file):
+            if row["eval_return"] == "":
+                continue
+            key = (row["method"], row["setting"])
+            value = float(row["normalized_return"]) if row["normalized_return"] else math.nan
+            rows.setdefault(key, {}).setdefault(int(row["seed"]), {})[int(row["iteration"])] = value
+            steps[int(row["iteration"])] = int(row["env_steps"])
+    curves = {}
+    for key, seeds in rows.items():
+        iterations = sorted(next(iter(seeds.values())))
+        curves[key] = {
+            "steps": np.array([steps[i] for i in iterations]),
+            "normalized": np.array([[seeds[s][i] for i in iterations] for s in sorted(seeds)]),
+        }
+    return curves
+
+
+def series_statistics(series: Series, curves, summary) -> dict:
+    """Final and training-averaged normalised return (mean, std, 95% bootstrap interval of the
+    mean) of a series, and its classifier error."""
+    from pngail_jax import stats
+
+    matches = [key for key in curves if key[0] == series.method]
+    if series.setting is not None:
+        matches = [key for key in matches if key[1] == series.setting]
+    if len(matches) != 1:
+        raise ValueError(f"{series.grid}: expected one curve of {series}, found {matches}")
+    curve = curves[matches[0]]
+    values = curve["normalized"]
+    result = {"steps": curve["steps"].tolist(), "curve": values.tolist()}
+    for name, per_seed in (("final", values[:, -1]), ("average", np.nanmean(values, axis=1))):
+        summary_of = stats.seed_summary(per_seed)
+        low, high = stats.bootstrap_ci(per_seed, np.mean)
+        result[name] = {
+            "mean": summary_of["mean"],
+            "std": summary_of["std"],
+            "ci95": [low, high],
+            "seeds": summary_of["num_seeds"],
+        }
+    label = series.method if len(curves) == len({k[0] for k in curves}) else None
+    row = summary["methods"].get(label or f"{series.method} [{matches[0][1]}]", {})
+    for name in ("mae", "rmse"):
+        result[f"confidence_{name}"] = [
+            row.get(f"confidence_{name}_mean"),
+            row.get(f"confidence_{name}_std"),
+        ]
+    return result
+
+
+def _number(value, digits: int = 2) -> str:
+    return "n/a" if value is None or not math.isfinite(value) else f"{value:.{digits}f}"
+
+
+def _mean_std(entry: dict) -> str:
+    return f"{_number(entry['mean'])} ± {_number(entry['std'])}"
+
+
+def _interval(entry: dict) -> str:
+    low, high = entry["ci95"]
+    return f"[{_number(low)}, {_number(high)}]"
+
+
+def plot_figure(path: Path, figure: Figure, results: dict) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    tasks = list(figure.panels)
+    columns = min(3, len(tasks))
+    rows = math.ceil(len(tasks) / columns)
+    fig, axes = plt.subplots(rows, columns, figsize=(5 * columns, 3.6 * rows), squeeze=False)
+    for axis in axes.flat[len(tasks) :]:
+        axis.set_visible(False)
+    for axis, task in zip(axes.flat, tasks, strict=False):
+        for series in figure.panels[task]:
+            entry = results[task][series.label]
+            steps = np.array(entry["steps"]) / 1e6
+            curve = np.array(entry["curve"], dtype=float)
+            mean = np.nanmean(curve, axis=0)
+            spread = (
+                np.nanstd(curve, axis=0, ddof=1) / math.sqrt(len(curve)) if len(curve) > 1 else 0
+            )
+            axis.plot(steps, mean, label=series.label, linewidth=1.5)
+            axis.fill_between(steps, mean - spread, mean + spread, alpha=0.2)
+        axis.axhline(1.0, color="grey", linestyle=":", linewidth=1)
+        axis.set_title(task)
+        axis.set_xlabel("environment steps per run (millions)")
+        axis.set_ylabel("normalised return")
+        axis.legend(fontsize=7)
+    fig.suptitle(f"{figure.title} (mean ± s.e. over seeds)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def figure_markdown(figure: Figure, results: dict, command: str) -> list[str]:
+    lines = [f"## {figure.title}", "", f"The paper: {figure.paper}.", "", f"    {command}", ""]
+    if figure.name == "table1":
+        lines += [
+            "| task | SC MAE | SC MAE, paper | BSC MAE | BSC MAE, paper | SC RMSE | BSC RMSE | "
+            "BSC RMSE, paper |",
+            "|---|---:|---:|---:|---:|---:|---:|---:|",
+        ]
+        for task in figure.panels:
+            sc, bsc = results[task]["pngail-no-bsc"], results[task]["pngail"]
+            paper = PAPER_TABLE1.get(task, (None,) * 4)
+            lines.append(
+                f"| {task} | {_number(sc['confidence_mae'][0], 3)} | {_number(paper[0], 3)} | "
+                f"{_number(bsc['confidence_mae'][0], 3)} | {_number(paper[2], 3)} | "
+                f"{_number(sc['confidence_rmse'][0], 3)} | {_number(bsc['confidence_rmse'][0], 3)}"
+                f" | {_number(paper[3], 3)} |"
+            )
+        return [*lines, ""]
+    lines += [
+        f"![{figure.name}]({figure.name}.png)",
+        "",
+        "| task | series | final: mean ± std | final: 95% CI | average during training: "
+        "mean ± std | seeds |",
+        "|---|---|---:|---:|---:|---:|",
+    ]
+    for task, series_list in figure.panels.items():
+        for series in series_list:
+            entry = results[task][series.label]
+            lines.append(
+                f"| {task} | {series.label} | {_mean_std(entry['final'])} | "
+                f"{_interval(entry['final'])} | {_mean_std(entry['average'])} | "
+                f"{entry['final']['seeds']} |"
+            )
+    return [*lines, ""]
+
+
+def write_page(out: Path, options: dict, figures: list[Figure], grids, timings: dict) -> Path:
+    """``README.md``, one plot per figure and ``results.json`` from the grids' outputs."""
+    from pngail_jax.report import json_safe
+
+    loaded = {
+        name: (read_curves(out / "grids" / name), read_json(out / "grids" / name / "summary.json"))
+        for name in grids
+    }
+    results = {}
+    for figure in figures:
+        results[figure.name] = {
+            task: {
+                series.label: series_statistics(series, *loaded[series.grid])
+                for series in series_list
+            }
+            for task, series_list in figure.panels.items()
+        }
+    budget = options["budget"]
+    lines = [
+        f"# The paper's figures at the {budget} budget",
+        "",
+        f"Budget `{budget}`: {BUDGETS[budget].iterations:,} iterations, {BUDGETS[budget].seeds} "
+        "seeds per method. Normalised return: (R - R_random) / (R_optimal - R_random), with "
+        "the paper's Table 3 returns for the authors' files and each made set's own measured "
+        "random and optimal returns. 'Final' is the last evaluation, 'average' the mean of "
+        "every evaluation during training (the paper's Table 4 convention); mean ± sample std "
+        "over seeds and a 95% percentile-bootstrap interval of the mean. "
+        + ("**A smoke budget checks that everything runs; its numbers are not results.**"
+           if budget != "paper" else ""),
+        "",
+        f"Made with `{options['command']}`.",
+        "",
+        "| grid | task | demonstrations | methods | wall time |",
+        "|---|---|---|---|---:|",
+    ]  # fmt: skip
+    for name, grid in grids.items():
+        seconds = timings.get(name)
+        wall = "n/a" if seconds is None else f"{seconds / 60:.1f} min"
+        lines.append(
+            f"| [{name}](grids/{name}/summary.md) | {grid.task} | {grid.demos.description} | "
+            f"{', '.join(grid.methods)} | {wall} |"
+        )
+    lines.append("")
+    base = f"python -m experiments.paper --budget {budget}"
+    if options.get("released_demos"):
+        base += f" --released-demos {options['released_demos']}"
+    for figure in figures:
+        command = f"{base} --only {figure.name} --envs {','.join(figure.panels)}"
+        lines += figure_markdown(figure, results[figure.name], command)
+        if figure.name != "table1":
+            plot_figure(out / f"{figure.name}.png", figure, results[figure.name])
+    for name, reason in NOT_IMPLEMENTED.items():
+        if name in options["only"]:
+            lines += [f"## {name}", "", f"Not built yet: {reason}.", ""]
+    document = {"options": options, "timings": timings, **results}
+    write_json(out / "results.json", json_safe(document))
+    page = out / "README.md"
+    atomic_write_text(page, "\n".join(lines))
+    return page
+
+
+# -- command line ----------------------------------------------------------------------------
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
+    )
+    parser.add_argument(
+        "--only",
+        help=f"comma-separated, from {', '.join(FIGURES)} (default: all that are built; "
+        f"not yet: {', '.join(NOT_IMPLEMENTED)})",
+    )
+    parser.add_argument(
+        "--envs", help=f"comma-separated tasks (default: the six, {', '.join(envs.ENV_NAMES)})"
+    )
+    parser.add_argument(
+        "--budget",
+        choices=tuple(BUDGETS),
+        default="smoke",
+        help="smoke: everything on a CPU, a check not a result; paper: 5,000 iterations x 5 "
+        "seeds (a GPU); test: the test suite's",
+    )
+    parser.add_argument(
+        "--released-demos",
+        type=Path,
+        metavar="DIR",
+        help="a folder of the authors' {env}_mixture.npy files (+ _mixture_conf.npy); tasks "
+        "without one there use made demonstrations",
+    )
+    parser.add_argument("--out", type=Path, help="default results/paper-<timestamp>")
+    parser.add_argument("--resume", type=Path, metavar="DIR", help="continue a run in DIR")
+    compilation.add_arguments(parser)
+    args = parser.parse_args(argv)
+    if args.resume is not None:
+        given = [flag for flag in ("only", "envs", "released_demos", "out") if getattr(args, flag)]
+        if given:
+            parser.error(f"--resume takes its options from the run: drop --{given[0]}")
+        if not (args.resume / "paper.json").exists():
+            parser.error(f"--resume {args.resume}: no paper.json there (not a run of this)")
+        return args
+    figures = known_names(parser, args.only, FIGURES, "figure", flag="--only") if args.only else [
+        name for name in FIGURES if name not in NOT_IMPLEMENTED
+    ]  # fmt: skip
+    unbuilt = [name for name in figures if name in NOT_IMPLEMENTED]
+    if unbuilt and len(unbuilt) == len(figures):
+        parser.error(f"--only {args.only}: not built yet ({NOT_IMPLEMENTED[unbuilt[0]]})")
+    args.figures = figures
+    args.tasks = (
+        known_names(parser, args.envs, envs.ENV_NAMES, "task", flag="--envs")
+        if args.envs
+        else list(envs.ENV_NAMES)
+    )
+    if args.released_demos is not None and not args.released_demos.is_dir():
+        parser.error(f"--released-demos {args.released_demos} is not a directory")
+    if args.out is None:
+        args.out = Path("results") / f"paper-{time.strftime('%Y%m%d-%H%M%S')}"
+    check_output_directory(parser, args.out, "paper.json", overwrite=False)
+    return args
+
+
+def command_line(argv) -> list[str]:
+    import shlex
+    import sys
+
+    return [shlex.quote(word) for word in (sys.argv[1:] if argv is None else argv)]
+
+
+def main(argv=None) -> Path:
+    args = parse_args(argv)
+    cache_flags = (
+        ["--no-compile-cache"]
+        if args.no_compile_cache
+        else (["--compile-cache", str(args.compile_cache)] if args.compile_cache else [])
+    )
+    if args.resume is not None:
+        out = args.resume
+        options = read_json(out / "paper.json")
+    else:
+        out = args.out
+        options = {
+            "budget": args.budget,
+            "only": args.figures,
+            "envs": args.tasks,
+            "released_demos": None if args.released_demos is None else str(args.released_demos),
+            "command": " ".join(["python -m experiments.paper", *command_line(argv)]),
+        }
+        out.mkdir(parents=True, exist_ok=True)
+        write_json(out / "paper.json", options)
+    budget = BUDGETS[options["budget"]]
+    released_dir = Path(options["released_demos"]) if options["released_demos"] else None
+    released = released_files(released_dir)
+    built = [name for name in options["only"] if name not in NOT_IMPLEMENTED]
+    figures, grids = plan(built, options["envs"], set(released))
+    print(
+        f"{len(figures)} figure(s) from {len(grids)} grid(s) on {', '.join(options['envs'])} "
+        f"at the {options['budget']} budget; the authors' files for: "
+        f"{', '.join(released) or 'none'} -> {out}",
+        flush=True,
+    )
+    demos = demo_paths(grids, out, budget, released, cache_flags)
+    timings_path = out / "timings.json"
+    timings = read_json(timings_path) if timings_path.exists() else {}
+    for name, grid in grids.items():
+        from pngail_jax.demos import load_demonstrations
+
+        path, scale = demos[grid.demos]
+        num_rows = load_demonstrations(path, action_scale=scale).num_rows
+        flags = sweep_arguments(grid, demos[grid.demos], budget, num_rows)
+        seconds = run_grid(grid, out / "grids" / name, flags, cache_flags)
+        if seconds:
+            timings[name] = timings.get(name, 0.0) + seconds
+            write_json(timings_path, timings)
+    page = write_page(out, options, figures, grids, timings)
+    print(f"\nwrote {page}")
+    return page
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,116 @@
+"""experiments.paper: the plan of figures and grids, the made mixtures, and a tiny run that
+writes the results page."""
+
+import json
+
+import numpy as np
+import pytest
+
+from experiments import paper
+from pngail_jax.demos import Demonstrations
+
+
+def test_fig2_and_fig3_share_one_grid_per_task_and_each_figure_has_its_grids():
+    figures, grids = paper.plan(["fig2", "fig3", "table1"], ["Hopper", "Pendulum-v1"], set())
+    assert sorted(grids) == ["Hopper-main", "Pendulum-v1-main"]
+    assert grids["Hopper-main"].methods == paper.SEVEN_METHODS
+    assert [s.method for s in figures[0].panels["Hopper"]] == list(paper.FIG2_METHODS)
+    # With the authors' Hopper file, Hopper's main grid uses it; Pendulum's stays made.
+    _, grids = paper.plan(["fig2"], ["Hopper", "Pendulum-v1"], {"Hopper"})
+    assert grids["Hopper-main"].demos.ratio is None
+    assert grids["Pendulum-v1-main"].demos.ratio == (1, 4)
+
+
+def test_every_built_figure_plans_on_all_six_tasks():
+    built = [name for name in paper.FIGURES if name not in paper.NOT_IMPLEMENTED]
+    figures, grids = paper.plan(built, list(paper.envs.ENV_NAMES), set())
+    assert [figure.name for figure in figures] == built
+    for figure in figures:  # every series names a grid of the plan and one of its methods
+        for series_list in figure.panels.values():
+            for series in series_list:
+                assert series.method in grids[series.grid].methods
+    # The 1:4 cells of Fig. 7 and the full set of Fig. 10 are the main grids' own.
+    fig7 = next(f for f in figures if f.name == "fig7").panels["Pendulum-v1"]
+    fig10 = next(f for f in figures if f.name == "fig10").panels["Ant"]
+    assert fig7[1].grid == "Pendulum-v1-main" and fig10[0].grid == "Ant-main"
+    # Fig. 6 keeps the labelled rows and scales the unlabelled ones: 200 + 0.5 * 800.
+    grid = grids["Pendulum-v1-unlabelled-0.5"]
+    flags = paper.sweep_arguments(grid, ("x.npz", 1.0), paper.BUDGETS["test"], 1000)
+    assert flags[flags.index("--num-demos") + 1] == "600"
+    assert float(flags[flags.index("--label-ratio") + 1]) == pytest.approx(200 / 600)
+
+
+def test_trajectory_counts_reach_the_tasks_rows_at_the_ratio():
+    # Pendulum's 200-step episodes: 2:1 doubled to reach 1,000 rows; 1:9 is 2,000 already.
+    assert paper.DemoSet("Pendulum-v1", (2, 1)).trajectory_counts(1000, 200) == (4, 2)
+    assert paper.DemoSet("Pendulum-v1", (1, 9)).trajectory_counts(1000, 200) == (1, 9)
+    assert paper.DemoSet("Ant", (1, 4), 0.5).trajectory_counts(600, 1000) == (1, 2)
+
+
+def made_set(lengths, num_optimal):
+    ids = np.repeat(np.arange(len(lengths)), lengths)
+    returns = [100.0 - 10 * i for i in range(len(lengths))]
+    confidence = np.clip(np.array(returns)[ids] / 100, 0, 1)
+    return Demonstrations(
+        observations=np.arange(len(ids) * 2, dtype=np.float32).reshape(-1, 2),
+        actions=np.zeros((len(ids), 1), np.float32),
+        confidence=confidence.astype(np.float32),
+        trajectory_ids=ids,
+        metadata={
+            "env": "Pendulum-v1",
+            "num_optimal_trajectories": num_optimal,
+            "trajectory_returns": returns,
+            "random_return": 0.0,
+            "optimal_return": 100.0,
+        },
+    )
+
+
+def test_a_mixture_takes_the_first_trajectories_of_each_kind_and_renumbers_them():
+    source = made_set([3, 2, 4, 1, 5], num_optimal=2)  # optimal: 0, 1; intermediate: 2, 3, 4
+    demo_set = paper.DemoSet("Pendulum-v1", (1, 2))
+    mixed = paper.mixture(source, 1, 2, demo_set)
+    np.testing.assert_array_equal(mixed.trajectory_ids, [0, 0, 0, 1, 1, 1, 1, 2])
+    np.testing.assert_array_equal(mixed.observations[:, 0], [0, 2, 4, 10, 12, 14, 16, 18])
+    assert mixed.metadata["trajectory_returns"] == [100.0, 80.0, 70.0]
+    assert mixed.metadata["num_optimal_trajectories"] == 1 and mixed.metadata["ratio"] == "1:2"
+    with pytest.raises(ValueError, match="needs 1 optimal \\+ 4 intermediate .* has 2 \\+ 3"):
+        paper.mixture(source, 1, 4, demo_set)
+
+
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--only", "fig11"], "unknown figure"),
+        (["--only", "table4"], "not built yet"),
+        (["--envs", "Hoper"], "Hoper"),
+        (["--resume", "nowhere", "--only", "fig2"], "drop --only"),
+        (["--resume", "nowhere"], "no paper.json"),
+    ],
+)
+def test_bad_flags_are_named(flags, message, capsys):
+    with pytest.raises(SystemExit):
+        paper.parse_args(flags)
+    assert message in capsys.readouterr().err
+
+
+@pytest.mark.filterwarnings("ignore:.*normalised returns run backwards")  # 4 iterations
+def test_a_tiny_fig2_run_writes_the_page_with_every_method_and_resumes(tmp_path):
+    out = tmp_path / "paper"
+    argv = ["--budget", "test", "--only", "fig2", "--envs", "Pendulum-v1", "--out", str(out)]
+    page = paper.main(argv)
+    text = page.read_text()
+    for method in paper.FIG2_METHODS:
+        assert f"| Pendulum-v1 | {method} |" in text
+    assert "--only fig2 --envs Pendulum-v1" in text and (out / "fig2.png").stat().st_size > 0
+    results = json.loads((out / "results.json").read_text())
+    final = results["fig2"]["Pendulum-v1"]["pngail"]["final"]
+    assert final["seeds"] == 2 and len(final["ci95"]) == 2
+    summary = json.loads((out / "grids" / "Pendulum-v1-main" / "summary.json").read_text())
+    assert summary["complete"] and sorted(summary["methods"]) == sorted(paper.SEVEN_METHODS)
+    # The same run again is refused; --resume keeps the finished grid and rewrites the page.
+    with pytest.raises(SystemExit):
+        paper.parse_args(argv)
+    before = (out / "grids" / "Pendulum-v1-main" / "metrics.csv").read_bytes()
+    assert paper.main(["--resume", str(out)]).read_text() == text
+    assert (out / "grids" / "Pendulum-v1-main" / "metrics.csv").read_bytes() == before
