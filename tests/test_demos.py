@@ -117,6 +117,30 @@ def test_released_pendulum_set_loads():
     np.testing.assert_allclose(stored.confidence[:200], 1.0)  # the optimal trajectory
     assert 0.3 < stored.confidence[200:].max() < 0.55
     stored.check_env(envs.make("Pendulum-v1"))
+    # Its documented layout: five consecutive 200-step episodes, one confidence each.
+    np.testing.assert_array_equal(stored.trajectory_ids, np.repeat(np.arange(5), 200))
+
+
+def _pendulum_file(directory, confidence):
+    rows = np.zeros((len(confidence), 4), np.float32)
+    np.save(directory / "Pendulum-v1_mixture.npy", rows)
+    np.save(directory / "Pendulum-v1_mixture_conf.npy", np.asarray(confidence)[:, None])
+    return directory / "Pendulum-v1_mixture.npy"
+
+
+def test_released_trajectories_follow_the_documented_layout_or_the_given_length(tmp_path):
+    two_episodes = _pendulum_file(tmp_path, np.repeat([1.0, 0.4], 200))
+    np.testing.assert_array_equal(load_released(two_episodes).trajectory_ids // 200, 0)
+    assert load_released(two_episodes).trajectory_ids[-1] == 1
+    explicit = load_released(two_episodes, trajectory_length=100)  # any whole split
+    np.testing.assert_array_equal(np.bincount(explicit.trajectory_ids), [100] * 4)
+    # Not the documented layout: rows without trajectories by default, an error when asked.
+    ragged = _pendulum_file(tmp_path, np.linspace(0, 1, 300))
+    assert load_released(ragged).trajectory_ids is None
+    with pytest.raises(DemonstrationError, match="300 rows are not whole trajectories of 200"):
+        load_released(ragged, trajectory_length=200)
+    with pytest.raises(DemonstrationError, match="changes within rows 0-99, so they are not"):
+        load_released(ragged, trajectory_length=100)
 
 
 def test_split_shapes_labels_and_noise():

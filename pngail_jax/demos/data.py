@@ -72,6 +72,11 @@ RELEASED_TASKS = {
     "Walker2d-v2": "Walker2d",
 }
 
+# The documented layout of the released files whose rows are whole trajectories stored one
+# after another: the Pendulum file is five 200-step episodes. The MuJoCo files are not
+# trajectories (the paper says so): they get no trajectory ids.
+RELEASED_TRAJECTORY_LENGTHS = {"Pendulum-v1": 200}
+
 # What the stored actions of a released file must be multiplied by to be in the environment's
 # units (the authors' Pendulum file stores torque / 2); 1 for the others.
 RELEASED_ACTION_SCALES = {"Pendulum-v1": 2.0}
@@ -381,8 +386,15 @@ def load_released(
     conf_path: str | Path | None = None,
     action_scale: float = 1.0,
     observation_size: int | None = None,
+    trajectory_length: int | None = None,
 ) -> Demonstrations:
     """Loads the paper's ``{env}_mixture.npy`` (+ ``{env}_mixture_conf.npy``) layout.
+
+    ``trajectory_length`` splits the rows into consecutive trajectories of that many rows and
+    fills ``trajectory_ids``: the row count must be a multiple of it and each trajectory must
+    carry one confidence (a varying one means another layout), else ``DemonstrationError``.
+    By default the file's documented layout (``RELEASED_TRAJECTORY_LENGTHS``: the Pendulum
+    file's five 200-step episodes) is used when the file fits it, and no ids otherwise.
 
     ``conf_path`` defaults to the sibling ``*_mixture_conf.npy``. ``action_scale`` multiplies
     the stored action columns (2 for the released Pendulum set, whose torques are stored / 2).
@@ -436,6 +448,17 @@ def load_released(
             "optimal_return": optimal_return,
             "normalizer_source": "paper Table 3",
         }
+    trajectory_ids = None
+    if trajectory_length is not None:
+        trajectory_ids = _consecutive_trajectories(confidence, trajectory_length, where)
+    elif env_name in RELEASED_TRAJECTORY_LENGTHS:
+        trajectory_length = RELEASED_TRAJECTORY_LENGTHS[env_name]
+        try:
+            trajectory_ids = _consecutive_trajectories(confidence, trajectory_length, where)
+        except DemonstrationError:  # not the documented layout: rows without trajectories
+            trajectory_length = None
+    if trajectory_ids is not None:
+        metadata["trajectory_length"] = trajectory_length
     with np.errstate(over="ignore"):  # an overflow to inf is refused below, naming the file
         actions = rows[:, observation_size:] * action_scale
     try:
@@ -443,10 +466,31 @@ def load_released(
             observations=rows[:, :observation_size],
             actions=actions,
             confidence=confidence,
+            trajectory_ids=trajectory_ids,
             metadata=metadata,
         )
     except DemonstrationError as error:
         raise DemonstrationError(f"{where}: {error}") from None
+
+
+def _consecutive_trajectories(confidence: np.ndarray, length: int, where: str) -> np.ndarray:
+    """int32[N] ids of consecutive ``length``-row trajectories, or raises naming the file."""
+    if isinstance(length, bool) or not isinstance(length, int) or length < 1:
+        raise DemonstrationError(f"trajectory_length must be a positive integer, got {length!r}")
+    num_rows = len(confidence)
+    if num_rows % length:
+        raise DemonstrationError(
+            f"{where}: {num_rows} rows are not whole trajectories of {length} rows"
+        )
+    per_trajectory = confidence.reshape(-1, length)
+    varying = np.flatnonzero(np.ptp(per_trajectory, axis=1) > 0)
+    if varying.size:
+        first = int(varying[0])
+        raise DemonstrationError(
+            f"{where}: the confidence changes within rows {first * length}-"
+            f"{(first + 1) * length - 1}, so they are not one {length}-row trajectory"
+        )
+    return np.repeat(np.arange(num_rows // length, dtype=np.int32), length)
 
 
 def _released_confidence(
