@@ -1,0 +1,111 @@
+"""The appendix baselines' losses against independent NumPy computations of their formulas:
+T-REX's Bradley-Terry loss on snippet sums, f-IRL's covariance gradient and divergences, BC."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from pngail_jax import bc, firl, ranking
+
+RNG = np.random.default_rng(0)
+
+
+def test_bradley_terry_on_snippet_sums_matches_numpy():
+    num_trajectories, steps, length, num_pairs = 5, 12, 4, 9
+    step_rewards = RNG.normal(size=(num_trajectories, steps)).astype(np.float32)
+    lengths = np.array([12, 3, 7, 12, 5], np.int32)  # padding beyond each length
+    trajectories = ranking.Trajectories(
+        observations=jnp.zeros((num_trajectories, steps, 1)),
+        actions=jnp.zeros((num_trajectories, steps, 1)),
+        lengths=jnp.asarray(lengths),
+        score=jnp.array([0.1, 0.5, 0.5, 1.0, 0.0]),
+    )
+    pairs = ranking.sample_pairs(jax.random.key(1), trajectories, num_pairs, length)
+    loss, metrics = ranking.ranking_loss(jnp.asarray(step_rewards), trajectories, pairs, length)
+
+    def snippet(index, start):  # the formula: sum of r over the snippet's real steps
+        stop = min(start + length, lengths[index])
+        return step_rewards[index, start:stop].sum()
+
+    worse = np.array([snippet(i, s) for i, s in zip(pairs.worse, pairs.worse_start, strict=True)])
+    better = np.array(
+        [snippet(i, s) for i, s in zip(pairs.better, pairs.better_start, strict=True)]
+    )
+    score = np.asarray(trajectories.score)
+    weight = (score[pairs.worse] != score[pairs.better]).astype(float)
+    assert np.all(score[pairs.better] >= score[pairs.worse])
+    # -log(exp(R_better) / (exp(R_better) + exp(R_worse))), averaged over unequal pairs
+    expected = np.sum(weight * -np.log(np.exp(better) / (np.exp(better) + np.exp(worse))))
+    np.testing.assert_allclose(loss, expected / weight.sum(), rtol=1e-5)
+    accuracy = np.sum(weight * (better > worse)) / weight.sum()
+    np.testing.assert_allclose(metrics["ranking/accuracy"], accuracy, rtol=1e-6)
+    # Snippets start where `length` steps fit, or at 0.
+    starts = np.concatenate([pairs.worse_start, pairs.better_start])
+    rows = np.concatenate([pairs.worse, pairs.better])
+    assert np.all(starts <= np.maximum(lengths[rows] - length, 0))
+
+
+def test_trex_learns_a_reward_that_ranks_the_trajectories():
+    # Trajectory k visits states around k: the better-scored, the larger the state.
+    observations = np.stack([np.full((20, 1), k, np.float32) for k in range(4)])
+    observations += RNG.normal(scale=0.1, size=observations.shape).astype(np.float32)
+    trajectories = ranking.Trajectories(
+        observations=jnp.asarray(observations),
+        actions=jnp.zeros((4, 20, 1)),
+        lengths=jnp.full(4, 20, jnp.int32),
+        score=jnp.arange(4.0),
+    )
+    config = ranking.RankingConfig(num_steps=300, snippet_length=5, hidden_sizes=(16,))
+    params, metrics = ranking.train_ranking_reward(config, trajectories, jax.random.key(0))
+    returns = ranking.StateReward(config.hidden_sizes)(params, trajectories.observations).sum(1)
+    assert np.all(np.diff(np.asarray(returns)) > 0)  # the learned reward orders them
+    assert metrics["ranking/loss"][-50:].mean() < metrics["ranking/loss"][:50].mean() / 2
+
+
+def test_firl_surrogate_gradient_is_the_covariance_formula():
+    num_trajectories, steps, features = 7, 6, 3
+    phi = RNG.normal(size=(num_trajectories, steps, features))
+    h = RNG.normal(size=(num_trajectories, steps))
+    theta = RNG.normal(size=features)
+
+    def surrogate(theta):  # linear reward r(s) = theta . phi(s)
+        reward_sums = (jnp.asarray(phi) @ theta).sum(axis=1)
+        return firl.covariance_surrogate(jnp.asarray(h.sum(axis=1)), reward_sums)[0]
+
+    gradient = jax.grad(surrogate)(jnp.asarray(theta, jnp.float32))
+    # grad = Cov_tau(sum_t h, sum_t grad r) with grad r = phi, the population covariance
+    phi_sums, h_sums = phi.sum(axis=1), h.sum(axis=1)
+    expected = [np.cov(h_sums, phi_sums[:, j], bias=True)[0, 1] for j in range(features)]
+    np.testing.assert_allclose(gradient, expected, rtol=1e-4, atol=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("coefs", "f"),
+    [
+        ((1, 0, 0), lambda u: u * np.log(u)),  # forward KL
+        ((0, 1, 0), lambda u: -np.log(u)),  # reverse KL
+        ((0, 0, 1), lambda u: u * np.log(u) - (1 + u) * np.log((1 + u) / 2)),  # JS
+    ],
+    ids=["fkl", "rkl", "js"],
+)
+def test_divergence_h_is_f_minus_u_f_prime_up_to_a_constant(coefs, f):
+    u = np.exp(RNG.uniform(-2, 2, size=50))
+    step = 1e-6
+    f_prime = (f(u + step) - f(u - step)) / (2 * step)
+    expected = f(u) - u * f_prime
+    h = np.asarray(firl.divergence_h(jnp.log(jnp.asarray(u, jnp.float32)), *coefs), np.float64)
+    offset = expected - h  # a constant, which the covariance ignores
+    np.testing.assert_allclose(offset, offset.mean(), atol=2e-4)
+
+
+def test_bc_loss_is_the_weighted_gaussian_negative_log_likelihood():
+    mean = RNG.normal(size=(8, 2)).astype(np.float32)
+    log_std = RNG.normal(size=2).astype(np.float32) * 0.3
+    actions = RNG.normal(size=(8, 2)).astype(np.float32)
+    weights = RNG.uniform(size=8).astype(np.float32)
+    loss, _ = bc.bc_loss(jnp.asarray(mean), jnp.asarray(log_std), jnp.asarray(actions), weights)
+    std = np.exp(log_std)
+    log_density = -0.5 * ((actions - mean) / std) ** 2 - np.log(std * np.sqrt(2 * np.pi))
+    expected = -np.sum(weights * log_density.sum(axis=1)) / weights.sum()
+    np.testing.assert_allclose(loss, expected, rtol=1e-5)
