@@ -71,7 +71,7 @@ class Invocation:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from pngail_jax.methods import METHOD_NAMES, PRESETS
+    from pngail_jax.methods import ALL_METHOD_NAMES, METHOD_NAMES, PRESETS
 
     methods_help = "\n".join(
         f"  {name:14s} {preset.description} (r: {preset.confidence_source})"
@@ -88,7 +88,11 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"{ENV_HELP} (default: the task of an authors' --demos file, e.g. Hopper for "
         f"Hopper-v2_mixture.npy; else {SMOKE.env})",
     )
-    add("--methods", help=f"comma-separated, from {', '.join(METHOD_NAMES)} (default: all)")
+    add(
+        "--methods",
+        help=f"comma-separated, from {', '.join(ALL_METHOD_NAMES)} (default: the paper's "
+        f"seven, {', '.join(METHOD_NAMES)})",
+    )
     add("--seeds", type=int, help=f"seeds per method and setting (default {SMOKE.seeds})")
     add("--iterations", type=int, help=f"TRPO iterations per run (default {SMOKE.iterations})")
     add(
@@ -220,7 +224,7 @@ def parse_args(argv=None) -> Invocation:
 
 def config_from_flags(parser, args) -> RunConfig:
     """The preset or saved config the flags name, with every flag given applied."""
-    from pngail_jax.methods import METHOD_NAMES
+    from pngail_jax.methods import ALL_METHOD_NAMES
 
     if args.config is not None and args.preset is not None:
         parser.error("--config and --preset both set the starting point: give one")
@@ -261,7 +265,9 @@ def config_from_flags(parser, args) -> RunConfig:
             settings=settings,
             methods=None
             if args.methods is None
-            else tuple(known_names(parser, args.methods, METHOD_NAMES, "method", flag="--methods")),
+            else tuple(
+                known_names(parser, args.methods, ALL_METHOD_NAMES, "method", flag="--methods")
+            ),
             seeds=args.seeds,
             iterations=args.iterations,
             label_ratios=comma_floats(parser, "--label-ratio", args.label_ratio),

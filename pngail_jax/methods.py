@@ -40,17 +40,38 @@ class MethodSpec:
     classifier_coef: jax.Array  # 1: unlabelled r from a trained classifier; 0: no classifier
     bsc_coef: jax.Array  # which classifier: 1 BSC (eq. 13), 0 SC (2IWIL)
     bsc_eps: jax.Array  # BSC's clip (0.01; the paper uses 0.05 on Walker2d)
+    # The appendix baselines (pngail_jax.ranking, .firl, .bc). Each reads its training
+    # phase's output, and a phase runs only in grids with a method that needs it (PHASES).
+    adversarial_reward_coef: jax.Array  # policy reward += coef sp(-z) (1 for the seven)
+    policy_update_coef: jax.Array  # 1: TRPO updates the policy; 0: it stays as initialised
+    bc_init_coef: jax.Array  # 1: the policy starts from behaviour cloning ("bc" phase)
+    bc_weighted_coef: jax.Array  # BC row weights 1 + coef (r - 1): 1 = confidence-weighted
+    ranking_reward_coef: jax.Array  # reward += coef r(s), learned from rankings (T-REX, D-REX)
+    noise_rankings_coef: jax.Array  # 1: rankings of noisy BC rollouts (D-REX), 0: by confidence
+    firl_coef: jax.Array  # reward += coef r(s), f-IRL's reward ("firl" phase)
+    firl_fkl_coef: jax.Array  # f-IRL's divergence: forward KL ...
+    firl_rkl_coef: jax.Array  # ... reverse KL ...
+    firl_js_coef: jax.Array  # ... Jensen-Shannon (pngail_jax.firl.divergence_h)
+    cail_coef: jax.Array  # 1: r is CAIL's learned per-trajectory confidence ("cail" phase)
+    cail_learning_rate: jax.Array  # CAIL's outer step on its log-confidences (0: frozen at 1)
 
     @property
     def classifier(self) -> ClassifierSpec:
         return ClassifierSpec(bsc_coef=self.bsc_coef, eps=self.bsc_eps)
 
 
+# Training phases beyond the seven methods' (split, classifier, adversarial loop); a grid
+# compiles only those its methods name (``required_phases``).
+PHASES = ("bc", "demo_rankings", "noise_rankings", "firl", "cail")
+
+
 @dataclasses.dataclass(frozen=True)
 class Preset:
     description: str
-    confidence_source: str  # "none", "given" (D_c only), "sc" or "bsc"
+    # "none", "given" (D_c only), "sc", "bsc", or "rankings" (every trajectory's confidence)
+    confidence_source: str
     coefficients: dict
+    phases: tuple[str, ...] = ()
 
 
 _PN = {"agent_coef": 1.0, "pn_coef": 1.0}
@@ -75,14 +96,53 @@ PRESETS: dict[str, Preset] = {
         **_IW, **_BSC}),
 }  # fmt: skip
 
+# The paper's seven: the default of every grid.
 METHOD_NAMES = tuple(PRESETS)
-_DEFAULTS = {field.name: 0.0 for field in dataclasses.fields(MethodSpec)} | {"bsc_eps": 0.01}
+
+_LEARNED_REWARD = {"adversarial_reward_coef": 0.0, "ranking_reward_coef": 1.0}
+_FIRL = {"adversarial_reward_coef": 0.0, "firl_coef": 1.0}
+APPENDIX_PRESETS: dict[str, Preset] = {
+    "bc": Preset("BC: behaviour cloning on every demonstration, no RL", "none", {
+        "policy_update_coef": 0.0, "bc_init_coef": 1.0}, ("bc",)),
+    "bc-weighted": Preset("BC weighted by confidence (BSC on D_u), no RL", "bsc", {
+        "policy_update_coef": 0.0, "bc_init_coef": 1.0, "bc_weighted_coef": 1.0, **_BSC},
+        ("bc",)),
+    "trex": Preset("T-REX: TRPO on a reward learned from trajectories ranked by confidence",
+        "rankings", _LEARNED_REWARD, ("demo_rankings",)),
+    "drex": Preset("D-REX: T-REX on rollouts of a cloned policy ranked by their noise",
+        "none", {**_LEARNED_REWARD, "noise_rankings_coef": 1.0}, ("bc", "noise_rankings")),
+    "cail": Preset("CAIL: per-trajectory confidences learned by a bilevel ranking loss",
+        "rankings", {"agent_coef": 1.0, "importance_weighted_coef": 1.0, "cail_coef": 1.0,
+                     "cail_learning_rate": 0.01}, ("cail",)),
+    "firl-fkl": Preset("f-IRL, forward KL: state reward from the divergence's gradient",
+        "none", {**_FIRL, "firl_fkl_coef": 1.0}, ("firl",)),
+    "firl-rkl": Preset("f-IRL, reverse KL", "none", {**_FIRL, "firl_rkl_coef": 1.0},
+        ("firl",)),
+    "firl-js": Preset("f-IRL, Jensen-Shannon", "none", {**_FIRL, "firl_js_coef": 1.0},
+        ("firl",)),
+}  # fmt: skip
+APPENDIX_METHOD_NAMES = tuple(APPENDIX_PRESETS)
+PRESETS.update(APPENDIX_PRESETS)
+ALL_METHOD_NAMES = tuple(PRESETS)
+
+_DEFAULTS = {field.name: 0.0 for field in dataclasses.fields(MethodSpec)} | {
+    "bsc_eps": 0.01,
+    "adversarial_reward_coef": 1.0,
+    "policy_update_coef": 1.0,
+}
+
+
+def required_phases(methods) -> tuple[str, ...]:
+    """The training phases (``PHASES``, in that order) that ``methods`` need."""
+    needed = {phase for name in methods for phase in PRESETS[name].phases}
+    return tuple(phase for phase in PHASES if phase in needed)
 
 
 def method_spec(name: str, **overrides: float) -> MethodSpec:
-    """The preset ``name`` (one of ``METHOD_NAMES``), with coefficients optionally overridden."""
+    """The preset ``name`` (one of ``ALL_METHOD_NAMES``), with coefficients optionally
+    overridden."""
     if name not in PRESETS:
-        raise ValueError(f"unknown method {name!r}; available: {', '.join(METHOD_NAMES)}")
+        raise ValueError(f"unknown method {name!r}; available: {', '.join(ALL_METHOD_NAMES)}")
     unknown = set(overrides) - set(_DEFAULTS)
     if unknown:
         raise ValueError(f"unknown MethodSpec field(s) {sorted(unknown)}; known: {list(_DEFAULTS)}")

@@ -29,12 +29,16 @@ class MLP(nn.Module):
 
     hidden_sizes: Sequence[int]
     output_size: int
+    output_bias: bool = True
 
     @nn.compact
     def __call__(self, x: jax.Array) -> jax.Array:
         for size in self.hidden_sizes:
             x = jnp.tanh(nn.Dense(size, kernel_init=torch_like_init())(x))
-        return nn.Dense(self.output_size, kernel_init=torch_like_init(OUTPUT_SCALE))(x)
+        output = nn.Dense(
+            self.output_size, kernel_init=torch_like_init(OUTPUT_SCALE), use_bias=self.output_bias
+        )
+        return output(x)
 
 
 class GaussianPolicy(nn.Module):

@@ -122,8 +122,35 @@ def sample_pairs(
     room = jnp.maximum(trajectories.lengths - snippet_length, 0) + 1  # possible starts
     uniform = jax.random.uniform(start_key, (2, num_pairs))
     starts = jnp.floor(uniform * room[jnp.stack([worse, better])]).astype(jnp.int32)
-    weight = (trajectories.score[first] != trajectories.score[second]).astype(jnp.float32)
+    informative = trajectories.score[first] != trajectories.score[second]
+    real = (trajectories.lengths[first] > 0) & (trajectories.lengths[second] > 0)  # not padding
+    weight = (informative & real).astype(jnp.float32)
     return SnippetPairs(worse, starts[0], better, starts[1], weight)
+
+
+def pad(trajectories: Trajectories, num: int, steps: int) -> Trajectories:
+    """``trajectories`` padded to ``num`` trajectories of ``steps`` steps (added trajectories
+    have length 0 and are never in a weighted pair)."""
+    k, t = trajectories.lengths.shape[0], trajectories.observations.shape[1]
+
+    def padded(x, *fill):
+        return jnp.pad(x, [(0, num - k), *fill])
+
+    return Trajectories(
+        observations=padded(trajectories.observations, (0, steps - t), (0, 0)),
+        actions=padded(trajectories.actions, (0, steps - t), (0, 0)),
+        lengths=padded(trajectories.lengths),
+        score=padded(trajectories.score),
+    )
+
+
+def select(condition, on_true: Trajectories, on_false: Trajectories) -> Trajectories:
+    """One of two sets of trajectories by a traced ``condition`` (both padded to one shape),
+    so cells of a grid can rank different trajectories."""
+    num = max(on_true.lengths.shape[0], on_false.lengths.shape[0])
+    steps = max(on_true.observations.shape[1], on_false.observations.shape[1])
+    a, b = pad(on_true, num, steps), pad(on_false, num, steps)
+    return jax.tree.map(lambda x, y: jnp.where(condition, x, y), a, b)
 
 
 def snippet_sums(
@@ -161,10 +188,15 @@ def ranking_loss(
 
 
 class StateReward:
-    """T-REX's reward network r(s): a tanh MLP of the observation."""
+    """A reward network r(s): a tanh MLP of the observation, without an output bias.
+
+    Rankings of equal-length snippets do not change when a constant is added to r, so an
+    output bias would get no gradient but float noise, which Adam scales up to full steps
+    (and the learned reward would then differ in its offset from one program to the next).
+    """
 
     def __init__(self, hidden_sizes):
-        self.network = MLP(tuple(hidden_sizes), 1)
+        self.network = MLP(tuple(hidden_sizes), 1, output_bias=False)
 
     def init(self, key, observation_size: int):
         return self.network.init(key, jnp.zeros((observation_size,)))
@@ -225,3 +257,19 @@ def noisy_rollouts(env, act_mean, config: RankingConfig, key: jax.Array) -> Traj
         lengths=episodes.valid.sum(axis=1).astype(jnp.int32),
         score=-levels,
     )
+
+
+def cail_outer_loss(
+    log_confidence, inner_loss, params, learning_rate, step_rewards_of, trajectories, pairs, length
+):
+    """CAIL's outer objective: the ranking loss of the reward after one gradient step.
+
+    ``inner_loss(params, log_confidence)`` is the confidence-weighted adversarial loss;
+    ``params - learning_rate * grad inner_loss`` is the lookahead, ``step_rewards_of(params)``
+    its per-step reward float[K, T] on ``trajectories``, and the Bradley-Terry loss of that
+    reward on ``pairs`` (``ranking_loss``) is returned as ``(loss, metrics)``. Differentiate
+    it with respect to ``log_confidence`` for CAIL's outer step (through the lookahead).
+    """
+    grads = jax.grad(inner_loss)(params, log_confidence)
+    lookahead = jax.tree.map(lambda p, g: p - learning_rate * g, params, grads)
+    return ranking_loss(step_rewards_of(lookahead), trajectories, pairs, length)

@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from pngail_jax.confidence import ClassifierConfig
-from pngail_jax.methods import METHOD_NAMES, PRESETS
+from pngail_jax.methods import ALL_METHOD_NAMES, METHOD_NAMES, PRESETS, required_phases
 from pngail_jax.settings import RunSettings, settings_for
 from pngail_jax.tracking import BACKENDS as LOG_BACKENDS
 from pngail_jax.train import AdversarialConfig
@@ -159,10 +159,12 @@ class RunConfig:
     def _validate(self) -> None:
         """The checks between fields, and the names each field must be among."""
         if not self.methods:
-            _fail(f"methods must name at least one method; available: {', '.join(METHOD_NAMES)}")
+            _fail(
+                f"methods must name at least one method; available: {', '.join(ALL_METHOD_NAMES)}"
+            )
         unknown = [name for name in self.methods if not _is_among(name, PRESETS)]
         if unknown:
-            _fail(f"unknown method(s) {unknown}; available: {', '.join(METHOD_NAMES)}")
+            _fail(f"unknown method(s) {unknown}; available: {', '.join(ALL_METHOD_NAMES)}")
         if len(set(self.methods)) != len(self.methods):
             _fail(f"methods must not repeat, got {list(self.methods)}")
         if not _is_among(self.fisher, FISHER_FORMS):
@@ -231,6 +233,7 @@ class RunConfig:
             classifier=self.classifier,
             num_demos=num_demos,
             discriminator_hidden_sizes=self.discriminator_hidden_sizes,
+            phases=required_phases(self.methods),
         )
 
     def to_dict(self) -> dict[str, Any]:

@@ -27,11 +27,12 @@ import numpy as np
 import optax
 from flax import struct
 
-from pngail_jax import envs
+from pngail_jax import envs, firl, ranking
+from pngail_jax.bc import BCConfig, train_bc
 from pngail_jax.confidence import ClassifierConfig, confidence_errors, train_classifier
 from pngail_jax.demos import DemonstrationError, Demonstrations, make_split
 from pngail_jax.losses import ConfidenceStats, discriminator_loss, policy_reward
-from pngail_jax.methods import PRESETS, MethodSpec
+from pngail_jax.methods import PHASES, PRESETS, MethodSpec, required_phases
 from pngail_jax.networks import Discriminator
 from pngail_jax.rl.train import (
     TRPO,
@@ -54,8 +55,19 @@ class AdversarialConfig:
     # WGAIL refreshes its weights at iterations every, 2 every, ..., until (w = 1 before).
     wgail_refresh_every: int = 50
     wgail_refresh_until: int = 400
+    # The appendix baselines' training phases this trainer compiles (``methods.PHASES``;
+    # ``methods.required_phases(names)``); none for the paper's seven.
+    phases: tuple[str, ...] = ()
+    ranking: ranking.RankingConfig = ranking.RankingConfig()
+    bc: BCConfig = BCConfig()
 
     def __post_init__(self):
+        unknown = [phase for phase in self.phases if phase not in PHASES]
+        if unknown or len(set(self.phases)) != len(self.phases):
+            raise ValueError(
+                f"AdversarialConfig.phases must be distinct names from {PHASES}, "
+                f"got {self.phases!r}"
+            )
         if self.num_demos is not None and (
             not isinstance(self.num_demos, int) or self.num_demos < 2
         ):
@@ -114,6 +126,20 @@ class TrainState:
     iteration: jax.Array  # int32[]
     eval_keys: jax.Array  # key[num_eval_episodes], the same every evaluation
     key: jax.Array
+    # The appendix baselines' state; None when their phase is not compiled.
+    ranking_reward_params: dict | None = None  # T-REX / D-REX's learned r(s)
+    firl: FirlState | None = None
+    cail_log_confidence: jax.Array | None = None  # float32[K]: log beta per trajectory
+
+
+@struct.dataclass
+class FirlState:
+    """f-IRL's reward r(s) and state discriminator, with their Adam states."""
+
+    reward_params: dict
+    reward_optimizer_state: optax.OptState
+    discriminator_params: dict
+    discriminator_optimizer_state: optax.OptState
 
 
 class AdversarialTrainer:
@@ -161,6 +187,16 @@ class AdversarialTrainer:
         has_mask = self.has_confidence and demos.labelled is not None
         self._allowed = jnp.asarray(demos.labelled) if has_mask else None
         self.num_allowed = int(demos.labelled.sum()) if has_mask else demos.num_rows
+        # Whole trajectories ranked by their given confidence (T-REX, CAIL), when the set has
+        # trajectory ids; each row's trajectory index.
+        self.trajectories = self._row_trajectory = None
+        if demos.trajectory_ids is not None and self.has_confidence:
+            self.trajectories = ranking.trajectories_of(
+                demos.observations, demos.actions, demos.trajectory_ids, demos.confidence
+            )
+            order = {t: k for k, t in enumerate(dict.fromkeys(demos.trajectory_ids.tolist()))}
+            self._row_trajectory = jnp.asarray([order[t] for t in demos.trajectory_ids.tolist()])
+        self.state_network = ranking.StateReward(config.ranking.hidden_sizes)
 
     def check_label_ratios(self, label_ratios) -> None:
         """Raises ``DemonstrationError`` when the demonstrations' ``labelled`` mask allows
@@ -182,6 +218,23 @@ class AdversarialTrainer:
             raise DemonstrationError(
                 f"the demonstrations carry no confidences, which {', '.join(readers)} read; "
                 "give a confidence file, or run only methods that read none (gail, wgail)"
+            )
+        missing = [p for p in required_phases(methods) if p not in self.config.phases]
+        if missing:
+            raise ValueError(
+                f"methods {list(methods)} need the training phase(s) {missing}, which this "
+                "trainer does not compile: AdversarialConfig(phases=required_phases(methods))"
+            )
+        rankers = [name for name in methods if PRESETS[name].confidence_source == "rankings"]
+        if rankers and self.trajectories is None:
+            raise DemonstrationError(
+                f"{', '.join(rankers)} rank whole trajectories, but these demonstrations have "
+                "no trajectory ids (the authors' MuJoCo files are rows, not trajectories; "
+                "made sets and the authors' Pendulum file have them)"
+            )
+        if rankers and len(np.unique(np.asarray(self.trajectories.score))) < 2:
+            raise DemonstrationError(
+                f"{', '.join(rankers)} need trajectories of at least two confidences to rank"
             )
 
     def init(self, hyperparams: Hyperparams, spec: MethodSpec, key: jax.Array):
@@ -218,8 +271,14 @@ class AdversarialTrainer:
             spec.classifier_coef * predicted + (1 - spec.classifier_coef) * without_classifier,
         )
         disc_params = self.discriminator.init(disc_key, inputs[0])
+        trpo_state = self.trpo.init(trpo_key)
+        # Keys of the appendix phases come from fold_in, so the split above (and every number
+        # of the seven methods) is the same whichever phases a grid compiles.
+        phase_state, trpo_state = self._init_phases(
+            spec, inputs, confidence, trpo_state, jax.random.fold_in(key, 1)
+        )
         state = TrainState(
-            trpo=self.trpo.init(trpo_key),
+            trpo=trpo_state,
             discriminator_params=disc_params,
             discriminator_optimizer_state=self.optimizer.init(disc_params),
             demo_rows=split.indices,
@@ -232,11 +291,61 @@ class AdversarialTrainer:
             iteration=jnp.zeros((), jnp.int32),
             eval_keys=jax.random.split(eval_key, self.config.trpo.num_eval_episodes),
             key=carry_key,
+            **phase_state,
         )
         errors = confidence_errors(confidence, split.true_confidence, split.labelled)
         if not self.has_confidence:
             errors = jax.tree.map(lambda e: jnp.full_like(e, jnp.nan), errors)
         return state, {f"confidence/{name}": value for name, value in errors.items()}
+
+    def _init_phases(self, spec, inputs, confidence, trpo_state, key):
+        """The appendix phases this trainer compiles: behaviour cloning, reward learning from
+        rankings, f-IRL's and CAIL's initial state. Returns (TrainState fields, trpo_state)."""
+        phases, config = self.config.phases, self.config
+        bc_key, noise_key, reward_key, firl_key = jax.random.split(key, 4)
+        size = self.env.observation_size
+        fields = {}
+        normalizer = trpo_state.normalizer
+        bc_params = None
+        if "bc" in phases:
+            weights = 1 + spec.bc_weighted_coef * (confidence - 1)
+            bc_params, _ = train_bc(
+                config.bc,
+                lambda params, obs: self.trpo.policy.apply(params, normalizer(obs)),
+                trpo_state.policy_params,
+                inputs[:, :size],
+                inputs[:, size:],
+                weights,
+                bc_key,
+            )
+            trpo_state = trpo_state.replace(
+                policy_params=_tree_where(
+                    spec.bc_init_coef > 0, bc_params, trpo_state.policy_params
+                )
+            )
+        sources = []
+        if "demo_rankings" in phases:
+            sources.append(self.trajectories)
+        if "noise_rankings" in phases:
+            act_mean = lambda obs: self.trpo.policy.apply(bc_params, normalizer(obs))[0]  # noqa: E731
+            sources.append(ranking.noisy_rollouts(self.env, act_mean, config.ranking, noise_key))
+        if sources:
+            ranked = sources[0]
+            if len(sources) == 2:  # T-REX and D-REX cells in one grid: each its own
+                ranked = ranking.select(spec.noise_rankings_coef > 0, sources[1], sources[0])
+            fields["ranking_reward_params"], _ = ranking.train_ranking_reward(
+                config.ranking, ranked, reward_key
+            )
+        if "firl" in phases:
+            reward_key, disc_key = jax.random.split(firl_key)
+            reward = self.state_network.init(reward_key, size)
+            disc = self.state_network.init(disc_key, size)
+            fields["firl"] = FirlState(
+                reward, self.optimizer.init(reward), disc, self.optimizer.init(disc)
+            )
+        if "cail" in phases:
+            fields["cail_log_confidence"] = jnp.zeros(self.trajectories.lengths.shape)
+        return fields, trpo_state
 
     def _importance_weights(self, state: TrainState) -> jax.Array:
         """WGAIL's w = [exp(-z) pi(a|s)]^(1/2) on every split row; no gradient flows."""
@@ -247,7 +356,7 @@ class AdversarialTrainer:
         return jnp.exp(0.5 * (log_prob - logits))
 
     def _iteration(self, hyperparams: Hyperparams, spec: MethodSpec, state: TrainState):
-        config, trpo_config = self.config, self.config.trpo
+        config, trpo_config, phases = self.config, self.config.trpo, self.config.phases
         trpo_state, transitions = self.trpo.rollout(state.trpo)
         refresh = (
             (state.iteration > 0)
@@ -255,6 +364,7 @@ class AdversarialTrainer:
             & (state.iteration <= config.wgail_refresh_until)
         )
         weights = jnp.where(refresh, self._importance_weights(state), state.importance_weights)
+        agent_obs = transitions.obs.reshape(trpo_config.batch_size, -1)
         agent_inputs = jnp.concatenate(
             [transitions.obs, jnp.clip(transitions.action, *self._action_bounds)], axis=-1
         ).reshape(trpo_config.batch_size, -1)
@@ -262,46 +372,148 @@ class AdversarialTrainer:
         rows = jax.random.randint(batch_key, (trpo_config.batch_size,), 0, self.num_demos)
         demo_batch = self._demo_inputs[state.demo_rows[rows]]
 
-        def loss_fn(params):
+        def loss_fn(params, confidence, stats):
             logits_agent = self.discriminator.apply(params, agent_inputs)
             logits_demo = self.discriminator.apply(params, demo_batch)
             loss, metrics = discriminator_loss(
                 spec,
                 logits_agent,
                 logits_demo,
-                state.confidence[rows],
+                confidence[rows],
                 state.labelled[rows],
                 weights[rows],
-                state.stats,
+                stats,
             )
             return loss, (metrics, logits_agent)
 
+        confidence, stats = state.confidence, state.stats
+        if "cail" in phases:
+            confidence, stats = self._cail_confidence(spec, state, state.cail_log_confidence)
         grads, (disc_metrics, logits_agent) = jax.grad(loss_fn, has_aux=True)(
-            state.discriminator_params
+            state.discriminator_params, confidence, stats
         )
-        # The reward comes from the discriminator before this iteration's step.
-        rewards = policy_reward(logits_agent).reshape(
-            trpo_config.unroll_length, trpo_config.num_envs
-        )
-        updates, disc_optimizer_state = self.optimizer.update(
-            grads, state.discriminator_optimizer_state
-        )
-        disc_params = optax.apply_updates(
+        # The reward comes from the discriminator (and learned rewards) before this
+        # iteration's steps.
+        rewards = policy_reward(logits_agent)
+        if phases:  # every method whose reward is not (only) adversarial has a phase
+            rewards = spec.adversarial_reward_coef * rewards
+        phase_fields, phase_metrics = {}, {}
+        if state.ranking_reward_params is not None:
+            rewards += spec.ranking_reward_coef * self.state_network(
+                state.ranking_reward_params, agent_obs
+            )
+        if "firl" in phases:
+            rewards += spec.firl_coef * self.state_network(state.firl.reward_params, agent_obs)
+            phase_fields["firl"], phase_metrics = self._firl_update(
+                hyperparams, spec, state.firl, transitions.obs, demo_batch
+            )
+        if "cail" in phases:
+            phase_fields["cail_log_confidence"], cail_metrics = self._cail_update(
+                hyperparams, spec, state, loss_fn, jax.random.fold_in(batch_key, 1)
+            )
+            phase_metrics = {**phase_metrics, **cail_metrics}
+        rewards = rewards.reshape(trpo_config.unroll_length, trpo_config.num_envs)
+        disc_params, disc_optimizer_state = self._adam_step(
             state.discriminator_params,
-            jax.tree.map(lambda u: -hyperparams.discriminator_learning_rate * u, updates),
+            state.discriminator_optimizer_state,
+            grads,
+            hyperparams.discriminator_learning_rate,
         )
-        trpo_state, trpo_metrics = self.trpo.update(
-            hyperparams.trpo, trpo_state, transitions, rewards
-        )
+        updated, trpo_metrics = self.trpo.update(hyperparams.trpo, trpo_state, transitions, rewards)
+        if "bc" in phases:  # a cloned policy that no RL moves (BC's cells) stays as it is
+            frozen = spec.policy_update_coef == 0
+            learner = ("policy_params", "value_params", "value_optimizer_state", "normalizer")
+            updated = updated.replace(
+                **{
+                    name: _tree_where(frozen, getattr(trpo_state, name), getattr(updated, name))
+                    for name in learner
+                }
+            )
         state = state.replace(
-            trpo=trpo_state,
+            trpo=updated,
             discriminator_params=disc_params,
             discriminator_optimizer_state=disc_optimizer_state,
             importance_weights=weights,
             iteration=state.iteration + 1,
             key=key,
+            **phase_fields,
         )
-        return state, {**trpo_metrics, **disc_metrics, "env_steps": trpo_state.env_steps}
+        metrics = {**trpo_metrics, **disc_metrics, **phase_metrics}
+        return state, {**metrics, "env_steps": updated.env_steps}
+
+    def _adam_step(self, params, optimizer_state, grads, learning_rate):
+        """One Adam step (``scale_by_adam``, then ``-learning_rate``): (params, state)."""
+        updates, optimizer_state = self.optimizer.update(grads, optimizer_state)
+        step = jax.tree.map(lambda u: -learning_rate * u, updates)
+        return optax.apply_updates(params, step), optimizer_state
+
+    def _firl_update(self, hyperparams, spec, firl_state: FirlState, agent_obs, demo_batch):
+        """One step of f-IRL's state discriminator, then of its reward by the covariance
+        estimator over the rollout's ``num_envs`` segments (agent_obs float[T, E, O])."""
+        size = self.env.observation_size
+        learning_rate = hyperparams.discriminator_learning_rate
+        network = self.state_network
+
+        def discriminator_loss_fn(params):
+            return firl.state_discriminator_loss(
+                network(params, demo_batch[:, :size]), network(params, agent_obs.reshape(-1, size))
+            )
+
+        grads, disc_metrics = jax.grad(discriminator_loss_fn, has_aux=True)(
+            firl_state.discriminator_params
+        )
+        disc_params, disc_optimizer_state = self._adam_step(
+            firl_state.discriminator_params, firl_state.discriminator_optimizer_state, grads,
+            learning_rate,
+        )  # fmt: skip
+        log_ratio = network(disc_params, agent_obs)  # float[T, E]: log rho_E / rho_agent
+        h = firl.divergence_h(log_ratio, spec.firl_fkl_coef, spec.firl_rkl_coef, spec.firl_js_coef)
+
+        def reward_loss_fn(params):
+            return firl.covariance_surrogate(h.sum(axis=0), network(params, agent_obs).sum(axis=0))
+
+        grads, reward_metrics = jax.grad(reward_loss_fn, has_aux=True)(firl_state.reward_params)
+        reward_params, reward_optimizer_state = self._adam_step(
+            firl_state.reward_params, firl_state.reward_optimizer_state, grads, learning_rate
+        )
+        new_state = FirlState(
+            reward_params, reward_optimizer_state, disc_params, disc_optimizer_state
+        )
+        return new_state, {**disc_metrics, **reward_metrics}
+
+    def _cail_confidence(self, spec, state: TrainState, log_confidence):
+        """CAIL's cells read r = beta of each row's trajectory (and its mean) instead of the
+        given / classified confidence."""
+        beta = jnp.exp(log_confidence)[self._row_trajectory[state.demo_rows]]
+        cail = spec.cail_coef > 0
+        stats = state.stats.replace(
+            mean_confidence=jnp.where(cail, beta.mean(), state.stats.mean_confidence)
+        )
+        return jnp.where(cail, beta, state.confidence), stats
+
+    def _cail_update(self, hyperparams, spec, state: TrainState, loss_fn, key):
+        """CAIL's outer step: the ranking loss of the reward after one gradient step of the
+        discriminator on the beta-weighted loss, differentiated through that step."""
+        trajectories, ranking_config = self.trajectories, self.config.ranking
+        inputs = jnp.concatenate([trajectories.observations, trajectories.actions], axis=-1)
+        pairs = ranking.sample_pairs(
+            key, trajectories, ranking_config.pairs_per_step, ranking_config.snippet_length
+        )
+
+        def inner_loss(params, log_confidence):
+            return loss_fn(params, *self._cail_confidence(spec, state, log_confidence))[0]
+
+        def outer_loss(log_confidence):
+            return ranking.cail_outer_loss(
+                log_confidence, inner_loss, state.discriminator_params,
+                hyperparams.discriminator_learning_rate,
+                lambda params: policy_reward(self.discriminator.apply(params, inputs)),
+                trajectories, pairs, ranking_config.snippet_length,
+            )  # fmt: skip
+
+        grads, metrics = jax.grad(outer_loss, has_aux=True)(state.cail_log_confidence)
+        new = state.cail_log_confidence - spec.cail_learning_rate * grads
+        return new, {f"cail/{name.split('/')[1]}": value for name, value in metrics.items()}
 
     def run_blocks(self, hyperparams: Hyperparams, spec: MethodSpec, state: TrainState, num_blocks):
         return run_evaluated_blocks(
@@ -322,3 +534,8 @@ class AdversarialTrainer:
     def policy_state(state: TrainState) -> TRPOState:
         """The learner's state inside a trainer state (for exporting its policy)."""
         return state.trpo
+
+
+def _tree_where(condition, on_true, on_false):
+    """``jnp.where`` over two pytrees of one structure."""
+    return jax.tree.map(lambda a, b: jnp.where(condition, a, b), on_true, on_false)

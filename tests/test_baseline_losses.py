@@ -109,3 +109,77 @@ def test_bc_loss_is_the_weighted_gaussian_negative_log_likelihood():
     log_density = -0.5 * ((actions - mean) / std) ** 2 - np.log(std * np.sqrt(2 * np.pi))
     expected = -np.sum(weights * log_density.sum(axis=1)) / weights.sum()
     np.testing.assert_allclose(loss, expected, rtol=1e-5)
+
+
+def test_cail_outer_loss_and_its_gradient_match_numpy():
+    """A linear discriminator z = theta . x: the inner step, the lookahead reward sp(-z) on
+    the trajectories and the Bradley-Terry loss, by hand in float64."""
+    dim, num_demo, num_agent, learning_rate, length = 2, 5, 4, 0.3, 3
+    demo_x = RNG.normal(size=(num_demo, dim))
+    agent_x = RNG.normal(size=(num_agent, dim))
+    row_trajectory = np.array([0, 0, 1, 2, 2])
+    theta = RNG.normal(size=dim)
+    steps = RNG.normal(size=(3, 6, dim))  # 3 trajectories of 6 [s, a] rows
+    trajectories = ranking.Trajectories(
+        observations=jnp.asarray(steps[..., :1], jnp.float32),
+        actions=jnp.asarray(steps[..., 1:], jnp.float32),
+        lengths=jnp.array([6, 4, 6], jnp.int32),
+        score=jnp.array([0.2, 0.9, 0.5]),
+    )
+    pairs = ranking.sample_pairs(jax.random.key(3), trajectories, 6, length)
+
+    def softplus(v):
+        return np.logaddexp(0, v)
+
+    def sigmoid(v):
+        return 1 / (1 + np.exp(-v))
+
+    def numpy_outer(log_confidence):
+        beta = np.exp(log_confidence)[row_trajectory]
+        u = beta / beta.mean()
+        # grad of mean_agent sp(-z) + mean_demo u sp(z) with z = theta . x
+        grad = (-sigmoid(-agent_x @ theta)[:, None] * agent_x).mean(0)
+        grad = grad + ((u * sigmoid(demo_x @ theta))[:, None] * demo_x).mean(0)
+        lookahead = theta - learning_rate * grad
+        rewards = softplus(-(steps @ lookahead))
+        lengths = np.asarray(trajectories.lengths)
+
+        def snippet(i, start):
+            return rewards[i, start : min(start + length, lengths[i])].sum()
+
+        worse = np.array(
+            [snippet(i, s) for i, s in zip(pairs.worse, pairs.worse_start, strict=True)]
+        )
+        better = np.array(
+            [snippet(i, s) for i, s in zip(pairs.better, pairs.better_start, strict=True)]
+        )
+        weight = np.asarray(pairs.weight, float)
+        return np.sum(weight * softplus(worse - better)) / weight.sum()
+
+    def inner_loss(params, log_confidence):
+        beta = jnp.exp(log_confidence)[row_trajectory]
+        u = beta / beta.mean()
+        agent = jnp.mean(jax.nn.softplus(-(jnp.asarray(agent_x, jnp.float32) @ params)))
+        demo = jnp.mean(u * jax.nn.softplus(jnp.asarray(demo_x, jnp.float32) @ params))
+        return agent + demo
+
+    inputs = jnp.concatenate([trajectories.observations, trajectories.actions], axis=-1)
+
+    def outer(log_confidence):
+        return ranking.cail_outer_loss(
+            log_confidence, inner_loss, jnp.asarray(theta, jnp.float32), learning_rate,
+            lambda params: jax.nn.softplus(-(inputs @ params)), trajectories, pairs, length,
+        )[0]  # fmt: skip
+
+    log_confidence = RNG.normal(size=3) * 0.5
+    np.testing.assert_allclose(
+        outer(jnp.asarray(log_confidence, jnp.float32)), numpy_outer(log_confidence), rtol=1e-5
+    )
+    gradient = jax.grad(outer)(jnp.asarray(log_confidence, jnp.float32))
+    step = 1e-6
+    numeric = [
+        (numpy_outer(log_confidence + step * e) - numpy_outer(log_confidence - step * e))
+        / (2 * step)
+        for e in np.eye(3)
+    ]
+    np.testing.assert_allclose(gradient, numeric, rtol=1e-3, atol=1e-6)

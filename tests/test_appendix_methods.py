@@ -1,0 +1,115 @@
+"""The appendix baselines in the trainer: one grid with the seven methods' machinery, each
+phase compiled only where a method needs it, a reduction (CAIL with its confidences frozen at
+1 is GAIL), a grid against its cells run alone, and clear errors. Tiny Pendulum configs."""
+
+import dataclasses
+
+import jax
+import numpy as np
+import pytest
+
+from pngail_jax import envs
+from pngail_jax.bc import BCConfig
+from pngail_jax.confidence import ClassifierConfig
+from pngail_jax.demos import DemonstrationError, Demonstrations
+from pngail_jax.grid import make_cells, stack_cells
+from pngail_jax.methods import METHOD_NAMES, method_spec, required_phases, stack
+from pngail_jax.ranking import RankingConfig
+from pngail_jax.rl import TRPOConfig
+from pngail_jax.run_config import RunConfig
+from pngail_jax.train import AdversarialConfig, AdversarialTrainer, Hyperparams
+
+METHODS = ("trex", "drex", "cail", "firl-fkl", "firl-rkl", "firl-js", "bc", "bc-weighted")
+# Tolerances between two compiled programs (vmapped vs single), as tests/test_grid.py's.
+RTOL = {"eval/return": 1e-3, "disc/loss": 1e-4, "train/reward": 1e-4}
+
+
+def demos(trajectories: bool = True) -> Demonstrations:
+    """4 trajectories of 50 rows with confidences 1, 0.6, 0.3, 0.1."""
+    rng = np.random.default_rng(0)
+    return Demonstrations(
+        observations=rng.normal(size=(200, 3)).astype(np.float32),
+        actions=rng.uniform(-2, 2, size=(200, 1)).astype(np.float32),
+        confidence=np.repeat([1.0, 0.6, 0.3, 0.1], 50).astype(np.float32),
+        trajectory_ids=np.repeat(np.arange(4), 50) if trajectories else None,
+        metadata={"random_return": -1200.0, "optimal_return": -150.0},
+    )
+
+
+def trainer_for(methods, data=None, num_iterations=2):
+    config = AdversarialConfig(
+        trpo=TRPOConfig(
+            num_envs=4, unroll_length=25, num_iterations=num_iterations, eval_every=1,
+            num_eval_episodes=1, num_value_minibatches=5,
+        ),
+        classifier=ClassifierConfig(num_steps=20),
+        phases=required_phases(methods),
+        ranking=RankingConfig(num_steps=20, snippet_length=10, noise_levels=(1.0, 0.0),
+                              rollouts_per_level=1),
+        bc=BCConfig(num_steps=20, batch_size=16),
+    )  # fmt: skip
+    return AdversarialTrainer(config, envs.make("Pendulum-v1"), data or demos())
+
+
+def test_the_seven_compile_no_appendix_phase():
+    assert RunConfig().adversarial_config().phases == ()
+    assert required_phases(METHOD_NAMES) == ()
+    assert RunConfig(methods=("gail", "drex")).adversarial_config().phases == (
+        "bc",
+        "noise_rankings",
+    )
+    state, _ = trainer_for(("gail",)).init(Hyperparams.create(), method_spec("gail"), key(0))
+    assert state.ranking_reward_params is None and state.firl is None
+
+
+def key(seed):
+    return jax.random.key(seed)
+
+
+def test_a_grid_of_the_appendix_methods_equals_its_cells_run_alone():
+    trainer = trainer_for(METHODS)
+    cells = make_cells(METHODS, 1)
+    hyperparams, specs, keys = stack_cells(cells, key(0))
+    state, grid_metrics = jax.jit(jax.vmap(trainer.train))(hyperparams, specs, keys)
+    single = jax.jit(trainer.train)  # one program for every method: the spec is data
+    for index, cell in enumerate(cells):
+        pick = jax.tree.map(lambda x, i=index: x[i], (hyperparams, specs, keys))
+        _, metrics = single(*pick)
+        for name, rtol in RTOL.items():
+            np.testing.assert_allclose(
+                grid_metrics[name][index], metrics[name], rtol=rtol, atol=1e-6,
+                err_msg=f"{cell.method} {name}",
+            )  # fmt: skip
+    # The cloned policies stay as cloned: the same return at every evaluation.
+    returns = np.asarray(grid_metrics["eval/return"])
+    for index, cell in enumerate(cells):
+        moved = not np.all(returns[index] == returns[index][0])
+        assert moved == (cell.method not in ("bc", "bc-weighted")), cell.method
+
+
+def test_cail_with_its_confidences_frozen_at_one_is_gail():
+    trainer = trainer_for(("gail", "cail"), num_iterations=3)
+    specs = stack([method_spec("gail"), method_spec("cail", cail_learning_rate=0.0)])
+    hyperparams = jax.tree.map(lambda x: np.stack([x, x]), Hyperparams.create())
+    keys = jax.numpy.stack([key(1), key(1)])  # the same key: the same split and rollouts
+    state, metrics = jax.jit(jax.vmap(trainer.train))(hyperparams, specs, keys)
+    for name in ("eval/return", "disc/loss", "train/reward", "trpo/kl"):
+        np.testing.assert_array_equal(metrics[name][0], metrics[name][1], err_msg=name)
+    np.testing.assert_array_equal(state.cail_log_confidence[1], 0.0)
+    # With its outer step, CAIL's confidences move and rank the trajectories apart.
+    learning = trainer_for(("cail",), num_iterations=3)
+    state, _ = jax.jit(learning.train)(Hyperparams.create(), method_spec("cail"), key(1))
+    assert np.any(np.asarray(state.cail_log_confidence) != 0.0)
+
+
+def test_ranking_methods_need_trajectories_and_their_phases():
+    methods = ("trex", "cail", "drex", "firl-js", "bc")
+    rows_only = trainer_for(methods, data=demos(trajectories=False))
+    with pytest.raises(DemonstrationError, match="trex, cail rank whole trajectories"):
+        rows_only.check_methods(("trex", "cail", "drex"))
+    rows_only.check_methods(("drex", "firl-js", "bc"))  # these need no trajectories
+    with pytest.raises(ValueError, match=r"need the training phase\(s\) \['firl'\]"):
+        trainer_for(("trex",)).check_methods(("trex", "firl-js"))
+    one_level = dataclasses.replace(demos(), confidence=np.ones(200, np.float32))
+    with pytest.raises(DemonstrationError, match="at least two confidences"):
+        trainer_for(("trex",), data=one_level).check_methods(("trex",))
