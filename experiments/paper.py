@@ -35,9 +35,23 @@ FIG2_METHODS = ("gail", "2iwil", "icgail", "wgail", "pngail")
 FIG3_METHODS = ("pngail", "pngail-no-bsc", "pngail-no-pn")
 SEVEN_METHODS = ("gail", "2iwil", "icgail", "wgail", "pngail", "pngail-no-bsc", "pngail-no-pn")
 MUJOCO_TASKS = ("Ant", "HalfCheetah", "Hopper", "Walker2d", "Swimmer")
-FIGURES = ("fig2", "fig3", "fig4", "fig6", "fig7", "fig8", "fig9", "fig10", "table1", "table4")
-# The appendix baselines of Fig. 5 / Table 4 (T-REX, D-REX, CAIL, f-IRL) are not built yet.
-NOT_IMPLEMENTED = {"table4": "needs the appendix baselines (CAIL, T-REX, D-REX, f-IRL)"}
+FIGURES = (
+    "fig2", "fig3", "fig4", "fig5", "fig6", "fig7", "fig8", "fig9", "fig10", "table1", "table4",
+)  # fmt: skip
+# Fig. 5 / Table 4: PN-GAIL against the appendix baselines (and the two BC baselines).
+APPENDIX_COMPARISON = (
+    "pngail", "cail", "trex", "drex", "firl-fkl", "firl-rkl", "firl-js", "bc", "bc-weighted",
+)  # fmt: skip
+PAPER_TABLE4 = {  # method: (Pendulum-v1, Ant-v2) average return during training, mean ± std
+    "pngail": ((-465.978, 132.710), (2960.458, 851.465)),
+    "cail": ((-697.821, 91.459), (2336.546, 735.378)),
+    "trex": ((-1074.435, 258.078), (-1858.025, 217.228)),
+    "drex": ((-1532.958, 114.138), (-2495.473, 220.703)),
+    "firl-fkl": ((-698.064, 300.793), (1563.796, 1372.482)),
+    "firl-rkl": ((-603.760, 189.727), (962.785, 816.547)),
+    "firl-js": ((-581.602, 185.096), (882.026, 690.371)),
+}
+PAPER_TABLE4_OPTIMAL = (-116.81, 4271.79)
 LABEL_RATIOS = (0.2, 0.1, 0.05, 0.03)  # Fig. 4 (a), (b)
 NOISE_STDS = (0.0, 0.2, 0.4)  # Fig. 4 (c)
 # Fig. 6 and Fig. 10 name proportions in their legends but not in the text: ours.
@@ -103,6 +117,19 @@ BUDGETS = {
         chunk_iterations=250,
         classifier_steps=None,
         demo_iterations={"pendulum": 300, "mujoco": 2_000},
+        demo_seeds=3,
+        measure_episodes=64,
+        settings={"pendulum": [], "mujoco": []},
+        demo_settings={"pendulum": [], "mujoco": []},
+    ),
+    # The largest a 2-core CPU allows for Pendulum-v1 grids (about half an hour each, 45
+    # cells); MuJoCo tasks at this budget would take days there.
+    "cpu": Budget(
+        iterations=500,
+        seeds=5,
+        chunk_iterations=100,
+        classifier_steps=None,
+        demo_iterations={"pendulum": 150, "mujoco": 300},
         demo_seeds=3,
         measure_episodes=64,
         settings={"pendulum": [], "mujoco": []},
@@ -252,6 +279,24 @@ def plan(figures: Sequence[str], tasks: Sequence[str], released: set[str]):
                         task: per_method(main_of(task), ("pngail-no-bsc", "pngail"))
                         for task in tasks
                     },
+                )
+            )
+        elif figure in ("fig5", "table4"):
+            panels = {}
+            for task in pick(("Pendulum-v1", "Ant")):
+                demos = main_of(task).demos if task == "Pendulum-v1" else DemoSet(task, (1, 10))
+                grid = GridSpec(f"{task}-appendix", task, demos, APPENDIX_COMPARISON)
+                panels[task] = per_method(grid, APPENDIX_COMPARISON)
+            made.append(
+                Figure(
+                    figure,
+                    "Fig. 5: PN-GAIL against the appendix baselines"
+                    if figure == "fig5"
+                    else "Table 4: average return during training, against the appendix baselines",
+                    "PN-GAIL above CAIL, T-REX, D-REX and f-IRL (the demonstrations of Fig. 2 "
+                    "on Pendulum-v1, of Fig. 8 on Ant; rankings by every trajectory's "
+                    "confidence)",
+                    panels,
                 )
             )
         elif figure == "fig4":
@@ -571,6 +616,7 @@ def series_statistics(series: Series, curves, summary) -> dict:
         }
     label = series.method if len(curves) == len({k[0] for k in curves}) else None
     row = summary["methods"].get(label or f"{series.method} [{matches[0][1]}]", {})
+    result["average_return"] = [row.get("average_return_mean"), row.get("average_return_std")]
     for name in ("mae", "rmse"):
         result[f"confidence_{name}"] = [
             row.get(f"confidence_{name}_mean"),
@@ -644,6 +690,8 @@ def figure_markdown(figure: Figure, results: dict, command: str) -> list[str]:
                 f" | {_number(paper[3], 3)} |"
             )
         return [*lines, ""]
+    if figure.name == "table4":
+        return [*lines, *table4_markdown(figure, results), ""]
     lines += [
         f"![{figure.name}]({figure.name}.png)",
         "",
@@ -660,6 +708,35 @@ def figure_markdown(figure: Figure, results: dict, command: str) -> list[str]:
                 f"{entry['final']['seeds']} |"
             )
     return [*lines, ""]
+
+
+def table4_markdown(figure: Figure, results: dict) -> list[str]:
+    """Raw average returns during training, ours beside the paper's, per method and task."""
+    tasks = list(figure.panels)
+    paper_column = {"Pendulum-v1": 0, "Ant": 1}
+    header = "| method | " + " | ".join(f"{task}: ours | {task}: paper" for task in tasks) + " |"
+    lines = [header, "|---|" + "---:|---:|" * len(tasks)]
+
+    def cell(pair) -> str:
+        mean, std = pair
+        return f"{_number(mean, 1)} ± {_number(std, 1)}"
+
+    for series in figure.panels[tasks[0]]:
+        row = [series.method]
+        for task in tasks:
+            paper = PAPER_TABLE4.get(series.method)
+            row += [
+                cell(results[task][series.label]["average_return"]),
+                cell(paper[paper_column[task]]) if paper else "not in the paper",
+            ]
+        lines.append("| " + " | ".join(row) + " |")
+    optimal = ["optimal policy"]
+    for task in tasks:
+        normalizer = results[task].get("normalizer")
+        ours = _number(normalizer[1], 1) if normalizer else "n/a"
+        optimal += [ours, _number(PAPER_TABLE4_OPTIMAL[paper_column[task]], 2)]
+    lines.append("| " + " | ".join(optimal) + " |")
+    return lines
 
 
 def write_page(out: Path, options: dict, figures: list[Figure], grids, timings: dict) -> Path:
@@ -679,6 +756,9 @@ def write_page(out: Path, options: dict, figures: list[Figure], grids, timings: 
             }
             for task, series_list in figure.panels.items()
         }
+        for task, series_list in figure.panels.items():  # the grid's random / optimal returns
+            config = read_json(out / "grids" / series_list[0].grid / "config.json")
+            results[figure.name][task]["normalizer"] = config["resolved"].get("normalizer")
     budget = options["budget"]
     lines = [
         f"# The paper's figures at the {budget} budget",
@@ -711,11 +791,8 @@ def write_page(out: Path, options: dict, figures: list[Figure], grids, timings: 
     for figure in figures:
         command = f"{base} --only {figure.name} --envs {','.join(figure.panels)}"
         lines += figure_markdown(figure, results[figure.name], command)
-        if figure.name != "table1":
+        if figure.name not in ("table1", "table4"):
             plot_figure(out / f"{figure.name}.png", figure, results[figure.name])
-    for name, reason in NOT_IMPLEMENTED.items():
-        if name in options["only"]:
-            lines += [f"## {name}", "", f"Not built yet: {reason}.", ""]
     document = {"options": options, "timings": timings, **results}
     write_json(out / "results.json", json_safe(document))
     page = out / "README.md"
@@ -732,8 +809,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     )
     parser.add_argument(
         "--only",
-        help=f"comma-separated, from {', '.join(FIGURES)} (default: all that are built; "
-        f"not yet: {', '.join(NOT_IMPLEMENTED)})",
+        help=f"comma-separated, from {', '.join(FIGURES)} (default: all)",
     )
     parser.add_argument(
         "--envs", help=f"comma-separated tasks (default: the six, {', '.join(envs.ENV_NAMES)})"
@@ -742,8 +818,9 @@ def parse_args(argv=None) -> argparse.Namespace:
         "--budget",
         choices=tuple(BUDGETS),
         default="smoke",
-        help="smoke: everything on a CPU, a check not a result; paper: 5,000 iterations x 5 "
-        "seeds (a GPU); test: the test suite's",
+        help="smoke: everything on a CPU, a check not a result; cpu: 500 iterations x 5 "
+        "seeds (Pendulum-v1 grids on a CPU); paper: 5,000 iterations x 5 seeds (a GPU); test: "
+        "the test suite's",
     )
     parser.add_argument(
         "--released-demos",
@@ -763,12 +840,11 @@ def parse_args(argv=None) -> argparse.Namespace:
         if not (args.resume / "paper.json").exists():
             parser.error(f"--resume {args.resume}: no paper.json there (not a run of this)")
         return args
-    figures = known_names(parser, args.only, FIGURES, "figure", flag="--only") if args.only else [
-        name for name in FIGURES if name not in NOT_IMPLEMENTED
-    ]  # fmt: skip
-    unbuilt = [name for name in figures if name in NOT_IMPLEMENTED]
-    if unbuilt and len(unbuilt) == len(figures):
-        parser.error(f"--only {args.only}: not built yet ({NOT_IMPLEMENTED[unbuilt[0]]})")
+    figures = (
+        known_names(parser, args.only, FIGURES, "figure", flag="--only")
+        if args.only
+        else list(FIGURES)
+    )
     args.figures = figures
     args.tasks = (
         known_names(parser, args.envs, envs.ENV_NAMES, "task", flag="--envs")
@@ -814,8 +890,7 @@ def main(argv=None) -> Path:
     budget = BUDGETS[options["budget"]]
     released_dir = Path(options["released_demos"]) if options["released_demos"] else None
     released = released_files(released_dir)
-    built = [name for name in options["only"] if name not in NOT_IMPLEMENTED]
-    figures, grids = plan(built, options["envs"], set(released))
+    figures, grids = plan(options["only"], options["envs"], set(released))
     print(
         f"{len(figures)} figure(s) from {len(grids)} grid(s) on {', '.join(options['envs'])} "
         f"at the {options['budget']} budget; the authors' files for: "
