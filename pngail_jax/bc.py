@@ -8,8 +8,8 @@ import dataclasses
 import chex
 import jax
 import jax.numpy as jnp
-import optax
 
+from pngail_jax.fitting import fit_with_adam
 from pngail_jax.networks import gaussian_log_prob
 
 
@@ -39,23 +39,12 @@ def train_bc(config: BCConfig, policy_apply, params, observations, actions, weig
     """Adam on ``bc_loss`` from ``params`` with batches drawn with probability proportional
     to ``weights`` float[N] (so weights 0 are never drawn; all equal: plain BC). Returns
     ``(params, metrics)``, metrics float[num_steps]."""
-    optimizer = optax.adam(config.learning_rate)
     probabilities = weights / jnp.maximum(weights.sum(), 1e-8)
 
-    def loss_fn(params, rows):
+    def loss_fn(params, key):
+        rows = jax.random.choice(key, observations.shape[0], (config.batch_size,), p=probabilities)
         mean, log_std = policy_apply(params, observations[rows])
         return bc_loss(mean, log_std, actions[rows], jnp.ones(rows.shape))
 
-    def step(carry, step_key):
-        params, optimizer_state = carry
-        rows = jax.random.choice(
-            step_key, observations.shape[0], (config.batch_size,), p=probabilities
-        )
-        grads, metrics = jax.grad(loss_fn, has_aux=True)(params, rows)
-        updates, optimizer_state = optimizer.update(grads, optimizer_state, params)
-        return (optax.apply_updates(params, updates), optimizer_state), metrics
-
-    (params, _), metrics = jax.lax.scan(
-        step, (params, optimizer.init(params)), jax.random.split(key, config.num_steps)
-    )
-    return params, metrics
+    keys = jax.random.split(key, config.num_steps)
+    return fit_with_adam(loss_fn, params, config.learning_rate, keys)

@@ -23,9 +23,9 @@ import chex
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optax
 from flax import struct
 
+from pngail_jax.fitting import fit_with_adam
 from pngail_jax.networks import MLP
 
 
@@ -213,23 +213,14 @@ def train_ranking_reward(config: RankingConfig, trajectories: Trajectories, key:
     reward = StateReward(config.hidden_sizes)
     init_key, train_key = jax.random.split(key)
     params = reward.init(init_key, trajectories.observations.shape[-1])
-    optimizer = optax.adam(config.learning_rate)
 
-    def loss_fn(params, pairs):
+    def loss_fn(params, key):
+        pairs = sample_pairs(key, trajectories, config.pairs_per_step, config.snippet_length)
         step_rewards = reward(params, trajectories.observations)
         return ranking_loss(step_rewards, trajectories, pairs, config.snippet_length)
 
-    def step(carry, step_key):
-        params, optimizer_state = carry
-        pairs = sample_pairs(step_key, trajectories, config.pairs_per_step, config.snippet_length)
-        grads, metrics = jax.grad(loss_fn, has_aux=True)(params, pairs)
-        updates, optimizer_state = optimizer.update(grads, optimizer_state, params)
-        return (optax.apply_updates(params, updates), optimizer_state), metrics
-
-    (params, _), metrics = jax.lax.scan(
-        step, (params, optimizer.init(params)), jax.random.split(train_key, config.num_steps)
-    )
-    return params, metrics
+    keys = jax.random.split(train_key, config.num_steps)
+    return fit_with_adam(loss_fn, params, config.learning_rate, keys)
 
 
 def noisy_rollouts(env, act_mean, config: RankingConfig, key: jax.Array) -> Trajectories:
