@@ -139,7 +139,8 @@ def test_unknown_method_and_field_are_named():
         method_spec("pu-gail")
     with pytest.raises(ValueError, match="unknown MethodSpec field"):
         method_spec("gail", temperature=1.0)
-    assert {p.confidence_source for p in PRESETS.values()} == {"none", "given", "sc", "bsc"}
+    sources = {p.confidence_source for p in PRESETS.values()}
+    assert sources == {"none", "given", "sc", "bsc", "rankings"}
 
 
 def test_theorem_4_3_optimal_discriminator():
