@@ -885,12 +885,19 @@ def main(argv=None) -> Path:
             "released_demos": None if args.released_demos is None else str(args.released_demos),
             "command": " ".join(["python -m experiments.paper", *command_line(argv)]),
         }
-        out.mkdir(parents=True, exist_ok=True)
-        write_json(out / "paper.json", options)
     budget = BUDGETS[options["budget"]]
     released_dir = Path(options["released_demos"]) if options["released_demos"] else None
     released = released_files(released_dir)
     figures, grids = plan(options["only"], options["envs"], set(released))
+    if not figures:
+        raise SystemExit(
+            f"none of {', '.join(options['only'])} has a panel on {', '.join(options['envs'])} "
+            "(Fig. 4: Ant, Hopper, Pendulum-v1; Fig. 5 / Table 4: Pendulum-v1, Ant; Fig. 6 and "
+            "7: Pendulum-v1; Fig. 8 and 10: Ant; Fig. 9: Ant, Pendulum-v1)"
+        )
+    if args.resume is None:
+        out.mkdir(parents=True, exist_ok=True)
+        write_json(out / "paper.json", options)
     print(
         f"{len(figures)} figure(s) from {len(grids)} grid(s) on {', '.join(options['envs'])} "
         f"at the {options['budget']} budget; the authors' files for: "

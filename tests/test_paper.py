@@ -80,6 +80,12 @@ def test_a_mixture_takes_the_first_trajectories_of_each_kind_and_renumbers_them(
         paper.mixture(source, 1, 4, demo_set)
 
 
+def test_figures_without_a_panel_on_the_tasks_asked_for_are_refused(tmp_path):
+    with pytest.raises(SystemExit, match="none of table4, fig8 has a panel on Hopper"):
+        paper.main(["--only", "table4,fig8", "--envs", "Hopper", "--out", str(tmp_path / "p")])
+    assert not (tmp_path / "p").exists()  # refused before anything is written
+
+
 @pytest.mark.parametrize(
     ("flags", "message"),
     [
