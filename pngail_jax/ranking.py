@@ -153,15 +153,15 @@ def select(condition, on_true: Trajectories, on_false: Trajectories) -> Trajecto
     return jax.tree.map(lambda x, y: jnp.where(condition, x, y), a, b)
 
 
-def snippet_sums(
-    step_rewards: jax.Array, lengths: jax.Array, index: jax.Array, start: jax.Array, length: int
-) -> jax.Array:
-    """float[P]: sums of ``step_rewards`` float[K, T] over steps [start, start + length) of
-    trajectory ``index`` (int[P] each), padding excluded."""
+def snippets(
+    features: jax.Array, lengths: jax.Array, index: jax.Array, start: jax.Array, length: int
+):
+    """The snippets [start, start + length) of trajectories ``index`` (int[P] each) of
+    ``features`` float[K, T, F]: float[P, length, F] and bool[P, length] (real steps, not
+    padding or beyond the end)."""
     steps = start[:, None] + jnp.arange(length)
-    inside = steps < jnp.minimum(lengths[index], step_rewards.shape[1])[:, None]
-    values = step_rewards[index[:, None], jnp.minimum(steps, step_rewards.shape[1] - 1)]
-    return jnp.where(inside, values, 0.0).sum(axis=1)
+    inside = steps < jnp.minimum(lengths[index], features.shape[1])[:, None]
+    return features[index[:, None], jnp.minimum(steps, features.shape[1] - 1)], inside
 
 
 def bradley_terry_loss(worse_sums: jax.Array, better_sums: jax.Array, weight: jax.Array):
@@ -177,13 +177,18 @@ def bradley_terry_loss(worse_sums: jax.Array, better_sums: jax.Array, weight: ja
 
 
 def ranking_loss(
-    step_rewards: jax.Array, trajectories: Trajectories, pairs: SnippetPairs, length: int
+    reward_fn, features: jax.Array, trajectories: Trajectories, pairs: SnippetPairs, length: int
 ):
-    """The Bradley-Terry loss of per-step rewards float[K, T] on ``pairs`` of snippets."""
-    worse = snippet_sums(step_rewards, trajectories.lengths, pairs.worse, pairs.worse_start, length)
-    better = snippet_sums(
-        step_rewards, trajectories.lengths, pairs.better, pairs.better_start, length
-    )
+    """The Bradley-Terry loss of ``reward_fn`` (float[..., F] -> float[...]) summed over the
+    ``pairs`` of snippets of per-step ``features`` float[K, T, F]. The reward is computed on
+    the snippets' steps only, so its cost does not grow with the trajectories' length."""
+
+    def sums(index, start):
+        inputs, inside = snippets(features, trajectories.lengths, index, start, length)
+        return jnp.where(inside, reward_fn(inputs), 0.0).sum(axis=1)
+
+    worse = sums(pairs.worse, pairs.worse_start)
+    better = sums(pairs.better, pairs.better_start)
     return bradley_terry_loss(worse, better, pairs.weight)
 
 
@@ -216,8 +221,10 @@ def train_ranking_reward(config: RankingConfig, trajectories: Trajectories, key:
 
     def loss_fn(params, key):
         pairs = sample_pairs(key, trajectories, config.pairs_per_step, config.snippet_length)
-        step_rewards = reward(params, trajectories.observations)
-        return ranking_loss(step_rewards, trajectories, pairs, config.snippet_length)
+        return ranking_loss(
+            lambda observations: reward(params, observations), trajectories.observations,
+            trajectories, pairs, config.snippet_length,
+        )  # fmt: skip
 
     keys = jax.random.split(train_key, config.num_steps)
     return fit_with_adam(loss_fn, params, config.learning_rate, keys)
@@ -251,16 +258,18 @@ def noisy_rollouts(env, act_mean, config: RankingConfig, key: jax.Array) -> Traj
 
 
 def cail_outer_loss(
-    log_confidence, inner_loss, params, learning_rate, step_rewards_of, trajectories, pairs, length
-):
+    log_confidence, inner_loss, params, learning_rate, reward_of, features, trajectories, pairs,
+    length,
+):  # fmt: skip
     """CAIL's outer objective: the ranking loss of the reward after one gradient step.
 
     ``inner_loss(params, log_confidence)`` is the confidence-weighted adversarial loss;
-    ``params - learning_rate * grad inner_loss`` is the lookahead, ``step_rewards_of(params)``
-    its per-step reward float[K, T] on ``trajectories``, and the Bradley-Terry loss of that
-    reward on ``pairs`` (``ranking_loss``) is returned as ``(loss, metrics)``. Differentiate
-    it with respect to ``log_confidence`` for CAIL's outer step (through the lookahead).
+    ``params - learning_rate * grad inner_loss`` is the lookahead, ``reward_of(params, x)`` its
+    reward of per-step ``features`` x, and the Bradley-Terry loss of that reward on ``pairs``
+    of snippets of ``trajectories`` (``ranking_loss``) is returned as ``(loss, metrics)``.
+    Differentiate it with respect to ``log_confidence`` for CAIL's outer step (through the
+    lookahead).
     """
     grads = jax.grad(inner_loss)(params, log_confidence)
     lookahead = jax.tree.map(lambda p, g: p - learning_rate * g, params, grads)
-    return ranking_loss(step_rewards_of(lookahead), trajectories, pairs, length)
+    return ranking_loss(lambda x: reward_of(lookahead, x), features, trajectories, pairs, length)

@@ -507,7 +507,7 @@ class AdversarialTrainer:
             return ranking.cail_outer_loss(
                 log_confidence, inner_loss, state.discriminator_params,
                 hyperparams.discriminator_learning_rate,
-                lambda params: policy_reward(self.discriminator.apply(params, inputs)),
+                lambda params, x: policy_reward(self.discriminator.apply(params, x)), inputs,
                 trajectories, pairs, ranking_config.snippet_length,
             )  # fmt: skip
 

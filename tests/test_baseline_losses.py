@@ -22,7 +22,8 @@ def test_bradley_terry_on_snippet_sums_matches_numpy():
         score=jnp.array([0.1, 0.5, 0.5, 1.0, 0.0]),
     )
     pairs = ranking.sample_pairs(jax.random.key(1), trajectories, num_pairs, length)
-    loss, metrics = ranking.ranking_loss(jnp.asarray(step_rewards), trajectories, pairs, length)
+    features = jnp.asarray(step_rewards)[..., None]  # a reward that reads its one feature
+    loss, metrics = ranking.ranking_loss(lambda x: x[..., 0], features, trajectories, pairs, length)
 
     def snippet(index, start):  # the formula: sum of r over the snippet's real steps
         stop = min(start + length, lengths[index])
@@ -168,7 +169,8 @@ def test_cail_outer_loss_and_its_gradient_match_numpy():
     def outer(log_confidence):
         return ranking.cail_outer_loss(
             log_confidence, inner_loss, jnp.asarray(theta, jnp.float32), learning_rate,
-            lambda params: jax.nn.softplus(-(inputs @ params)), trajectories, pairs, length,
+            lambda params, x: jax.nn.softplus(-(x @ params)), inputs, trajectories, pairs,
+            length,
         )[0]  # fmt: skip
 
     log_confidence = RNG.normal(size=3) * 0.5
