@@ -22,6 +22,7 @@ import argparse
 import dataclasses
 import math
 import time
+import types
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -30,6 +31,7 @@ import numpy as np
 from experiments.cli import HelpFormatter, check_output_directory, known_names
 from pngail_jax import compilation, envs
 from pngail_jax.integrity import atomic_write_text, read_json, write_json
+from pngail_jax.report import group_label
 
 FIG2_METHODS = ("gail", "2iwil", "icgail", "wgail", "pngail")
 FIG3_METHODS = ("pngail", "pngail-no-bsc", "pngail-no-pn")
@@ -519,8 +521,11 @@ def mixture(source, num_optimal: int, num_intermediate: int, demo_set: DemoSet):
 # -- grids -----------------------------------------------------------------------------------
 
 
-def sweep_arguments(grid: GridSpec, demos: tuple[Path, float], budget: Budget, num_rows: int):
-    """The ``experiments.sweep`` flags of a grid (without ``--out``)."""
+def sweep_arguments(
+    grid: GridSpec, demos: tuple[Path, float], budget: Budget, num_rows: int | None
+):
+    """The ``experiments.sweep`` flags of a grid (without ``--out``); ``num_rows``, the
+    demonstrations' row count, is read only by a grid with fewer unlabelled rows (Fig. 6)."""
     from pngail_jax.run_config import RunConfig
 
     path, scale = demos
@@ -614,8 +619,9 @@ def series_statistics(series: Series, curves, summary) -> dict:
             "ci95": [low, high],
             "seeds": summary_of["num_seeds"],
         }
-    label = series.method if len(curves) == len({k[0] for k in curves}) else None
-    row = summary["methods"].get(label or f"{series.method} [{matches[0][1]}]", {})
+    settings = list(dict.fromkeys(setting for _, setting in curves))
+    cell = types.SimpleNamespace(method=series.method, setting=matches[0][1])
+    row = summary["methods"].get(group_label(cell, settings), {})  # summary.json's key
     result["average_return"] = [row.get("average_return_mean"), row.get("average_return_std")]
     for name in ("mae", "rmse"):
         result[f"confidence_{name}"] = [
@@ -907,12 +913,14 @@ def main(argv=None) -> Path:
     demos = demo_paths(grids, out, budget, released, cache_flags)
     timings_path = out / "timings.json"
     timings = read_json(timings_path) if timings_path.exists() else {}
-    for name, grid in grids.items():
-        from pngail_jax.demos import load_demonstrations
+    from pngail_jax.demos import load_demonstrations
 
+    num_rows = {}  # of each demonstration set, read once, where a grid sizes its split by it
+    for name, grid in grids.items():
         path, scale = demos[grid.demos]
-        num_rows = load_demonstrations(path, action_scale=scale).num_rows
-        flags = sweep_arguments(grid, demos[grid.demos], budget, num_rows)
+        if grid.unlabelled_fraction != 1 and grid.demos not in num_rows:
+            num_rows[grid.demos] = load_demonstrations(path, action_scale=scale).num_rows
+        flags = sweep_arguments(grid, demos[grid.demos], budget, num_rows.get(grid.demos))
         seconds = run_grid(grid, out / "grids" / name, flags, cache_flags)
         if seconds:
             timings[name] = timings.get(name, 0.0) + seconds

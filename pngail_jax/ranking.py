@@ -73,9 +73,10 @@ class Trajectories:
         return jnp.arange(self.observations.shape[1]) < self.lengths[:, None]
 
 
-def trajectories_of(observations, actions, trajectory_ids, confidence) -> Trajectories:
+def trajectories_of(observations, actions, trajectory_ids, confidence):
     """Host-side: the demonstrations' trajectories (``trajectory_ids`` int[N] group the rows,
-    in row order) padded to the longest, each scored by its mean confidence."""
+    in row order) padded to the longest, each scored by its mean confidence, and int32[N]:
+    each row's trajectory index among them. Returns ``(Trajectories, row_trajectory)``."""
     ids = np.asarray(trajectory_ids)
     order = list(dict.fromkeys(ids.tolist()))
     longest = max(int((ids == i).sum()) for i in order)
@@ -90,9 +91,12 @@ def trajectories_of(observations, actions, trajectory_ids, confidence) -> Trajec
         obs[k, : len(rows)] = observations[rows]
         act[k, : len(rows)] = actions[rows]
         score[k] = np.mean(confidence[rows])
-    return Trajectories(
+    index_of = {trajectory: k for k, trajectory in enumerate(order)}
+    row_trajectory = np.array([index_of[trajectory] for trajectory in ids.tolist()], np.int32)
+    trajectories = Trajectories(
         jnp.asarray(obs), jnp.asarray(act), jnp.asarray(lengths), jnp.asarray(score)
     )
+    return trajectories, jnp.asarray(row_trajectory)
 
 
 @struct.dataclass

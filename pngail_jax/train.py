@@ -191,11 +191,9 @@ class AdversarialTrainer:
         # trajectory ids; each row's trajectory index.
         self.trajectories = self._row_trajectory = None
         if demos.trajectory_ids is not None and self.has_confidence:
-            self.trajectories = ranking.trajectories_of(
+            self.trajectories, self._row_trajectory = ranking.trajectories_of(
                 demos.observations, demos.actions, demos.trajectory_ids, demos.confidence
             )
-            order = {t: k for k, t in enumerate(dict.fromkeys(demos.trajectory_ids.tolist()))}
-            self._row_trajectory = jnp.asarray([order[t] for t in demos.trajectory_ids.tolist()])
         self.state_network = ranking.StateReward(config.ranking.hidden_sizes)
 
     def check_label_ratios(self, label_ratios) -> None:
