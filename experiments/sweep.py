@@ -540,6 +540,12 @@ def build(config: RunConfig, saved: SavedRun | None) -> SweepRun:
     )
     if normalizer is None:
         print("note: the demonstrations carry no random/optimal returns: no normalised return")
+    if trainer.num_clipped_rows:
+        print(
+            f"note: {trainer.num_clipped_rows} of {demos.num_rows} demonstration rows have "
+            "actions beyond the bounds; the discriminator sees them clipped, as the agent's "
+            "(docs/methods.md)"
+        )
     print("compiling ...", flush=True)
     grid = Grid(trainer, inputs, chunk_blocks, devices)
     print(

@@ -8,9 +8,12 @@
    discriminator *before* this iteration's update; one Adam step of the discriminator on the
    agent batch and as many demonstration rows drawn with replacement; one TRPO update.
 
-The discriminator sees agent actions clipped to the action bounds (what the environment
-applies) and demonstrations in the environment's units. The reference compares unclipped agent
-torques with half-scale Pendulum demonstrations; we do not copy that mismatch.
+The discriminator (and every other learned function that compares the agent with the
+demonstrations: WGAIL's weights, behaviour cloning, CAIL's rankings) sees agent and
+demonstration actions in one space, the action the environment applies: both clipped to the
+action bounds. The reference compares the policy's unclipped outputs on both sides (and, on
+Pendulum, full-scale agent torques with half-scale demonstrations); we compare what acts on the
+physics, so no feature the environment ignores (|a| beyond the bound) separates the two.
 
 ``train`` is ``init`` followed by ``run_blocks``, so a host loop can run the same computation
 in chunks (``pngail_jax.grid``).
@@ -177,7 +180,18 @@ class AdversarialTrainer:
         self.trpo = TRPO(config.trpo, env)
         self.discriminator = Discriminator(config.discriminator_hidden_sizes)
         self.optimizer = optax.scale_by_adam()
-        self._demo_inputs = jnp.asarray(demos.inputs)
+        # One action space on both sides of every learned comparison with the agent (the
+        # discriminator, WGAIL's weights, BC, CAIL's rankings): the action the environment
+        # applies. The agent's actions are clipped to the bounds in ``_iteration``, the
+        # demonstrations' here (the authors' MuJoCo files store unclipped policy actions, and
+        # a discriminator could otherwise tell them apart by |a| > 1 alone). The confidence
+        # classifier compares demonstrations only with each other and reads the file's rows,
+        # as the authors' classifier does.
+        low, high = np.asarray(env.action_low), np.asarray(env.action_high)
+        self.num_clipped_rows = int(demos.rows_beyond(low, high).sum())
+        applied = demos.clipped(low, high)
+        self._demo_inputs = jnp.asarray(applied.inputs)
+        self._classifier_inputs = jnp.asarray(demos.inputs)
         # Without confidences every row gets r = 1; no method that reads r may run then.
         self._confidence = jnp.asarray(
             demos.confidence if self.has_confidence else np.ones(demos.num_rows, np.float32)
@@ -192,7 +206,7 @@ class AdversarialTrainer:
         self.trajectories = self._row_trajectory = None
         if demos.trajectory_ids is not None and self.has_confidence:
             self.trajectories, self._row_trajectory = ranking.trajectories_of(
-                demos.observations, demos.actions, demos.trajectory_ids, demos.confidence
+                applied.observations, applied.actions, demos.trajectory_ids, demos.confidence
             )
         self.state_network = ranking.StateReward(config.ranking.hidden_sizes)
 
@@ -254,7 +268,7 @@ class AdversarialTrainer:
             predicted, _, _ = train_classifier(
                 self.config.classifier,
                 spec.classifier,
-                inputs,
+                self._classifier_inputs[split.indices],
                 split.confidence,
                 split.labelled,
                 classifier_key,

@@ -175,6 +175,19 @@ class Demonstrations:
         """float32[N, observation_size + action_size]: rows [s, a]."""
         return np.concatenate([self.observations, self.actions], axis=1)
 
+    def rows_beyond(self, low, high) -> np.ndarray:
+        """bool[N]: rows with an action outside ``[low, high]`` in some dimension."""
+        return ((self.actions < low) | (self.actions > high)).any(axis=1)
+
+    def clipped(self, low, high) -> Demonstrations:
+        """These demonstrations with every action clipped to ``[low, high]`` (float32[A]
+        each): the action the environment applies, since the physics clamps controls to
+        their range. Unchanged (the same arrays) when every action is already inside."""
+        if not self.rows_beyond(low, high).any():
+            return self
+        actions = np.clip(self.actions, low, high).astype(np.float32)
+        return dataclasses.replace(self, actions=actions)
+
     def check_env(self, env) -> None:
         """Raises ``DemonstrationError`` unless the sizes match ``env``'s and no action lies
         beyond ``ACTION_BOUND_MULTIPLE`` times the magnitude of ``env``'s action bound
