@@ -11,6 +11,7 @@ Only rows that a ``.npz`` file's ``labelled`` mask allows are labelled.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import time
 from pathlib import Path
@@ -128,11 +129,10 @@ def main(argv=None) -> dict:
         check_labelled_mask(demos, args.demos, num_labelled)
     except DemonstrationError as error:
         raise SystemExit(f"classify: {error}") from None
-    unlabelled_per_labelled = math.ceil((traj_size - num_labelled) / num_labelled)
-    config = ClassifierConfig(
-        num_steps=args.steps,
-        labelled_batch_size=args.batch_size,
-        unlabelled_batch_size=args.batch_size * unlabelled_per_labelled,
+    # The authors' batch: per labelled row, int(n_u / n_c) unlabelled rows.
+    authors = ClassifierConfig(num_steps=args.steps, labelled_batch_size=args.batch_size)
+    config = dataclasses.replace(
+        authors, unlabelled_batch_size=authors.unlabelled_rows_per_step(traj_size, num_labelled)
     )
     specs = [METHODS[m]() if m == "sc" else METHODS[m](args.eps) for m in args.methods]
     stacked = jax.tree.map(lambda *x: jnp.repeat(jnp.stack(x), args.seeds, axis=0), *specs)

@@ -226,11 +226,19 @@ class RunConfig:
         """The static configuration of the trainer this run builds on demonstrations of
         ``num_rows`` rows (None: ``num_demos`` as given, every row when None)."""
         num_demos = self.num_demos if num_rows is None else self.task_num_demos(num_rows)
+        classifier = self.classifier
+        if classifier.unlabelled_batch_size is None and num_demos is not None:
+            # The unlabelled batch as wide as the grid's smallest label ratio needs, no wider.
+            width = max(
+                classifier.unlabelled_rows_per_step(num_demos, max(round(r * num_demos), 1))
+                for r in self.label_ratios
+            )
+            classifier = dataclasses.replace(classifier, max_unlabelled_batch_size=width)
         return AdversarialConfig(
             trpo=self.settings.trpo_config(
                 self.iterations, fisher=self.fisher, fisher_subsample=self.fisher_subsample
             ),
-            classifier=self.classifier,
+            classifier=classifier,
             num_demos=num_demos,
             discriminator_hidden_sizes=self.discriminator_hidden_sizes,
             phases=required_phases(self.methods),
@@ -410,7 +418,11 @@ def _classifier_fields(values: dict[str, Any]) -> dict[str, Any]:
     """``ClassifierConfig`` keyword arguments checked and in their stored types (its own
     checks let a bool, a float learning rate of NaN or a negative width through)."""
     checked = dict(values)
-    for name in ("num_steps", "labelled_batch_size", "unlabelled_batch_size"):
+    for name in (
+        "num_steps", "labelled_batch_size", "unlabelled_batch_size", "max_unlabelled_batch_size"
+    ):  # fmt: skip
+        if name == "unlabelled_batch_size" and checked.get(name) is None:
+            continue  # the authors' int(n_u / n_c)
         if name in checked:
             checked[name] = _integer(f"ClassifierConfig.{name}", checked[name], minimum=1)
     if "learning_rate" in checked:

@@ -212,14 +212,26 @@ class AdversarialTrainer:
 
     def check_label_ratios(self, label_ratios) -> None:
         """Raises ``DemonstrationError`` when the demonstrations' ``labelled`` mask allows
-        fewer rows than the largest ratio labels, ``round(label_ratio * num_demos)``; call it on
-        the host before building a grid (the split itself labels at most the allowed rows)."""
+        fewer rows than the largest ratio labels, ``round(label_ratio * num_demos)``, and
+        ``ValueError`` when the smallest ratio needs a wider unlabelled classifier batch than
+        the config compiles; call it on the host before building a grid (the split itself
+        labels at most the allowed rows)."""
         largest = max(float(ratio) for ratio in label_ratios)
         requested = round(largest * self.num_demos)
         if self.has_confidence and requested > self.num_allowed:
             raise DemonstrationError(
                 f"label ratio {largest:g} of {self.num_demos} rows asks for {requested} labelled "
                 f"rows, but the demonstrations' labelled mask allows only {self.num_allowed}"
+            )
+        classifier = self.config.classifier
+        smallest = min(float(ratio) for ratio in label_ratios)
+        num_labelled = max(round(smallest * self.num_demos), 1)
+        needed = classifier.unlabelled_rows_per_step(self.num_demos, num_labelled)
+        if needed > classifier.unlabelled_batch_width:
+            raise ValueError(
+                f"label ratio {smallest:g} of {self.num_demos} rows needs {needed} unlabelled "
+                "rows per classifier step (n_u // n_c), more than ClassifierConfig's "
+                f"max_unlabelled_batch_size {classifier.max_unlabelled_batch_size}: raise it"
             )
 
     def check_methods(self, methods) -> None:

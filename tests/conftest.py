@@ -2,6 +2,7 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 
 def run_x64(test_file: str, function_name: str) -> dict:
@@ -35,3 +36,13 @@ def run_in_subprocess(test_file: str, function_name: str, environment: dict) -> 
     results = [line for line in done.stdout.splitlines() if line.startswith("RESULT ")]
     assert done.returncode == 0 and results, f"subprocess failed:\n{done.stderr[-3000:]}"
     return json.loads(results[-1].removeprefix("RESULT "))
+
+
+def authors_data(name: str) -> Path:
+    """The authors' released demonstrations ``name`` folder (``pendulum``, ``released``): the
+    documented download folder ``data/<name>`` of this checkout, else the copy beside the
+    checkout that the project's machines and CI have (``../shared/data/<name>``). Tests skip
+    when neither exists."""
+    root = Path(__file__).resolve().parents[1]
+    candidates = (root / "data" / name, root.parent / "shared" / "data" / name)
+    return next((folder for folder in candidates if folder.exists()), candidates[0])

@@ -1,15 +1,15 @@
 """SC and BSC losses against NumPy evaluations of the formulas, and Table 1 on Pendulum."""
 
-from pathlib import Path
-
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import authors_data
 
-from pngail_jax.confidence import bsc_loss, logistic_loss, sc_loss
+from pngail_jax.confidence import ClassifierConfig, bsc_loss, logistic_loss, sc_loss
+from pngail_jax.run_config import RunConfig
 
-AUTHORS_PENDULUM = Path(__file__).resolve().parents[1] / "data" / "pendulum"
+AUTHORS_PENDULUM = authors_data("pendulum")
 
 
 def f32(x):
@@ -100,6 +100,40 @@ def test_sc_matches_numpy(batch, positive_branch):
     np.testing.assert_allclose(loss, max(pos, 0) + max(neg, 0), rtol=1e-5)
     np.testing.assert_allclose(metrics["sc/positive_risk"], pos, rtol=1e-5)
     np.testing.assert_allclose(metrics["sc/negative_risk"], neg, rtol=1e-5)
+
+
+@pytest.mark.parametrize("positive_branch", [True, False])
+def test_masked_unlabelled_rows_drop_out_of_both_losses(batch, positive_branch):
+    """A batch of static width whose last rows are masked (weights 1/k on the first k, 0
+    after) is the loss on the first k rows: how one grid holds several label ratios, each
+    with the authors' int(n_u / n_c) unlabelled rows per step."""
+    g_c, r, g_u = batch
+    k, beta = 9, 0.9
+    weights = np.where(np.arange(len(g_u)) < k, 1 / k, 0.0)
+    garbage = g_u.copy()
+    garbage[k:] = 1e3  # masked rows may hold anything
+    with jax.enable_x64(True):
+        bsc, _ = bsc_loss(*map(jnp.asarray, (g_c, r, garbage)), beta, beta, 10.0, weights)
+        sc, _ = sc_loss(*map(jnp.asarray, (g_c, r, garbage)), beta, positive_branch, weights)
+    np.testing.assert_allclose(bsc, numpy_bsc(g_c, r, g_u[:k], beta, beta, 10.0)[0], rtol=1e-10)
+    expected_sc, _ = sc_loss(*map(jnp.asarray, (g_c, r, g_u[:k])), beta, positive_branch)
+    np.testing.assert_allclose(sc, expected_sc, rtol=1e-6)
+
+
+def test_the_classifier_batch_holds_int_nu_over_nc_unlabelled_rows():
+    """The authors' code draws int(n_u / n_c) unlabelled rows per labelled row: 4, 9, 19, 32
+    at label ratios 0.2, 0.1, 0.05, 0.03 of 1,000 rows; a sweep's batch is as wide as its
+    smallest ratio needs, and a fixed size stays fixed."""
+    config = ClassifierConfig()
+    counts = [config.unlabelled_rows_per_step(1000, round(ratio * 1000)) for ratio in RATIOS]
+    assert counts == [4, 9, 19, 32]
+    assert ClassifierConfig(unlabelled_batch_size=4).unlabelled_rows_per_step(1000, 50) == 4
+    run = RunConfig(label_ratios=(0.2, 0.05))
+    assert run.adversarial_config(1000).classifier.unlabelled_batch_width == 19
+    assert RunConfig().adversarial_config(1000).classifier.unlabelled_batch_width == 4
+
+
+RATIOS = (0.2, 0.1, 0.05, 0.03)
 
 
 def test_sc_non_negative_correction_zeroes_a_negative_risk():

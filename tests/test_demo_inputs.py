@@ -11,6 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import authors_data
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
@@ -27,7 +28,7 @@ from pngail_jax.demos import (
     save_npz,
 )
 
-AUTHORS_PENDULUM = Path(__file__).resolve().parents[1] / "data" / "pendulum"
+AUTHORS_PENDULUM = authors_data("pendulum")
 needs_authors_pendulum = pytest.mark.skipif(
     not (AUTHORS_PENDULUM / "Pendulum-v1_mixture.npy").exists(),
     reason=f"the authors' Pendulum set is not at {AUTHORS_PENDULUM}",

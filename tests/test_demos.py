@@ -5,6 +5,7 @@ from pathlib import Path
 import jax
 import numpy as np
 import pytest
+from conftest import authors_data
 
 from pngail_jax import envs
 from pngail_jax.demos import (
@@ -16,7 +17,7 @@ from pngail_jax.demos import (
     save_npz,
 )
 
-AUTHORS_PENDULUM = Path(__file__).resolve().parents[1] / "data" / "pendulum"
+AUTHORS_PENDULUM = authors_data("pendulum")
 
 
 def _valid(**overrides):

@@ -117,3 +117,23 @@ def test_a_method_whose_seeds_all_diverge_is_null_with_a_reason(tmp_path):
     )
     assert "every seed diverged" in written["null_means"]
     assert written["probability_of_improvement"]["gail"]["estimate"] is None
+
+
+def test_late_average_is_the_mean_of_the_last_tenth_of_the_evaluations():
+    """Two conventions under their own names: the average over all of training and over its
+    last 10% (ceil of a tenth of the evaluations): 3 of 30, 5 of 50, 1 of 5, 2 of 11."""
+    assert [report.late_evaluations(n) for n in (30, 50, 5, 11, 1)] == [3, 5, 1, 2, 1]
+    cells = make_cells(["gail", "pngail"], 2)
+    metrics = synthetic_metrics(cells, num_iterations=300, eval_every=10)
+    summary = report.summarize(cells, metrics, NORMALIZER, 1000.0, 2.0)
+    evaluations = metrics["eval/return"][:, 9::10]  # iterations 10, 20, ..., 300
+    assert evaluations.shape == (4, 30) and np.isfinite(evaluations).all()
+    for index, seed in enumerate(summary["methods"]["pngail"]["per_seed"]):
+        row = 2 + index
+        np.testing.assert_allclose(seed["late_average_return"], evaluations[row, -3:].mean())
+        np.testing.assert_allclose(seed["average_return"], evaluations[row].mean())
+        np.testing.assert_allclose(
+            seed["late_average_normalized_return"], (evaluations[row, -3:].mean() + 1200) / 1000
+        )
+    markdown = report.summary_markdown(summary, cells, metrics, "t")
+    assert "average over the last 10%" in markdown and "average over all of training" in markdown
