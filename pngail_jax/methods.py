@@ -53,7 +53,7 @@ class MethodSpec:
     firl_rkl_coef: jax.Array  # ... reverse KL ...
     firl_js_coef: jax.Array  # ... Jensen-Shannon (pngail_jax.firl.divergence_h)
     cail_coef: jax.Array  # 1: r is CAIL's learned per-trajectory confidence ("cail" phase)
-    cail_learning_rate: jax.Array  # CAIL's outer step on its log-confidences (0: frozen at 1)
+    cail_learning_rate: jax.Array  # CAIL's gradient step on beta (0: beta frozen at 1)
 
     @property
     def classifier(self) -> ClassifierSpec:
@@ -111,9 +111,9 @@ APPENDIX_PRESETS: dict[str, Preset] = {
         "rankings", _LEARNED_REWARD, ("demo_rankings",)),
     "drex": Preset("D-REX: T-REX on rollouts of a cloned policy ranked by their noise",
         "none", {**_LEARNED_REWARD, "noise_rankings_coef": 1.0}, ("bc", "noise_rankings")),
-    "cail": Preset("CAIL: per-trajectory confidences learned by a bilevel ranking loss",
+    "cail": Preset("CAIL: per-pair confidences learned by a bilevel ranking loss",
         "rankings", {"agent_coef": 1.0, "importance_weighted_coef": 1.0, "cail_coef": 1.0,
-                     "cail_learning_rate": 0.01}, ("cail",)),
+                     "cail_learning_rate": 0.1}, ("cail",)),
     "firl-fkl": Preset("f-IRL, forward KL: state reward from the divergence's gradient",
         "none", {**_FIRL, "firl_fkl_coef": 1.0}, ("firl",)),
     "firl-rkl": Preset("f-IRL, reverse KL", "none", {**_FIRL, "firl_rkl_coef": 1.0},

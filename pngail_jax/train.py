@@ -30,7 +30,7 @@ import numpy as np
 import optax
 from flax import struct
 
-from pngail_jax import envs, firl, ranking
+from pngail_jax import cail, envs, firl, ranking
 from pngail_jax.bc import BCConfig, train_bc
 from pngail_jax.confidence import ClassifierConfig, confidence_errors, train_classifier
 from pngail_jax.demos import DemonstrationError, Demonstrations, make_split
@@ -63,6 +63,7 @@ class AdversarialConfig:
     phases: tuple[str, ...] = ()
     ranking: ranking.RankingConfig = ranking.RankingConfig()
     bc: BCConfig = BCConfig()
+    cail: cail.CAILConfig = cail.CAILConfig()
 
     def __post_init__(self):
         unknown = [phase for phase in self.phases if phase not in PHASES]
@@ -132,7 +133,10 @@ class TrainState:
     # The appendix baselines' state; None when their phase is not compiled.
     ranking_reward_params: dict | None = None  # T-REX / D-REX's learned r(s)
     firl: FirlState | None = None
-    cail_log_confidence: jax.Array | None = None  # float32[K]: log beta per trajectory
+    cail_confidence: jax.Array | None = None  # float32[M]: CAIL's beta per split row
+    # bool[K]: the demonstration trajectories whose ranking T-REX and CAIL may see (a share
+    # ``label_ratio`` of them, at least 2, drawn per seed: the label information PN-GAIL gets).
+    ranked_trajectories: jax.Array | None = None
 
 
 @struct.dataclass
@@ -298,8 +302,9 @@ class AdversarialTrainer:
         trpo_state = self.trpo.init(trpo_key)
         # Keys of the appendix phases come from fold_in, so the split above (and every number
         # of the seven methods) is the same whichever phases a grid compiles.
+        ranked = self._ranked_trajectories(hyperparams.label_ratio, jax.random.fold_in(key, 2))
         phase_state, trpo_state = self._init_phases(
-            spec, inputs, confidence, trpo_state, jax.random.fold_in(key, 1)
+            spec, inputs, confidence, trpo_state, jax.random.fold_in(key, 1), ranked
         )
         state = TrainState(
             trpo=trpo_state,
@@ -315,6 +320,7 @@ class AdversarialTrainer:
             iteration=jnp.zeros((), jnp.int32),
             eval_keys=jax.random.split(eval_key, self.config.trpo.num_eval_episodes),
             key=carry_key,
+            ranked_trajectories=ranked,
             **phase_state,
         )
         errors = confidence_errors(confidence, split.true_confidence, split.labelled)
@@ -322,7 +328,19 @@ class AdversarialTrainer:
             errors = jax.tree.map(lambda e: jnp.full_like(e, jnp.nan), errors)
         return state, {f"confidence/{name}": value for name, value in errors.items()}
 
-    def _init_phases(self, spec, inputs, confidence, trpo_state, key):
+    def _ranked_trajectories(self, label_ratio, key):
+        """bool[K]: a share ``label_ratio`` of the demonstration trajectories (rounded, at
+        least 2), drawn per seed, whose ranking T-REX and CAIL may see: the same label
+        information as the ``label_ratio`` of rows PN-GAIL's D_c holds. None when no compiled
+        phase ranks demonstrations."""
+        if self.trajectories is None or not {"demo_rankings", "cail"} & set(self.config.phases):
+            return None
+        num = self.trajectories.lengths.shape[0]
+        num_ranked = jnp.maximum(jnp.round(label_ratio * num), 2)
+        position = jax.random.permutation(key, num)
+        return jnp.zeros(num, bool).at[position].set(jnp.arange(num) < num_ranked)
+
+    def _init_phases(self, spec, inputs, confidence, trpo_state, key, ranked=None):
         """The appendix phases this trainer compiles: behaviour cloning, reward learning from
         rankings, f-IRL's and CAIL's initial state. Returns (TrainState fields, trpo_state)."""
         phases, config = self.config.phases, self.config
@@ -368,7 +386,7 @@ class AdversarialTrainer:
                 reward, self.optimizer.init(reward), disc, self.optimizer.init(disc)
             )
         if "cail" in phases:
-            fields["cail_log_confidence"] = jnp.zeros(self.trajectories.lengths.shape)
+            fields["cail_confidence"] = jnp.ones(self.num_demos)
         return fields, trpo_state
 
     def _importance_weights(self, state: TrainState) -> jax.Array:
@@ -410,11 +428,8 @@ class AdversarialTrainer:
             )
             return loss, (metrics, logits_agent)
 
-        confidence, stats = state.confidence, state.stats
-        if "cail" in phases:
-            confidence, stats = self._cail_confidence(spec, state, state.cail_log_confidence)
         grads, (disc_metrics, logits_agent) = jax.grad(loss_fn, has_aux=True)(
-            state.discriminator_params, confidence, stats
+            state.discriminator_params, state.confidence, state.stats
         )
         # The reward comes from the discriminator (and learned rewards) before this
         # iteration's steps.
@@ -431,11 +446,6 @@ class AdversarialTrainer:
             phase_fields["firl"], phase_metrics = self._firl_update(
                 hyperparams, spec, state.firl, transitions.obs, demo_batch
             )
-        if "cail" in phases:
-            phase_fields["cail_log_confidence"], cail_metrics = self._cail_update(
-                hyperparams, spec, state, loss_fn, jax.random.fold_in(batch_key, 1)
-            )
-            phase_metrics = {**phase_metrics, **cail_metrics}
         rewards = rewards.reshape(trpo_config.unroll_length, trpo_config.num_envs)
         disc_params, disc_optimizer_state = self._adam_step(
             state.discriminator_params,
@@ -443,6 +453,18 @@ class AdversarialTrainer:
             grads,
             hyperparams.discriminator_learning_rate,
         )
+        if "cail" in phases:  # CAIL's cells take the discriminator of its rounds instead
+            (cail_params, cail_optimizer_state, beta), cail_metrics = self._cail_rounds(
+                spec, state, agent_inputs, jax.random.fold_in(batch_key, 1)
+            )
+            use = spec.cail_coef > 0
+            disc_params = _tree_where(use, cail_params, disc_params)
+            disc_optimizer_state = _tree_where(use, cail_optimizer_state, disc_optimizer_state)
+            disc_metrics["disc/loss"] = jnp.where(
+                use, cail_metrics["cail/disc_loss"], disc_metrics["disc/loss"]
+            )
+            phase_fields["cail_confidence"] = beta
+            phase_metrics = {**phase_metrics, **cail_metrics}
         updated, trpo_metrics = self.trpo.update(hyperparams.trpo, trpo_state, transitions, rewards)
         if "bc" in phases:  # a cloned policy that no RL moves (BC's cells) stays as it is
             frozen = spec.policy_update_coef == 0
@@ -505,39 +527,87 @@ class AdversarialTrainer:
         )
         return new_state, {**disc_metrics, **reward_metrics}
 
-    def _cail_confidence(self, spec, state: TrainState, log_confidence):
-        """CAIL's cells read r = beta of each row's trajectory (and its mean) instead of the
-        given / classified confidence."""
-        beta = jnp.exp(log_confidence)[self._row_trajectory[state.demo_rows]]
-        cail = spec.cail_coef > 0
-        stats = state.stats.replace(
-            mean_confidence=jnp.where(cail, beta.mean(), state.stats.mean_confidence)
+    def _cail_rounds(self, spec, state: TrainState, agent_inputs, key):
+        """CAIL's ``num_rounds`` rounds of this iteration (``pngail_jax.cail``): per round,
+        the lookahead, the outer step on beta, and one Adam step of the discriminator on a
+        fresh batch. agent_inputs float[N, O + A] is this iteration's rollout. Returns
+        ``((discriminator params, its Adam state, beta float[M]), metrics)``, the metrics
+        averaged over the rounds."""
+        config, trajectories = self.config.cail, self.trajectories
+        features = jnp.concatenate([trajectories.observations, trajectories.actions], axis=-1)
+        valid = trajectories.valid
+        ranked = state.ranked_trajectories.astype(jnp.float32)
+        num_agent = agent_inputs.shape[0]
+
+        def batch_loss(params, beta, agent_rows, demo_rows):
+            logits_agent = self.discriminator.apply(params, agent_inputs[agent_rows])
+            logits_demo = self.discriminator.apply(
+                params, self._demo_inputs[state.demo_rows[demo_rows]]
+            )
+            return cail.inner_loss(logits_agent, logits_demo, beta[demo_rows])
+
+        def ranking_loss(params, index):
+            returns = cail.trajectory_returns(
+                lambda x: policy_reward(self.discriminator.apply(params, x)),
+                features[index],
+                valid[index],
+            )
+            return cail.margin_ranking_loss(returns, trajectories.score[index])
+
+        def round_(carry, round_key):
+            params, optimizer_state, beta = carry
+            index_key, agent_key, demo_key, step_agent_key, step_demo_key = jax.random.split(
+                round_key, 5
+            )
+            index = jax.random.choice(
+                index_key, ranked.shape[0], (config.num_trajectories,), p=ranked / ranked.sum()
+            )
+            rows = lambda k, n: jax.random.randint(k, (config.batch_size,), 0, n)  # noqa: E731
+            agent_rows, demo_rows = rows(agent_key, num_agent), rows(demo_key, self.num_demos)
+            beta = cail.renormalize(beta, config.beta_max)
+
+            def outer_loss(beta):
+                grads = jax.grad(batch_loss)(params, beta, agent_rows, demo_rows)
+                lookahead = jax.tree.map(
+                    lambda p, g: p - config.lookahead_learning_rate * g, params, grads
+                )
+                return ranking_loss(lookahead, index)
+
+            beta_grads, metrics = jax.grad(outer_loss, has_aux=True)(beta)
+            beta = cail.renormalize(beta - spec.cail_learning_rate * beta_grads, config.beta_max)
+            step_rows = rows(step_agent_key, num_agent), rows(step_demo_key, self.num_demos)
+            loss, grads = jax.value_and_grad(batch_loss)(params, beta, *step_rows)
+            new_params, new_optimizer_state = self._adam_step(
+                params, optimizer_state, grads, config.discriminator_learning_rate
+            )
+            skipped = jnp.zeros(())
+            if config.pretrain_iterations is not None:  # step only where the gradients agree
+                ranking_grads = jax.grad(lambda p: ranking_loss(p, index)[0])(params)
+                product = sum(jax.tree.leaves(jax.tree.map(jnp.vdot, grads, ranking_grads)))
+                step = (product >= 0) | (state.iteration < config.pretrain_iterations)
+                new_params = _tree_where(step, new_params, params)
+                new_optimizer_state = _tree_where(step, new_optimizer_state, optimizer_state)
+                skipped = 1.0 - step.astype(jnp.float32)
+            metrics = {**metrics, "cail/disc_loss": loss, "cail/skipped_steps": skipped}
+            return (new_params, new_optimizer_state, beta), metrics
+
+        carry = (state.discriminator_params, state.discriminator_optimizer_state)
+        carry, metrics = jax.lax.scan(
+            round_, (*carry, state.cail_confidence), jax.random.split(key, config.num_rounds)
         )
-        return jnp.where(cail, beta, state.confidence), stats
+        metrics = jax.tree.map(jnp.mean, metrics)
+        metrics["cail/skipped_steps"] *= config.num_rounds  # a count per iteration
+        beta = carry[2]
+        return carry, {**metrics, "cail/beta_std": beta.std(), "cail/beta_max": beta.max()}
 
-    def _cail_update(self, hyperparams, spec, state: TrainState, loss_fn, key):
-        """CAIL's outer step: the ranking loss of the reward after one gradient step of the
-        discriminator on the beta-weighted loss, differentiated through that step."""
-        trajectories, ranking_config = self.trajectories, self.config.ranking
-        inputs = jnp.concatenate([trajectories.observations, trajectories.actions], axis=-1)
-        pairs = ranking.sample_pairs(
-            key, trajectories, ranking_config.pairs_per_step, ranking_config.snippet_length
-        )
-
-        def inner_loss(params, log_confidence):
-            return loss_fn(params, *self._cail_confidence(spec, state, log_confidence))[0]
-
-        def outer_loss(log_confidence):
-            return ranking.cail_outer_loss(
-                log_confidence, inner_loss, state.discriminator_params,
-                hyperparams.discriminator_learning_rate,
-                lambda params, x: policy_reward(self.discriminator.apply(params, x)), inputs,
-                trajectories, pairs, ranking_config.snippet_length,
-            )  # fmt: skip
-
-        grads, metrics = jax.grad(outer_loss, has_aux=True)(state.cail_log_confidence)
-        new = state.cail_log_confidence - spec.cail_learning_rate * grads
-        return new, {f"cail/{name.split('/')[1]}": value for name, value in metrics.items()}
+    def cail_trajectory_confidence(self, state: TrainState) -> jax.Array:
+        """float[K]: CAIL's mean beta over each demonstration trajectory's rows in the split
+        (NaN for a trajectory with no row in it)."""
+        trajectory = self._row_trajectory[state.demo_rows]
+        num = self.trajectories.lengths.shape[0]
+        total = jax.ops.segment_sum(state.cail_confidence, trajectory, num)
+        count = jax.ops.segment_sum(jnp.ones_like(state.cail_confidence), trajectory, num)
+        return jnp.where(count > 0, total / jnp.maximum(count, 1), jnp.nan)
 
     def run_blocks(self, hyperparams: Hyperparams, spec: MethodSpec, state: TrainState, num_blocks):
         return run_evaluated_blocks(

@@ -1,0 +1,114 @@
+"""CAIL (Zhang et al., 2021) as its codebase runs it, on this project's GAIL discriminator.
+
+CAIL learns a confidence beta for every demonstration state-action pair together with the
+discriminator. Each iteration runs ``CAILConfig.num_rounds`` rounds of:
+
+1. **renormalise**: ``beta <- clip(beta / mean(beta), 0, beta_max)`` (mean over every row);
+2. **lookahead**: one plain gradient step of the confidence-weighted discriminator loss on a
+   batch of B agent and B demonstration pairs,
+   ``theta' = theta - lookahead_lr * grad_theta L(theta, beta)``, with
+   ``L = mean_agent sp(-z) + mean_demo beta sp(z)`` (agent label 1, ``sp`` softplus);
+3. **outer step on beta**: ``beta <- beta - confidence_lr * grad_beta L_rank(theta'(beta))``,
+   where ``L_rank`` is the margin ranking loss (margin 0) over *all pairs* of
+   ``num_trajectories`` whole ranked trajectories drawn with replacement, of the summed reward
+   ``R(tau) = sum_t sp(-z_theta'(s_t, a_t))``; the gradient reaches beta through the lookahead
+   (second order);
+4. **renormalise** again, then one Adam step of the discriminator on a fresh batch with beta
+   held fixed (optionally only when that step's gradient agrees with the ranking loss's, see
+   ``pretrain_iterations``).
+
+Everything here is pure and jittable; ``pngail_jax.train`` calls it inside the one-program grid.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import chex
+import jax
+import jax.numpy as jnp
+
+# The codebase's smoothing of the hinge where two returns differ by less than this.
+SMOOTHING = 1e-5
+
+
+@dataclasses.dataclass(frozen=True)
+class CAILConfig:
+    """Static settings; defaults are the CAIL codebase's (``docs/methods.md`` lists them).
+
+    ``pretrain_iterations``: from this iteration on, the discriminator steps only when the dot
+    product of its gradient with the ranking loss's gradient (at the current parameters) is
+    >= 0. None never gates, which is what the codebase does as configured: its gate compares a
+    count of PPO iterations with a threshold in environment steps, which it never reaches.
+    """
+
+    num_rounds: int = 10  # confidence and discriminator updates per iteration
+    batch_size: int = 100  # agent and demonstration pairs per lookahead and per real step
+    num_trajectories: int = 20  # ranked trajectories per outer loss (all pairs among them)
+    lookahead_learning_rate: float = 3e-4  # the lookahead's plain gradient step
+    discriminator_learning_rate: float = 3e-4  # Adam, CAIL cells' discriminator
+    beta_max: float = 2.0  # beta is clipped to [0, beta_max] after each renormalisation
+    pretrain_iterations: int | None = None
+
+    def __post_init__(self):
+        for name in ("num_rounds", "batch_size", "num_trajectories"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"CAILConfig.{name} must be a positive integer, got {value!r}")
+        if self.num_trajectories < 2:
+            raise ValueError("CAILConfig.num_trajectories must be at least 2 (pairs of them)")
+        for name in ("lookahead_learning_rate", "discriminator_learning_rate", "beta_max"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"CAILConfig.{name} must be positive")
+        if self.pretrain_iterations is not None and (
+            isinstance(self.pretrain_iterations, bool)
+            or not isinstance(self.pretrain_iterations, int)
+            or self.pretrain_iterations < 0
+        ):
+            raise ValueError("CAILConfig.pretrain_iterations must be None or an integer >= 0")
+
+
+def renormalize(beta: jax.Array, beta_max: float) -> jax.Array:
+    """``clip(beta / mean(beta), 0, beta_max)`` over every row (float[M])."""
+    return jnp.clip(beta / jnp.mean(beta), 0.0, beta_max)
+
+
+def inner_loss(logits_agent: jax.Array, logits_demo: jax.Array, beta: jax.Array):
+    """CAIL's confidence-weighted discriminator loss ``mean_agent sp(-z) + mean_demo beta
+    sp(z)`` (a plain mean over the batch, no division by the sum of beta).
+
+    logits_agent float[B_a], logits_demo float[B_d], beta float[B_d]. Returns the loss."""
+    chex.assert_equal_shape([logits_demo, beta])
+    return jnp.mean(jax.nn.softplus(-logits_agent)) + jnp.mean(beta * jax.nn.softplus(logits_demo))
+
+
+def margin_ranking_loss(returns: jax.Array, truth: jax.Array):
+    """Sum over all pairs i < j of the sampled trajectories of the hinge ``max(0, -y (R_i -
+    R_j))``, ``y = sign(truth_i - truth_j)``, margin 0; a pair whose returns differ by less
+    than ``SMOOTHING`` takes ``(|R_i - R_j| - SMOOTHING)^2 / (4 SMOOTHING)`` instead (the
+    codebase's smoothing). Pairs of equal truth (the same trajectory drawn twice) count 0.
+
+    returns, truth: float[N]. Returns ``(loss, metrics)``: the pair accuracy among informative
+    pairs.
+    """
+    chex.assert_equal_shape([returns, truth])
+    num = returns.shape[0]
+    upper = jnp.triu(jnp.ones((num, num), bool), k=1)
+    difference = returns[:, None] - returns[None, :]
+    sign = jnp.sign(truth[:, None] - truth[None, :])
+    informative = upper & (sign != 0)
+    hinge = jnp.maximum(0.0, -sign * difference)
+    smoothed = (jnp.abs(difference) - SMOOTHING) ** 2 / (4 * SMOOTHING)
+    per_pair = jnp.where(jnp.abs(difference) < SMOOTHING, smoothed, hinge)
+    loss = jnp.sum(jnp.where(informative, per_pair, 0.0))
+    correct = jnp.sum(informative & (sign * difference > 0))
+    accuracy = correct / jnp.maximum(informative.sum(), 1)
+    return loss, {"cail/ranking_loss": loss, "cail/ranking_accuracy": accuracy}
+
+
+def trajectory_returns(reward_of, features: jax.Array, valid: jax.Array) -> jax.Array:
+    """``sum_t reward_of(features[n, t])`` over the valid steps of each trajectory.
+
+    features float[N, T, F], valid bool[N, T]; ``reward_of`` maps float[..., F] to float[...].
+    Returns float[N]."""
+    return jnp.sum(jnp.where(valid, reward_of(features), 0.0), axis=1)
