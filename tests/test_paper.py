@@ -32,9 +32,16 @@ def test_every_built_figure_plans_on_all_six_tasks():
     fig7 = next(f for f in figures if f.name == "fig7").panels["Pendulum-v1"]
     fig10 = next(f for f in figures if f.name == "fig10").panels["Ant"]
     assert fig7[1].grid == "Pendulum-v1-main" and fig10[0].grid == "Ant-main"
-    # Table 4 and Fig. 5 share one grid per task: Fig. 2's demonstrations, Fig. 8's on Ant.
-    assert grids["Ant-appendix"].demos == paper.DemoSet("Ant", (1, 10))
-    assert grids["Pendulum-v1-appendix"].demos == grids["Pendulum-v1-main"].demos
+    # Table 4 and Fig. 5 share their grids: Fig. 2's demonstrations, Fig. 8's on Ant; one
+    # grid per set of training phases, so no cell runs a phase it does not read.
+    assert grids["Ant-appendix-cail"].demos == paper.DemoSet("Ant", (1, 10))
+    assert grids["Pendulum-v1-appendix-firl"].demos == grids["Pendulum-v1-main"].demos
+    assert grids["Pendulum-v1-appendix-firl"].methods == ("firl-fkl", "firl-rkl", "firl-js")
+    appendix = [name for name in grids if name.startswith("Pendulum-v1-appendix-")]
+    assert sorted(appendix) == [
+        f"Pendulum-v1-appendix-{group}"
+        for group in ("bc", "cail", "drex", "firl", "pngail", "trex")
+    ]
     # Fig. 6 keeps the labelled rows and scales the unlabelled ones: 200 + 0.5 * 800.
     grid = grids["Pendulum-v1-unlabelled-0.5"]
     flags = paper.sweep_arguments(grid, ("x.npz", 1.0), paper.BUDGETS["test"], 1000)
