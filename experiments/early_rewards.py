@@ -28,6 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from experiments.cli import HelpFormatter
+from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import load_demonstrations
 from pngail_jax.grid import Cell, Grid, stack_cells
 from pngail_jax.losses import policy_reward
@@ -49,10 +50,15 @@ def parse_args(argv=None):
     parser.add_argument("--seeds", type=int, default=3, help="seeds per variant")
     parser.add_argument("--iterations", type=int, default=150, help="TRPO iterations")
     parser.add_argument("--every", type=int, default=10, help="iterations between readings")
+    parser.add_argument(
+        "--classifier-steps", type=int, default=25_000, help="confidence classifier steps"
+    )
     parser.add_argument("--out", type=Path, default=Path("early_rewards.json"), help="JSON file")
     args = parser.parse_args(argv)
     if args.seeds < 1 or args.every < 1 or args.iterations < args.every:
         parser.error("need --seeds >= 1 and --iterations >= --every >= 1")
+    if args.classifier_steps < 1:
+        parser.error("--classifier-steps must be positive")
     if args.out.exists():
         parser.error(f"{args.out} exists: choose another --out")
     return args
@@ -61,7 +67,7 @@ def parse_args(argv=None):
 def rewards_on_rows(trainer: AdversarialTrainer, state, optimal: jax.Array):
     """Mean policy reward sp(-z) of each cell's discriminator on the optimal (bool[N]) and
     the other demonstration rows: float[C] each."""
-    inputs = trainer._demo_inputs  # the rows as the discriminator sees them
+    inputs = trainer.demo_inputs
 
     def one(params):
         reward = policy_reward(trainer.discriminator.apply(params, inputs))
@@ -81,6 +87,7 @@ def main(argv=None) -> dict:
         iterations=args.iterations,
         label_ratios=(0.2, 0.99),
         settings=dataclasses.replace(table, eval_every=args.every),
+        classifier=ClassifierConfig(num_steps=args.classifier_steps),
     )
     env = make_env(run.env, run.settings)
     trainer = AdversarialTrainer(run.adversarial_config(demos.num_rows), env, demos)

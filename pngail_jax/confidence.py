@@ -134,7 +134,7 @@ class ClassifierConfig:
             value = getattr(self, name)
             if value is None and name == "unlabelled_batch_size":
                 continue
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            if not isinstance(value, int) or value < 1:  # RunConfig also refuses a bool
                 raise ValueError(
                     f"ClassifierConfig.{name} must be a positive integer, got {value!r}"
                 )

@@ -214,6 +214,12 @@ class AdversarialTrainer:
             )
         self.state_network = ranking.StateReward(config.ranking.hidden_sizes)
 
+    @property
+    def demo_inputs(self) -> jax.Array:
+        """float[N, O + A]: every demonstration row as the discriminator sees it (actions
+        clipped to the action bounds)."""
+        return self._demo_inputs
+
     def check_label_ratios(self, label_ratios) -> None:
         """Raises ``DemonstrationError`` when the demonstrations' ``labelled`` mask allows
         fewer rows than the largest ratio labels, ``round(label_ratio * num_demos)``, and
