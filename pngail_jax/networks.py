@@ -99,3 +99,66 @@ class Discriminator(nn.Module):
     @nn.compact
     def __call__(self, x: jax.Array) -> jax.Array:
         return MLP(self.hidden_sizes, 1)(x)[..., 0]
+
+
+def torch_bias_init(fan_in: int):
+    """PyTorch's default ``nn.Linear`` bias, U(-1 / sqrt(fan_in), 1 / sqrt(fan_in))."""
+    bound = 1.0 / fan_in**0.5
+
+    def init(key, shape, dtype=jnp.float32):
+        return jax.random.uniform(key, shape, dtype, -bound, bound)
+
+    return init
+
+
+def torch_dense(features: int, x: jax.Array) -> jax.Array:
+    """A ``torch.nn.Linear(x.shape[-1], features)`` with its default initialisation (weights
+    and bias U(+-1/sqrt(fan_in))), applied to x; call it inside a compact ``__call__``."""
+    layer = nn.Dense(
+        features, kernel_init=torch_like_init(), bias_init=torch_bias_init(x.shape[-1])
+    )
+    return layer(x)
+
+
+class ResidualDiscriminator(nn.Module):
+    """f-IRL's state discriminator (``ResNetAIRLDisc`` of twni2016/f-IRL, batch norm off):
+    ``Linear(O, hidden_size)`` with no activation after it, ``num_residual_blocks`` blocks
+    ``x + tanh(Linear(x))``, then ``Linear(hidden_size, 1)``, clamped to
+    ``[-clamp_magnitude, clamp_magnitude]``. PyTorch's default initialisation throughout.
+
+    Input float[..., O] (raw states); output float[...], the logit (demonstration = label 1).
+    """
+
+    hidden_size: int = 128
+    num_residual_blocks: int = 2
+    clamp_magnitude: float = 10.0
+
+    @nn.compact
+    def __call__(self, states: jax.Array) -> jax.Array:
+        x = torch_dense(self.hidden_size, states)
+        for _ in range(self.num_residual_blocks):
+            x = x + jnp.tanh(torch_dense(self.hidden_size, x))
+        logit = torch_dense(1, x)[..., 0]
+        return jnp.clip(logit, -self.clamp_magnitude, self.clamp_magnitude)
+
+
+class ClampedStateReward(nn.Module):
+    """f-IRL's reward r(s) (``MLPReward`` of twni2016/f-IRL, not residual, batch norm off):
+    ``Linear(O, h_0)`` with no activation after it, then ``Linear(h_i-1, h_i)`` + ReLU for
+    each further size, then ``Linear(h_last, 1)``, clamped to ``[-clamp_magnitude,
+    clamp_magnitude]``. With (64, 64): Linear -> Linear -> ReLU -> Linear, one nonlinearity,
+    as theirs. PyTorch's default initialisation throughout.
+
+    Input float[..., O] (raw states); output float[...].
+    """
+
+    hidden_sizes: Sequence[int] = (64, 64)
+    clamp_magnitude: float = 10.0
+
+    @nn.compact
+    def __call__(self, states: jax.Array) -> jax.Array:
+        x = torch_dense(self.hidden_sizes[0], states)
+        for size in self.hidden_sizes[1:]:
+            x = jax.nn.relu(torch_dense(size, x))
+        reward = torch_dense(1, x)[..., 0]
+        return jnp.clip(reward, -self.clamp_magnitude, self.clamp_magnitude)

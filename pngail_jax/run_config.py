@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from pngail_jax.confidence import ClassifierConfig
+from pngail_jax.firl import FirlConfig
 from pngail_jax.methods import ALL_METHOD_NAMES, METHOD_NAMES, PRESETS, required_phases
 from pngail_jax.settings import RunSettings, settings_for
 from pngail_jax.tracking import BACKENDS as LOG_BACKENDS
@@ -242,6 +243,7 @@ class RunConfig:
             num_demos=num_demos,
             discriminator_hidden_sizes=self.discriminator_hidden_sizes,
             phases=required_phases(self.methods),
+            firl=FirlConfig.for_env(self.env),
         )
 
     def to_dict(self) -> dict[str, Any]:

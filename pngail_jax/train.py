@@ -36,7 +36,7 @@ from pngail_jax.confidence import ClassifierConfig, confidence_errors, train_cla
 from pngail_jax.demos import DemonstrationError, Demonstrations, make_split
 from pngail_jax.losses import ConfidenceStats, discriminator_loss, policy_reward
 from pngail_jax.methods import PHASES, PRESETS, MethodSpec, required_phases
-from pngail_jax.networks import Discriminator
+from pngail_jax.networks import ClampedStateReward, Discriminator, ResidualDiscriminator
 from pngail_jax.rl.train import (
     TRPO,
     TRPOConfig,
@@ -64,6 +64,7 @@ class AdversarialConfig:
     ranking: ranking.RankingConfig = ranking.RankingConfig()
     bc: BCConfig = BCConfig()
     cail: cail.CAILConfig = cail.CAILConfig()
+    firl: firl.FirlConfig = firl.FirlConfig()
 
     def __post_init__(self):
         unknown = [phase for phase in self.phases if phase not in PHASES]
@@ -141,7 +142,8 @@ class TrainState:
 
 @struct.dataclass
 class FirlState:
-    """f-IRL's reward r(s) and state discriminator, with their Adam states."""
+    """f-IRL's reward r(s) and state discriminator, with their Adam states (both kept from
+    one iteration to the next, as its codebase never rebuilds them)."""
 
     reward_params: dict
     reward_optimizer_state: optax.OptState
@@ -213,6 +215,25 @@ class AdversarialTrainer:
                 applied.observations, applied.actions, demos.trajectory_ids, demos.confidence
             )
         self.state_network = ranking.StateReward(config.ranking.hidden_sizes)
+        self._init_firl(config.firl, demos)
+
+    def _init_firl(self, config: firl.FirlConfig, demos: Demonstrations) -> None:
+        """f-IRL's networks, optimisers and the source of its demonstration segments: the
+        set's trajectories when it has trajectory ids, else (None) consecutive split rows."""
+        self.firl_discriminator = ResidualDiscriminator(
+            config.discriminator_hidden_size, config.discriminator_residual_blocks,
+            config.clamp_magnitude,
+        )  # fmt: skip
+        self.firl_reward = ClampedStateReward(config.reward_hidden_sizes, config.clamp_magnitude)
+        self.firl_discriminator_optimizer = firl.adam_with_l2(
+            config.discriminator_learning_rate, config.discriminator_weight_decay
+        )
+        self.firl_reward_optimizer = firl.adam_with_l2(
+            config.reward_learning_rate, config.reward_weight_decay
+        )
+        self._firl_segments = None
+        if "firl" in self.config.phases and demos.trajectory_ids is not None:
+            self._firl_segments = firl.SegmentSource.of_trajectories(demos.trajectory_ids)
 
     @property
     def demo_inputs(self) -> jax.Array:
@@ -386,11 +407,12 @@ class AdversarialTrainer:
             )
         if "firl" in phases:
             reward_key, disc_key = jax.random.split(firl_key)
-            reward = self.state_network.init(reward_key, size)
-            disc = self.state_network.init(disc_key, size)
+            reward = self.firl_reward.init(reward_key, jnp.zeros((size,)))
+            disc = self.firl_discriminator.init(disc_key, jnp.zeros((size,)))
             fields["firl"] = FirlState(
-                reward, self.optimizer.init(reward), disc, self.optimizer.init(disc)
-            )
+                reward, self.firl_reward_optimizer.init(reward),
+                disc, self.firl_discriminator_optimizer.init(disc),
+            )  # fmt: skip
         if "cail" in phases:
             fields["cail_confidence"] = jnp.ones(self.num_demos)
         return fields, trpo_state
@@ -448,9 +470,13 @@ class AdversarialTrainer:
                 state.ranking_reward_params, agent_obs
             )
         if "firl" in phases:
-            rewards += spec.firl_coef * self.state_network(state.firl.reward_params, agent_obs)
+            # f-IRL's order: the discriminator and the reward learn from this rollout, then
+            # the policy improves under the updated reward.
             phase_fields["firl"], phase_metrics = self._firl_update(
-                hyperparams, spec, state.firl, transitions.obs, demo_batch
+                spec, state, transitions.obs, jax.random.fold_in(batch_key, 2)
+            )
+            rewards += spec.firl_coef * self.firl_reward.apply(
+                phase_fields["firl"].reward_params, agent_obs
             )
         rewards = rewards.reshape(trpo_config.unroll_length, trpo_config.num_envs)
         disc_params, disc_optimizer_state = self._adam_step(
@@ -499,39 +525,59 @@ class AdversarialTrainer:
         step = jax.tree.map(lambda u: -learning_rate * u, updates)
         return optax.apply_updates(params, step), optimizer_state
 
-    def _firl_update(self, hyperparams, spec, firl_state: FirlState, agent_obs, demo_batch):
-        """One step of f-IRL's state discriminator, then of its reward by the covariance
-        estimator over the rollout's ``num_envs`` segments (agent_obs float[T, E, O])."""
+    def _firl_update(self, spec, state: TrainState, agent_obs, key):
+        """f-IRL's outer step (``firl/irl_samples.py``): the state discriminator refitted
+        (warm-started) on the split's states against this rollout's, then one Adam step of the
+        reward on the covariance loss over the rollout's ``num_envs`` segments of
+        ``unroll_length`` steps (agent_obs float[T, E, O], our stand-in for their sampled
+        trajectories) and as many resampled demonstration segments. Returns (FirlState,
+        metrics)."""
+        config, trpo_config = self.config.firl, self.config.trpo
         size = self.env.observation_size
-        learning_rate = hyperparams.discriminator_learning_rate
-        network = self.state_network
-
-        def discriminator_loss_fn(params):
-            return firl.state_discriminator_loss(
-                network(params, demo_batch[:, :size]), network(params, agent_obs.reshape(-1, size))
-            )
-
-        grads, disc_metrics = jax.grad(discriminator_loss_fn, has_aux=True)(
-            firl_state.discriminator_params
-        )
-        disc_params, disc_optimizer_state = self._adam_step(
-            firl_state.discriminator_params, firl_state.discriminator_optimizer_state, grads,
-            learning_rate,
+        firl_state = state.firl
+        discriminator_key, segment_key = jax.random.split(key)
+        disc_params, disc_optimizer_state, disc_losses = firl.fit_discriminator(
+            self.firl_discriminator.apply, self.firl_discriminator_optimizer,
+            firl_state.discriminator_params, firl_state.discriminator_optimizer_state,
+            self._demo_inputs[state.demo_rows, :size], agent_obs.reshape(-1, size),
+            config.discriminator_iterations, config.discriminator_batch_size, discriminator_key,
         )  # fmt: skip
-        log_ratio = network(disc_params, agent_obs)  # float[T, E]: log rho_E / rho_agent
+        source = self._firl_segments
+        if source is None:  # no trajectory ids: segments of consecutive split rows
+            source = firl.SegmentSource.of_rows(state.demo_rows)
+        expert_rows = firl.sample_segment_rows(
+            segment_key, source, trpo_config.num_envs, trpo_config.unroll_length
+        )
+        expert_obs = self._demo_inputs[expert_rows, :size]  # float[T, E, O]
+        segments = jnp.concatenate([agent_obs, expert_obs], axis=1)  # float[T, 2E, O]
+        log_ratio = self.firl_discriminator.apply(disc_params, segments)  # log rho_E / rho
         h = firl.divergence_h(log_ratio, spec.firl_fkl_coef, spec.firl_rkl_coef, spec.firl_js_coef)
 
         def reward_loss_fn(params):
-            return firl.covariance_surrogate(h.sum(axis=0), network(params, agent_obs).sum(axis=0))
+            rewards = self.firl_reward.apply(params, segments)  # float[T, 2E]
+            loss, metrics = firl.covariance_surrogate(
+                h.sum(axis=0), rewards.sum(axis=0), trpo_config.unroll_length
+            )
+            agent, expert = jnp.split(rewards, 2, axis=1)
+            means = {"firl/reward_agent": agent.mean(), "firl/reward_expert": expert.mean()}
+            return loss, {**metrics, **means}
 
         grads, reward_metrics = jax.grad(reward_loss_fn, has_aux=True)(firl_state.reward_params)
-        reward_params, reward_optimizer_state = self._adam_step(
-            firl_state.reward_params, firl_state.reward_optimizer_state, grads, learning_rate
+        updates, reward_optimizer_state = self.firl_reward_optimizer.update(
+            grads, firl_state.reward_optimizer_state, firl_state.reward_params
         )
         new_state = FirlState(
-            reward_params, reward_optimizer_state, disc_params, disc_optimizer_state
-        )
-        return new_state, {**disc_metrics, **reward_metrics}
+            optax.apply_updates(firl_state.reward_params, updates), reward_optimizer_state,
+            disc_params, disc_optimizer_state,
+        )  # fmt: skip
+        metrics = {
+            "firl/disc_loss": disc_losses[-1],
+            "firl/disc_loss_first": disc_losses[0],
+            "firl/log_ratio_agent": log_ratio[:, : trpo_config.num_envs].mean(),
+            "firl/log_ratio_expert": log_ratio[:, trpo_config.num_envs :].mean(),
+            **reward_metrics,
+        }
+        return new_state, metrics
 
     def _cail_rounds(self, spec, state: TrainState, agent_inputs, key):
         """CAIL's ``num_rounds`` rounds of this iteration (``pngail_jax.cail``): per round,

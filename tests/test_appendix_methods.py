@@ -12,6 +12,7 @@ from pngail_jax import envs
 from pngail_jax.bc import BCConfig
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import DemonstrationError, Demonstrations
+from pngail_jax.firl import FirlConfig
 from pngail_jax.grid import make_cells, stack_cells
 from pngail_jax.methods import METHOD_NAMES, method_spec, required_phases, stack
 from pngail_jax.ranking import RankingConfig
@@ -47,6 +48,7 @@ def trainer_for(methods, data=None, num_iterations=2):
         ranking=RankingConfig(num_steps=20, snippet_length=10, noise_levels=(1.0, 0.0),
                               rollouts_per_level=1),
         bc=BCConfig(num_steps=20, batch_size=16),
+        firl=FirlConfig(discriminator_iterations=5, discriminator_batch_size=16),
     )  # fmt: skip
     return AdversarialTrainer(config, envs.make("Pendulum-v1"), data or demos())
 
@@ -80,6 +82,10 @@ def test_a_grid_of_the_appendix_methods_equals_its_cells_run_alone():
                 grid_metrics[name][index], metrics[name], rtol=rtol, atol=1e-6,
                 err_msg=f"{cell.method} {name}",
             )  # fmt: skip
+    # f-IRL's discriminator and reward are warm-started: their Adam states count every step
+    # (5 refit steps and 1 reward step per iteration, 2 iterations).
+    assert np.all(np.asarray(state.firl.discriminator_optimizer_state[1].count) == 10)
+    assert np.all(np.asarray(state.firl.reward_optimizer_state[1].count) == 2)
     # The cloned policies stay as cloned: the same return at every evaluation.
     returns = np.asarray(grid_metrics["eval/return"])
     for index, cell in enumerate(cells):

@@ -1,12 +1,11 @@
 """The appendix baselines' losses against independent NumPy computations of their formulas:
-T-REX's Bradley-Terry loss on snippet sums, f-IRL's covariance gradient and divergences, BC."""
+T-REX's Bradley-Terry loss on snippet sums, BC, CAIL's outer loss (f-IRL's: tests/test_firl.py)."""
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-import pytest
 
-from pngail_jax import bc, firl, ranking
+from pngail_jax import bc, ranking
 
 RNG = np.random.default_rng(0)
 
@@ -62,42 +61,6 @@ def test_trex_learns_a_reward_that_ranks_the_trajectories():
     returns = ranking.StateReward(config.hidden_sizes)(params, trajectories.observations).sum(1)
     assert np.all(np.diff(np.asarray(returns)) > 0)  # the learned reward orders them
     assert metrics["ranking/loss"][-50:].mean() < metrics["ranking/loss"][:50].mean() / 2
-
-
-def test_firl_surrogate_gradient_is_the_covariance_formula():
-    num_trajectories, steps, features = 7, 6, 3
-    phi = RNG.normal(size=(num_trajectories, steps, features))
-    h = RNG.normal(size=(num_trajectories, steps))
-    theta = RNG.normal(size=features)
-
-    def surrogate(theta):  # linear reward r(s) = theta . phi(s)
-        reward_sums = (jnp.asarray(phi) @ theta).sum(axis=1)
-        return firl.covariance_surrogate(jnp.asarray(h.sum(axis=1)), reward_sums)[0]
-
-    gradient = jax.grad(surrogate)(jnp.asarray(theta, jnp.float32))
-    # grad = Cov_tau(sum_t h, sum_t grad r) with grad r = phi, the population covariance
-    phi_sums, h_sums = phi.sum(axis=1), h.sum(axis=1)
-    expected = [np.cov(h_sums, phi_sums[:, j], bias=True)[0, 1] for j in range(features)]
-    np.testing.assert_allclose(gradient, expected, rtol=1e-4, atol=1e-6)
-
-
-@pytest.mark.parametrize(
-    ("coefs", "f"),
-    [
-        ((1, 0, 0), lambda u: u * np.log(u)),  # forward KL
-        ((0, 1, 0), lambda u: -np.log(u)),  # reverse KL
-        ((0, 0, 1), lambda u: u * np.log(u) - (1 + u) * np.log((1 + u) / 2)),  # JS
-    ],
-    ids=["fkl", "rkl", "js"],
-)
-def test_divergence_h_is_f_minus_u_f_prime_up_to_a_constant(coefs, f):
-    u = np.exp(RNG.uniform(-2, 2, size=50))
-    step = 1e-6
-    f_prime = (f(u + step) - f(u - step)) / (2 * step)
-    expected = f(u) - u * f_prime
-    h = np.asarray(firl.divergence_h(jnp.log(jnp.asarray(u, jnp.float32)), *coefs), np.float64)
-    offset = expected - h  # a constant, which the covariance ignores
-    np.testing.assert_allclose(offset, offset.mean(), atol=2e-4)
 
 
 def test_bc_loss_is_the_weighted_gaussian_negative_log_likelihood():
