@@ -1,5 +1,11 @@
-"""Behaviour cloning: the policy's Gaussian log-likelihood of the demonstrations' actions,
-optionally weighted per row by its confidence (confidence-weighted BC)."""
+"""Behaviour cloning, two kinds.
+
+- The ``bc`` / ``bc-weighted`` baselines: the TRPO policy's Gaussian log-likelihood of the
+  demonstrations' actions, optionally weighted per row by its confidence (``train_bc``).
+- D-REX's cloned policy, which only makes D-REX's noisy rollouts: a separate deterministic
+  ReLU network fitted by mean squared error, as the CAIL codebase's ``DREX.train_bc``
+  (``train_deterministic_bc``).
+"""
 
 from __future__ import annotations
 
@@ -9,8 +15,8 @@ import chex
 import jax
 import jax.numpy as jnp
 
-from pngail_jax.fitting import fit_with_adam
-from pngail_jax.networks import gaussian_log_prob
+from pngail_jax.fitting import fit_with_adam, squared_norm
+from pngail_jax.networks import DeterministicPolicy, gaussian_log_prob
 
 
 @dataclasses.dataclass(frozen=True)
@@ -47,4 +53,69 @@ def train_bc(config: BCConfig, policy_apply, params, observations, actions, weig
         return bc_loss(mean, log_std, actions[rows], jnp.ones(rows.shape))
 
     keys = jax.random.split(key, config.num_steps)
+    return fit_with_adam(loss_fn, params, config.learning_rate, keys)
+
+
+@dataclasses.dataclass(frozen=True)
+class DeterministicBCConfig:
+    """D-REX's behaviour cloning, with the CAIL codebase's values (``cail/algo/drex.py``):
+    a 256x256x256 ReLU network with a tanh output scaled to the action bounds, Adam at 1e-3 on
+    MSE + 1e-3 ||theta||^2, 50,000 steps of 128 rows drawn uniformly from every
+    demonstration."""
+
+    num_steps: int = 50_000
+    batch_size: int = 128
+    learning_rate: float = 1e-3
+    l2_coef: float = 1e-3
+    hidden_sizes: tuple[int, ...] = (256, 256, 256)
+
+    def __post_init__(self):
+        for name in ("num_steps", "batch_size"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(
+                    f"DeterministicBCConfig.{name} must be a positive integer, got {value!r}"
+                )
+        if not self.l2_coef >= 0:
+            raise ValueError(f"DeterministicBCConfig.l2_coef must be >= 0, got {self.l2_coef!r}")
+
+
+def deterministic_bc_loss(predicted: jax.Array, targets: jax.Array, params, l2_coef):
+    """mean((predicted - targets)^2) + l2_coef ||params||^2, the mean over every element
+    (torch's ``MSELoss``), on actions float[B, A] in the policy's [-1, 1] units.
+
+    Returns ``(loss, metrics)``.
+    """
+    chex.assert_equal_shape([predicted, targets])
+    mse = jnp.mean(jnp.square(predicted - targets))
+    penalty = l2_coef * squared_norm(params)
+    return mse + penalty, {"bc/mse": mse, "bc/l2": penalty}
+
+
+def cloned_actions(config: DeterministicBCConfig, params, observations, low, high):
+    """The cloned policy's actions float[..., A] in the environment's units: its tanh output
+    in [-1, 1] mapped linearly onto [low, high] (float[A] each), as the CAIL codebase's
+    ``NormalizedEnv`` scales its actions."""
+    unit = DeterministicPolicy(low.shape[-1], config.hidden_sizes).apply(params, observations)
+    return low + (unit + 1) * (high - low) / 2
+
+
+def train_deterministic_bc(
+    config: DeterministicBCConfig, observations, actions, low, high, key: jax.Array
+):
+    """Fits ``DeterministicPolicy`` to ``actions`` float[N, A] (within [low, high]) on
+    ``observations`` float[N, O]: Adam on ``deterministic_bc_loss`` in the policy's [-1, 1]
+    units (the CAIL codebase's demonstrations are stored in those units), batches drawn
+    uniformly with replacement. Returns ``(params, metrics)``, metrics float[num_steps]."""
+    policy = DeterministicPolicy(actions.shape[-1], config.hidden_sizes)
+    init_key, train_key = jax.random.split(key)
+    params = policy.init(init_key, observations[0])
+    targets = 2 * (actions - low) / (high - low) - 1
+
+    def loss_fn(params, key):
+        rows = jax.random.randint(key, (config.batch_size,), 0, observations.shape[0])
+        predicted = policy.apply(params, observations[rows])
+        return deterministic_bc_loss(predicted, targets[rows], params, config.l2_coef)
+
+    keys = jax.random.split(train_key, config.num_steps)
     return fit_with_adam(loss_fn, params, config.learning_rate, keys)

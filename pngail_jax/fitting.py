@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import jax
+import jax.numpy as jnp
 import optax
 
 
@@ -19,3 +20,10 @@ def fit_with_adam(loss_fn, params, learning_rate: float, keys: jax.Array):
 
     (params, _), metrics = jax.lax.scan(step, (params, optimizer.init(params)), keys)
     return params, metrics
+
+
+def squared_norm(params) -> jax.Array:
+    """||theta||^2: the sum of squares of every leaf of ``params`` (weights and biases), the
+    L2 term the CAIL codebase adds to its losses (``parameters_to_vector(p).norm() ** 2``).
+    float[]."""
+    return sum(jnp.sum(jnp.square(leaf)) for leaf in jax.tree.leaves(params))

@@ -47,7 +47,7 @@ class MethodSpec:
     bc_init_coef: jax.Array  # 1: the policy starts from behaviour cloning ("bc" phase)
     bc_weighted_coef: jax.Array  # BC row weights 1 + coef (r - 1): 1 = confidence-weighted
     ranking_reward_coef: jax.Array  # reward += coef r(s), learned from rankings (T-REX, D-REX)
-    noise_rankings_coef: jax.Array  # 1: rankings of noisy BC rollouts (D-REX), 0: by confidence
+    noise_rankings_coef: jax.Array  # 1: D-REX's reward (noisy rollouts), 0: T-REX's (confidence)
     firl_coef: jax.Array  # reward += coef r(s), f-IRL's reward ("firl" phase)
     firl_fkl_coef: jax.Array  # f-IRL's divergence: forward KL ...
     firl_rkl_coef: jax.Array  # ... reverse KL ...
@@ -110,7 +110,7 @@ APPENDIX_PRESETS: dict[str, Preset] = {
     "trex": Preset("T-REX: TRPO on a reward learned from trajectories ranked by confidence",
         "rankings", _LEARNED_REWARD, ("demo_rankings",)),
     "drex": Preset("D-REX: T-REX on rollouts of a cloned policy ranked by their noise",
-        "none", {**_LEARNED_REWARD, "noise_rankings_coef": 1.0}, ("bc", "noise_rankings")),
+        "none", {**_LEARNED_REWARD, "noise_rankings_coef": 1.0}, ("noise_rankings",)),
     "cail": Preset("CAIL: per-pair confidences learned by a bilevel ranking loss",
         "rankings", {"agent_coef": 1.0, "importance_weighted_coef": 1.0, "cail_coef": 1.0,
                      "cail_learning_rate": 0.1}, ("cail",)),

@@ -2,7 +2,9 @@
 
 Hidden layers use PyTorch's default ``nn.Linear`` weight distribution, U(+-1/sqrt(fan_in)),
 with zero biases; every network's output layer starts with those weights scaled by 0.1 and a
-zero bias, as the reference code initialises them (``docs/trpo.md``).
+zero bias, as the reference code initialises them (``docs/trpo.md``). T-REX's and D-REX's
+networks (``ReluMLP``, ``DeterministicPolicy``) keep the CAIL codebase's orthogonal
+initialisation instead.
 """
 
 from __future__ import annotations
@@ -39,6 +41,41 @@ class MLP(nn.Module):
             self.output_size, kernel_init=torch_like_init(OUTPUT_SCALE), use_bias=self.output_bias
         )
         return output(x)
+
+
+class ReluMLP(nn.Module):
+    """ReLU MLP with the CAIL codebase's initialisation (``build_mlp(init=True)``): every
+    layer, the output included, has orthogonal weights of gain 1 and zero biases; the output
+    is linear.
+
+    Input float[..., in]; output float[..., output_size].
+    """
+
+    hidden_sizes: Sequence[int]
+    output_size: int
+    output_bias: bool = True
+
+    @nn.compact
+    def __call__(self, x: jax.Array) -> jax.Array:
+        orthogonal = nn.initializers.orthogonal(1.0)
+        for size in self.hidden_sizes:
+            x = nn.relu(nn.Dense(size, kernel_init=orthogonal)(x))
+        return nn.Dense(self.output_size, kernel_init=orthogonal, use_bias=self.output_bias)(x)
+
+
+class DeterministicPolicy(nn.Module):
+    """A deterministic policy tanh(ReluMLP(obs)) in [-1, 1] per action dimension (the CAIL
+    codebase's ``DeterministicPolicy``; ``pngail_jax.bc`` scales it to the action bounds).
+
+    Input float[..., obs_size]; output float[..., action_size].
+    """
+
+    action_size: int
+    hidden_sizes: Sequence[int] = (256, 256, 256)
+
+    @nn.compact
+    def __call__(self, obs: jax.Array) -> jax.Array:
+        return jnp.tanh(ReluMLP(self.hidden_sizes, self.action_size)(obs))
 
 
 class GaussianPolicy(nn.Module):

@@ -31,7 +31,7 @@ import optax
 from flax import struct
 
 from pngail_jax import cail, envs, firl, ranking
-from pngail_jax.bc import BCConfig, train_bc
+from pngail_jax.bc import BCConfig, cloned_actions, train_bc, train_deterministic_bc
 from pngail_jax.confidence import ClassifierConfig, confidence_errors, train_classifier
 from pngail_jax.demos import DemonstrationError, Demonstrations, make_split
 from pngail_jax.losses import ConfidenceStats, discriminator_loss, policy_reward
@@ -61,6 +61,8 @@ class AdversarialConfig:
     # The appendix baselines' training phases this trainer compiles (``methods.PHASES``;
     # ``methods.required_phases(names)``); none for the paper's seven.
     phases: tuple[str, ...] = ()
+    # D-REX's cloned policy, noisy rollouts and reward fit; ``ranking`` is T-REX's reward fit.
+    drex: ranking.DrexConfig = ranking.DrexConfig()
     ranking: ranking.RankingConfig = ranking.RankingConfig()
     bc: BCConfig = BCConfig()
     cail: cail.CAILConfig = cail.CAILConfig()
@@ -132,7 +134,8 @@ class TrainState:
     eval_keys: jax.Array  # key[num_eval_episodes], the same every evaluation
     key: jax.Array
     # The appendix baselines' state; None when their phase is not compiled.
-    ranking_reward_params: dict | None = None  # T-REX / D-REX's learned r(s)
+    # T-REX's / D-REX's learned r(s): {phase: an ensemble's params, leading axis [M]}.
+    ranking_reward_params: dict | None = None
     firl: FirlState | None = None
     cail_confidence: jax.Array | None = None  # float32[M]: CAIL's beta per split row
     # bool[K]: the demonstration trajectories whose ranking T-REX and CAIL may see (a share
@@ -214,7 +217,11 @@ class AdversarialTrainer:
             self.trajectories, self._row_trajectory = ranking.trajectories_of(
                 applied.observations, applied.actions, demos.trajectory_ids, demos.confidence
             )
-        self.state_network = ranking.StateReward(config.ranking.hidden_sizes)
+        # The rewards learned from rankings, by the phase that fits them.
+        self.ranking_rewards = {
+            "demo_rankings": ranking.RankingReward(config.ranking.hidden_sizes),
+            "noise_rankings": ranking.RankingReward(config.drex.ranking.hidden_sizes),
+        }
         self._init_firl(config.firl, demos)
 
     def _init_firl(self, config: firl.FirlConfig, demos: Demonstrations) -> None:
@@ -291,6 +298,17 @@ class AdversarialTrainer:
             raise DemonstrationError(
                 f"{', '.join(rankers)} need trajectories of at least two confidences to rank"
             )
+        length = self.config.ranking.snippet_length
+        if (
+            "demo_rankings" in required_phases(methods)
+            and self.config.ranking.skip_short_trajectories
+        ):
+            long_enough = np.asarray(self.trajectories.lengths) >= length
+            if len(np.unique(np.asarray(self.trajectories.score)[long_enough])) < 2:
+                raise DemonstrationError(
+                    f"trex compares snippets of {length} steps, but fewer than two confidences "
+                    f"are among the trajectories of at least {length} steps"
+                )
 
     def init(self, hyperparams: Hyperparams, spec: MethodSpec, key: jax.Array):
         split_key, classifier_key, trpo_key, disc_key, eval_key, carry_key = jax.random.split(
@@ -368,8 +386,10 @@ class AdversarialTrainer:
         return jnp.zeros(num, bool).at[position].set(jnp.arange(num) < num_ranked)
 
     def _init_phases(self, spec, inputs, confidence, trpo_state, key, ranked=None):
-        """The appendix phases this trainer compiles: behaviour cloning, reward learning from
-        rankings, f-IRL's and CAIL's initial state. Returns (TrainState fields, trpo_state)."""
+        """The appendix phases this trainer compiles: behaviour cloning of the TRPO policy,
+        reward learning from rankings (T-REX's on the ``ranked`` demonstration trajectories,
+        D-REX's on its own cloned policy's noisy rollouts), f-IRL's and CAIL's initial state.
+        Returns (TrainState fields, trpo_state)."""
         phases, config = self.config.phases, self.config
         bc_key, noise_key, reward_key, firl_key = jax.random.split(key, 4)
         size = self.env.observation_size
@@ -392,19 +412,18 @@ class AdversarialTrainer:
                     spec.bc_init_coef > 0, bc_params, trpo_state.policy_params
                 )
             )
-        sources = []
-        if "demo_rankings" in phases:
-            sources.append(self.trajectories)
-        if "noise_rankings" in phases:
-            act_mean = lambda obs: self.trpo.policy.apply(bc_params, normalizer(obs))[0]  # noqa: E731
-            sources.append(ranking.noisy_rollouts(self.env, act_mean, config.ranking, noise_key))
-        if sources:
-            ranked = sources[0]
-            if len(sources) == 2:  # T-REX and D-REX cells in one grid: each its own
-                ranked = ranking.select(spec.noise_rankings_coef > 0, sources[1], sources[0])
-            fields["ranking_reward_params"], _ = ranking.train_ranking_reward(
-                config.ranking, ranked, reward_key
+        trex_key, drex_key = jax.random.split(reward_key)
+        rewards = {}
+        if "demo_rankings" in phases:  # T-REX: the demonstrations, ranked by confidence
+            rewards["demo_rankings"], _ = ranking.train_ranking_reward(
+                config.ranking, self.trajectories, trex_key, eligible=ranked
             )
+        if "noise_rankings" in phases:  # D-REX: noisy rollouts of its own cloned policy
+            rewards["noise_rankings"], _ = ranking.train_ranking_reward(
+                config.drex.ranking, self._drex_rollouts(inputs, noise_key), drex_key
+            )
+        if rewards:
+            fields["ranking_reward_params"] = rewards
         if "firl" in phases:
             reward_key, disc_key = jax.random.split(firl_key)
             reward = self.firl_reward.init(reward_key, jnp.zeros((size,)))
@@ -416,6 +435,35 @@ class AdversarialTrainer:
         if "cail" in phases:
             fields["cail_confidence"] = jnp.ones(self.num_demos)
         return fields, trpo_state
+
+    def _drex_rollouts(self, inputs, key) -> ranking.Trajectories:
+        """D-REX's ranked trajectories: its deterministic policy cloned from the split's
+        ``inputs`` float[M, O + A] (not the TRPO policy of ``bc``), rolled out at each noise
+        level of ``config.drex``."""
+        size, drex = self.env.observation_size, self.config.drex
+        low, high = self._action_bounds
+        bc_key, rollout_key = jax.random.split(key)
+        params, _ = train_deterministic_bc(
+            drex.bc, inputs[:, :size], inputs[:, size:], low, high, bc_key
+        )
+
+        def act(obs):
+            return cloned_actions(drex.bc, params, obs, low, high)
+
+        return ranking.noisy_rollouts(self.env, act, drex, rollout_key)
+
+    def _ranking_reward(self, spec: MethodSpec, params: dict, observations) -> jax.Array:
+        """The learned r(s) float[B] a cell reads: D-REX's ensemble mean where
+        ``spec.noise_rankings_coef`` is 1, T-REX's where it is 0 (in a grid with both, every
+        cell has both and weighs them by its spec)."""
+        weight = {
+            "demo_rankings": 1 - spec.noise_rankings_coef,
+            "noise_rankings": spec.noise_rankings_coef,
+        }
+        return sum(
+            weight[phase] * self.ranking_rewards[phase].ensemble(phase_params, observations)
+            for phase, phase_params in params.items()
+        )
 
     def _importance_weights(self, state: TrainState) -> jax.Array:
         """WGAIL's w = [exp(-z) pi(a|s)]^(1/2) on every split row; no gradient flows."""
@@ -466,8 +514,8 @@ class AdversarialTrainer:
             rewards = spec.adversarial_reward_coef * rewards
         phase_fields, phase_metrics = {}, {}
         if state.ranking_reward_params is not None:
-            rewards += spec.ranking_reward_coef * self.state_network(
-                state.ranking_reward_params, agent_obs
+            rewards += spec.ranking_reward_coef * self._ranking_reward(
+                spec, state.ranking_reward_params, agent_obs
             )
         if "firl" in phases:
             # f-IRL's order: the discriminator and the reward learn from this rollout, then

@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 from pngail_jax import envs
-from pngail_jax.bc import BCConfig
+from pngail_jax.bc import BCConfig, DeterministicBCConfig
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import DemonstrationError, Demonstrations
 from pngail_jax.firl import FirlConfig
 from pngail_jax.grid import make_cells, stack_cells
 from pngail_jax.methods import METHOD_NAMES, method_spec, required_phases, stack
-from pngail_jax.ranking import RankingConfig
+from pngail_jax.ranking import DrexConfig, RankingConfig
 from pngail_jax.rl import TRPOConfig
 from pngail_jax.run_config import RunConfig
 from pngail_jax.train import AdversarialConfig, AdversarialTrainer, Hyperparams
@@ -45,8 +45,15 @@ def trainer_for(methods, data=None, num_iterations=2):
         ),
         classifier=ClassifierConfig(num_steps=20),
         phases=required_phases(methods),
-        ranking=RankingConfig(num_steps=20, snippet_length=10, noise_levels=(1.0, 0.0),
-                              rollouts_per_level=1),
+        ranking=RankingConfig(num_steps=20, snippet_length=10, hidden_sizes=(16,)),
+        drex=DrexConfig(
+            bc=DeterministicBCConfig(num_steps=20, batch_size=16, hidden_sizes=(16,)),
+            noise_levels=(1.0, 0.5, 0.0), rollouts_per_level=1,
+            ranking=dataclasses.replace(
+                DrexConfig().ranking, num_steps=20, pairs_per_step=8, num_dataset_pairs=32,
+                hidden_sizes=(16,), num_members=2,
+            ),
+        ),
         bc=BCConfig(num_steps=20, batch_size=16),
         firl=FirlConfig(discriminator_iterations=5, discriminator_batch_size=16),
     )  # fmt: skip
@@ -56,10 +63,7 @@ def trainer_for(methods, data=None, num_iterations=2):
 def test_the_seven_compile_no_appendix_phase():
     assert RunConfig().adversarial_config().phases == ()
     assert required_phases(METHOD_NAMES) == ()
-    assert RunConfig(methods=("gail", "drex")).adversarial_config().phases == (
-        "bc",
-        "noise_rankings",
-    )
+    assert RunConfig(methods=("gail", "drex")).adversarial_config().phases == ("noise_rankings",)
     state, _ = trainer_for(("gail",)).init(Hyperparams.create(), method_spec("gail"), key(0))
     assert state.ranking_reward_params is None and state.firl is None
 
@@ -165,3 +169,8 @@ def test_ranking_methods_need_trajectories_and_their_phases():
     one_level = dataclasses.replace(demos(), confidence=np.ones(200, np.float32))
     with pytest.raises(DemonstrationError, match="at least two confidences"):
         trainer_for(("trex",), data=one_level).check_methods(("trex",))
+    # T-REX's snippets have exactly snippet_length (10) steps: here only one trajectory has.
+    ids = np.repeat(np.arange(4), [185, 5, 5, 5])
+    short = dataclasses.replace(demos(), trajectory_ids=ids, confidence=(1.0 - ids / 4))
+    with pytest.raises(DemonstrationError, match="snippets of 10 steps"):
+        trainer_for(("trex",), data=short).check_methods(("trex",))
