@@ -10,6 +10,7 @@ import pytest
 
 from pngail_jax import envs
 from pngail_jax.bc import BCConfig, DeterministicBCConfig
+from pngail_jax.cail import CAILConfig
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import DemonstrationError, Demonstrations
 from pngail_jax.firl import FirlConfig
@@ -145,6 +146,22 @@ def test_cail_learns_confidences_that_rank_trajectories_of_known_quality():
     np.testing.assert_array_equal(np.asarray(state.cail_confidence[3]), 1.0)
     returns = np.asarray(metrics["eval/return"])
     assert not np.array_equal(returns[3], returns[4])  # CAIL with beta = 1 is not GAIL
+
+
+def test_cails_gradient_gate_skips_only_disagreeing_steps_after_pretraining():
+    """CAILConfig(pretrain_iterations=N) steps the discriminator only where its gradient and
+    the ranking loss's agree from iteration N on (a count of skipped steps per iteration);
+    before N (here: never reached) it skips none."""
+    base = trainer_for(("cail",), num_iterations=3)
+    hyperparams, spec = Hyperparams.create(label_ratio=0.95), method_spec("cail")
+    results = {}
+    for start in (0, 1000):
+        config = dataclasses.replace(base.config, cail=CAILConfig(pretrain_iterations=start))
+        trainer = AdversarialTrainer(config, base.env, demos())
+        results[start] = jax.jit(trainer.train)(hyperparams, spec, key(3))
+    skipped = np.asarray(results[0][1]["cail/skipped_steps"])
+    assert np.all((skipped >= 0) & (skipped <= 10)) and np.all(skipped == np.round(skipped))
+    assert np.all(np.asarray(results[1000][1]["cail/skipped_steps"]) == 0)
 
 
 def cells_of(state, num):
