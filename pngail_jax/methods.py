@@ -68,7 +68,8 @@ PHASES = ("bc", "demo_rankings", "noise_rankings", "firl", "cail")
 @dataclasses.dataclass(frozen=True)
 class Preset:
     description: str
-    # "none", "given" (D_c only), "sc", "bsc", or "rankings" (every trajectory's confidence)
+    # "none", "given" (D_c only), "sc", "bsc", or "rankings" (a label_ratio share of the
+    # trajectories, ranked by confidence)
     confidence_source: str
     coefficients: dict
     phases: tuple[str, ...] = ()

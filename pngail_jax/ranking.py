@@ -31,7 +31,7 @@ from flax import struct
 
 from pngail_jax.bc import DeterministicBCConfig
 from pngail_jax.fitting import fit_with_adam, squared_norm
-from pngail_jax.networks import MLP, ReluMLP
+from pngail_jax.networks import ReluMLP
 
 
 @dataclasses.dataclass(frozen=True)
@@ -270,30 +270,14 @@ def ranking_loss(
     return bradley_terry_loss(worse, better, pairs.weight)
 
 
-class StateReward:
-    """A reward network r(s): a tanh MLP of the observation, without an output bias (f-IRL's
-    reward and state discriminator).
-
-    Rankings of equal-length snippets do not change when a constant is added to r, so an
-    output bias would get no gradient but float noise, which Adam scales up to full steps
-    (and the learned reward would then differ in its offset from one program to the next).
-    """
-
-    def __init__(self, hidden_sizes):
-        self.network = MLP(tuple(hidden_sizes), 1, output_bias=False)
-
-    def init(self, key, observation_size: int):
-        return self.network.init(key, jnp.zeros((observation_size,)))
-
-    def __call__(self, params, observations: jax.Array) -> jax.Array:
-        return self.network.apply(params, observations)[..., 0]
-
-
 class RankingReward:
     """T-REX's and D-REX's reward r(s): the CAIL codebase's ``StateFunction`` (a ReLU MLP of
     the observation, orthogonal initialisation, ``networks.ReluMLP``) without its output
-    bias, for ``StateReward``'s reason (with the L2 term that bias would only decay from its
-    initial 0). An ensemble's parameters carry a leading member axis [M]."""
+    bias. Rankings of equal-length snippets do not change when a constant is added to r, so
+    that bias would get no gradient but float noise, which Adam scales up to full steps (and
+    the learned reward would then differ in its offset from one program to the next; with the
+    L2 term it would only decay from its initial 0). An ensemble's parameters carry a leading
+    member axis [M]."""
 
     def __init__(self, hidden_sizes):
         self.network = ReluMLP(tuple(hidden_sizes), 1, output_bias=False)
