@@ -172,6 +172,18 @@ class ClassifierSpec:
         return cls(bsc_coef=jnp.asarray(1.0), eps=jnp.asarray(eps, jnp.float32))
 
 
+def _unlabelled_weights(config: ClassifierConfig, num_rows: int, num_labelled: jax.Array):
+    """float[width] weights of ``mean_u`` over the unlabelled batch: 1/k on its first k =
+    ``labelled_batch_size * (n_u // n_c)`` rows (the authors' count, at most the width), 0
+    after; None (a plain mean) when the config fixes the count."""
+    if config.unlabelled_batch_size is not None:
+        return None
+    width = config.unlabelled_batch_width
+    ratio = (num_rows - num_labelled) // jnp.maximum(num_labelled, 1)
+    rows_per_step = jnp.clip(config.labelled_batch_size * ratio, 1, width)
+    return (jnp.arange(width) < rows_per_step) / rows_per_step
+
+
 def train_classifier(
     config: ClassifierConfig,
     spec: ClassifierSpec,
@@ -200,12 +212,7 @@ def train_classifier(
     num_labelled = labelled.sum()
     beta = (inputs.shape[0] - num_labelled) / inputs.shape[0]
     width = config.unlabelled_batch_width
-    if config.unlabelled_batch_size is None:  # the authors' int(n_u / n_c) per labelled row
-        ratio = (inputs.shape[0] - num_labelled) // jnp.maximum(num_labelled, 1)
-        rows_per_step = jnp.clip(config.labelled_batch_size * ratio, 1, width)
-        unlabelled_weights = (jnp.arange(width) < rows_per_step) / rows_per_step
-    else:
-        unlabelled_weights = None
+    unlabelled_weights = _unlabelled_weights(config, inputs.shape[0], num_labelled)
     positive_branch = jnp.sum(jnp.where(labelled, confidence, 0.0)) / num_labelled > 0.5
     labelled_p = labelled / num_labelled
     unlabelled_p = (~labelled) / jnp.maximum((~labelled).sum(), 1)

@@ -546,15 +546,8 @@ class AdversarialTrainer:
             phase_fields["cail_confidence"] = beta
             phase_metrics = {**phase_metrics, **cail_metrics}
         updated, trpo_metrics = self.trpo.update(hyperparams.trpo, trpo_state, transitions, rewards)
-        if "bc" in phases:  # a cloned policy that no RL moves (BC's cells) stays as it is
-            frozen = spec.policy_update_coef == 0
-            learner = ("policy_params", "value_params", "value_optimizer_state", "normalizer")
-            updated = updated.replace(
-                **{
-                    name: _tree_where(frozen, getattr(trpo_state, name), getattr(updated, name))
-                    for name in learner
-                }
-            )
+        if "bc" in phases:
+            updated = _keep_cloned_policy(spec, trpo_state, updated)
         state = state.replace(
             trpo=updated,
             discriminator_params=disc_params,
@@ -683,8 +676,9 @@ class AdversarialTrainer:
             skipped = jnp.zeros(())
             if config.pretrain_iterations is not None:  # step only where the gradients agree
                 ranking_grads = jax.grad(lambda p: ranking_loss(p, index)[0])(params)
-                product = sum(jax.tree.leaves(jax.tree.map(jnp.vdot, grads, ranking_grads)))
-                step = (product >= 0) | (state.iteration < config.pretrain_iterations)
+                step = _gradients_agree(grads, ranking_grads) | (
+                    state.iteration < config.pretrain_iterations
+                )
                 new_params = _tree_where(step, new_params, params)
                 new_optimizer_state = _tree_where(step, new_optimizer_state, optimizer_state)
                 skipped = 1.0 - step.astype(jnp.float32)
@@ -728,6 +722,24 @@ class AdversarialTrainer:
     def policy_state(state: TrainState) -> TRPOState:
         """The learner's state inside a trainer state (for exporting its policy)."""
         return state.trpo
+
+
+def _gradients_agree(grads, other_grads) -> jax.Array:
+    """bool[]: the dot product of two gradients (pytrees of one structure) is >= 0."""
+    return sum(jax.tree.leaves(jax.tree.map(jnp.vdot, grads, other_grads))) >= 0
+
+
+def _keep_cloned_policy(spec: MethodSpec, before: TRPOState, updated: TRPOState) -> TRPOState:
+    """A cloned policy that no RL moves (BC's cells, ``policy_update_coef`` 0) stays as it
+    was: its learner's fields from ``before``, the rest (counters, keys) from ``updated``."""
+    frozen = spec.policy_update_coef == 0
+    learner = ("policy_params", "value_params", "value_optimizer_state", "normalizer")
+    return updated.replace(
+        **{
+            name: _tree_where(frozen, getattr(before, name), getattr(updated, name))
+            for name in learner
+        }
+    )
 
 
 def _tree_where(condition, on_true, on_false):
