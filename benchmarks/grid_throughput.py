@@ -60,6 +60,11 @@ without a file, 1000 random rows of the task's shapes (the run says so).
     python benchmarks/grid_throughput.py --json rows.json         # Pendulum-v1, 1, 7, 35 cells
     python benchmarks/grid_throughput.py --env Hopper --quick --json hopper.json
     python benchmarks/grid_throughput.py --quick --devices 2      # sharded over 2 host devices
+    python benchmarks/grid_throughput.py --env HalfCheetah-v4 --physics c,mjx --sizes 7
+
+``--physics c,mjx`` measures gymnasium's task on MuJoCo's C engine and on MJX one after the
+other in this run and ends with a side-by-side table: training and env-only steps/s per engine
+and the C engine's ratio over MJX at each grid size (rows gain ``physics``).
 
 ``--devices N`` shards every grid over N devices; on a CPU it re-runs this script in a
 subprocess with ``XLA_FLAGS=--xla_force_host_platform_device_count=N`` (XLA reads it when its
@@ -76,7 +81,7 @@ peak_memory_bytes, device, jax_version}`` plus ``cells``, ``num_envs``, ``unroll
 ``chunk_compile_seconds``, ``cold_cache_hits``, ``compile_seconds_warm``,
 ``init_compile_seconds_warm``, ``chunk_compile_seconds_warm``, ``warm_cache_hits``,
 ``init_peak_memory_bytes``, ``init_seconds`` (the untimed init call), ``nonfinite_cells``,
-``synthetic_demos``.
+``synthetic_demos``, ``physics`` (the engine of gymnasium's tasks, else None).
 """
 
 from __future__ import annotations
@@ -114,8 +119,8 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 PENDULUM_DEMOS = REPO_ROOT / "data" / "pendulum" / "Pendulum-v1_mixture.npy"
 PENDULUM_ACTION_SCALE = 2.0  # the released Pendulum set stores torques / 2
 SYNTHETIC_ROWS = 1000
-# Brax tasks that end an episode when the body falls (terminate_when_unhealthy).
-TERMINATING_TASKS = ("Ant", "Hopper", "Walker2d")
+# Tasks that end an episode when the body falls (terminate_when_unhealthy).
+TERMINATING_TASKS = ("Ant", "Hopper", "Walker2d", "Ant-v4", "Hopper-v4", "Walker2d-v4")
 SIZES, QUICK_SIZES = (1, 7, 35), (1, 7)
 CLASSIFIER_STEPS, QUICK_CLASSIFIER_STEPS = 25_000, 1_000
 CACHE_HIT_EVENT = "/jax/compilation_cache/cache_hits"
@@ -150,7 +155,10 @@ def full_episode_trpo(env_name: str, settings, train) -> TRPO | None:
     """``train``'s TRPO on the task without early termination; None where it never ends one."""
     if env_name not in TERMINATING_TASKS:
         return None
-    env = envs.make(env_name, terminate_when_unhealthy=False, **settings.env_options)
+    options = dict(settings.env_options)
+    if env_name in envs.GYM_TASKS:
+        options["physics"] = settings.physics
+    env = envs.make(env_name, terminate_when_unhealthy=False, **options)
     return TRPO(train.config.trpo, env)
 
 
@@ -271,7 +279,10 @@ def compile_worker(args, devices) -> None:
 
 def compile_times(args, size: int) -> dict:
     """Cold (empty cache) then warm (the cache the cold compile filled) compile of the grid of
-    ``size`` cells, each in a fresh process."""
+    ``size`` cells, each in a fresh process; with ``--no-compile-times``, only the measuring
+    process's own compile (no cache), as ``compile_seconds``."""
+    if not args.compile_times:
+        return {"compile_seconds": None, "compile_seconds_warm": None, "warm_cache_hits": None}
     print("  compiling in two fresh processes (cold, then warm)", flush=True)
     with tempfile.TemporaryDirectory(prefix="grid_throughput_xla_cache_") as cache_dir:
         cold = compile_in_fresh_process(args, size, cache_dir)
@@ -295,6 +306,8 @@ def measure_grid(args, train, full_trpo, size: int, devices, key) -> dict:
     methods, seeds = grid_layout(size)
     inputs = stack_cells(make_cells(methods, seeds), key)
     grid = Grid(train, inputs, blocks_per_chunk=1, devices=devices)
+    if compiling["compile_seconds"] is None:
+        compiling["compile_seconds"] = grid.compile_seconds
     state, chunks = time_chunks(grid)
     eval_seconds = evaluation_seconds(train.trpo, state)
     eval_seconds_full = eval_seconds if full_trpo is None else evaluation_seconds(full_trpo, state)
@@ -372,16 +385,21 @@ def print_progress(row: dict) -> None:
     warning = ""
     if row["nonfinite_cells"]:
         warning = f"  WARNING: {row['nonfinite_cells']} cell(s) non-finite"
-    if row["warm_cache_hits"] < 2:
+    if row["warm_cache_hits"] is not None and row["warm_cache_hits"] < 2:
         warning += f"  NOTE: warm compile read {row['warm_cache_hits']} of 2 programs from cache"
     print(
         f"  {row['cells']:3d} cells ({len(row['methods'])}x{row['seeds']} methods x seeds) "
         f"{row['steps_per_second']:>10,.0f} steps/s training, "
         f"{row['steps_per_second_with_eval']:>10,.0f} with evaluation  "
-        f"compile {row['compile_seconds']:5.1f} s cold, {row['compile_seconds_warm']:5.1f} s warm"
+        f"compile {row['compile_seconds']:5.1f} s cold, "
+        f"{_seconds(row['compile_seconds_warm'])} warm"
         f"  init {row['init_seconds']:5.1f} s{warning}",
         flush=True,
     )
+
+
+def _seconds(value: float | None) -> str:
+    return "-" if value is None else f"{value:.1f} s"
 
 
 def markdown_table(rows: list[dict]) -> str:
@@ -403,7 +421,7 @@ def markdown_table(rows: list[dict]) -> str:
             f"{row['steps_per_second_with_full_eval']:,.0f} | "
             f"{row['env_steps_per_second']:,.0f} | {row['train_over_env_ratio']:.4f} | "
             f"{row['eval_share']:.1%} / {row['eval_share_full_episodes']:.1%} | "
-            f"{row['compile_seconds']:.1f} / {row['compile_seconds_warm']:.1f} | {memory} |"
+            f"{row['compile_seconds']:.1f} / {_seconds(row['compile_seconds_warm'])} | {memory} |"
         )
     return "\n".join(lines)
 
@@ -467,6 +485,13 @@ def parse_args(argv=None) -> argparse.Namespace:
         "without a file)",
     )
     parser.add_argument("--json", type=Path, default=None, help="write the rows here")
+    parser.add_argument(
+        "--compile-times",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="time the cold and warm compiles in two fresh processes (default); "
+        "--no-compile-times reports only this process's compile, and saves two compiles",
+    )
     parser.add_argument("--seed", type=int, default=0, help="key of cells and env runs")
     parser.add_argument("--devices-worker", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--compile-worker", type=int, help=argparse.SUPPRESS)
@@ -507,7 +532,7 @@ def measure_environment(args, devices) -> list[dict]:
     demos, demos_note = load_demos(args.demos, args.env, env)
     print(
         f"device {device_description()} x{len(devices)} used, jax {jax.__version__}; "
-        f"{args.env}: {run_settings.describe(settings)}; {args.iterations} iterations per "
+        f"{args.env}: {run_settings.describe(settings, env)}; {args.iterations} iterations per "
         f"timed chunk, {args.classifier_steps:,} classifier steps (untimed)\n"
         f"demonstrations: {demos_note}",
         flush=True,
@@ -516,11 +541,12 @@ def measure_environment(args, devices) -> list[dict]:
         "device": device_description(),
         "jax_version": jax.__version__,
         "synthetic_demos": demos_note.startswith("SYNTHETIC"),
+        "physics": getattr(env, "physics", None),
     }
     rows = measure_rows(args, env, demos, devices, common)
     per_device = "; peak memory per device" if len(devices) > 1 else ""
     print(
-        f"\n{args.env}: {run_settings.describe(settings)}; demonstrations: {demos_note}\n"
+        f"\n{args.env}: {run_settings.describe(settings, env)}; demonstrations: {demos_note}\n"
         f"Timed: median of {NUM_REPEATS} warm calls of a chunk ({args.iterations} iterations + "
         "one evaluation) and of an evaluation alone; training steps/s leaves the evaluation "
         f"out, 'incl. eval' adds one every {settings.eval_every} iterations; {len(devices)} "
@@ -529,23 +555,91 @@ def measure_environment(args, devices) -> list[dict]:
     return rows
 
 
+def split_physics(argv: list[str]) -> tuple[list[str], list[str | None]]:
+    """``argv`` without its ``--physics`` flag, and the engines that flag lists (``c,mjx``:
+    both, measured one after the other in this run; no flag: [None], the platform's)."""
+    rest, engines = [], [None]
+    items = iter(argv)
+    for item in items:
+        if item == "--physics" or item.startswith("--physics="):
+            value = item.partition("=")[2] if "=" in item else next(items, "")
+            engines = [engine.strip() for engine in value.split(",")]
+            bad = [engine for engine in engines if engine not in envs.PHYSICS]
+            if bad or not engines:
+                raise SystemExit(
+                    f"--physics: comma-separated engines among {', '.join(envs.PHYSICS)}, "
+                    f"got {value!r}"
+                )
+        else:
+            rest.append(item)
+    return rest, engines
+
+
+def physics_table(rows: list[dict]) -> str:
+    """Training and env-only steps/s per engine, side by side per grid size, with the
+    ratios of the first engine listed over each other one (all measured in this run)."""
+    engines = list(dict.fromkeys(row["physics"] for row in rows))
+    sizes = list(dict.fromkeys(row["cells"] for row in rows))
+    first = engines[0]
+    header = "| cells | " + " | ".join(
+        f"{engine}: training / env-only steps/s" for engine in engines
+    )
+    header += "".join(f" | {first} / {other}: training, env-only" for other in engines[1:])
+    lines = [header + " |", "|---:|" + "---:|" * (2 * len(engines) - 1)]
+    for size in sizes:
+        by_engine = {row["physics"]: row for row in rows if row["cells"] == size}
+        cells = [
+            f"{by_engine[e]['steps_per_second']:,.0f} / {by_engine[e]['env_steps_per_second']:,.0f}"
+            for e in engines
+        ]
+        for other in engines[1:]:
+            a, b = by_engine[first], by_engine[other]
+            cells.append(
+                f"{a['steps_per_second'] / b['steps_per_second']:.1f}x, "
+                f"{a['env_steps_per_second'] / b['env_steps_per_second']:.1f}x"
+            )
+        lines.append(f"| {size} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> None:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    rest, engines = split_physics(argv)
+    if len(engines) > 1 and "--devices" in " ".join(rest):
+        raise SystemExit("--physics with several engines and --devices: measure one at a time")
+    if len(engines) > 1:
+        rows = []
+        for engine in engines:
+            print(f"\n=== physics: {engine}", flush=True)
+            rows += run(rest + ["--physics", engine])
+        print("\n" + physics_table(rows), flush=True)
+    else:
+        rows = run(argv)
+    json_path = parse_args(rest).json
+    if json_path and rows:
+        json_path.parent.mkdir(parents=True, exist_ok=True)
+        json_path.write_text(json.dumps(rows, indent=2))
+        print(f"\nwrote {json_path}", file=sys.stderr)
+
+
+def run(argv: list[str]) -> list[dict]:
+    """Measures one engine (or the platform's): this script's rows for ``argv``."""
     args = parse_args(argv)
     num_devices = args.devices or 1
     if jax.device_count() < num_devices:
         if args.devices_worker or jax.devices()[0].platform != "cpu":
             raise SystemExit(f"--devices {num_devices}: jax sees only {jax.devices()}")
-        raise SystemExit(rerun_with_host_devices(num_devices, argv))
+        code = rerun_with_host_devices(num_devices, argv)
+        if code:
+            raise SystemExit(code)
+        return []
     devices = jax.devices()[:num_devices]
     if args.compile_worker:
         compile_worker(args, devices)
-        return
+        return []
     rows = measure_environment(args, devices)
     print(markdown_table(rows), flush=True)
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(rows, indent=2))
-        print(f"\nwrote {args.json}", file=sys.stderr)
+    return rows
 
 
 if __name__ == "__main__":

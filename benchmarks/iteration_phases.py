@@ -84,7 +84,7 @@ NUM_ROUNDS = 5
 SAMPLE_SECONDS = 0.05  # fast phases: back-to-back calls per sample, each blocked, to last this
 MAX_CALLS_PER_SAMPLE = 100
 UNROLLS = (2, 4, 8)
-TERMINATING_ENVS = ("Ant", "Hopper", "Walker2d")
+TERMINATING_ENVS = ("Ant", "Hopper", "Walker2d", "Ant-v4", "Hopper-v4", "Walker2d-v4")
 LABEL_RATIO = 0.2  # Hyperparams' default: the fraction of split rows in D_c
 CHAIN_PHASES = ("rollout", "gae/sequential", "value_fit", "conjugate_gradient")
 

@@ -37,7 +37,11 @@ from pngail_jax.report import group_label, late_evaluations
 FIG2_METHODS = ("gail", "2iwil", "icgail", "wgail", "pngail")
 FIG3_METHODS = ("pngail", "pngail-no-bsc", "pngail-no-pn")
 SEVEN_METHODS = ("gail", "2iwil", "icgail", "wgail", "pngail", "pngail-no-bsc", "pngail-no-pn")
-MUJOCO_TASKS = ("Ant", "HalfCheetah", "Hopper", "Walker2d", "Swimmer")
+# The paper's six tasks: its MuJoCo tasks as gymnasium's -v4 (gym -v2's model files and
+# observations). Figures name tasks by family (``envs.task_family``), so Brax's variants
+# (``--envs Hopper``) fill the same panels.
+MUJOCO_TASKS = envs.GYM_TASKS
+PAPER_TASKS = ("Pendulum-v1", *MUJOCO_TASKS)
 FIGURES = (
     "fig2", "fig3", "fig4", "fig5", "fig6", "fig7", "fig8", "fig9", "fig10", "table1", "table4",
 )  # fmt: skip
@@ -279,8 +283,8 @@ def plan(figures: Sequence[str], tasks: Sequence[str], released: set[str]):
     def main_of(task):
         return main_grid(task, task in released)
 
-    def pick(names):
-        return [task for task in names if task in tasks]
+    def pick(families):
+        return [task for family in families for task in tasks if envs.task_family(task) == family]
 
     for figure in figures:
         if figure in ("fig2", "fig3"):
@@ -722,7 +726,7 @@ def figure_markdown(figure: Figure, results: dict, command: str) -> list[str]:
         ]
         for task in figure.panels:
             sc, bsc = results[task]["pngail-no-bsc"], results[task]["pngail"]
-            paper = PAPER_TABLE1.get(task, (None,) * 4)
+            paper = PAPER_TABLE1.get(envs.task_family(task), (None,) * 4)
             lines.append(
                 f"| {task} | {_number(sc['confidence_mae'][0], 3)} | {_number(paper[0], 3)} | "
                 f"{_number(bsc['confidence_mae'][0], 3)} | {_number(paper[2], 3)} | "
@@ -754,7 +758,7 @@ def table4_markdown(figure: Figure, results: dict) -> list[str]:
     """Raw returns, ours under both averages (the last 10% of training, and all of it)
     beside the paper's "average reward after training convergence", per method and task."""
     tasks = list(figure.panels)
-    paper_column = {"Pendulum-v1": 0, "Ant": 1}
+    paper_column = {task: {"Pendulum-v1": 0, "Ant": 1}[envs.task_family(task)] for task in tasks}
     header = (
         "| method | "
         + " | ".join(
@@ -863,7 +867,9 @@ def parse_args(argv=None) -> argparse.Namespace:
         help=f"comma-separated, from {', '.join(FIGURES)} (default: all)",
     )
     parser.add_argument(
-        "--envs", help=f"comma-separated tasks (default: the six, {', '.join(envs.ENV_NAMES)})"
+        "--envs",
+        help=f"comma-separated tasks (default: the paper's six, {', '.join(PAPER_TASKS)}; any "
+        f"of {', '.join(envs.ENV_NAMES)})",
     )
     parser.add_argument(
         "--budget",
@@ -900,7 +906,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     args.tasks = (
         known_names(parser, args.envs, envs.ENV_NAMES, "task", flag="--envs")
         if args.envs
-        else list(envs.ENV_NAMES)
+        else list(PAPER_TASKS)
     )
     if args.released_demos is not None and not args.released_demos.is_dir():
         parser.error(f"--released-demos {args.released_demos} is not a directory")

@@ -535,7 +535,7 @@ def build(config: RunConfig, saved: SavedRun | None) -> SweepRun:
         f"{config.num_settings} setting(s)) on {config.env}, {config.iterations} iterations x "
         f"{config.settings.samples_per_iteration} steps, {trainer.num_demos} demonstration "
         f"rows; {len(devices)} {devices[0].platform} device(s)\n"
-        f"  {run_settings.describe(config.settings)}",
+        f"  {run_settings.describe(config.settings, env)}",
         flush=True,
     )
     if normalizer is None:
@@ -570,6 +570,8 @@ def write_config(out: Path, run: SweepRun, argv: list[str]) -> None:
             "normalizer": run.normalizer,
             "num_demos": run.trainer.num_demos,
             "bsc_eps": run.config.task_bsc_eps,
+            # The engine that ran (RunSettings.physics None: chosen from the platform).
+            "physics": getattr(run.env, "physics", None),
             "adversarial": dataclasses.asdict(run.trainer.config),
             "inputs": input_files(run.config, run.demos_path),
         },

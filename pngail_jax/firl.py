@@ -94,7 +94,9 @@ class FirlConfig:
     def for_env(cls, env_name: str) -> FirlConfig:
         """The codebase's settings for ``env_name``: ant.yml's (5 residual blocks, a
         (128, 128) reward) for Ant, the other MuJoCo files' (the defaults) for any other."""
-        if env_name == "Ant":
+        from pngail_jax.envs import task_family
+
+        if task_family(env_name) == "Ant":
             return cls(discriminator_residual_blocks=5, reward_hidden_sizes=(128, 128))
         return cls()
 

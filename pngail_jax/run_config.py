@@ -25,6 +25,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any, NoReturn
 
+from pngail_jax import envs
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.firl import FirlConfig
 from pngail_jax.methods import ALL_METHOD_NAMES, METHOD_NAMES, PRESETS, required_phases
@@ -43,7 +44,8 @@ TASK_BSC_EPS = {"Walker2d": 0.05}
 # Classifier steps per task where the paper departs from 25,000 (appendix C.2).
 TASK_CLASSIFIER_STEPS = {"Walker2d": 50_000}
 # Rows per split, n_c + n_u, per task (the paper's Table 3): ``num_demos=None`` takes these,
-# capped at the demonstrations' row count.
+# capped at the demonstrations' row count. Per-task tables are keyed by ``envs.task_family``
+# (Hopper-v4 and Brax's Hopper share a row).
 TASK_NUM_DEMOS = {
     "Pendulum-v1": 1000,
     "Ant": 600,
@@ -58,7 +60,9 @@ def task_classifier(env: str) -> ClassifierConfig:
     """The paper's classifier settings for ``env`` (``TASK_CLASSIFIER_STEPS``, else the
     reference code's 25,000 steps)."""
     default = ClassifierConfig()
-    return ClassifierConfig(num_steps=TASK_CLASSIFIER_STEPS.get(env, default.num_steps))
+    return ClassifierConfig(
+        num_steps=TASK_CLASSIFIER_STEPS.get(envs.task_family(env), default.num_steps)
+    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -210,7 +214,11 @@ class RunConfig:
 
     @property
     def task_bsc_eps(self) -> float:
-        return self.bsc_eps if self.bsc_eps is not None else TASK_BSC_EPS.get(self.env, 0.01)
+        return (
+            self.bsc_eps
+            if self.bsc_eps is not None
+            else TASK_BSC_EPS.get(envs.task_family(self.env), 0.01)
+        )
 
     @property
     def num_settings(self) -> int:
@@ -221,7 +229,7 @@ class RunConfig:
         task's paper size (``TASK_NUM_DEMOS``) capped at ``num_rows``, or every row."""
         if self.num_demos is not None:
             return self.num_demos
-        return min(num_rows, TASK_NUM_DEMOS.get(self.env, num_rows))
+        return min(num_rows, TASK_NUM_DEMOS.get(envs.task_family(self.env), num_rows))
 
     def adversarial_config(self, num_rows: int | None = None) -> AdversarialConfig:
         """The static configuration of the trainer this run builds on demonstrations of

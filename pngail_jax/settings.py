@@ -2,8 +2,9 @@
 
 A ``RunSettings`` holds what differs between tasks but not between methods: the rollout
 shape (parallel envs x unroll length, about 5,000 samples per iteration as in the paper),
-the MJX solver caps, how often and on how many episodes the deterministic policy is
-evaluated, and whether TRPO normalises observations. ``experiments.sweep``,
+the MJX solver caps, the physics engine of gymnasium's MuJoCo tasks, how often and on how
+many episodes the deterministic policy is evaluated, and whether TRPO normalises
+observations. ``experiments.sweep``,
 ``experiments.train_rl`` and ``experiments.make_demos`` use ``settings_for(env)`` unless a
 flag overrides a field; ``benchmarks/grid_throughput.py`` measures with them.
 
@@ -72,6 +73,13 @@ def add_arguments(parser) -> None:
         help=f"MJX solver: 'own' (the task's), 'fast' (1/4) or 'I/L' iterations {table}",
     )
     group.add_argument(
+        "--physics",
+        choices=envs.PHYSICS,
+        help="physics engine of gymnasium's MuJoCo tasks (Hopper-v4, ...): MuJoCo's C engine "
+        "(float64, threaded; fastest on a CPU) or MJX (accelerators) (default: c on a CPU, mjx "
+        "on a GPU or TPU)",
+    )
+    group.add_argument(
         "--normalize-observations",
         action=argparse.BooleanOptionalAction,
         default=None,
@@ -102,13 +110,22 @@ def from_arguments(env_name: str, args, base: RunSettings | None = None) -> RunS
         if env_name == "Pendulum-v1" and any(value is not None for value in solver.values()):
             raise ValueError("--solver: Pendulum-v1 has no MJX solver (use 'own' or omit it)")
         settings = dataclasses.replace(settings, **solver)
+    if args.physics is not None:
+        if env_name not in envs.GYM_TASKS:
+            raise ValueError(
+                f"--physics: only gymnasium's MuJoCo tasks ({', '.join(envs.GYM_TASKS)}) have a "
+                f"choice of engine, not {env_name}"
+            )
+        settings = dataclasses.replace(settings, physics=args.physics)
     return settings
 
 
-def describe(settings: RunSettings) -> str:
-    """One line for progress output and reports."""
+def describe(settings: RunSettings, env: envs.Env | None = None) -> str:
+    """One line for progress output and reports; with ``env``, the engine it runs on."""
+    engine = getattr(env, "physics", None) or settings.physics
+    physics = f"physics: {PHYSICS_NAMES[engine]}, " if engine else ""
     return (
-        f"{settings.num_envs} envs x {settings.unroll_length} steps, solver: "
+        f"{settings.num_envs} envs x {settings.unroll_length} steps, {physics}solver: "
         f"{settings.solver_description}, evaluation: {settings.num_eval_episodes} episodes every "
         f"{settings.eval_every} iterations"
         + (", normalised observations" if settings.normalize_observations else "")
@@ -127,6 +144,9 @@ class RunSettings:
     eval_every: int = 10
     num_eval_episodes: int = 32
     normalize_observations: bool = False
+    # Engine of gymnasium's MuJoCo tasks (envs.PHYSICS); None: from the platform when the
+    # environment is made (envs.default_physics), and the run's config.json records which ran.
+    physics: str | None = None
 
     def __post_init__(self):
         # Frozen: counts are normalised to Python ints through object.__setattr__.
@@ -135,6 +155,11 @@ class RunSettings:
         for name in ("solver_iterations", "ls_iterations"):
             if getattr(self, name) is not None:
                 object.__setattr__(self, name, _positive_int(name, getattr(self, name)))
+        if self.physics is not None and self.physics not in envs.PHYSICS:
+            raise ValueError(
+                f"RunSettings.physics must be one of {', '.join(envs.PHYSICS)} or None, "
+                f"got {self.physics!r}"
+            )
         if not isinstance(self.normalize_observations, bool):
             raise ValueError(
                 "RunSettings.normalize_observations must be True or False, "
@@ -185,6 +210,8 @@ class RunSettings:
 
 REFERENCE_SETTINGS = RunSettings()
 
+PHYSICS_NAMES = {"c": "MuJoCo C engine (float64)", "mjx": "MJX"}
+
 # The MuJoCo tasks: the reference's 25 envs x 200 steps, the fast MJX solver (1 Newton / 4
 # line-search iterations, Brax's own setting for Ant), and 10 evaluation episodes every 50
 # iterations (the reference evaluates 5). The wide, short shape that suits a GPU (250 x 20,
@@ -203,6 +230,9 @@ OWN_SOLVER_MUJOCO_SETTINGS = dataclasses.replace(
 
 ENV_SETTINGS: dict[str, RunSettings] = {
     "Pendulum-v1": REFERENCE_SETTINGS,
+    # gymnasium's tasks keep gymnasium's solver, whichever engine: the C engine's cost hardly
+    # depends on the caps, and they are what makes it equal gymnasium.
+    **{name: OWN_SOLVER_MUJOCO_SETTINGS for name in envs.GYM_TASKS},
     "Ant": MUJOCO_SETTINGS,
     # The fast solver makes HalfCheetah's physics diverge to NaN now and then
     # (docs/environments.md), which would poison a whole run's update: its own solver.
@@ -229,5 +259,14 @@ def settings_for(env_name: str, **overrides) -> RunSettings:
 
 
 def make_env(env_name: str, settings: RunSettings) -> envs.Env:
-    """``envs.make(env_name)`` with the settings' solver caps (Pendulum takes none)."""
-    return envs.make(env_name, **settings.env_options)
+    """``envs.make(env_name)`` with the settings' solver caps (Pendulum takes none) and, for
+    gymnasium's MuJoCo tasks, their physics engine."""
+    options = dict(settings.env_options)
+    if env_name in envs.GYM_TASKS:
+        options["physics"] = settings.physics
+    elif settings.physics is not None:
+        raise ValueError(
+            f"RunSettings.physics: only gymnasium's MuJoCo tasks have a choice of engine, "
+            f"not {env_name}"
+        )
+    return envs.make(env_name, **options)

@@ -6,8 +6,17 @@ from pngail_jax import envs
 
 
 def test_unknown_name_lists_available():
-    with pytest.raises(ValueError, match="available: Pendulum-v1, Ant, HalfCheetah"):
+    with pytest.raises(ValueError, match="available: Pendulum-v1, Hopper-v4, .*, Ant, HalfCheetah"):
         envs.make("CartPole-v1")
+
+
+def test_bad_physics_and_thread_options_are_named():
+    with pytest.raises(ValueError, match="Hopper-v4: physics must be one of c, mjx, got 'gpu'"):
+        envs.make("Hopper-v4", physics="gpu")
+    with pytest.raises(ValueError, match="Hopper-v4: num_threads must be a positive integer"):
+        envs.make("Hopper-v4", num_threads=0)
+    with pytest.raises(ValueError, match="unsupported option.*'physics'"):
+        envs.make("Hopper", physics="c")  # Brax's variant runs on MJX only
 
 
 def test_unknown_option_is_named():

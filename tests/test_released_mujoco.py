@@ -12,10 +12,10 @@ from pngail_jax.run_config import RunConfig
 # The released files' shapes, [s, a] columns, and the paper's Table 3 for each task.
 RELEASED = {
     # file env: (our task, observation columns, action columns, n_c + n_u, random, optimal)
-    "HalfCheetah-v2": ("HalfCheetah", 17, 6, 2500, -288.44, 3467.32),
-    "Hopper-v2": ("Hopper", 11, 3, 100, 18.04, 3250.67),
-    "Swimmer-v2": ("Swimmer", 8, 2, 25, 2.31, 348.99),
-    "Walker2d-v2": ("Walker2d", 17, 6, 2000, 1.91, 3694.13),
+    "HalfCheetah-v2": ("HalfCheetah-v4", 17, 6, 2500, -288.44, 3467.32),
+    "Hopper-v2": ("Hopper-v4", 11, 3, 100, 18.04, 3250.67),
+    "Swimmer-v2": ("Swimmer-v4", 8, 2, 25, 2.31, 348.99),
+    "Walker2d-v2": ("Walker2d-v4", 17, 6, 2000, 1.91, 3694.13),
 }
 
 
@@ -40,6 +40,7 @@ def test_each_released_mujoco_file_fits_its_task_with_the_papers_settings(tmp_pa
         optimal_return,
     )
     demos.check_env(envs.make(task))  # sizes and units fit our task
+    demos.check_env(envs.make(envs.task_family(task)))  # and Brax's variant of it
     # --demos alone picks the task, and the split takes the paper's n_c + n_u, capped at the
     # file's 3,000 rows (HalfCheetah's 2,500 and Walker2d's 2,000 fit; so do the others).
     config = sweep.parse_args(["--demos", str(mixture), "--out", str(tmp_path / "run")]).config
@@ -68,6 +69,8 @@ def test_a_released_file_of_another_task_is_named(tmp_path):
     hopper = load_released(write_released(tmp_path, "Hopper-v2", 10, 14))
     with pytest.raises(DemonstrationError, match="demonstrations of Hopper-v2 do not fit Swimmer"):
         hopper.check_env(envs.make("Swimmer"))
+    with pytest.raises(DemonstrationError, match="pick the task Hopper-v4"):
+        hopper.check_env(envs.make("Walker2d-v4"))
     ant = load_released(write_released(tmp_path, "Ant-v2", 10, 119))
     with pytest.raises(DemonstrationError, match="Ant-v2 file cannot serve: .* 111 columns"):
         ant.check_env(envs.make("Ant"))

@@ -25,6 +25,8 @@ DOCUMENTED = {
     "Swimmer": (5000, 25, 200, {}, 50, 10),  # the fast solver learned worse there
     "HalfCheetah": (5000, 25, 200, {}, 50, 10),  # the fast solver diverges there
     "Walker2d": (5000, 25, 200, {}, 50, 10),  # fast solver's learning effect not measured
+    # gymnasium's tasks: gymnasium's own solver, which the C engine needs to equal it.
+    **{name: (5000, 25, 200, {}, 50, 10) for name in envs.GYM_TASKS},
 }
 
 
@@ -134,3 +136,19 @@ def test_hopper_learns_with_the_table_settings():
     _, metrics = train(TRPOHyperparams.create(), key)
     final = float(metrics["eval/return"][-1])
     assert final >= 150.0, final
+
+
+def test_physics_setting_reaches_gymnasium_tasks_only():
+    parser = argparse.ArgumentParser()
+    settings.add_arguments(parser)
+    chosen = settings.from_arguments("Hopper-v4", parser.parse_args(["--physics", "mjx"]))
+    assert chosen.physics == "mjx" and settings_for("Hopper-v4").physics is None
+    with pytest.raises(ValueError, match="--physics: only gymnasium's MuJoCo tasks"):
+        settings.from_arguments("Hopper", parser.parse_args(["--physics", "c"]))
+    with pytest.raises(SystemExit):  # argparse names the choices
+        parser.parse_args(["--physics", "gpu"])
+    with pytest.raises(ValueError, match="RunSettings.physics must be one of c, mjx"):
+        RunSettings(physics="C")
+    env = settings.make_env("Swimmer-v4", settings_for("Swimmer-v4"))
+    assert env.physics == envs.default_physics() == "c"  # the tests run on a CPU
+    assert "physics: MuJoCo C engine" in settings.describe(settings_for("Swimmer-v4"), env)

@@ -35,7 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from pngail_jax.envs import ENV_NAMES
+from pngail_jax.envs import ENV_NAMES, task_family
 
 NPZ_FORMAT_VERSION = 1
 
@@ -62,14 +62,15 @@ RELEASED_ACTION_SIZES = {
     "Walker2d-v2": 6,
 }
 
-# Our task of each released file's environment. The authors' Ant-v2 file has none: gym v2's
-# Ant observations (111: positions, velocities and contact forces) are not our Ant's (27).
+# Our task of each released file's environment: gymnasium's -v4 tasks, which have gym -v2's
+# model files and observation layouts. The authors' Ant-v2 file has none: gym v2's Ant
+# observations (111: positions, velocities and contact forces) are not Ant-v4's (27).
 RELEASED_TASKS = {
     "Pendulum-v1": "Pendulum-v1",
-    "HalfCheetah-v2": "HalfCheetah",
-    "Hopper-v2": "Hopper",
-    "Swimmer-v2": "Swimmer",
-    "Walker2d-v2": "Walker2d",
+    "HalfCheetah-v2": "HalfCheetah-v4",
+    "Hopper-v2": "Hopper-v4",
+    "Swimmer-v2": "Swimmer-v4",
+    "Walker2d-v2": "Walker2d-v4",
 }
 
 # The documented layout of the released files whose rows are whole trajectories stored one
@@ -193,7 +194,8 @@ class Demonstrations:
         beyond ``ACTION_BOUND_MULTIPLE`` times the magnitude of ``env``'s action bound
         (``max(|low|, |high|)`` per dimension). Actions a little outside the bounds pass: the
         released MuJoCo sets store unclipped policy actions. A released file of another task
-        than ``env`` (``RELEASED_TASKS``), or the unusable Ant-v2 file, is named as such."""
+        than ``env`` (``RELEASED_TASKS``; any variant of the same task, ``envs.task_family``,
+        fits), or the unusable Ant-v2 file, is named as such."""
         made_for = self.metadata.get("env")
         if made_for == "Ant-v2":
             raise DemonstrationError(
@@ -202,7 +204,7 @@ class Demonstrations:
                 f"{env.observation_size}; make Ant demonstrations with experiments.make_demos"
             )
         task = RELEASED_TASKS.get(made_for, made_for)
-        if task in ENV_NAMES and task != env.name:
+        if task in ENV_NAMES and task_family(task) != task_family(env.name):
             raise DemonstrationError(
                 f"demonstrations of {made_for} do not fit {env.name}: pick the task {task} "
                 "(--env), or demonstrations of this one"

@@ -4,15 +4,18 @@
     state = jax.vmap(env.reset)(jax.random.split(key, 16))
     state = jax.vmap(env.step)(state, actions)          # actions: float[16, env.action_size]
 
-``make(name, **options)`` knows ``Pendulum-v1`` (pure JAX, equal to gymnasium's), ``Ant``,
-``HalfCheetah``, ``Hopper``, ``Walker2d`` (Brax on MJX) and ``Swimmer`` (gymnasium's Swimmer-v5
-on MJX), the names given to ``register`` and ``"package.module:factory"``, your own ``Env``
+``make(name, **options)`` knows ``Pendulum-v1`` (pure JAX, equal to gymnasium's), gymnasium's
+MuJoCo tasks ``Hopper-v4``, ``HalfCheetah-v4``, ``Walker2d-v4``, ``Swimmer-v4`` and ``Ant-v4``
+(exact, on MuJoCo's C engine on a CPU or on MJX: ``gym_mujoco``), Brax's variants ``Ant``,
+``HalfCheetah``, ``Hopper``, ``Walker2d`` (on MJX) and ``Swimmer`` (gymnasium's Swimmer-v5 on
+MJX), the names given to ``register`` and ``"package.module:factory"``, your own ``Env``
 or Brax environment (``docs/environments.md``, "Bring your own environment").
 ``AutoReset(env)`` restarts finished episodes.
 """
 
 from __future__ import annotations
 
+import functools
 import importlib
 import inspect
 import sys
@@ -21,23 +24,30 @@ from typing import Any
 
 from pngail_jax.envs.autoreset import AutoReset, AutoResetState
 from pngail_jax.envs.base import Env, EnvState, check_positive_int
+from pngail_jax.envs.gym_mujoco import PHYSICS, TASKS, default_physics
 from pngail_jax.envs.mjx_tasks import BRAX_TASKS, FAST_SOLVER, from_brax
 
 __all__ = [
     "ENV_NAMES",
     "FAST_SOLVER",
+    "GYM_TASKS",
+    "PHYSICS",
     "AutoReset",
     "AutoResetState",
     "Env",
     "EnvState",
     "check_name",
+    "default_physics",
     "from_brax",
     "is_known",
+    "task_family",
     "make",
     "register",
 ]
 
-ENV_NAMES = ("Pendulum-v1", *BRAX_TASKS, "Swimmer")
+# gymnasium's MuJoCo tasks, exactly (physics: MuJoCo's C engine or MJX).
+GYM_TASKS = tuple(TASKS)
+ENV_NAMES = ("Pendulum-v1", *GYM_TASKS, *BRAX_TASKS, "Swimmer")
 
 # Factories given to ``register``, by name.
 _REGISTRY: dict[str, Callable[..., Any]] = {}
@@ -52,8 +62,9 @@ def make(name: str, **options) -> Env:
     may return a Brax environment instead: it is wrapped with ``from_brax``.
 
     Built-in options: ``max_episode_steps`` for every env; ``g`` for Pendulum-v1;
-    ``solver_iterations`` and ``ls_iterations`` (MJX solver overrides, see ``FAST_SOLVER``) for
-    the MuJoCo tasks, plus any Brax environment keyword for the Brax ones. Building a MuJoCo
+    ``solver_iterations`` and ``ls_iterations`` (solver overrides, see ``FAST_SOLVER``) for
+    the MuJoCo tasks; ``physics`` (``"c"``, ``"mjx"``, None: from the platform) and
+    ``num_threads`` for gymnasium's; any Brax environment keyword for Brax's. Building a MuJoCo
     task loads the model (a second or two); compiling its step takes 10-60 s on a CPU.
 
     Options are checked before anything is built: ``max_episode_steps``, ``solver_iterations``
@@ -65,6 +76,10 @@ def make(name: str, **options) -> Env:
         from pngail_jax.envs.pendulum import Pendulum
 
         return _build(Pendulum, name, options)
+    if name in TASKS:
+        from pngail_jax.envs.gym_mujoco import GymMujocoTask
+
+        return _build(functools.partial(GymMujocoTask, name), name, options)
     if name in BRAX_TASKS:
         from pngail_jax.envs.mjx_tasks import BraxTask
 
@@ -93,6 +108,13 @@ def register(name: str, factory: Callable[..., Any], *, overwrite: bool = False)
     if not callable(factory):
         raise ValueError(f"the factory of {name!r} must be callable, got {factory!r}")
     _REGISTRY[name] = factory
+
+
+def task_family(name: str) -> str:
+    """The task a name runs, whichever variant: ``"Hopper"`` for ``"Hopper-v4"`` (gymnasium's)
+    and ``"Hopper"`` (Brax's); any other name as it is. Per-task tables (the paper's
+    demonstration counts, classifier settings, Table 1) are keyed by it."""
+    return name.removesuffix("-v4") if name in GYM_TASKS else name
 
 
 def check_name(name: str) -> None:

@@ -1,0 +1,440 @@
+"""gymnasium's MuJoCo tasks (-v4), exactly, on MuJoCo's C engine or on MJX.
+
+``Hopper-v4``, ``HalfCheetah-v4``, ``Walker2d-v4``, ``Swimmer-v4`` and ``Ant-v4`` are
+gymnasium's tasks of those names: the same model files (read from the installed gymnasium),
+frame skip, observation, reward terms, termination and reset noise. They are the closest
+available to the paper's gym -v2 tasks (mujoco-py), which used the same model files.
+
+One task, two physics engines (``physics=``):
+
+- ``"c"``: MuJoCo's own C engine in float64, as gymnasium runs it. The physics state travels
+  through JAX as the float64 bytes of MuJoCo's state vector (time, positions, velocities and
+  the solver's warm start) viewed as ``uint32``, so it is exact whatever JAX's float width,
+  and ``step`` is a ``jax.pure_callback`` batched over every env of a grid at once: one
+  call per time step steps all of them on a pool of threads (MuJoCo releases the GIL).
+  ``mujoco.rollout`` is not used because it does not return the solver's warm start: without
+  it HalfCheetah-v4 drifted from gymnasium by 16 in a joint velocity over one episode.
+- ``"mjx"``: MJX, in JAX's float width, for accelerators.
+- ``None`` (default): ``"c"`` when JAX's default backend is the CPU, else ``"mjx"``.
+
+Observations, rewards and terminations are written once (``TaskSpec``) against an array
+namespace, NumPy for the C engine and ``jax.numpy`` for MJX.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+import os
+import threading
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from flax import struct
+
+from pngail_jax.envs.base import Env, float_dtype
+from pngail_jax.envs.mjx_tasks import _check_options, _gymnasium_asset, _import_mjx
+
+PHYSICS = ("c", "mjx")
+
+
+def _healthy_hopper(xp, qpos, qvel):
+    # gymnasium: every state entry but x and z strictly inside (-100, 100), 0.7 < z,
+    # -0.2 < torso angle < 0.2 (a NaN fails every comparison).
+    rest = xp.concatenate([qpos[2:], qvel])
+    z, angle = qpos[1], qpos[2]
+    return xp.all((rest > -100.0) & (rest < 100.0)) & (z > 0.7) & (angle > -0.2) & (angle < 0.2)
+
+
+def _healthy_walker(xp, qpos, qvel):
+    z, angle = qpos[1], qpos[2]
+    return (z > 0.8) & (z < 2.0) & (angle > -1.0) & (angle < 1.0)
+
+
+def _healthy_ant(xp, qpos, qvel):
+    # Ant's range is inclusive, unlike Hopper's and Walker2d's.
+    finite = xp.all(xp.isfinite(qpos)) & xp.all(xp.isfinite(qvel))
+    return finite & (qpos[2] >= 0.2) & (qpos[2] <= 1.0)
+
+
+def _observe_clipped_velocity(xp, qpos, qvel):
+    return xp.concatenate([qpos[1:], xp.clip(qvel, -10.0, 10.0)])
+
+
+def _observe_from(start: int):
+    def observe(xp, qpos, qvel):
+        return xp.concatenate([qpos[start:], qvel])
+
+    return observe
+
+
+@dataclasses.dataclass(frozen=True)
+class TaskSpec:
+    """One gymnasium -v4 task, as data.
+
+    Reward: ``x_velocity + healthy_reward - ctrl_cost_weight * |action|^2`` with
+    ``x_velocity = (x_after - x_before) / dt``, ``dt = timestep * frame_skip``. ``x`` is
+    ``qpos[0]``, except where ``position_body`` names a body: then it is that body's frame
+    position from MuJoCo's last forward pass (gymnasium's ``get_body_com``), which after a
+    step lags the state by one substep. Terminating tasks pay ``healthy_reward`` on every
+    step, the last one included, as gymnasium does with ``terminate_when_unhealthy``.
+    Reset: ``qpos0 + U(-s, s)`` and ``U(-s, s)`` (or ``s * N(0, 1)``) velocities.
+
+    Attributes:
+      xml: gymnasium's model file name.
+      frame_skip: physics steps per environment step.
+      ctrl_cost_weight: weight of the squared action (as given, before MuJoCo clamps it).
+      reset_noise_scale: ``s`` above.
+      normal_velocity_noise: velocities ``s * N(0, 1)`` (HalfCheetah, Ant), else ``U(-s, s)``.
+      observe: ``(xp, qpos, qvel) -> obs``; ``xp`` is ``numpy`` or ``jax.numpy``.
+      healthy: ``(xp, qpos, qvel) -> bool``, or None for a task that never terminates.
+      healthy_reward: reward per step of a terminating task.
+      position_body: see above.
+    """
+
+    xml: str
+    frame_skip: int
+    ctrl_cost_weight: float
+    reset_noise_scale: float
+    normal_velocity_noise: bool
+    observe: Callable
+    healthy: Callable | None = None
+    healthy_reward: float = 0.0
+    position_body: str | None = None
+
+
+TASKS: dict[str, TaskSpec] = {
+    "Hopper-v4": TaskSpec(
+        "hopper.xml", 4, 1e-3, 5e-3, False, _observe_clipped_velocity, _healthy_hopper, 1.0
+    ),
+    "HalfCheetah-v4": TaskSpec("half_cheetah.xml", 5, 0.1, 0.1, True, _observe_from(1)),
+    "Walker2d-v4": TaskSpec(
+        "walker2d.xml", 4, 1e-3, 5e-3, False, _observe_clipped_velocity, _healthy_walker, 1.0
+    ),
+    "Swimmer-v4": TaskSpec("swimmer.xml", 4, 1e-4, 0.1, False, _observe_from(2)),
+    "Ant-v4": TaskSpec(
+        "ant.xml", 5, 0.5, 0.1, True, _observe_from(2), _healthy_ant, 1.0, position_body="torso"
+    ),
+}
+
+
+def default_physics() -> str:
+    """``"c"`` when JAX computes on the CPU, else ``"mjx"`` (an accelerator)."""
+    return "c" if jax.default_backend() == "cpu" else "mjx"
+
+
+def check_physics(name: str, physics: Any) -> str:
+    """The engine ``physics`` names (None: ``default_physics()``), or a ValueError."""
+    if physics is None:
+        return default_physics()
+    if physics not in PHYSICS:
+        raise ValueError(f"{name}: physics must be one of {', '.join(PHYSICS)}, got {physics!r}")
+    return physics
+
+
+@struct.dataclass
+class CState:
+    """Physics state of one environment on the C engine.
+
+    Attributes:
+      bits: uint32[2 * (state_size + 1)], the float64 bytes of MuJoCo's state vector
+        (``mjSTATE_FULLPHYSICS | mjSTATE_WARMSTART``) followed by the ``x`` that the next
+        step's velocity starts from.
+    """
+
+    bits: jax.Array
+
+
+@struct.dataclass
+class MjxState:
+    """Physics state of one environment on MJX: its ``mjx.Data`` and the next step's start ``x``."""
+
+    data: Any
+    x: jax.Array
+
+
+class GymMujocoTask(Env):
+    """A gymnasium -v4 MuJoCo task (``TASKS``) on the C engine or on MJX.
+
+    Args:
+      name: a key of ``TASKS``.
+      max_episode_steps: time limit, a positive integer (1000, gymnasium's).
+      solver_iterations, ls_iterations: solver caps, positive integers; None keeps the model's
+        (gymnasium's). Any other value departs from gymnasium.
+      physics: ``"c"``, ``"mjx"`` or None (from the platform, ``default_physics``).
+      num_threads: threads of the C engine (default: the CPUs this process may use).
+      terminate_when_unhealthy: gymnasium's option of that name: False never terminates and
+        pays the healthy reward only on healthy steps (for measuring full-length episodes).
+    """
+
+    def __init__(
+        self,
+        name: str,
+        max_episode_steps: int = 1000,
+        solver_iterations: int | None = None,
+        ls_iterations: int | None = None,
+        physics: str | None = None,
+        num_threads: int | None = None,
+        terminate_when_unhealthy: bool = True,
+    ):
+        max_episode_steps, solver = _check_options(
+            name, max_episode_steps, solver_iterations, ls_iterations
+        )
+        self.physics = check_physics(name, physics)
+        if num_threads is not None and (
+            isinstance(num_threads, bool) or not isinstance(num_threads, int) or num_threads < 1
+        ):
+            raise ValueError(f"{name}: num_threads must be a positive integer, got {num_threads!r}")
+        if not isinstance(terminate_when_unhealthy, bool):
+            raise ValueError(
+                f"{name}: terminate_when_unhealthy must be True or False, "
+                f"got {terminate_when_unhealthy!r}"
+            )
+        self.terminate_when_unhealthy = terminate_when_unhealthy
+        import mujoco
+
+        self.spec = TASKS[name]
+        model = mujoco.MjModel.from_xml_path(_gymnasium_asset(self.spec.xml))
+        for field, value in solver.items():
+            setattr(model.opt, field, value)
+        self.name = name
+        self.observation_size = int(
+            jax.eval_shape(
+                functools.partial(self.spec.observe, jnp),
+                jax.ShapeDtypeStruct((model.nq,), jnp.float32),
+                jax.ShapeDtypeStruct((model.nv,), jnp.float32),
+            ).shape[0]
+        )
+        self.action_size = int(model.nu)
+        self.action_low = np.asarray(model.actuator_ctrlrange[:, 0], np.float32)
+        self.action_high = np.asarray(model.actuator_ctrlrange[:, 1], np.float32)
+        self.max_episode_steps = max_episode_steps
+        self.dt = float(model.opt.timestep) * self.spec.frame_skip
+        self.model_options = {
+            "solver": int(model.opt.solver),
+            "iterations": int(model.opt.iterations),
+            "ls_iterations": int(model.opt.ls_iterations),
+            "timestep": float(model.opt.timestep),
+            "integrator": int(model.opt.integrator),
+        }
+        self._init_qpos = np.asarray(model.qpos0, np.float64)
+        self._nq, self._nv = int(model.nq), int(model.nv)
+        self._body = (
+            None
+            if self.spec.position_body is None
+            else mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, self.spec.position_body)
+        )
+        if self.physics == "c":
+            self._engine = _CEngine(model, self.spec.frame_skip, self._body, num_threads)
+        else:
+            mjx = _import_mjx()
+            self._mjx = mjx
+            self._mjx_model = mjx.put_model(model)
+
+    def __repr__(self) -> str:
+        return super().__repr__()[:-1] + f", physics={self.physics!r})"
+
+    # -- reset --------------------------------------------------------------------------
+
+    def initial_qpos_qvel(self, key: jax.Array) -> tuple[jax.Array, jax.Array]:
+        """Draws gymnasium's reset distribution: ``(qpos, qvel)`` in JAX's float width."""
+        qpos_key, qvel_key = jax.random.split(key)
+        scale = self.spec.reset_noise_scale
+        dtype = float_dtype()
+        qpos = self._init_qpos.astype(dtype) + jax.random.uniform(
+            qpos_key, (self._nq,), dtype, -scale, scale
+        )
+        if self.spec.normal_velocity_noise:
+            qvel = scale * jax.random.normal(qvel_key, (self._nv,), dtype)
+        else:
+            qvel = jax.random.uniform(qvel_key, (self._nv,), dtype, -scale, scale)
+        return qpos, qvel
+
+    def state_at(self, qpos: jax.Array, qvel: jax.Array) -> tuple[jax.Array, Any]:
+        """``(obs, internal)`` of an episode starting at ``qpos``, ``qvel``, as gymnasium's
+        ``reset`` leaves it after ``set_state`` (time 0, no solver warm start)."""
+        qpos = jnp.asarray(qpos, float_dtype())
+        qvel = jnp.asarray(qvel, float_dtype())
+        obs = self.spec.observe(jnp, qpos, qvel)
+        # A free root body's frame sits at its joint's position: the start x is qpos[0]
+        # whichever x the task reads.
+        if self.physics == "c":
+            internal = CState(bits=self._engine.initial_bits(qpos, qvel))
+        else:
+            data = self._mjx.make_data(self._mjx_model)
+            data = data.replace(
+                qpos=qpos.astype(data.qpos.dtype), qvel=qvel.astype(data.qvel.dtype)
+            )
+            data = self._mjx.forward(self._mjx_model, data)
+            internal = MjxState(data=data, x=qpos[0])
+        return obs, internal
+
+    def _reset(self, key):
+        return self.state_at(*self.initial_qpos_qvel(key))
+
+    # -- step ---------------------------------------------------------------------------
+
+    def _step(self, internal, action):
+        if self.physics == "c":
+            bits, qpos, qvel, x_after, x_before = self._engine.step(internal.bits, action)
+            internal = CState(bits=bits)
+        else:
+            data = internal.data.replace(ctrl=action.astype(internal.data.ctrl.dtype))
+            data = jax.lax.fori_loop(
+                0,
+                self.spec.frame_skip,
+                lambda _, d: self._mjx.step(self._mjx_model, d),
+                data,
+            )
+            qpos, qvel, x_before = data.qpos, data.qvel, internal.x
+            x_after = qpos[0] if self._body is None else data.xpos[self._body, 0]
+            internal = MjxState(data=data, x=x_after)
+        dtype = float_dtype()
+        qpos, qvel = qpos.astype(dtype), qvel.astype(dtype)
+        x_velocity = (x_after - x_before).astype(dtype) / self.dt
+        reward = x_velocity - self.spec.ctrl_cost_weight * jnp.sum(jnp.square(action))
+        terminated = jnp.zeros((), bool)
+        if self.spec.healthy is not None:
+            healthy = self.spec.healthy(jnp, qpos, qvel)
+            if self.terminate_when_unhealthy:
+                reward = reward + self.spec.healthy_reward
+                terminated = ~healthy
+            else:
+                reward = reward + jnp.where(healthy, self.spec.healthy_reward, 0.0)
+        obs = self.spec.observe(jnp, qpos, qvel)
+        return obs, reward.astype(dtype), terminated, internal
+
+
+class _CEngine:
+    """MuJoCo's C engine behind ``jax.pure_callback``: state in, ``frame_skip`` steps, state out.
+
+    Each call steps a whole batch (every env of every cell of a grid: the callback is
+    batched with ``vmap_method="broadcast_all"``), split across a thread pool with one
+    ``MjData`` per thread.
+    """
+
+    def __init__(self, model, frame_skip: int, body: int | None, num_threads: int | None):
+        import mujoco
+
+        self._mujoco = mujoco
+        self._model = model
+        self._frame_skip = frame_skip
+        self._body = body
+        self._spec = int(mujoco.mjtState.mjSTATE_FULLPHYSICS | mujoco.mjtState.mjSTATE_WARMSTART)
+        self.state_size = int(mujoco.mj_stateSize(model, self._spec))
+        # MuJoCo concatenates a state's components in the order of their bits: a component's
+        # offset is the size of the components of lower bits.
+        self._qpos_at = self._offset(mujoco.mjtState.mjSTATE_QPOS)
+        self._qvel_at = self._offset(mujoco.mjtState.mjSTATE_QVEL)
+        data = mujoco.MjData(model)
+        mujoco.mj_resetData(model, data)
+        self._template = np.empty(self.state_size, np.float64)
+        mujoco.mj_getState(model, data, self._template, self._spec)
+        self._num_threads = num_threads or len(os.sched_getaffinity(0))
+        self._pool = None
+        self._datas: list = []
+        self._lock = threading.Lock()
+
+    def _offset(self, component) -> int:
+        lower = self._spec & (int(component) - 1)
+        return int(self._mujoco.mj_stateSize(self._model, lower))
+
+    @property
+    def width(self) -> int:
+        """uint32 words per env: the state vector and the start x, float64 each."""
+        return 2 * (self.state_size + 1)
+
+    # The reset state, built on the host so that it is float64 whatever JAX's width.
+    def initial_bits(self, qpos: jax.Array, qvel: jax.Array) -> jax.Array:
+        shape = jax.ShapeDtypeStruct((self.width,), jnp.uint32)
+        return jax.pure_callback(
+            self._initial_bits_host, shape, qpos, qvel, vmap_method="broadcast_all"
+        )
+
+    def _initial_bits_host(self, qpos, qvel):
+        qpos = np.asarray(qpos, np.float64)
+        qvel = np.asarray(qvel, np.float64)
+        batch = qpos.shape[:-1]
+        state = np.empty((*batch, self.state_size + 1), np.float64)
+        state[..., :-1] = self._template
+        nq, nv = qpos.shape[-1], qvel.shape[-1]
+        state[..., self._qpos_at : self._qpos_at + nq] = qpos
+        state[..., self._qvel_at : self._qvel_at + nv] = qvel
+        state[..., -1] = qpos[..., 0]
+        return state.view(np.uint32)
+
+    def step(self, bits: jax.Array, action: jax.Array):
+        """``(bits, qpos, qvel, x_after, x_before)`` after ``frame_skip`` steps; positions and
+        velocities come back float64 under ``jax_enable_x64``, else float32."""
+        dtype = float_dtype()
+        nq, nv = self._model.nq, self._model.nv
+        shapes = (
+            jax.ShapeDtypeStruct((self.width,), jnp.uint32),
+            jax.ShapeDtypeStruct((nq,), dtype),
+            jax.ShapeDtypeStruct((nv,), dtype),
+            jax.ShapeDtypeStruct((), dtype),
+            jax.ShapeDtypeStruct((), dtype),
+        )
+        host = functools.partial(self._step_host, dtype=np.dtype(dtype))
+        return jax.pure_callback(host, shapes, bits, action, vmap_method="broadcast_all")
+
+    def _step_host(self, bits, action, *, dtype):
+        bits = np.asarray(bits)
+        batch = bits.shape[:-1]
+        count = math.prod(batch)
+        state = np.ascontiguousarray(bits.reshape(count, self.width)).view(np.float64).copy()
+        controls = np.asarray(action, np.float64).reshape(count, -1)
+        x_before = state[:, -1].copy()
+        self._run(state, controls)
+        nq, nv = self._model.nq, self._model.nv
+        qpos = state[:, self._qpos_at : self._qpos_at + nq]
+        qvel = state[:, self._qvel_at : self._qvel_at + nv]
+        return (
+            state.view(np.uint32).reshape(*batch, self.width),
+            qpos.astype(dtype).reshape(*batch, nq),
+            qvel.astype(dtype).reshape(*batch, nv),
+            state[:, -1].astype(dtype).reshape(batch),
+            x_before.astype(dtype).reshape(batch),
+        )
+
+    def _run(self, state: np.ndarray, controls: np.ndarray) -> None:
+        """Steps each row of ``state`` (float64[N, state_size + 1]) in place."""
+        count = state.shape[0]
+        threads = min(self._num_threads, count)
+        if threads <= 1:
+            self._run_rows(self._data(0), state, controls, 0, count)
+            return
+        pool = self._thread_pool(threads)
+        bounds = np.linspace(0, count, threads + 1).astype(int)
+        futures = [
+            pool.submit(self._run_rows, self._data(i), state, controls, bounds[i], bounds[i + 1])
+            for i in range(threads)
+        ]
+        for future in futures:
+            future.result()
+
+    def _run_rows(self, data, state, controls, start: int, stop: int) -> None:
+        mujoco, model, spec = self._mujoco, self._model, self._spec
+        for row in range(start, stop):
+            mujoco.mj_setState(model, data, state[row, :-1], spec)
+            data.ctrl[:] = controls[row]
+            mujoco.mj_step(model, data, nstep=self._frame_skip)
+            mujoco.mj_getState(model, data, state[row, :-1], spec)
+            state[row, -1] = data.qpos[0] if self._body is None else data.xpos[self._body, 0]
+
+    def _data(self, index: int):
+        with self._lock:
+            while len(self._datas) <= index:
+                self._datas.append(self._mujoco.MjData(self._model))
+            return self._datas[index]
+
+    def _thread_pool(self, threads: int) -> ThreadPoolExecutor:
+        with self._lock:
+            if self._pool is None:
+                self._pool = ThreadPoolExecutor(self._num_threads, thread_name_prefix="mujoco")
+            return self._pool

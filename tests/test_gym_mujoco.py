@@ -1,0 +1,176 @@
+"""gymnasium's -v4 MuJoCo tasks on MuJoCo's C engine against gymnasium itself, step for step."""
+
+import gymnasium as gym
+import jax
+import numpy as np
+import pytest
+from conftest import run_x64
+
+from pngail_jax import envs
+
+NUM_STEPS = 1000
+
+
+def _gymnasium_episode(name: str, seed: int, num_steps: int = NUM_STEPS):
+    """gymnasium's env from ``reset(seed)``, stepped with uniform actions up to 1.2x the bounds
+    (MuJoCo clamps them; the control cost uses them as given). Stepping goes on past a
+    termination (``unwrapped``: no order enforcing), so every task is compared for
+    ``num_steps`` steps, unhealthy states included."""
+    reference = gym.make(name).unwrapped
+    reference.reset(seed=seed)
+    qpos, qvel = reference.data.qpos.copy(), reference.data.qvel.copy()
+    rng = np.random.default_rng(seed)
+    low, high = reference.action_space.low, reference.action_space.high
+    rows = []
+    for _ in range(num_steps):
+        action = rng.uniform(1.2 * low, 1.2 * high)
+        obs, reward, terminated, _, _ = reference.step(action)
+        rows.append((action, obs, reward, terminated))
+    actions, obs, rewards, terminated = (np.array(column) for column in zip(*rows, strict=True))
+    return qpos, qvel, actions, obs, rewards, terminated
+
+
+def _our_episode(env, qpos, qvel, actions):
+    step = jax.jit(env.step)
+    template = jax.jit(env.reset)(jax.random.key(0))
+    obs, internal = jax.jit(env.state_at)(qpos, qvel)
+    state = template.replace(obs=obs, internal=internal)
+    rows = []
+    for action in actions:
+        state = step(state, action)
+        rows.append((state.obs, state.reward, state.done))
+    return [np.array(column) for column in zip(*rows, strict=True)]
+
+
+def x64_episode_errors() -> dict:
+    """Runs in a float64 subprocess: per task, the largest |difference| from gymnasium."""
+    assert jax.config.jax_enable_x64
+    errors = {}
+    for seed, name in enumerate(envs.GYM_TASKS):
+        qpos, qvel, actions, obs, rewards, terminated = _gymnasium_episode(name, seed)
+        env = envs.make(name, physics="c")
+        our_obs, our_rewards, our_terminated = _our_episode(env, qpos, qvel, actions)
+        assert our_obs.dtype == np.float64
+        errors[name] = {
+            "obs": float(np.abs(our_obs - obs).max()),
+            "reward": float(np.abs(our_rewards - rewards).max()),
+            "terminations_differ": int((our_terminated != terminated).sum()),
+            "terminations": int(terminated.sum()),
+        }
+    return errors
+
+
+def test_c_engine_equals_gymnasium_over_whole_episodes_in_float64():
+    errors = run_x64(__file__, "x64_episode_errors")
+    print(errors)
+    for name, error in errors.items():
+        assert error["obs"] < 1e-9 and error["reward"] < 1e-9, (name, error)
+        assert error["terminations_differ"] == 0, (name, error)
+
+
+def test_c_engine_is_float64_exact_even_when_jax_is_float32():
+    """The physics state crosses JAX as float64 bytes, so in float32 JAX the observations are
+    gymnasium's, rounded once to float32: equal, not merely close, after 1000 steps."""
+    assert not jax.config.jax_enable_x64
+    qpos, qvel, actions, obs, rewards, terminated = _gymnasium_episode("HalfCheetah-v4", seed=7)
+    env = envs.make("HalfCheetah-v4", physics="c")
+    our_obs, our_rewards, _ = _our_episode(env, qpos, qvel, actions.astype(np.float32))
+    assert our_obs.dtype == np.float32
+    # Our start state and actions are float32: replay gymnasium from the same rounded values.
+    reference = gym.make("HalfCheetah-v4").unwrapped
+    reference.reset(seed=7)
+    reference.set_state(qpos.astype(np.float32), qvel.astype(np.float32))
+    expected = np.array([reference.step(a.astype(np.float32))[0] for a in actions])
+    np.testing.assert_array_equal(our_obs, expected.astype(np.float32))
+
+
+def test_spaces_match_gymnasium():
+    for name in envs.GYM_TASKS:
+        env = envs.make(name, physics="c")
+        reference = gym.make(name)
+        assert env.observation_size == reference.observation_space.shape[0], name
+        assert env.action_size == reference.action_space.shape[0], name
+        np.testing.assert_array_equal(env.action_low, reference.action_space.low)
+        np.testing.assert_array_equal(env.action_high, reference.action_space.high)
+        assert env.max_episode_steps == reference.spec.max_episode_steps == 1000
+        assert env.dt == pytest.approx(reference.unwrapped.dt)
+
+
+@pytest.mark.parametrize("name", ["Hopper-v4", "HalfCheetah-v4"])
+def test_reset_distribution(name):
+    env = envs.make(name, physics="c")
+    spec = env.spec
+    states = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.key(0), 4000))
+    qpos0 = gym.make(name).unwrapped.init_qpos
+    bits = np.asarray(states.internal.bits).reshape(len(states.obs), -1)
+    state = bits.view(np.float64)
+    nq = len(qpos0)
+    qpos = state[:, 1 : 1 + nq]  # after the time
+    qvel = state[:, 1 + nq : 1 + 2 * nq]
+    scale = spec.reset_noise_scale
+    assert np.abs(qpos - qpos0).max() <= scale
+    np.testing.assert_allclose((qpos - qpos0).std(axis=0), scale / np.sqrt(3), rtol=0.1)
+    expected_std = scale if spec.normal_velocity_noise else scale / np.sqrt(3)
+    np.testing.assert_allclose(qvel.std(axis=0), expected_std, rtol=0.1)
+    np.testing.assert_array_equal(state[:, 0], 0.0)  # time
+    np.testing.assert_array_equal(state[:, -1], qpos[:, 0])  # the first step's start x
+    expected = np.array([spec.observe(np, p, v) for p, v in zip(qpos, qvel, strict=True)])
+    np.testing.assert_array_equal(states.obs, expected.astype(np.float32))
+
+
+def _hopper_grid_setup():
+    """3 methods x 2 seeds on Hopper-v4 (C engine), 4 envs x 20 steps, 50-step episodes."""
+    from test_grid import small_grid_inputs
+
+    from pngail_jax.confidence import ClassifierConfig
+    from pngail_jax.demos import Demonstrations
+    from pngail_jax.rl import TRPOConfig
+    from pngail_jax.train import AdversarialConfig, AdversarialTrainer
+
+    env = envs.make("Hopper-v4", physics="c", max_episode_steps=50)
+    rng = np.random.default_rng(0)
+    demos = Demonstrations(
+        observations=rng.normal(size=(120, 11)).astype(np.float32),
+        actions=rng.uniform(-1, 1, size=(120, 3)).astype(np.float32),
+        confidence=np.repeat(rng.uniform(0.2, 1.0, 6), 20).astype(np.float32),
+    )
+    trpo = TRPOConfig(
+        num_envs=4, unroll_length=20, num_iterations=2, eval_every=1, num_eval_episodes=2
+    )
+    config = AdversarialConfig(trpo=trpo, classifier=ClassifierConfig(num_steps=20))
+    return AdversarialTrainer(config, env, demos), small_grid_inputs()
+
+
+def test_c_engine_grid_repeats_resumes_and_batches_like_any_env(tmp_path):
+    """The callback under jit(vmap) over cells, chunks and a checkpoint: the same program
+    twice is bit-identical, a resumed chunk equals the uninterrupted one, and the vmapped
+    grid equals its cells run one at a time (the physics is exact per env; only XLA's
+    float32 reductions may differ between the two programs)."""
+    from test_grid import COMPARED, assert_close_across_programs
+
+    from pngail_jax.checkpoint import restore_tree, save_tree
+    from pngail_jax.grid import Grid
+
+    trainer, (cells, inputs) = _hopper_grid_setup()
+    grid = Grid(trainer, inputs, blocks_per_chunk=1)
+    runs = []
+    for _ in range(2):
+        state, _ = grid.init()
+        state, first = grid.run_chunk(state)
+        runs.append((state, grid.fetch(first)))
+    for name in COMPARED:
+        np.testing.assert_array_equal(runs[0][1][name], runs[1][1][name], err_msg=name)
+    state = runs[0][0]
+    template = jax.eval_shape(lambda: grid.unpad(state))
+    save_tree(tmp_path / "state", grid.unpad(state))
+    _, uninterrupted = grid.run_chunk(state)
+    _, resumed = grid.run_chunk(grid.place(restore_tree(tmp_path / "state", template)))
+    for name in uninterrupted:
+        np.testing.assert_array_equal(resumed[name], uninterrupted[name], err_msg=name)
+
+    single = jax.jit(trainer.train)
+    _, whole = jax.jit(jax.vmap(trainer.train))(*inputs)
+    for index in (0, len(cells) - 1):
+        one = single(*jax.tree.map(lambda x, i=index: x[i], inputs))[1]
+        for name in COMPARED:
+            assert_close_across_programs(one[name], np.asarray(whole[name])[index], name)
