@@ -74,8 +74,9 @@ def comma_floats(parser: argparse.ArgumentParser, flag: str, text: str | None):
 
 
 ENV_HELP = (
-    "a built-in (Pendulum-v1, Ant, HalfCheetah, Hopper, Walker2d, Swimmer), a registered name, "
-    "or package.module:factory (docs/environments.md)"
+    "a built-in (Pendulum-v1; gymnasium's Hopper-v4, HalfCheetah-v4, Walker2d-v4, Swimmer-v4, "
+    "Ant-v4; Brax's Ant, HalfCheetah, Hopper, Walker2d and the MJX Swimmer), a registered "
+    "name, or package.module:factory (docs/environments.md)"
 )
 
 

@@ -456,38 +456,41 @@ def plan(figures: Sequence[str], tasks: Sequence[str], released: set[str]):
 # -- demonstrations --------------------------------------------------------------------------
 
 
-def released_files(directory: Path | None) -> dict[str, Path]:
-    """Our task -> the authors' file in ``directory`` for each task that has a usable one."""
+def released_files(directory: Path | None, tasks: Sequence[str]) -> dict[str, Path]:
+    """Task -> the authors' file in ``directory``, for each of ``tasks`` that has a usable one
+    (a file serves every variant of its task, ``envs.task_family``: Hopper-v2's serves
+    Hopper-v4 and Brax's Hopper)."""
     from pngail_jax.demos import RELEASED_TASKS
 
     if directory is None:
         return {}
     found = {}
-    for file_env, task in RELEASED_TASKS.items():
+    for file_env, file_task in RELEASED_TASKS.items():
         path = directory / f"{file_env}_mixture.npy"
-        if path.exists():
-            found[task] = path
+        for task in tasks:
+            if path.exists() and envs.task_family(task) == envs.task_family(file_task):
+                found[task] = path
     return found
 
 
 def demo_paths(grids, out: Path, budget: Budget, released: dict[str, Path], cache_flags):
     """The demonstrations file of every grid's set (made, mixed and saved when missing)."""
-    from pngail_jax.demos import RELEASED_ACTION_SCALES, RELEASED_TASKS, load_npz, save_npz
+    from pngail_jax.demos import RELEASED_ACTION_SCALES, load_npz, save_npz
     from pngail_jax.integrity import atomic_path
     from pngail_jax.run_config import TASK_NUM_DEMOS
 
     sets = list(dict.fromkeys(grid.demos for grid in grids.values()))
     paths = {}
-    file_env_of = {task: file_env for file_env, task in RELEASED_TASKS.items()}
     for demo_set in sets:
         if demo_set.ratio is None:
-            scale = RELEASED_ACTION_SCALES.get(file_env_of[demo_set.task], 1.0)
-            paths[demo_set] = (released[demo_set.task], scale)
+            path = released[demo_set.task]
+            scale = RELEASED_ACTION_SCALES.get(path.name.removesuffix("_mixture.npy"), 1.0)
+            paths[demo_set] = (path, scale)
     made = [s for s in sets if s.ratio is not None]
     for task in dict.fromkeys(s.task for s in made):
         episode_steps = envs.make(task).max_episode_steps
         counts = {
-            s: s.trajectory_counts(TASK_NUM_DEMOS.get(task, 1), episode_steps)
+            s: s.trajectory_counts(TASK_NUM_DEMOS.get(envs.task_family(task), 1), episode_steps)
             for s in made
             if s.task == task
         }
@@ -944,7 +947,7 @@ def main(argv=None) -> Path:
         }
     budget = BUDGETS[options["budget"]]
     released_dir = Path(options["released_demos"]) if options["released_demos"] else None
-    released = released_files(released_dir)
+    released = released_files(released_dir, options["envs"])
     figures, grids = plan(options["only"], options["envs"], set(released))
     if not figures:
         raise SystemExit(

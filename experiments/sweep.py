@@ -85,7 +85,7 @@ def build_parser() -> argparse.ArgumentParser:
     add = parser.add_argument
     add(
         "--env",
-        help=f"{ENV_HELP} (default: the task of an authors' --demos file, e.g. Hopper for "
+        help=f"{ENV_HELP} (default: the task of an authors' --demos file, e.g. Hopper-v4 for "
         f"Hopper-v2_mixture.npy; else {SMOKE.env})",
     )
     add(
@@ -292,7 +292,7 @@ def config_from_flags(parser, args) -> RunConfig:
 
 
 def _task_of(demos: str | None) -> str | None:
-    """The task of an authors' released file (``Hopper-v2_mixture.npy``: Hopper), so
+    """The task of an authors' released file (``Hopper-v2_mixture.npy``: Hopper-v4), so
     ``--demos`` alone picks it."""
     from pngail_jax.demos import released_task
 
@@ -349,6 +349,11 @@ def load_saved(directory: Path) -> SavedRun:
     try:
         data = upgrade_saved_config(read_json(path, "run config"))
         config = RunConfig.from_dict(data)
+        # The engine that ran goes on running (a run begun on a CPU resumed on a GPU would
+        # otherwise switch to MJX, whose state the checkpoint does not hold).
+        physics = data["resolved"].get("physics")
+        if physics is not None and config.settings.physics is None:
+            config = config.replace(settings=config.settings.replace(physics=physics))
         devices = data["provenance"]
         return SavedRun(
             config,

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from pngail_jax import envs
-from pngail_jax.envs import mjx_tasks
+from pngail_jax.envs import gym_mujoco, mjx_tasks
 
-MUJOCO_TASKS = ("Ant", "HalfCheetah", "Hopper", "Walker2d", "Swimmer")
+MUJOCO_TASKS = ("Ant", "HalfCheetah", "Hopper", "Walker2d", "Swimmer", *envs.GYM_TASKS)
 
 
 @pytest.fixture(autouse=True)
@@ -19,6 +19,8 @@ def no_model_loading(monkeypatch):
 
     monkeypatch.setattr(mjx_tasks, "_brax_task", load)
     monkeypatch.setattr(mjx_tasks, "_import_mjx", load)
+    monkeypatch.setattr(gym_mujoco, "_gymnasium_asset", load)
+    monkeypatch.setattr(gym_mujoco, "_import_mjx", load)
 
 
 BAD_OPTIONS = [
@@ -43,6 +45,14 @@ BAD_OPTIONS = [
         for name in MUJOCO_TASKS
         for option, value in (("solver_iterations", 0), ("ls_iterations", 1.5))
     ],
+    ("Hopper-v4", {"physics": "gpu"}, "Hopper-v4: physics must be one of c, mjx, got 'gpu'"),
+    ("Ant-v4", {"num_threads": 0}, "Ant-v4: num_threads must be a positive integer, got 0"),
+    ("Ant-v4", {"num_threads": True}, "num_threads must be a positive integer, got True"),
+    (
+        "Walker2d-v4",
+        {"terminate_when_unhealthy": 0},
+        "Walker2d-v4: terminate_when_unhealthy must be True or False, got 0",
+    ),
 ]
 
 

@@ -158,5 +158,26 @@ class TestSwimmer(EnvContract):
     env_name = "Swimmer"
 
 
+# gymnasium's tasks on the C engine (the tests run on a CPU): no XLA physics to compile.
+class TestHopperV4(EnvContract):
+    env_name = "Hopper-v4"
+
+
+class TestHalfCheetahV4(EnvContract):
+    env_name = "HalfCheetah-v4"
+
+
+class TestWalker2dV4(EnvContract):
+    env_name = "Walker2d-v4"
+
+
+class TestSwimmerV4(EnvContract):
+    env_name = "Swimmer-v4"
+
+
+class TestAntV4(EnvContract):
+    env_name = "Ant-v4"
+
+
 def test_every_environment_has_a_contract_class():
     assert {cls.env_name for cls in EnvContract.__subclasses__()} == set(envs.ENV_NAMES)

@@ -43,32 +43,36 @@ from pngail_jax.envs.mjx_tasks import _check_options, _gymnasium_asset, _import_
 PHYSICS = ("c", "mjx")
 
 
+# Task functions act on the last axis, so the C engine's host code runs them on a whole batch.
+
+
 def _healthy_hopper(xp, qpos, qvel):
-    # gymnasium: every state entry but x and z strictly inside (-100, 100), 0.7 < z,
+    # gymnasium: every state entry but x and z strictly inside (-100, 100), 0.7 < z < inf,
     # -0.2 < torso angle < 0.2 (a NaN fails every comparison).
-    rest = xp.concatenate([qpos[2:], qvel])
-    z, angle = qpos[1], qpos[2]
-    return xp.all((rest > -100.0) & (rest < 100.0)) & (z > 0.7) & (angle > -0.2) & (angle < 0.2)
+    rest = xp.concatenate([qpos[..., 2:], qvel], axis=-1)
+    z, angle = qpos[..., 1], qpos[..., 2]
+    in_range = xp.all((rest > -100.0) & (rest < 100.0), axis=-1)
+    return in_range & (z > 0.7) & (z < xp.inf) & (angle > -0.2) & (angle < 0.2)
 
 
 def _healthy_walker(xp, qpos, qvel):
-    z, angle = qpos[1], qpos[2]
+    z, angle = qpos[..., 1], qpos[..., 2]
     return (z > 0.8) & (z < 2.0) & (angle > -1.0) & (angle < 1.0)
 
 
 def _healthy_ant(xp, qpos, qvel):
     # Ant's range is inclusive, unlike Hopper's and Walker2d's.
-    finite = xp.all(xp.isfinite(qpos)) & xp.all(xp.isfinite(qvel))
-    return finite & (qpos[2] >= 0.2) & (qpos[2] <= 1.0)
+    finite = xp.all(xp.isfinite(qpos), axis=-1) & xp.all(xp.isfinite(qvel), axis=-1)
+    return finite & (qpos[..., 2] >= 0.2) & (qpos[..., 2] <= 1.0)
 
 
 def _observe_clipped_velocity(xp, qpos, qvel):
-    return xp.concatenate([qpos[1:], xp.clip(qvel, -10.0, 10.0)])
+    return xp.concatenate([qpos[..., 1:], xp.clip(qvel, -10.0, 10.0)], axis=-1)
 
 
 def _observe_from(start: int):
     def observe(xp, qpos, qvel):
-        return xp.concatenate([qpos[start:], qvel])
+        return xp.concatenate([qpos[..., start:], qvel], axis=-1)
 
     return observe
 
@@ -106,6 +110,28 @@ class TaskSpec:
     healthy: Callable | None = None
     healthy_reward: float = 0.0
     position_body: str | None = None
+
+
+def outcome(xp, spec: TaskSpec, terminate_when_unhealthy: bool, dt: float, step: dict):
+    """``(obs, reward, terminated)`` of a step, gymnasium's formulas on the last axis.
+
+    ``step``: ``qpos``, ``qvel`` after the step, ``x_before`` / ``x_after`` (the positions
+    the forward velocity reads) and ``action`` as given; arrays of the namespace ``xp``.
+    """
+    qpos, qvel, action = step["qpos"], step["qvel"], step["action"]
+    forward_reward = (step["x_after"] - step["x_before"]) / dt
+    ctrl_cost = spec.ctrl_cost_weight * xp.sum(xp.square(action), axis=-1)
+    terminated = xp.zeros_like(forward_reward, dtype=bool)
+    rewards = forward_reward
+    if spec.healthy is not None:
+        healthy = spec.healthy(xp, qpos, qvel)
+        if terminate_when_unhealthy:
+            rewards = rewards + spec.healthy_reward
+            terminated = ~healthy
+        else:
+            rewards = rewards + xp.where(healthy, spec.healthy_reward, 0.0)
+    # gymnasium's order of operations, so that float64 rewards agree to the last bit.
+    return spec.observe(xp, qpos, qvel), rewards - ctrl_cost, terminated
 
 
 TASKS: dict[str, TaskSpec] = {
@@ -230,7 +256,7 @@ class GymMujocoTask(Env):
             else mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, self.spec.position_body)
         )
         if self.physics == "c":
-            self._engine = _CEngine(model, self.spec.frame_skip, self._body, num_threads)
+            self._engine = _CEngine(model, self, num_threads)
         else:
             mjx = _import_mjx()
             self._mjx = mjx
@@ -281,33 +307,33 @@ class GymMujocoTask(Env):
 
     def _step(self, internal, action):
         if self.physics == "c":
-            bits, qpos, qvel, x_after, x_before = self._engine.step(internal.bits, action)
-            internal = CState(bits=bits)
-        else:
-            data = internal.data.replace(ctrl=action.astype(internal.data.ctrl.dtype))
-            data = jax.lax.fori_loop(
-                0,
-                self.spec.frame_skip,
-                lambda _, d: self._mjx.step(self._mjx_model, d),
-                data,
-            )
-            qpos, qvel, x_before = data.qpos, data.qvel, internal.x
-            x_after = qpos[0] if self._body is None else data.xpos[self._body, 0]
-            internal = MjxState(data=data, x=x_after)
+            # Physics, observation, reward and termination all in float64 on the host.
+            bits, obs, reward, terminated = self._engine.step(internal.bits, action)
+            return obs, reward, terminated, CState(bits=bits)
+        data = internal.data.replace(ctrl=action.astype(internal.data.ctrl.dtype))
+        data = jax.lax.fori_loop(
+            0, self.spec.frame_skip, lambda _, d: self._mjx.step(self._mjx_model, d), data
+        )
+        x_after = data.qpos[0] if self._body is None else data.xpos[self._body, 0]
         dtype = float_dtype()
-        qpos, qvel = qpos.astype(dtype), qvel.astype(dtype)
-        x_velocity = (x_after - x_before).astype(dtype) / self.dt
-        reward = x_velocity - self.spec.ctrl_cost_weight * jnp.sum(jnp.square(action))
-        terminated = jnp.zeros((), bool)
-        if self.spec.healthy is not None:
-            healthy = self.spec.healthy(jnp, qpos, qvel)
-            if self.terminate_when_unhealthy:
-                reward = reward + self.spec.healthy_reward
-                terminated = ~healthy
-            else:
-                reward = reward + jnp.where(healthy, self.spec.healthy_reward, 0.0)
-        obs = self.spec.observe(jnp, qpos, qvel)
-        return obs, reward.astype(dtype), terminated, internal
+        step = {
+            "qpos": data.qpos.astype(dtype),
+            "qvel": data.qvel.astype(dtype),
+            "x_before": internal.x.astype(dtype),
+            "x_after": x_after.astype(dtype),
+            "action": action,
+        }
+        obs, reward, terminated = outcome(
+            jnp, self.spec, self.terminate_when_unhealthy, self.dt, step
+        )
+        return obs, reward.astype(dtype), terminated, MjxState(data=data, x=x_after)
+
+
+def _available_cpus() -> int:
+    """CPUs this process may run on (``os.sched_getaffinity`` where the OS has it)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
 
 
 class _CEngine:
@@ -318,13 +344,14 @@ class _CEngine:
     ``MjData`` per thread.
     """
 
-    def __init__(self, model, frame_skip: int, body: int | None, num_threads: int | None):
+    def __init__(self, model, task: GymMujocoTask, num_threads: int | None):
         import mujoco
 
         self._mujoco = mujoco
         self._model = model
-        self._frame_skip = frame_skip
-        self._body = body
+        self._task = task  # its spec, time step and termination option
+        self._frame_skip = task.spec.frame_skip
+        self._body = task._body
         self._spec = int(mujoco.mjtState.mjSTATE_FULLPHYSICS | mujoco.mjtState.mjSTATE_WARMSTART)
         self.state_size = int(mujoco.mj_stateSize(model, self._spec))
         # MuJoCo concatenates a state's components in the order of their bits: a component's
@@ -335,10 +362,13 @@ class _CEngine:
         mujoco.mj_resetData(model, data)
         self._template = np.empty(self.state_size, np.float64)
         mujoco.mj_getState(model, data, self._template, self._spec)
-        self._num_threads = num_threads or len(os.sched_getaffinity(0))
+        self._num_threads = num_threads or _available_cpus()
         self._pool = None
         self._datas: list = []
         self._lock = threading.Lock()
+        # Programs run from several Python threads may call back at once: one batch at a
+        # time, as the thread pool and its MjData are shared.
+        self._run_lock = threading.Lock()
 
     def _offset(self, component) -> int:
         lower = self._spec & (int(component) - 1)
@@ -369,16 +399,14 @@ class _CEngine:
         return state.view(np.uint32)
 
     def step(self, bits: jax.Array, action: jax.Array):
-        """``(bits, qpos, qvel, x_after, x_before)`` after ``frame_skip`` steps; positions and
-        velocities come back float64 under ``jax_enable_x64``, else float32."""
+        """``(bits, obs, reward, terminated)`` after ``frame_skip`` steps; the observation and
+        reward come back in JAX's float width, computed in float64."""
         dtype = float_dtype()
-        nq, nv = self._model.nq, self._model.nv
         shapes = (
             jax.ShapeDtypeStruct((self.width,), jnp.uint32),
-            jax.ShapeDtypeStruct((nq,), dtype),
-            jax.ShapeDtypeStruct((nv,), dtype),
+            jax.ShapeDtypeStruct((self._task.observation_size,), dtype),
             jax.ShapeDtypeStruct((), dtype),
-            jax.ShapeDtypeStruct((), dtype),
+            jax.ShapeDtypeStruct((), jnp.bool_),
         )
         host = functools.partial(self._step_host, dtype=np.dtype(dtype))
         return jax.pure_callback(host, shapes, bits, action, vmap_method="broadcast_all")
@@ -388,18 +416,29 @@ class _CEngine:
         batch = bits.shape[:-1]
         count = math.prod(batch)
         state = np.ascontiguousarray(bits.reshape(count, self.width)).view(np.float64).copy()
-        controls = np.asarray(action, np.float64).reshape(count, -1)
+        # The control cost keeps the action's width, as gymnasium's NumPy does with a float32
+        # action; MuJoCo's controls are float64.
+        action = np.asarray(action).reshape(count, self._model.nu)
         x_before = state[:, -1].copy()
-        self._run(state, controls)
+        with self._run_lock:
+            self._run(state, action.astype(np.float64))
         nq, nv = self._model.nq, self._model.nv
-        qpos = state[:, self._qpos_at : self._qpos_at + nq]
-        qvel = state[:, self._qvel_at : self._qvel_at + nv]
+        step = {
+            "qpos": state[:, self._qpos_at : self._qpos_at + nq],
+            "qvel": state[:, self._qvel_at : self._qvel_at + nv],
+            "x_before": x_before,
+            "x_after": state[:, -1],
+            "action": action,
+        }
+        task = self._task
+        obs, reward, terminated = outcome(
+            np, task.spec, task.terminate_when_unhealthy, task.dt, step
+        )
         return (
             state.view(np.uint32).reshape(*batch, self.width),
-            qpos.astype(dtype).reshape(*batch, nq),
-            qvel.astype(dtype).reshape(*batch, nv),
-            state[:, -1].astype(dtype).reshape(batch),
-            x_before.astype(dtype).reshape(batch),
+            obs.astype(dtype).reshape(*batch, obs.shape[-1]),
+            reward.astype(dtype).reshape(batch),
+            terminated.reshape(batch),
         )
 
     def _run(self, state: np.ndarray, controls: np.ndarray) -> None:
