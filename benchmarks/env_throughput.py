@@ -110,6 +110,11 @@ def configurations(env_names, quick: bool, on_gpu: bool, fast_solver_only: bool)
             yield name, "-", {}, widths
             continue
         widths = QUICK_MUJOCO_WIDTHS if quick else (GPU_WIDTHS if on_gpu else CPU_WIDTHS)
+        if name in envs.GYM_TASKS:
+            # gymnasium's tasks keep gymnasium's solver; one row per engine.
+            for physics in envs.PHYSICS:
+                yield name, f"gymnasium's, physics {physics}", {"physics": physics}, widths
+            continue
         if name == "Ant":
             # Brax's own Ant already runs the fast setting (Newton, 1 / 4 iterations).
             yield name, "default=fast", {}, widths

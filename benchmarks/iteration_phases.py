@@ -537,7 +537,10 @@ def main(argv=None) -> None:
     trpo = TRPO(config, make_env(args.env, settings))
     evaluation_trpo = None
     if args.env in TERMINATING_ENVS:
-        never_ending = envs.make(args.env, terminate_when_unhealthy=False, **settings.env_options)
+        options = dict(settings.env_options)
+        if args.env in envs.GYM_TASKS:
+            options["physics"] = settings.physics
+        never_ending = envs.make(args.env, terminate_when_unhealthy=False, **options)
         evaluation_trpo = TRPO(config, never_ending)
     common = {
         "env": args.env,

@@ -473,8 +473,11 @@ def released_files(directory: Path | None, tasks: Sequence[str]) -> dict[str, Pa
     return found
 
 
-def demo_paths(grids, out: Path, budget: Budget, released: dict[str, Path], cache_flags):
-    """The demonstrations file of every grid's set (made, mixed and saved when missing)."""
+def demo_paths(
+    grids, out: Path, budget: Budget, released: dict[str, Path], cache_flags, engine_flags=None
+):
+    """The demonstrations file of every grid's set (made, mixed and saved when missing);
+    ``engine_flags(task)``: extra ``make_demos`` flags (the physics engine)."""
     from pngail_jax.demos import RELEASED_ACTION_SCALES, load_npz, save_npz
     from pngail_jax.integrity import atomic_path
     from pngail_jax.run_config import TASK_NUM_DEMOS
@@ -512,6 +515,7 @@ def demo_paths(grids, out: Path, budget: Budget, released: dict[str, Path], cach
                     "--ratio", f"{num_optimal}:{num_intermediate}",
                     "--measure-episodes", str(budget.measure_episodes),
                     *budget.demo_settings[kind], *cache_flags,
+                    *(engine_flags(task) if engine_flags else []),
                 ]
             )  # fmt: skip
         source = load_npz(full)
@@ -889,12 +893,22 @@ def parse_args(argv=None) -> argparse.Namespace:
         help="a folder of the authors' {env}_mixture.npy files (+ _mixture_conf.npy); tasks "
         "without one there use made demonstrations",
     )
+    parser.add_argument(
+        "--physics",
+        choices=envs.PHYSICS,
+        help="physics engine of gymnasium's MuJoCo tasks in every grid and make_demos run "
+        "(default: c on a CPU, mjx on a GPU or TPU)",
+    )
     parser.add_argument("--out", type=Path, help="default results/paper-<timestamp>")
     parser.add_argument("--resume", type=Path, metavar="DIR", help="continue a run in DIR")
     compilation.add_arguments(parser)
     args = parser.parse_args(argv)
     if args.resume is not None:
-        given = [flag for flag in ("only", "envs", "released_demos", "out") if getattr(args, flag)]
+        given = [
+            flag
+            for flag in ("only", "envs", "released_demos", "out", "physics")
+            if getattr(args, flag)
+        ]
         if given:
             parser.error(f"--resume takes its options from the run: drop --{given[0]}")
         if not (args.resume / "paper.json").exists():
@@ -943,6 +957,7 @@ def main(argv=None) -> Path:
             "only": args.figures,
             "envs": args.tasks,
             "released_demos": None if args.released_demos is None else str(args.released_demos),
+            "physics": args.physics,
             "command": " ".join(["python -m experiments.paper", *command_line(argv)]),
         }
     budget = BUDGETS[options["budget"]]
@@ -964,7 +979,12 @@ def main(argv=None) -> Path:
         f"{', '.join(released) or 'none'} -> {out}",
         flush=True,
     )
-    demos = demo_paths(grids, out, budget, released, cache_flags)
+    physics = options.get("physics")  # absent from runs begun before the flag existed
+
+    def engine_flags(task: str) -> list[str]:
+        return ["--physics", physics] if physics and task in envs.GYM_TASKS else []
+
+    demos = demo_paths(grids, out, budget, released, cache_flags, engine_flags)
     timings_path = out / "timings.json"
     timings = read_json(timings_path) if timings_path.exists() else {}
     from pngail_jax.demos import load_demonstrations
@@ -975,6 +995,7 @@ def main(argv=None) -> Path:
         if grid.unlabelled_fraction != 1 and grid.demos not in num_rows:
             num_rows[grid.demos] = load_demonstrations(path, action_scale=scale).num_rows
         flags = sweep_arguments(grid, demos[grid.demos], budget, num_rows.get(grid.demos))
+        flags += engine_flags(grid.task)
         seconds = run_grid(grid, out / "grids" / name, flags, cache_flags)
         if seconds:
             timings[name] = timings.get(name, 0.0) + seconds
