@@ -33,7 +33,12 @@ CHECKPOINTS = (1, 10, 50, 200)
 def gymnasium_trajectory(name: str, seed: int, num_steps: int):
     reference = gym.make(name).unwrapped
     reference.reset(seed=seed)
-    qpos, qvel = reference.data.qpos.copy(), reference.data.qvel.copy()
+    # Our tasks start from the state in JAX's float width: so does gymnasium here (a no-op
+    # under x64), or a 1e-8 rounding of the start would grow chaotically and hide the engines.
+    width = np.float64 if jax.config.jax_enable_x64 else np.float32
+    qpos = reference.data.qpos.astype(width).astype(np.float64)
+    qvel = reference.data.qvel.astype(width).astype(np.float64)
+    reference.set_state(qpos, qvel)
     rng = np.random.default_rng(seed)
     low, high = reference.action_space.low, reference.action_space.high
     actions = rng.uniform(low, high, (num_steps, len(low))).astype(np.float32)

@@ -11,14 +11,16 @@ One task, two physics engines (``physics=``):
   through JAX as the float64 bytes of MuJoCo's state vector (time, positions, velocities and
   the solver's warm start) viewed as ``uint32``, so it is exact whatever JAX's float width,
   and ``step`` is a ``jax.pure_callback`` batched over every env of a grid at once: one
-  call per time step steps all of them on a pool of threads (MuJoCo releases the GIL).
+  call per time step steps all of them on a pool of threads (MuJoCo releases the GIL) and
+  computes their observations, rewards and terminations in float64 with gymnasium's
+  formulas, rounded to JAX's width only on the way out.
   ``mujoco.rollout`` is not used because it does not return the solver's warm start: without
   it HalfCheetah-v4 drifted from gymnasium by 16 in a joint velocity over one episode.
 - ``"mjx"``: MJX, in JAX's float width, for accelerators.
 - ``None`` (default): ``"c"`` when JAX's default backend is the CPU, else ``"mjx"``.
 
-Observations, rewards and terminations are written once (``TaskSpec``) against an array
-namespace, NumPy for the C engine and ``jax.numpy`` for MJX.
+Observations, rewards and terminations are written once (``TaskSpec``, ``outcome``) against
+an array namespace, NumPy for the C engine and ``jax.numpy`` for MJX.
 """
 
 from __future__ import annotations
