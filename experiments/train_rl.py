@@ -147,7 +147,12 @@ def plot_learning_curve(path: Path, metrics: dict[str, np.ndarray], title: str) 
     mean = metrics["eval/return"][:, evaluated].mean(axis=0)
     axis.plot(steps[evaluated], mean, color="black", lw=2, marker="o", ms=3, label="mean")
     train_mean = nanmean(metrics["train/episode_return"], axis=0)
-    axis.plot(steps, train_mean, color="tab:orange", lw=1, label="training episodes (mean)")
+    # Iterations where no episode ended are NaN (a 1000-step episode ends every fifth
+    # 200-step iteration): joined over them, or matplotlib draws isolated, invisible points.
+    ended = np.isfinite(train_mean)
+    axis.plot(
+        steps[ended], train_mean[ended], color="tab:orange", lw=1, label="training episodes (mean)"
+    )
     axis.set(xlabel="environment steps", ylabel="episode return", title=title)
     axis.grid(alpha=0.3)
     axis.legend()

@@ -80,13 +80,13 @@ def test_make_demos_tiny_mujoco_task(tmp_path):
     """A MuJoCo task (early terminations, so trajectories of any length) at a tiny budget."""
     flags = "--iterations 2 --eval-every 1 --seeds 1 --num-envs 2 --unroll-length 16 "
     flags += "--num-eval-episodes 1 --measure-episodes 1 --num-trajectories 3 --ratio 1:2"
-    path = make_demos.main(["--env", "Hopper", "--out", str(tmp_path), *flags.split()])
+    path = make_demos.main(["--env", "Hopper-v4", "--out", str(tmp_path), *flags.split()])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # 2 iterations may not beat the random policy
         demos = load_demonstrations(path)
-    demos.check_env(envs.make("Hopper"))
+    demos.check_env(envs.make("Hopper-v4"))
     meta = demos.metadata
-    assert meta["env"] == "Hopper" and meta["num_optimal_trajectories"] == 1
+    assert meta["env"] == "Hopper-v4" and meta["num_optimal_trajectories"] == 1
     lengths = np.bincount(demos.trajectory_ids)
     assert len(lengths) == 3 and lengths.sum() == demos.num_rows and lengths.max() <= 1000
     # Each trajectory's rows carry its own normalised return, clipped to [0, 1].
