@@ -230,8 +230,8 @@ OWN_SOLVER_MUJOCO_SETTINGS = dataclasses.replace(
 
 ENV_SETTINGS: dict[str, RunSettings] = {
     "Pendulum-v1": REFERENCE_SETTINGS,
-    # gymnasium's tasks keep gymnasium's solver, whichever engine: the C engine's cost hardly
-    # depends on the caps, and they are what makes it equal gymnasium.
+    # gymnasium's tasks keep gymnasium's solver, whichever engine: on the C engine it is what
+    # makes the task equal gymnasium's.
     **{name: OWN_SOLVER_MUJOCO_SETTINGS for name in envs.GYM_TASKS},
     "Ant": MUJOCO_SETTINGS,
     # The fast solver makes HalfCheetah's physics diverge to NaN now and then
