@@ -15,7 +15,8 @@ One task, two physics engines (``physics=``):
   computes their observations, rewards and terminations in float64 with gymnasium's
   formulas, rounded to JAX's width only on the way out.
   ``mujoco.rollout`` is not used because it does not return the solver's warm start: without
-  it HalfCheetah-v4 drifted from gymnasium by 16 in a joint velocity over one episode.
+  it HalfCheetah-v4 drifted from gymnasium by 16 (largest position or velocity difference)
+  within one episode.
 - ``"mjx"``: MJX, in JAX's float width, for accelerators.
 - ``None`` (default): ``"c"`` when JAX's default backend is the CPU, else ``"mjx"``.
 
