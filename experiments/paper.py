@@ -473,11 +473,17 @@ def released_files(directory: Path | None, tasks: Sequence[str]) -> dict[str, Pa
     return found
 
 
+def engine_flags(task: str, physics: str | None) -> list[str]:
+    """The sweep and make_demos flags that run ``task`` on ``physics`` (gymnasium's MuJoCo
+    tasks only; None: the platform's engine, no flag)."""
+    return ["--physics", physics] if physics and task in envs.GYM_TASKS else []
+
+
 def demo_paths(
-    grids, out: Path, budget: Budget, released: dict[str, Path], cache_flags, engine_flags=None
+    grids, out: Path, budget: Budget, released: dict[str, Path], cache_flags, physics=None
 ):
     """The demonstrations file of every grid's set (made, mixed and saved when missing);
-    ``engine_flags(task)``: extra ``make_demos`` flags (the physics engine)."""
+    made ones on ``physics`` (``engine_flags``)."""
     from pngail_jax.demos import RELEASED_ACTION_SCALES, load_npz, save_npz
     from pngail_jax.integrity import atomic_path
     from pngail_jax.run_config import TASK_NUM_DEMOS
@@ -515,7 +521,7 @@ def demo_paths(
                     "--ratio", f"{num_optimal}:{num_intermediate}",
                     "--measure-episodes", str(budget.measure_episodes),
                     *budget.demo_settings[kind], *cache_flags,
-                    *(engine_flags(task) if engine_flags else []),
+                    *engine_flags(task, physics),
                 ]
             )  # fmt: skip
         source = load_npz(full)
@@ -904,15 +910,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     compilation.add_arguments(parser)
     args = parser.parse_args(argv)
     if args.resume is not None:
-        given = [
-            flag
-            for flag in ("only", "envs", "released_demos", "out", "physics")
-            if getattr(args, flag)
-        ]
-        if given:
-            parser.error(f"--resume takes its options from the run: drop --{given[0]}")
-        if not (args.resume / "paper.json").exists():
-            parser.error(f"--resume {args.resume}: no paper.json there (not a run of this)")
+        _check_resume(parser, args)
         return args
     figures = (
         known_names(parser, args.only, FIGURES, "figure", flag="--only")
@@ -933,6 +931,18 @@ def parse_args(argv=None) -> argparse.Namespace:
     return args
 
 
+def _check_resume(parser: argparse.ArgumentParser, args) -> None:
+    """``--resume DIR`` takes every option from DIR's paper.json: refuses others, and a DIR
+    that is not a run of this program."""
+    given = [
+        flag for flag in ("only", "envs", "released_demos", "out", "physics") if getattr(args, flag)
+    ]
+    if given:
+        parser.error(f"--resume takes its options from the run: drop --{given[0]}")
+    if not (args.resume / "paper.json").exists():
+        parser.error(f"--resume {args.resume}: no paper.json there (not a run of this)")
+
+
 def command_line(argv) -> list[str]:
     import shlex
     import sys
@@ -947,19 +957,7 @@ def main(argv=None) -> Path:
         if args.no_compile_cache
         else (["--compile-cache", str(args.compile_cache)] if args.compile_cache else [])
     )
-    if args.resume is not None:
-        out = args.resume
-        options = read_json(out / "paper.json")
-    else:
-        out = args.out
-        options = {
-            "budget": args.budget,
-            "only": args.figures,
-            "envs": args.tasks,
-            "released_demos": None if args.released_demos is None else str(args.released_demos),
-            "physics": args.physics,
-            "command": " ".join(["python -m experiments.paper", *command_line(argv)]),
-        }
+    out, options = run_options(args, argv)
     budget = BUDGETS[options["budget"]]
     released_dir = Path(options["released_demos"]) if options["released_demos"] else None
     released = released_files(released_dir, options["envs"])
@@ -980,29 +978,47 @@ def main(argv=None) -> Path:
         flush=True,
     )
     physics = options.get("physics")  # absent from runs begun before the flag existed
+    demos = demo_paths(grids, out, budget, released, cache_flags, physics)
+    timings = run_grids(grids, demos, out, budget, cache_flags, physics)
+    page = write_page(out, options, figures, grids, timings)
+    print(f"\nwrote {page}")
+    return page
 
-    def engine_flags(task: str) -> list[str]:
-        return ["--physics", physics] if physics and task in envs.GYM_TASKS else []
 
-    demos = demo_paths(grids, out, budget, released, cache_flags, engine_flags)
-    timings_path = out / "timings.json"
-    timings = read_json(timings_path) if timings_path.exists() else {}
+def run_options(args, argv) -> tuple[Path, dict]:
+    """The output directory and the run's options: a resumed run's paper.json, else the
+    flags'."""
+    if args.resume is not None:
+        return args.resume, read_json(args.resume / "paper.json")
+    return args.out, {
+        "budget": args.budget,
+        "only": args.figures,
+        "envs": args.tasks,
+        "released_demos": None if args.released_demos is None else str(args.released_demos),
+        "physics": args.physics,
+        "command": " ".join(["python -m experiments.paper", *command_line(argv)]),
+    }
+
+
+def run_grids(grids, demos, out: Path, budget: Budget, cache_flags, physics) -> dict:
+    """Runs (or resumes, or keeps) every grid; each grid's wall-clock seconds over all calls,
+    kept in ``out/timings.json``."""
     from pngail_jax.demos import load_demonstrations
 
+    timings_path = out / "timings.json"
+    timings = read_json(timings_path) if timings_path.exists() else {}
     num_rows = {}  # of each demonstration set, read once, where a grid sizes its split by it
     for name, grid in grids.items():
         path, scale = demos[grid.demos]
         if grid.unlabelled_fraction != 1 and grid.demos not in num_rows:
             num_rows[grid.demos] = load_demonstrations(path, action_scale=scale).num_rows
         flags = sweep_arguments(grid, demos[grid.demos], budget, num_rows.get(grid.demos))
-        flags += engine_flags(grid.task)
+        flags += engine_flags(grid.task, physics)
         seconds = run_grid(grid, out / "grids" / name, flags, cache_flags)
         if seconds:
             timings[name] = timings.get(name, 0.0) + seconds
             write_json(timings_path, timings)
-    page = write_page(out, options, figures, grids, timings)
-    print(f"\nwrote {page}")
-    return page
+    return timings
 
 
 if __name__ == "__main__":

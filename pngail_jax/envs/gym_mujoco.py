@@ -215,15 +215,7 @@ class GymMujocoTask(Env):
             name, max_episode_steps, solver_iterations, ls_iterations
         )
         self.physics = check_physics(name, physics)
-        if num_threads is not None and (
-            isinstance(num_threads, bool) or not isinstance(num_threads, int) or num_threads < 1
-        ):
-            raise ValueError(f"{name}: num_threads must be a positive integer, got {num_threads!r}")
-        if not isinstance(terminate_when_unhealthy, bool):
-            raise ValueError(
-                f"{name}: terminate_when_unhealthy must be True or False, "
-                f"got {terminate_when_unhealthy!r}"
-            )
+        _check_engine_options(name, num_threads, terminate_when_unhealthy)
         self.terminate_when_unhealthy = terminate_when_unhealthy
         import mujoco
 
@@ -244,13 +236,7 @@ class GymMujocoTask(Env):
         self.action_high = np.asarray(model.actuator_ctrlrange[:, 1], np.float32)
         self.max_episode_steps = max_episode_steps
         self.dt = float(model.opt.timestep) * self.spec.frame_skip
-        self.model_options = {
-            "solver": int(model.opt.solver),
-            "iterations": int(model.opt.iterations),
-            "ls_iterations": int(model.opt.ls_iterations),
-            "timestep": float(model.opt.timestep),
-            "integrator": int(model.opt.integrator),
-        }
+        self.model_options = _model_options(model)
         self._init_qpos = np.asarray(model.qpos0, np.float64)
         self._nq, self._nv = int(model.nq), int(model.nv)
         self._body = (
@@ -337,6 +323,32 @@ def _available_cpus() -> int:
     if hasattr(os, "sched_getaffinity"):
         return len(os.sched_getaffinity(0))
     return os.cpu_count() or 1
+
+
+def _check_engine_options(name: str, num_threads: Any, terminate_when_unhealthy: Any) -> None:
+    """ValueError naming the option unless ``num_threads`` is None or a positive integer and
+    ``terminate_when_unhealthy`` a bool; called before any model is loaded."""
+    if num_threads is not None and (
+        isinstance(num_threads, bool) or not isinstance(num_threads, int) or num_threads < 1
+    ):
+        raise ValueError(f"{name}: num_threads must be a positive integer, got {num_threads!r}")
+    if not isinstance(terminate_when_unhealthy, bool):
+        raise ValueError(
+            f"{name}: terminate_when_unhealthy must be True or False, "
+            f"got {terminate_when_unhealthy!r}"
+        )
+
+
+def _model_options(model) -> dict[str, Any]:
+    """The solver settings in use (for reports and benchmark tables)."""
+    opt = model.opt
+    return {
+        "solver": int(opt.solver),
+        "iterations": int(opt.iterations),
+        "ls_iterations": int(opt.ls_iterations),
+        "timestep": float(opt.timestep),
+        "integrator": int(opt.integrator),
+    }
 
 
 class _CEngine:
