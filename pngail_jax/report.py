@@ -135,7 +135,8 @@ def summarize(cells, metrics, normalizer, train_env_steps_per_second, compile_se
     standard error over seeds (and the confidence classifier's MAE and RMSE on D_u, mean and
     std, when ``metrics`` has them), and as interquartile mean with a 95% percentile-bootstrap
     interval (``pngail_jax.stats``, fixed seed: the same numbers on every
-    call), and a per-seed table. Cells in ``excluded`` (diverged,
+    call), and a per-seed table (with the classifier's errors, which tell
+    a seed's labels apart). Cells in ``excluded`` (diverged,
     ``pngail_jax.grid.nonfinite_cells``) and non-finite returns are left out of every
     statistic and of ``num_seeds``. With PN-GAIL in the grid: the probability that a PN-GAIL
     seed's final return beats a baseline seed's, per baseline, with its 95% interval.
@@ -160,8 +161,17 @@ def summarize(cells, metrics, normalizer, train_env_steps_per_second, compile_se
         row["diverged_seeds"] = [cells[i].seed for i in indices if i in excluded]
         if row["num_seeds"] == 0:
             row["note"] = "no seed has a finite return (diverged, NaN/inf): statistics are null"
+        errors = {
+            f"confidence_{name}": np.asarray(metrics[f"confidence/{name}"])
+            for name in ("mae", "rmse")
+            if f"confidence/{name}" in metrics
+        }
         row["per_seed"] = [
-            {"seed": cells[i].seed, **{name: float(v[i]) for name, v in values.items()}}
+            {
+                "seed": cells[i].seed,
+                **{name: float(v[i]) for name, v in values.items()},
+                **{name: float(v[i]) for name, v in errors.items()},
+            }
             for i in indices
         ]
         methods[label] = row

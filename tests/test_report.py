@@ -58,6 +58,9 @@ def test_summary_groups_by_method_and_setting_and_drops_diverged_cells(tmp_path)
     per_seed = row["per_seed"]
     assert [s["seed"] for s in per_seed] == [0, 1, 2] and np.isnan(per_seed[1]["final_return"])
     assert per_seed[2]["final_return"] == final[5]
+    # each seed's own classifier error, for telling a bad seed's labels from its training
+    assert per_seed[2]["confidence_mae"] == metrics["confidence/mae"][5]
+    assert "confidence_rmse" not in per_seed[2]  # not measured, not made up
     improvement = summary["probability_of_improvement"]
     assert list(improvement) == ["gail [label_ratio=0.1,noise=0]", "gail [label_ratio=0.2,noise=0]"]
     assert improvement["gail [label_ratio=0.1,noise=0]"]["estimate"] == (
