@@ -26,8 +26,8 @@ import jax.numpy as jnp
 from pngail_jax.confidence import ClassifierConfig, ClassifierSpec, split_and_train
 from pngail_jax.demos import load_released
 
-# The authors' Pendulum set, downloaded into data/pendulum/ (docs/demonstrations.md).
-DEFAULT_DEMOS = Path(__file__).resolve().parents[1] / "data/pendulum/Pendulum-v1_mixture.npy"
+# The authors' Pendulum set, downloaded into data/released/ (docs/demonstrations.md).
+DEFAULT_DEMOS = Path(__file__).resolve().parents[1] / "data/released/Pendulum-v1_mixture.npy"
 
 
 def timed(function, *args):

@@ -52,7 +52,7 @@ measuring process compiles its own grid again, without the cache. Peak memory is
 aliased; per device when sharded).
 
 Demonstrations (their contents do not change the throughput): ``--demos``, by default the
-authors' Pendulum set ``data/pendulum/Pendulum-v1_mixture.npy`` in the repository (a download,
+authors' Pendulum set ``data/released/Pendulum-v1_mixture.npy`` in the repository (a download,
 see docs/demonstrations.md; actions x 2) for Pendulum-v1 and none for the MuJoCo tasks;
 without a file, 1000 random rows of the task's shapes (the run says so).
 
@@ -481,7 +481,7 @@ def parse_args(argv=None) -> argparse.Namespace:
         type=Path,
         default=None,
         help="demonstration file (default for Pendulum-v1: "
-        "data/pendulum/Pendulum-v1_mixture.npy in the repository, if downloaded; random rows "
+        "data/released/Pendulum-v1_mixture.npy in the repository, if downloaded; random rows "
         "without a file)",
     )
     parser.add_argument("--json", type=Path, default=None, help="write the rows here")

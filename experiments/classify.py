@@ -1,6 +1,6 @@
 """Table 1: how well SC and BSC recover hidden confidences, all seeds x methods in one program.
 
-    python -m experiments.classify --demos data/pendulum/Pendulum-v1_mixture.npy
+    python -m experiments.classify --demos data/released/Pendulum-v1_mixture.npy
 
 Reads raw [s, a] rows (no environment needed), draws per seed a split of ``--traj-size`` rows
 with ``--label-ratio`` of them labelled, trains each classifier and prints MAE / RMSE over the
@@ -21,7 +21,12 @@ import jax.numpy as jnp
 
 from experiments.cli import HelpFormatter, check_positive, known_names
 from pngail_jax.confidence import ClassifierConfig, ClassifierSpec, split_and_train
-from pngail_jax.demos import DemonstrationError, Demonstrations, load_demonstrations
+from pngail_jax.demos import (
+    DemonstrationError,
+    Demonstrations,
+    action_scale_note,
+    load_demonstrations,
+)
 from pngail_jax.integrity import write_json
 from pngail_jax.report import json_safe
 
@@ -44,8 +49,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument(
         "--action-scale",
         type=float,
-        default=1.0,
-        help="multiply stored actions (2 for the released Pendulum set)",
+        default=None,
+        help="multiply stored actions (default: an authors' file's known scale, 2 for their "
+        "Pendulum file; else 1)",
     )
     parser.add_argument("--traj-size", type=int, default=None, help="rows per seed (all)")
     parser.add_argument("--label-ratio", type=float, default=0.2, help="labelled share, n_c")
@@ -78,7 +84,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     for flag, value, minimum in (
         ("--noise", args.noise, ">= 0"),
         ("--eps", args.eps, "> 0"),
-        ("--action-scale", args.action_scale, "> 0"),
+        ("--action-scale", 1.0 if args.action_scale is None else args.action_scale, "> 0"),
     ):
         in_range = value >= 0 if minimum == ">= 0" else value > 0
         if not (math.isfinite(value) and in_range):
@@ -116,6 +122,8 @@ def main(argv=None) -> dict:
         demos = load(args)
     except (DemonstrationError, FileNotFoundError) as error:
         raise SystemExit(f"classify: {error}") from None
+    if action_scale_note(demos):
+        print(action_scale_note(demos))
     traj_size = demos.num_rows if args.traj_size is None else args.traj_size
     if not 2 <= traj_size <= demos.num_rows:
         raise SystemExit(f"--traj-size must be in [2, {demos.num_rows}], got {traj_size}")

@@ -10,7 +10,7 @@ program, and every ``--every`` iterations prints, per method (mean over seeds):
 - the policy reward ``sp(-z)`` the discriminator gives the optimal demonstration rows (r = 1),
   the intermediate ones (r < 1), and the agent's own batch.
 
-    python -m experiments.early_rewards --demos data/pendulum/Pendulum-v1_mixture.npy
+    python -m experiments.early_rewards --demos data/released/Pendulum-v1_mixture.npy
 
 writes ``early_rewards.json`` (``--out``) and prints a markdown table.
 """
@@ -81,7 +81,7 @@ def rewards_on_rows(trainer: AdversarialTrainer, state, optimal: jax.Array):
 
 def main(argv=None) -> dict:
     args = parse_args(argv)
-    demos = load_demonstrations(args.demos, action_scale=2.0)
+    demos = load_demonstrations(args.demos)  # the authors' file: its known scale, x 2
     table = RunConfig().settings  # Pendulum-v1's row of the settings table
     run = RunConfig(
         iterations=args.iterations,

@@ -1,8 +1,8 @@
 """The main job: every method x seed (x label ratio x noise) as one compiled program.
 
     python -m experiments.sweep        # smoke scale: Pendulum-v1, 7 methods x 3 seeds
-    python -m experiments.sweep --demos data/pendulum/Pendulum-v1_mixture.npy \\
-        --action-scale 2 --seeds 5 --iterations 1000
+    python -m experiments.sweep --demos data/released/Pendulum-v1_mixture.npy \\
+        --seeds 5 --iterations 1000
     python -m experiments.sweep --preset paper --demos ...   # 5,000 iterations, 5 seeds (GPU)
     python -m experiments.sweep --config runs/A/config.json --seeds 10   # a new run like A
     python -m experiments.sweep --resume runs/20261122-210000
@@ -121,7 +121,8 @@ def build_parser() -> argparse.ArgumentParser:
     add(
         "--action-scale",
         type=float,
-        help="multiplies stored actions, 2 for the authors' Pendulum set (default 1)",
+        help="multiplies stored actions (default: an authors' file's known scale, 2 for "
+        "their Pendulum file, whose torques are stored halved; else 1)",
     )
     add(
         "--num-demos",
@@ -252,7 +253,7 @@ def config_from_flags(parser, args) -> RunConfig:
         except ImportError as error:
             parser.error(f"--log: {error}")
     if demos is not None and demos != base.demos:  # another data set: not the saved one's
-        base = dataclasses.replace(base, conf=None, confidence_field=None, action_scale=1.0)
+        base = dataclasses.replace(base, conf=None, confidence_field=None, action_scale=None)
     try:
         settings_base = base.settings if env == base.env else None
         settings = run_settings.from_arguments(env, args, base=settings_base)
@@ -456,6 +457,7 @@ class SweepRun:
     grid: object
     demos_path: str
     normalizer: list[float] | None
+    action_scale: float = 1.0  # what the stored actions were multiplied by
 
 
 def load_or_make_demos(config: RunConfig, saved_path: str | None = None):
@@ -506,7 +508,7 @@ def build(config: RunConfig, saved: SavedRun | None) -> SweepRun:
     """Environment, demonstrations, trainer and the compiled grid of ``config``."""
     import jax
 
-    from pngail_jax.demos import DemonstrationError
+    from pngail_jax.demos import DemonstrationError, action_scale_note
     from pngail_jax.grid import Grid, make_cells, stack_cells
     from pngail_jax.train import AdversarialTrainer
 
@@ -545,6 +547,9 @@ def build(config: RunConfig, saved: SavedRun | None) -> SweepRun:
     )
     if normalizer is None:
         print("note: the demonstrations carry no random/optimal returns: no normalised return")
+    action_scale = float(demos.metadata.get("action_scale", 1.0))
+    if action_scale_note(demos):
+        print(action_scale_note(demos))
     if trainer.num_clipped_rows:
         print(
             f"note: {trainer.num_clipped_rows} of {demos.num_rows} demonstration rows have "
@@ -559,7 +564,7 @@ def build(config: RunConfig, saved: SavedRun | None) -> SweepRun:
         f"{grid.iterations_per_chunk} iterations per chunk)",
         flush=True,
     )
-    return SweepRun(config, env, trainer, cells, grid, demos_path, normalizer)
+    return SweepRun(config, env, trainer, cells, grid, demos_path, normalizer, action_scale)
 
 
 def write_config(out: Path, run: SweepRun, argv: list[str]) -> None:
@@ -573,6 +578,7 @@ def write_config(out: Path, run: SweepRun, argv: list[str]) -> None:
         "resolved": {
             "demos_path": run.demos_path,
             "normalizer": run.normalizer,
+            "action_scale": run.action_scale,
             "num_demos": run.trainer.num_demos,
             "bsc_eps": run.config.task_bsc_eps,
             # The engine that ran (RunSettings.physics None: chosen from the platform).

@@ -85,7 +85,9 @@ class RunConfig:
     demos: str | None = None
     conf: str | None = None  # confidence file (default: the mixture's sibling)
     confidence_field: str | None = None  # Minari: the per-episode field holding confidences
-    action_scale: float = 1.0  # multiplies stored actions (2 for the authors' Pendulum set)
+    # Multiplies stored actions. None: an authors' file's known scale (2 for their Pendulum
+    # file, whose torques are stored halved), else 1 (``demos.load_released``).
+    action_scale: float | None = None
     # Rows per split, n_c + n_u. None: the task's paper size (TASK_NUM_DEMOS) capped at the
     # demonstrations' rows; every row for a task without one.
     num_demos: int | None = None
@@ -140,9 +142,10 @@ class RunConfig:
             "noise_stds",
             _float_axis("noise stds", self.noise_stds, "be finite and >= 0", lambda s: s >= 0),
         )
-        set_field("action_scale", _real("action_scale", self.action_scale))
-        if self.action_scale <= 0:
-            _fail(f"action_scale must be finite and positive, got {self.action_scale!r}")
+        if self.action_scale is not None:
+            set_field("action_scale", _real("action_scale", self.action_scale))
+            if self.action_scale <= 0:
+                _fail(f"action_scale must be finite and positive, got {self.action_scale!r}")
         if self.bsc_eps is not None:
             set_field("bsc_eps", _real("bsc_eps", self.bsc_eps, "lie in (0, 0.5)"))
             if not 0 < self.bsc_eps < 0.5:
@@ -193,7 +196,7 @@ class RunConfig:
         if (
             self.demos is not None
             and self.demos.endswith(".npz")
-            and (self.conf is not None or self.action_scale != 1.0)
+            and (self.conf is not None or self.action_scale not in (None, 1.0))
         ):
             _fail("demos: an .npz set carries its confidences and units: no conf or action_scale")
 

@@ -38,11 +38,11 @@ def run_in_subprocess(test_file: str, function_name: str, environment: dict) -> 
     return json.loads(results[-1].removeprefix("RESULT "))
 
 
-def authors_data(name: str) -> Path:
-    """The authors' released demonstrations ``name`` folder (``pendulum``, ``released``): the
-    documented download folder ``data/<name>`` of this checkout, else the copy beside the
-    checkout that the project's machines and CI have (``../shared/data/<name>``). Tests skip
-    when neither exists."""
+def authors_data() -> Path:
+    """The folder of the authors' released demonstrations: the documented download folder
+    ``data/released`` of this checkout (docs/demonstrations.md), else the copy beside the
+    checkout that the project's machines and CI have (``../shared/data/released``). Tests
+    that need a file skip when it is in neither."""
     root = Path(__file__).resolve().parents[1]
-    candidates = (root / "data" / name, root.parent / "shared" / "data" / name)
+    candidates = (root / "data" / "released", root.parent / "shared" / "data" / "released")
     return next((folder for folder in candidates if folder.exists()), candidates[0])

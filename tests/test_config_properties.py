@@ -66,7 +66,7 @@ FIELD_VALUES = {
     "demos": PATHS,
     "conf": PATHS,
     "confidence_field": PATHS,
-    "action_scale": FLOATS,
+    "action_scale": FLOATS | st.none(),
     "num_demos": COUNTS,
     "chunk_iterations": COUNTS,
     "settings": st.builds(
@@ -126,8 +126,9 @@ def assert_stored_types(config: RunConfig) -> None:
         assert getattr(config, name) is None or type(getattr(config, name)) is int, name
     for name in ("demos", "conf", "confidence_field", "preset_name"):
         assert getattr(config, name) is None or type(getattr(config, name)) is str, name
-    assert type(config.action_scale) is float and type(config.fisher) is str
-    assert config.bsc_eps is None or type(config.bsc_eps) is float
+    assert type(config.fisher) is str
+    for name in ("action_scale", "bsc_eps"):
+        assert getattr(config, name) is None or type(getattr(config, name)) is float, name
     assert type(config.settings) is RunSettings and type(config.classifier) is ClassifierConfig
     classifier = config.classifier
     assert kinds(classifier.hidden_sizes, int) and type(classifier.learning_rate) is float

@@ -28,7 +28,7 @@ from pngail_jax.demos import (
     save_npz,
 )
 
-AUTHORS_PENDULUM = authors_data("pendulum")
+AUTHORS_PENDULUM = authors_data()
 needs_authors_pendulum = pytest.mark.skipif(
     not (AUTHORS_PENDULUM / "Pendulum-v1_mixture.npy").exists(),
     reason=f"the authors' Pendulum set is not at {AUTHORS_PENDULUM}",
@@ -270,6 +270,37 @@ def test_actions_beyond_the_bound_multiple_are_refused():
     )
     with pytest.raises(DemonstrationError, match=message):
         Demonstrations(np.zeros((5, 11), np.float32), actions).check_env(env)
+
+
+def test_an_authors_file_gets_its_known_action_scale_unless_one_is_given(tmp_path, capsys):
+    """The authors' Pendulum file stores torque / 2: loaded by name it is multiplied by 2 (the
+    sweep and classify say so and record it); a given scale, even 1, wins; other files get 1."""
+    from experiments import sweep
+    from pngail_jax.demos import action_scale_note
+    from pngail_jax.run_config import RunConfig
+
+    mixture = write_released(tmp_path, GOOD_ROWS)
+    known = load_demonstrations(mixture)
+    np.testing.assert_array_equal(known.actions, 2 * GOOD_ROWS[:, 3:])
+    assert known.metadata["action_scale"] == 2.0
+    assert known.metadata["action_scale_source"] == "known"
+    assert "multiplied by 2 (--action-scale overrides)" in action_scale_note(known)
+    given = load_demonstrations(mixture, action_scale=1.0)
+    np.testing.assert_array_equal(given.actions, GOOD_ROWS[:, 3:])
+    assert given.metadata["action_scale_source"] == "given" and action_scale_note(given) is None
+    other = tmp_path / "other"
+    other.mkdir()
+    hopper = write_released(other, np.zeros((2, 14), np.float32), env_name="Hopper-v2")
+    assert load_demonstrations(hopper).metadata["action_scale"] == 1.0
+    assert action_scale_note(load_demonstrations(hopper)) is None
+    with pytest.raises(DemonstrationError, match="npz set is stored in the environment's units"):
+        (tmp_path / "set.npz").write_bytes(GOOD_NPZ)
+        load_demonstrations(tmp_path / "set.npz", action_scale=2.0)
+    # The sweep's loader: the config's None is the known scale, 1.0 is the stored units.
+    demos, _ = sweep.load_or_make_demos(RunConfig(demos=str(mixture)))
+    np.testing.assert_array_equal(demos.actions, known.actions)
+    demos, _ = sweep.load_or_make_demos(RunConfig(demos=str(mixture), action_scale=1.0))
+    np.testing.assert_array_equal(demos.actions, GOOD_ROWS[:, 3:])
 
 
 @needs_authors_pendulum

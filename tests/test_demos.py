@@ -17,7 +17,7 @@ from pngail_jax.demos import (
     save_npz,
 )
 
-AUTHORS_PENDULUM = authors_data("pendulum")
+AUTHORS_PENDULUM = authors_data()
 
 
 def _valid(**overrides):
@@ -106,12 +106,13 @@ def test_check_env_sizes():
 
 
 @pytest.mark.skipif(
-    not AUTHORS_PENDULUM.exists(), reason=f"the authors' Pendulum set is not at {AUTHORS_PENDULUM}"
+    not (AUTHORS_PENDULUM / "Pendulum-v1_mixture.npy").exists(),
+    reason=f"the authors' Pendulum set is not in {AUTHORS_PENDULUM}",
 )
 def test_released_pendulum_set_loads():
     path = AUTHORS_PENDULUM / "Pendulum-v1_mixture.npy"
-    stored = load_released(path)
-    scaled = load_released(path, action_scale=2.0)
+    stored = load_released(path, action_scale=1.0)
+    scaled = load_released(path)  # the file's known scale: x 2
     assert stored.num_rows == 1000 and stored.observations.shape == (1000, 3)
     assert np.abs(stored.actions).max() <= 1.0  # stored as torque / 2
     np.testing.assert_allclose(scaled.actions, 2 * stored.actions)

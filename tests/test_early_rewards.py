@@ -8,7 +8,7 @@ from conftest import authors_data
 
 from experiments import early_rewards
 
-PENDULUM = authors_data("pendulum") / "Pendulum-v1_mixture.npy"
+PENDULUM = authors_data() / "Pendulum-v1_mixture.npy"
 
 
 @pytest.mark.skipif(not PENDULUM.exists(), reason=f"the authors' Pendulum set is not at {PENDULUM}")

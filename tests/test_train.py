@@ -1,12 +1,12 @@
 """Learning test of the adversarial trainer: GAIL imitates the authors' optimal trajectory."""
 
 import dataclasses
-from pathlib import Path
 
 import chex
 import jax
 import numpy as np
 import pytest
+from conftest import authors_data
 
 from pngail_jax import envs
 from pngail_jax.bc import BCConfig
@@ -18,11 +18,12 @@ from pngail_jax.ranking import RankingConfig
 from pngail_jax.rl import TRPOConfig
 from pngail_jax.train import AdversarialConfig, AdversarialTrainer
 
-SHARED_PENDULUM = Path(__file__).resolve().parents[2] / "shared" / "data" / "pendulum"
+SHARED_PENDULUM = authors_data()
 
 
 @pytest.mark.skipif(
-    not SHARED_PENDULUM.exists(), reason=f"the authors' Pendulum set is not at {SHARED_PENDULUM}"
+    not (SHARED_PENDULUM / "Pendulum-v1_mixture.npy").exists(),
+    reason=f"the authors' Pendulum set is not in {SHARED_PENDULUM}",
 )
 def test_gail_learns_pendulum_from_the_optimal_trajectory():
     """Rows 0-199 of the released set come from the optimal policy (r = 1). From random

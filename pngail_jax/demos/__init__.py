@@ -7,6 +7,7 @@ from pngail_jax.demos.data import (
     DemonstrationError,
     Demonstrations,
     Split,
+    action_scale_note,
     load_demonstrations,
     load_minari,
     load_npz,
@@ -20,6 +21,7 @@ from pngail_jax.demos.data import (
 __all__ = [
     "ACTION_BOUND_MULTIPLE",
     "RELEASED_ACTION_SCALES",
+    "action_scale_note",
     "RELEASED_TASKS",
     "DemonstrationError",
     "Demonstrations",

@@ -83,6 +83,19 @@ RELEASED_TRAJECTORY_LENGTHS = {"Pendulum-v1": 200}
 RELEASED_ACTION_SCALES = {"Pendulum-v1": 2.0}
 
 
+def action_scale_note(demos) -> str | None:
+    """One line saying that an authors' file's known action scale was applied (for the
+    terminal), or None when the scale was given or is 1."""
+    if demos.metadata.get("action_scale_source") != "known":
+        return None
+    scale = demos.metadata["action_scale"]
+    name = demos.metadata.get("source", "").removeprefix("released layout: ")
+    return (
+        f"note: {name} is the authors' file, which stores actions divided by {scale:g}: they "
+        f"are multiplied by {scale:g} (--action-scale overrides)"
+    )
+
+
 def released_task(path: str | Path) -> str | None:
     """Our task of a released ``{env}_mixture.npy`` file (``RELEASED_TASKS``), else None."""
     name = Path(path).name
@@ -399,7 +412,7 @@ def released_confidence_path(mixture_path: str | Path) -> Path:
 def load_released(
     mixture_path: str | Path,
     conf_path: str | Path | None = None,
-    action_scale: float = 1.0,
+    action_scale: float | None = None,
     observation_size: int | None = None,
     trajectory_length: int | None = None,
 ) -> Demonstrations:
@@ -412,7 +425,9 @@ def load_released(
     file's five 200-step episodes) is used when the file fits it, and no ids otherwise.
 
     ``conf_path`` defaults to the sibling ``*_mixture_conf.npy``. ``action_scale`` multiplies
-    the stored action columns (2 for the released Pendulum set, whose torques are stored / 2).
+    the stored action columns; None: the file's known scale (``RELEASED_ACTION_SCALES``: 2 for
+    the authors' Pendulum file, whose torques are stored / 2), else 1. ``metadata`` records the
+    scale applied and, under ``action_scale_source``, whether it was the known one.
     ``observation_size`` splits [s, a]; by default it is looked up from the file name's
     environment (``RELEASED_OBSERVATION_SIZES``), and the rows must then also hold that
     environment's number of action columns (``RELEASED_ACTION_SIZES``). Errors name the
@@ -421,9 +436,13 @@ def load_released(
     mixture_path = Path(mixture_path)
     if not mixture_path.name.endswith("_mixture.npy"):
         raise DemonstrationError(f"{mixture_path}: expected a file named {{env}}_mixture.npy")
+    env_name = mixture_path.name.removesuffix("_mixture.npy")
+    source = "given"
+    if action_scale is None:
+        action_scale = RELEASED_ACTION_SCALES.get(env_name, 1.0)
+        source = "known" if env_name in RELEASED_ACTION_SCALES else "default"
     if not (math.isfinite(action_scale) and action_scale > 0):
         raise DemonstrationError(f"action_scale must be positive and finite, got {action_scale!r}")
-    env_name = mixture_path.name.removesuffix("_mixture.npy")
     if conf_path is None:
         conf_path = released_confidence_path(mixture_path)
     where = f"mixture file {mixture_path}"
@@ -454,6 +473,7 @@ def load_released(
     metadata = {
         "env": env_name,
         "action_scale": float(action_scale),
+        "action_scale_source": source,
         "source": f"released layout: {mixture_path.name}",
     }
     if env_name in PAPER_NORMALIZERS:
@@ -622,11 +642,15 @@ def _npz_metadata(metadata_json: np.ndarray | None, where: str) -> dict[str, Any
 def load_demonstrations(
     path: str | Path,
     conf_path: str | Path | None = None,
-    action_scale: float = 1.0,
+    action_scale: float | None = None,
     *,
     confidence_field: str | None = None,
 ) -> Demonstrations:
     """Loads ``*_mixture.npy``, ``*.npz`` or ``"minari:<dataset_id>"``, a local Minari dataset.
+
+    ``action_scale`` multiplies stored actions; None: the known scale of an authors' file
+    (``load_released``), 1 for a Minari dataset. An ``.npz`` set is in the environment's units
+    already: it takes no scale other than None or 1.
 
     For a Minari dataset, per-episode confidences come from ``conf_path`` (a ``.npy`` file or a
     text file, one number per episode and line, in episode order) or from the episode metadata
@@ -637,7 +661,7 @@ def load_demonstrations(
             str(path).removeprefix(MINARI_PREFIX),
             conf_path,
             confidence_field=confidence_field,
-            action_scale=action_scale,
+            action_scale=1.0 if action_scale is None else action_scale,
         )
     if confidence_field is not None:
         raise DemonstrationError(
@@ -647,6 +671,10 @@ def load_demonstrations(
     if not path.exists():
         raise FileNotFoundError(f"demonstrations not found: {path}")
     if path.suffix == ".npz":
+        if action_scale not in (None, 1.0):
+            raise DemonstrationError(
+                f"{path}: an .npz set is stored in the environment's units: no action_scale"
+            )
         return load_npz(path)
     return load_released(path, conf_path, action_scale)
 
