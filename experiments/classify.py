@@ -53,6 +53,12 @@ def parse_args(argv=None) -> argparse.Namespace:
         help="multiply stored actions (default: an authors' file's known scale, 2 for their "
         "Pendulum file; else 1)",
     )
+    parser.add_argument(
+        "--env",
+        default=None,
+        help="the environment of a file of rows that is not an authors' one: its observation "
+        "and action sizes split the rows (default: none, an authors' file knows its own)",
+    )
     parser.add_argument("--traj-size", type=int, default=None, help="rows per seed (all)")
     parser.add_argument("--label-ratio", type=float, default=0.2, help="labelled share, n_c")
     parser.add_argument("--noise", type=float, default=0.0, help="confidence noise std")
@@ -99,7 +105,16 @@ def parse_args(argv=None) -> argparse.Namespace:
 def load(args: argparse.Namespace) -> Demonstrations:
     """The demonstrations of ``--demos``, which must carry confidences; raises
     ``DemonstrationError`` or ``FileNotFoundError`` naming the file."""
-    demos = load_demonstrations(args.demos, args.conf, args.action_scale)
+    sizes = {}
+    if args.env is not None:
+        from pngail_jax import envs
+
+        try:
+            env = envs.make(args.env)
+        except ValueError as error:
+            raise DemonstrationError(f"--env: {error}") from None
+        sizes = {"observation_size": env.observation_size, "action_size": env.action_size}
+    demos = load_demonstrations(args.demos, args.conf, args.action_scale, **sizes)
     if demos.confidence is None:
         raise DemonstrationError(f"{args.demos}: these demonstrations carry no confidence")
     return demos

@@ -125,6 +125,18 @@ def build_parser() -> argparse.ArgumentParser:
         "their Pendulum file, whose torques are stored halved; else 1)",
     )
     add(
+        "--optimal-return",
+        type=float,
+        help="the normalised return's 1: the best return the task allows (default: the "
+        "demonstrations' own, Table 3 for an authors' file; none for a file of rows)",
+    )
+    add(
+        "--random-return",
+        type=float,
+        help="the normalised return's 0 (default: the demonstrations' own; with "
+        "--optimal-return alone, measured from uniform random actions)",
+    )
+    add(
         "--num-demos",
         type=int,
         help="rows per split, n_c + n_u (default: the task's Table 3 size, capped at the "
@@ -253,7 +265,14 @@ def config_from_flags(parser, args) -> RunConfig:
         except ImportError as error:
             parser.error(f"--log: {error}")
     if demos is not None and demos != base.demos:  # another data set: not the saved one's
-        base = dataclasses.replace(base, conf=None, confidence_field=None, action_scale=None)
+        base = dataclasses.replace(
+            base,
+            conf=None,
+            confidence_field=None,
+            action_scale=None,
+            random_return=None,
+            optimal_return=None,
+        )
     try:
         settings_base = base.settings if env == base.env else None
         settings = run_settings.from_arguments(env, args, base=settings_base)
@@ -278,6 +297,8 @@ def config_from_flags(parser, args) -> RunConfig:
             conf=conf,
             confidence_field=args.confidence_field,
             action_scale=args.action_scale,
+            random_return=args.random_return,
+            optimal_return=args.optimal_return,
             num_demos=args.num_demos,
             chunk_iterations=args.chunk_iterations,
             classifier=classifier,
@@ -314,6 +335,8 @@ def _flag_message(message: str) -> str:
         ("cpu_devices", "--cpu-devices"),
         ("num_demos", "--num-demos"),
         ("action_scale", "--action-scale"),
+        ("random_return", "--random-return"),
+        ("optimal_return", "--optimal-return"),
         ("bsc_eps", "--bsc-eps"),
         ("ClassifierConfig.num_steps", "--classifier-steps"),
         ("seed must", "--seed must"),
@@ -339,6 +362,7 @@ class SavedRun:
     platform: str
     local_device_count: int
     inputs: dict  # {role: integrity.file_record} of the input files; {} from older versions
+    normalizer: list[float] | None = None  # what the run normalised returns by
 
 
 def load_saved(directory: Path) -> SavedRun:
@@ -363,6 +387,7 @@ def load_saved(directory: Path) -> SavedRun:
             devices["platform"],
             devices["local_device_count"],
             data["resolved"].get("inputs", {}),
+            data["resolved"].get("normalizer"),
         )
     except IntegrityError as error:
         raise SystemExit(f"--resume {directory}: {error}") from None
@@ -398,7 +423,7 @@ def input_files(config: RunConfig, demos_path: str) -> dict:
         files = {"confidence file": config.conf} if config.conf else {}
     else:
         files = {"demonstrations": demos_path}
-        if demos_path.endswith("_mixture.npy"):
+        if config.conf or demos_path.endswith("_mixture.npy"):
             files["confidence file"] = config.conf or released_confidence_path(demos_path)
     return {role: file_record(path) for role, path in files.items()}
 
@@ -458,16 +483,23 @@ class SweepRun:
     demos_path: str
     normalizer: list[float] | None
     action_scale: float = 1.0  # what the stored actions were multiplied by
+    normalizer_source: str = "none"
 
 
-def load_or_make_demos(config: RunConfig, saved_path: str | None = None):
-    """The demonstrations and the path they came from (made and cached without ``demos``)."""
+def load_or_make_demos(config: RunConfig, saved_path: str | None = None, env=None):
+    """The demonstrations and the path they came from (made and cached without ``demos``);
+    a file of rows that is not an authors' one is split by ``env``'s sizes."""
     from pngail_jax.demos import load_demonstrations
 
     source = saved_path or config.demos
     if source is not None:
         demos = load_demonstrations(
-            source, config.conf, config.action_scale, confidence_field=config.confidence_field
+            source,
+            config.conf,
+            config.action_scale,
+            confidence_field=config.confidence_field,
+            observation_size=None if env is None else env.observation_size,
+            action_size=None if env is None else env.action_size,
         )
         return demos, source
     from pngail_jax.demos import DemonstrationError
@@ -497,6 +529,39 @@ def normalizer_of(demos) -> list[float] | None:
     return None
 
 
+RANDOM_RETURN_EPISODES = 32
+
+
+def resolve_normalizer(config: RunConfig, demos, env) -> tuple[list[float] | None, str]:
+    """(random, optimal) returns and where they came from: the flags, the demonstrations'
+    metadata, or the flag's optimal return with a random return measured here (uniform
+    random actions, ``RANDOM_RETURN_EPISODES`` episodes, a key of ``config.seed``)."""
+    if config.optimal_return is None:
+        normalizer = normalizer_of(demos)
+        source = demos.metadata.get("normalizer_source", "the demonstrations' metadata")
+        return normalizer, source if normalizer else "none"
+    if config.random_return is not None:
+        return [config.random_return, config.optimal_return], "--random-return, --optimal-return"
+    import jax
+
+    from pngail_jax.demos.generate import rollout_episodes, uniform_random_actions
+
+    keys = jax.random.split(
+        jax.random.fold_in(jax.random.key(config.seed), 7), RANDOM_RETURN_EPISODES
+    )
+    episodes = jax.jit(lambda k: rollout_episodes(env, uniform_random_actions(env), k))(keys)
+    random_return = float(episodes.returns.mean())
+    if not config.optimal_return > random_return:
+        raise SystemExit(
+            f"--optimal-return {config.optimal_return:g} is not above the random policy's "
+            f"return, {random_return:.1f} (measured): give the best return the task allows"
+        )
+    return [random_return, config.optimal_return], (
+        f"--optimal-return; random return measured ({RANDOM_RETURN_EPISODES} episodes of "
+        "uniform random actions)"
+    )
+
+
 def blocks_per_chunk(num_evaluations: int, target_blocks: int) -> int:
     """The largest divisor of num_evaluations not above the target (so all chunks match)."""
     return max(
@@ -514,7 +579,7 @@ def build(config: RunConfig, saved: SavedRun | None) -> SweepRun:
 
     env = run_settings.make_env(config.env, config.settings)
     try:
-        demos, demos_path = load_or_make_demos(config, saved.demos_path if saved else None)
+        demos, demos_path = load_or_make_demos(config, saved.demos_path if saved else None, env)
     except (DemonstrationError, FileNotFoundError, ImportError) as error:
         raise SystemExit(f"demonstrations: {error}") from None
     try:
@@ -536,7 +601,10 @@ def build(config: RunConfig, saved: SavedRun | None) -> SweepRun:
     num_evaluations = config.iterations // eval_every
     chunk_blocks = blocks_per_chunk(num_evaluations, max(1, config.chunk_iterations // eval_every))
     devices = jax.devices()
-    normalizer = normalizer_of(demos)
+    if saved is not None and saved.normalizer is not None:  # as the run began
+        normalizer, normalizer_source = saved.normalizer, "the run's config.json"
+    else:
+        normalizer, normalizer_source = resolve_normalizer(config, demos, env)
     print(
         f"{len(cells)} runs ({', '.join(config.methods)} x {config.seeds} seeds x "
         f"{config.num_settings} setting(s)) on {config.env}, {config.iterations} iterations x "
@@ -546,7 +614,15 @@ def build(config: RunConfig, saved: SavedRun | None) -> SweepRun:
         flush=True,
     )
     if normalizer is None:
-        print("note: the demonstrations carry no random/optimal returns: no normalised return")
+        print(
+            "note: the demonstrations carry no random/optimal returns: no normalised return "
+            "(give --optimal-return, and --random-return or it is measured)"
+        )
+    elif config.optimal_return is not None and saved is None:
+        print(
+            f"normalised return: random {normalizer[0]:.1f}, optimal {normalizer[1]:.1f} "
+            f"({normalizer_source})"
+        )
     action_scale = float(demos.metadata.get("action_scale", 1.0))
     if action_scale_note(demos):
         print(action_scale_note(demos))
@@ -564,7 +640,9 @@ def build(config: RunConfig, saved: SavedRun | None) -> SweepRun:
         f"{grid.iterations_per_chunk} iterations per chunk)",
         flush=True,
     )
-    return SweepRun(config, env, trainer, cells, grid, demos_path, normalizer, action_scale)
+    return SweepRun(
+        config, env, trainer, cells, grid, demos_path, normalizer, action_scale, normalizer_source
+    )
 
 
 def write_config(out: Path, run: SweepRun, argv: list[str]) -> None:
@@ -578,6 +656,7 @@ def write_config(out: Path, run: SweepRun, argv: list[str]) -> None:
         "resolved": {
             "demos_path": run.demos_path,
             "normalizer": run.normalizer,
+            "normalizer_source": run.normalizer_source,
             "action_scale": run.action_scale,
             "num_demos": run.trainer.num_demos,
             "bsc_eps": run.config.task_bsc_eps,

@@ -88,6 +88,11 @@ class RunConfig:
     # Multiplies stored actions. None: an authors' file's known scale (2 for their Pendulum
     # file, whose torques are stored halved), else 1 (``demos.load_released``).
     action_scale: float | None = None
+    # The normalised return's ends, (R - random) / (optimal - random). None: the
+    # demonstrations' own (the paper's Table 3 for an authors' file, measured for made ones);
+    # an optimal return without a random one: the random one is measured (uniform actions).
+    random_return: float | None = None
+    optimal_return: float | None = None
     # Rows per split, n_c + n_u. None: the task's paper size (TASK_NUM_DEMOS) capped at the
     # demonstrations' rows; every row for a task without one.
     num_demos: int | None = None
@@ -146,6 +151,9 @@ class RunConfig:
             set_field("action_scale", _real("action_scale", self.action_scale))
             if self.action_scale <= 0:
                 _fail(f"action_scale must be finite and positive, got {self.action_scale!r}")
+        for name in ("random_return", "optimal_return"):
+            if getattr(self, name) is not None:
+                set_field(name, _real(name, getattr(self, name), "be a finite number"))
         if self.bsc_eps is not None:
             set_field("bsc_eps", _real("bsc_eps", self.bsc_eps, "lie in (0, 0.5)"))
             if not 0 < self.bsc_eps < 0.5:
@@ -188,6 +196,15 @@ class RunConfig:
                 f"({self.settings.eval_every}; set it with --eval-every)"
             )
         self.adversarial_config()  # the trainer's own checks (e.g. samples per iteration)
+        if self.random_return is not None and self.optimal_return is None:
+            _fail("random_return needs optimal_return (the normalised return's other end)")
+        if None not in (self.random_return, self.optimal_return) and not (
+            self.optimal_return > self.random_return
+        ):
+            _fail(
+                f"optimal_return ({self.optimal_return}) must be above random_return "
+                f"({self.random_return})"
+            )
         if self.conf is not None and self.demos is None:
             _fail("conf: a confidence file needs demos (made demonstrations carry their own)")
         is_minari = self.demos is not None and self.demos.startswith("minari:")

@@ -67,6 +67,8 @@ FIELD_VALUES = {
     "conf": PATHS,
     "confidence_field": PATHS,
     "action_scale": FLOATS | st.none(),
+    "random_return": FLOATS | st.none(),
+    "optimal_return": FLOATS | st.none(),
     "num_demos": COUNTS,
     "chunk_iterations": COUNTS,
     "settings": st.builds(
@@ -127,7 +129,7 @@ def assert_stored_types(config: RunConfig) -> None:
     for name in ("demos", "conf", "confidence_field", "preset_name"):
         assert getattr(config, name) is None or type(getattr(config, name)) is str, name
     assert type(config.fisher) is str
-    for name in ("action_scale", "bsc_eps"):
+    for name in ("action_scale", "bsc_eps", "random_return", "optimal_return"):
         assert getattr(config, name) is None or type(getattr(config, name)) is float, name
     assert type(config.settings) is RunSettings and type(config.classifier) is ClassifierConfig
     classifier = config.classifier

@@ -271,6 +271,9 @@ def test_bad_flags_are_named(demos_path, tmp_path, capsys):
     with pytest.raises(SystemExit):
         sweep.parse_args(["--num-envs", "0"])
     assert "--num-envs must be a positive integer" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        sweep.parse_args(["--random-return", "-1200"])
+    assert "--random-return needs optimal_return" in capsys.readouterr().err
 
 
 def test_every_flag_has_help_and_its_default():

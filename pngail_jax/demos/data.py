@@ -4,8 +4,10 @@ Two on-disk layouts:
 
 - The paper's released layout: ``{env}_mixture.npy`` of shape (N, obs_dim + act_dim), rows
   ``[s, a]``, and ``{env}_mixture_conf.npy`` of shape (N, 1). The released Pendulum set stores
-  the torque divided by 2, so load it with ``action_scale=2`` to get the environment's units;
-  the default 1 keeps the rows as stored (``docs/demonstrations.md``).
+  the torque divided by 2; loaded by its name it is multiplied by 2 (``action_scale`` None),
+  ``action_scale=1`` keeps the rows as stored (``docs/demonstrations.md``). Any other ``.npy``
+  of rows ``[s, a]`` loads the same way, given the observation size (an environment's) and
+  optionally a confidence file.
 - Our ``.npz`` schema, version 1: arrays ``observations`` float32[N, O], ``actions``
   float32[N, A], optional ``confidence`` float32[N], ``labelled`` bool[N],
   ``trajectory_ids`` int32[N], plus ``metadata_json`` (a JSON string) and ``format_version``.
@@ -415,8 +417,10 @@ def load_released(
     action_scale: float | None = None,
     observation_size: int | None = None,
     trajectory_length: int | None = None,
+    action_size: int | None = None,
 ) -> Demonstrations:
-    """Loads the paper's ``{env}_mixture.npy`` (+ ``{env}_mixture_conf.npy``) layout.
+    """Loads the paper's ``{env}_mixture.npy`` (+ ``{env}_mixture_conf.npy``) layout, or any
+    ``.npy`` of rows [s, a].
 
     ``trajectory_length`` splits the rows into consecutive trajectories of that many rows and
     fills ``trajectory_ids``: the row count must be a multiple of it and each trajectory must
@@ -424,44 +428,53 @@ def load_released(
     By default the file's documented layout (``RELEASED_TRAJECTORY_LENGTHS``: the Pendulum
     file's five 200-step episodes) is used when the file fits it, and no ids otherwise.
 
-    ``conf_path`` defaults to the sibling ``*_mixture_conf.npy``. ``action_scale`` multiplies
+    ``conf_path`` defaults to the sibling ``*_mixture_conf.npy`` of a file so named; another
+    file has no confidence without one. ``action_scale`` multiplies
     the stored action columns; None: the file's known scale (``RELEASED_ACTION_SCALES``: 2 for
     the authors' Pendulum file, whose torques are stored / 2), else 1. ``metadata`` records the
     scale applied and, under ``action_scale_source``, whether it was the known one.
-    ``observation_size`` splits [s, a]; by default it is looked up from the file name's
-    environment (``RELEASED_OBSERVATION_SIZES``), and the rows must then also hold that
-    environment's number of action columns (``RELEASED_ACTION_SIZES``). Errors name the
-    mixture or confidence file they are about.
+    An authors' file (its name's environment in ``RELEASED_OBSERVATION_SIZES``) is split by that
+    environment's observation size and must hold its number of action columns
+    (``RELEASED_ACTION_SIZES``). Any other file needs ``observation_size`` (the environment's;
+    the sweep passes it), and ``action_size`` when given must be the remaining column count.
+    Errors name the rows or confidence file they are about.
     """
     mixture_path = Path(mixture_path)
-    if not mixture_path.name.endswith("_mixture.npy"):
-        raise DemonstrationError(f"{mixture_path}: expected a file named {{env}}_mixture.npy")
-    env_name = mixture_path.name.removesuffix("_mixture.npy")
+    if mixture_path.suffix != ".npy":
+        raise DemonstrationError(
+            f"{mixture_path}: expected a .npy file of rows [observation, action], an .npz set "
+            "or minari:<dataset id>"
+        )
+    named = mixture_path.name.endswith("_mixture.npy")
+    env_name = mixture_path.name.removesuffix("_mixture.npy") if named else None
     source = "given"
     if action_scale is None:
         action_scale = RELEASED_ACTION_SCALES.get(env_name, 1.0)
         source = "known" if env_name in RELEASED_ACTION_SCALES else "default"
     if not (math.isfinite(action_scale) and action_scale > 0):
         raise DemonstrationError(f"action_scale must be positive and finite, got {action_scale!r}")
-    if conf_path is None:
+    if conf_path is None and named:
         conf_path = released_confidence_path(mixture_path)
-    where = f"mixture file {mixture_path}"
-    action_size = None
-    if observation_size is None:
-        if env_name not in RELEASED_OBSERVATION_SIZES:
-            raise DemonstrationError(
-                f"{where}: unknown environment {env_name!r}; pass "
-                f"observation_size (known: "
-                f"{', '.join(RELEASED_OBSERVATION_SIZES)})"
-            )
+    where = f"{'mixture' if named else 'rows'} file {mixture_path}"
+    if env_name in RELEASED_OBSERVATION_SIZES:
         observation_size = RELEASED_OBSERVATION_SIZES[env_name]
         action_size = RELEASED_ACTION_SIZES[env_name]
-    rows = _load_numpy(mixture_path, "mixture file")
-    confidence = _load_numpy(conf_path, "confidence file")
+        sizes_of = env_name
+    elif observation_size is None:
+        known = f"unknown environment {env_name!r}" if named else "not an authors' file"
+        raise DemonstrationError(
+            f"{where}: {known}; give the environment (--env; in Python, observation_size) "
+            f"to split its rows [observation, action] (authors' files: "
+            f"{', '.join(RELEASED_OBSERVATION_SIZES)})"
+        )
+    else:
+        sizes_of = "the environment's"
+    rows = _load_numpy(mixture_path, where.removesuffix(f" {mixture_path}"))
+    confidence = None if conf_path is None else _load_numpy(conf_path, "confidence file")
     if rows.ndim == 2 and action_size is not None:
         if rows.shape[1] != observation_size + action_size:
             raise DemonstrationError(
-                f"{where}: rows have {rows.shape[1]} columns, but {env_name} rows [s, a] have "
+                f"{where}: rows have {rows.shape[1]} columns, but {sizes_of} rows [s, a] have "
                 f"{observation_size} + {action_size} columns (observation + action)"
             )
     if rows.ndim != 2 or not 0 < observation_size < rows.shape[1]:
@@ -469,12 +482,13 @@ def load_released(
             f"{where}: rows of shape {rows.shape} cannot be split "
             f"into {observation_size} observation columns and actions"
         )
-    confidence = _released_confidence(confidence, conf_path, mixture_path, len(rows))
+    if confidence is not None:
+        confidence = _released_confidence(confidence, conf_path, mixture_path, len(rows))
     metadata = {
-        "env": env_name,
+        **({"env": env_name} if named else {}),
         "action_scale": float(action_scale),
         "action_scale_source": source,
-        "source": f"released layout: {mixture_path.name}",
+        "source": f"{'released layout' if named else 'rows'}: {mixture_path.name}",
     }
     if env_name in PAPER_NORMALIZERS:
         random_return, optimal_return = PAPER_NORMALIZERS[env_name]
@@ -485,7 +499,8 @@ def load_released(
         }
     trajectory_ids = None
     if trajectory_length is not None:
-        trajectory_ids = _consecutive_trajectories(confidence, trajectory_length, where)
+        per_row = np.zeros(len(rows)) if confidence is None else confidence
+        trajectory_ids = _consecutive_trajectories(per_row, trajectory_length, where)
     elif env_name in RELEASED_TRAJECTORY_LENGTHS:
         trajectory_length = RELEASED_TRAJECTORY_LENGTHS[env_name]
         try:
@@ -645,11 +660,15 @@ def load_demonstrations(
     action_scale: float | None = None,
     *,
     confidence_field: str | None = None,
+    observation_size: int | None = None,
+    action_size: int | None = None,
 ) -> Demonstrations:
     """Loads ``*_mixture.npy``, ``*.npz`` or ``"minari:<dataset_id>"``, a local Minari dataset.
 
     ``action_scale`` multiplies stored actions; None: the known scale of an authors' file
-    (``load_released``), 1 for a Minari dataset. An ``.npz`` set is in the environment's units
+    (``load_released``), 1 for a Minari dataset. A ``.npy`` of rows [s, a] that is not an
+    authors' file is split by ``observation_size`` (and checked against ``action_size``), an
+    environment's sizes. An ``.npz`` set is in the environment's units
     already: it takes no scale other than None or 1.
 
     For a Minari dataset, per-episode confidences come from ``conf_path`` (a ``.npy`` file or a
@@ -676,7 +695,9 @@ def load_demonstrations(
                 f"{path}: an .npz set is stored in the environment's units: no action_scale"
             )
         return load_npz(path)
-    return load_released(path, conf_path, action_scale)
+    return load_released(
+        path, conf_path, action_scale, observation_size=observation_size, action_size=action_size
+    )
 
 
 @struct.dataclass
