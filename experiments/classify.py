@@ -2,7 +2,7 @@
 
     python -m experiments.classify --demos data/released/Pendulum-v1_mixture.npy
 
-Reads raw [s, a] rows (no environment needed), draws per seed a split of ``--traj-size`` rows
+Reads raw [s, a] rows (no environment needed), draws per seed a split of ``--num-demos`` rows
 with ``--label-ratio`` of them labelled, trains each classifier and prints MAE / RMSE over the
 unlabelled rows (mean +- population std over seeds), against the confidences before noise.
 Only rows that a ``.npz`` file's ``labelled`` mask allows are labelled.
@@ -19,7 +19,13 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 
-from experiments.cli import HelpFormatter, check_positive, known_names
+from experiments.cli import (
+    ArgumentParser,
+    HelpFormatter,
+    check_positive,
+    known_names,
+    note_deprecated,
+)
 from pngail_jax.confidence import ClassifierConfig, ClassifierSpec, split_and_train
 from pngail_jax.demos import (
     DemonstrationError,
@@ -34,8 +40,8 @@ METHODS = {"sc": ClassifierSpec.sc, "bsc": ClassifierSpec.bsc}
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(
-        description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
+    parser = ArgumentParser(
+        "classify", description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
     )
     parser.add_argument(
         "--demos", type=Path, required=True, help="*_mixture.npy (released layout) or our .npz"
@@ -59,37 +65,56 @@ def parse_args(argv=None) -> argparse.Namespace:
         help="the environment of a file of rows that is not an authors' one: its observation "
         "and action sizes split the rows (default: none, an authors' file knows its own)",
     )
-    parser.add_argument("--traj-size", type=int, default=None, help="rows per seed (all)")
+    parser.add_argument(
+        "--num-demos",
+        "--traj-size",
+        dest="num_demos",
+        type=int,
+        default=None,
+        help="rows per seed, n_c + n_u (default: all)",
+    )
     parser.add_argument("--label-ratio", type=float, default=0.2, help="labelled share, n_c")
     parser.add_argument("--noise", type=float, default=0.0, help="confidence noise std")
-    parser.add_argument("--methods", default="sc,bsc", help="classifiers, comma-separated")
+    parser.add_argument(
+        "--classifiers", "--methods", dest="classifiers", default="sc,bsc", help="comma-separated"
+    )
     parser.add_argument("--seeds", type=int, default=5, help="seeds (splits and inits)")
     parser.add_argument("--seed", type=int, default=0, help="base PRNG seed")
-    parser.add_argument("--steps", type=int, default=25_000, help="classifier training steps")
+    parser.add_argument(
+        "--classifier-steps",
+        "--steps",
+        dest="classifier_steps",
+        type=int,
+        default=25_000,
+        help="classifier training steps",
+    )
     parser.add_argument(
         "--batch-size",
         type=int,
         default=1,
         help="labelled rows per step (unlabelled: this x n_u / n_c)",
     )
-    parser.add_argument("--eps", type=float, default=0.01, help="BSC clip")
+    parser.add_argument(
+        "--bsc-eps", "--eps", dest="bsc_eps", type=float, default=0.01, help="BSC clip"
+    )
     parser.add_argument("--json", type=Path, default=None, help="also write the results here")
     parser.add_argument(
         "--overwrite", action="store_true", help="replace an existing --json file (default: refuse)"
     )
     args = parser.parse_args(argv)
-    args.methods = known_names(parser, args.methods, METHODS, "method")
+    note_deprecated(argv, DEPRECATED_FLAGS)
+    args.classifiers = known_names(parser, args.classifiers, METHODS, "classifier")
     if not 0 < args.label_ratio < 1:  # also refuses nan
         parser.error(f"--label-ratio must be in (0, 1), got {args.label_ratio}")
-    check_positive(parser, args, ("seeds", "steps", "batch_size"))
-    if args.traj_size is not None and args.traj_size < 2:
+    check_positive(parser, args, ("seeds", "classifier_steps", "batch_size"))
+    if args.num_demos is not None and args.num_demos < 2:
         parser.error(
-            f"--traj-size must be at least 2 (one labelled and one unlabelled row), "
-            f"got {args.traj_size}"
+            f"--num-demos must be at least 2 (one labelled and one unlabelled row), "
+            f"got {args.num_demos}"
         )
     for flag, value, minimum in (
         ("--noise", args.noise, ">= 0"),
-        ("--eps", args.eps, "> 0"),
+        ("--bsc-eps", args.bsc_eps, "> 0"),
         ("--action-scale", 1.0 if args.action_scale is None else args.action_scale, "> 0"),
     ):
         in_range = value >= 0 if minimum == ">= 0" else value > 0
@@ -100,6 +125,15 @@ def parse_args(argv=None) -> argparse.Namespace:
     if args.json is not None and args.json.exists() and not args.overwrite:
         parser.error(f"--json {args.json} exists: choose another file, or pass --overwrite")
     return args
+
+
+# The sweep's names for the same things (the old spellings still work, with a note).
+DEPRECATED_FLAGS = {
+    "--steps": "--classifier-steps",
+    "--eps": "--bsc-eps",
+    "--traj-size": "--num-demos",
+    "--methods": "--classifiers",
+}
 
 
 def load(args: argparse.Namespace) -> Demonstrations:
@@ -127,7 +161,7 @@ def check_labelled_mask(demos: Demonstrations, path: Path, num_labelled: int) ->
         raise DemonstrationError(
             f"{path}: its labelled mask allows only {int(demos.labelled.sum())} of "
             f"{demos.num_rows} rows to be labelled, fewer than the {num_labelled} asked for "
-            "(lower --label-ratio or --traj-size)"
+            "(lower --label-ratio or --num-demos)"
         )
 
 
@@ -139,9 +173,9 @@ def main(argv=None) -> dict:
         raise SystemExit(f"classify: {error}") from None
     if action_scale_note(demos):
         print(action_scale_note(demos))
-    traj_size = demos.num_rows if args.traj_size is None else args.traj_size
+    traj_size = demos.num_rows if args.num_demos is None else args.num_demos
     if not 2 <= traj_size <= demos.num_rows:
-        raise SystemExit(f"--traj-size must be in [2, {demos.num_rows}], got {traj_size}")
+        raise SystemExit(f"--num-demos must be in [2, {demos.num_rows}], got {traj_size}")
     num_labelled = round(args.label_ratio * traj_size)
     if not 1 <= num_labelled < traj_size:
         raise SystemExit(
@@ -153,11 +187,11 @@ def main(argv=None) -> dict:
     except DemonstrationError as error:
         raise SystemExit(f"classify: {error}") from None
     # The authors' batch: per labelled row, int(n_u / n_c) unlabelled rows.
-    authors = ClassifierConfig(num_steps=args.steps, labelled_batch_size=args.batch_size)
+    authors = ClassifierConfig(num_steps=args.classifier_steps, labelled_batch_size=args.batch_size)
     config = dataclasses.replace(
         authors, unlabelled_batch_size=authors.unlabelled_rows_per_step(traj_size, num_labelled)
     )
-    specs = [METHODS[m]() if m == "sc" else METHODS[m](args.eps) for m in args.methods]
+    specs = [METHODS[m]() if m == "sc" else METHODS[m](args.bsc_eps) for m in args.classifiers]
     stacked = jax.tree.map(lambda *x: jnp.repeat(jnp.stack(x), args.seeds, axis=0), *specs)
     keys = jnp.tile(jax.random.split(jax.random.key(args.seed), args.seeds), len(specs))
 
@@ -181,8 +215,9 @@ def main(argv=None) -> dict:
     )
     print(
         f"{demos.num_rows} rows from {args.demos}; {traj_size} per seed, {num_labelled} "
-        f"labelled{mask_note}; {len(specs)} method(s) x {args.seeds} seeds x {args.steps} steps of "
-        f"{config.labelled_batch_size} + {config.unlabelled_batch_size} rows",
+        f"labelled{mask_note}; {len(specs)} classifier(s) x {args.seeds} seeds x "
+        f"{args.classifier_steps} steps of {config.labelled_batch_size} + "
+        f"{config.unlabelled_batch_size} rows",
         flush=True,
     )
     start = time.perf_counter()
@@ -190,7 +225,7 @@ def main(argv=None) -> dict:
     seconds = time.perf_counter() - start
     summary = {}
     print("\n| method | MAE | RMSE | BSC clip active |\n|---|---|---|---|")
-    for index, method in enumerate(args.methods):
+    for index, method in enumerate(args.classifiers):
         rows = slice(index * args.seeds, (index + 1) * args.seeds)
         mae, rmse = results["mae"][rows], results["rmse"][rows]
         summary[method] = {
@@ -210,7 +245,7 @@ def main(argv=None) -> dict:
         "| method | alpha = beta = 0 (origin) | alpha = beta = n_u / (n_c + n_u) |\n"
         "|---|---|---|"
     )
-    for index, method in enumerate(args.methods):
+    for index, method in enumerate(args.classifiers):
         rows = slice(index * args.seeds, (index + 1) * args.seeds)
         origin, balanced = results["variance_origin"][rows], results["variance_balanced"][rows]
         summary[method]["variance_origin"] = float(origin.mean())

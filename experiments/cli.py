@@ -24,6 +24,34 @@ class HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefau
         return super()._get_help_string(action)
 
 
+class ArgumentParser(argparse.ArgumentParser):
+    """A program's parser: usage lines that say ``python -m experiments.<program>``, every
+    default in the help, and errors as one line (the program, the message and where the usage
+    is) instead of the usage block followed by the message."""
+
+    def __init__(self, program: str, description: str | None = None, **kwargs):
+        super().__init__(
+            prog=f"python -m experiments.{program}",
+            description=description,
+            formatter_class=kwargs.pop("formatter_class", HelpFormatter),
+            **kwargs,
+        )
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (usage: {self.prog} --help)\n")
+
+
+def note_deprecated(argv: Sequence[str] | None, renamed: dict[str, str]) -> None:
+    """Prints one note per old spelling in ``argv`` (``{old flag: new flag}``): the old flags
+    keep working as aliases, and the note says the name to use."""
+    import sys
+
+    given = sys.argv[1:] if argv is None else argv
+    for old, new in renamed.items():
+        if any(item == old or item.startswith(f"{old}=") for item in given):
+            print(f"note: {old} is deprecated; it is now {new}", file=sys.stderr)
+
+
 def _items(parser: argparse.ArgumentParser, prefix: str, text: str, what: str) -> list[str]:
     """The stripped comma-separated items of a flag's value; an empty one (``"a,,b"``,
     ``"a,"``, ``""``) exits with ``prefix`` (the flag) leading the message."""

@@ -6,7 +6,7 @@
 Each arm is one ``experiments.train_rl`` run into ``OUT/<arm>/`` (skipped when that directory
 already holds a finished run, so an interrupted comparison continues where it stopped), all
 with the same seeds, Fisher form and iteration count. Then every arm's final policies are
-evaluated by one protocol: ``--eval-episodes`` deterministic episodes from the same reset keys
+evaluated by one protocol: ``--num-eval-episodes`` deterministic episodes from the same reset keys
 on the task's own MJX solver and on the fast one, so a policy trained on the fast physics is
 also judged on the accurate one. Writes ``comparison.json``, ``comparison.md`` and
 ``comparison.png`` (evaluation return vs environment steps, mean and standard error band).
@@ -31,11 +31,13 @@ import numpy as np
 
 from experiments.cli import (
     ENV_HELP,
+    ArgumentParser,
     HelpFormatter,
     check_env,
     check_output_directory,
     check_positive,
     known_names,
+    note_deprecated,
 )
 from pngail_jax.integrity import atomic_path, atomic_write_text, write_json
 from pngail_jax.report import json_safe
@@ -63,7 +65,8 @@ ARMS = {
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
+        "compare_settings",
         description=__doc__.split("\n\n")[0],
         epilog="arms:\n"
         + "\n".join(f"  {name:18s} train_rl {' '.join(flags)}" for name, flags in ARMS.items()),
@@ -75,7 +78,14 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--seeds", type=int, default=5, help="seeds per arm (the same in each)")
     parser.add_argument("--iterations", type=int, default=400, help="TRPO iterations per arm")
     parser.add_argument("--eval-every", type=int, default=50, help="iterations between evaluations")
-    parser.add_argument("--eval-episodes", type=int, default=32, help="of the final evaluation")
+    parser.add_argument(
+        "--num-eval-episodes",
+        "--eval-episodes",
+        dest="num_eval_episodes",
+        type=int,
+        default=32,
+        help="of the final evaluation",
+    )
     parser.add_argument("--seed", type=int, default=0, help="base PRNG seed")
     parser.add_argument("--out", type=Path, required=True, help="output directory (required)")
     parser.add_argument(
@@ -85,6 +95,7 @@ def parse_args(argv=None) -> argparse.Namespace:
         "default: refuse)",
     )
     args = parser.parse_args(argv)
+    note_deprecated(argv, {"--eval-episodes": "--num-eval-episodes"})
     check_output_directory(parser, args.out, COMPARISON_FILE, args.overwrite)
     check_env(parser, args.env)
     args.arms = known_names(parser, args.arms, list(ARMS), "arm", flag="--arms")
@@ -93,7 +104,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     args.baseline = args.baseline or args.arms[0]
     if args.baseline not in args.arms:
         parser.error(f"--baseline {args.baseline!r} is not among --arms")
-    check_positive(parser, args, ("seeds", "iterations", "eval_every", "eval_episodes"))
+    check_positive(parser, args, ("seeds", "iterations", "eval_every", "num_eval_episodes"))
     return args
 
 
@@ -213,7 +224,7 @@ def main(argv=None) -> dict:
         for name, solver in physics.items():
             if name not in evaluators:
                 evaluators[name] = make_evaluator(
-                    args.env, solver, metadata, args.eval_episodes, key
+                    args.env, solver, metadata, args.num_eval_episodes, key
                 )
             returns = evaluators[name](arrays["policy_params"], arrays["normalizer"])
             final[name] = np.asarray(returns)
@@ -246,7 +257,7 @@ def main(argv=None) -> dict:
         "seeds": args.seeds,
         "iterations": args.iterations,
         "baseline": args.baseline,
-        "eval_episodes": args.eval_episodes,
+        "eval_episodes": args.num_eval_episodes,
         "arms": results,
     }
     markdown = comparison_markdown(summary)

@@ -17,7 +17,6 @@ writes ``early_rewards.json`` (``--out``) and prints a markdown table.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import time
@@ -27,7 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from experiments.cli import HelpFormatter
+from experiments.cli import ArgumentParser, HelpFormatter
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import load_demonstrations
 from pngail_jax.grid import Cell, Grid, stack_cells
@@ -45,7 +44,7 @@ VARIANTS = (  # (label, method, label ratio)
 
 
 def parse_args(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=HelpFormatter)
+    parser = ArgumentParser("early_rewards", description=__doc__, formatter_class=HelpFormatter)
     parser.add_argument("--demos", type=Path, required=True, help="Pendulum-v1_mixture.npy")
     parser.add_argument("--seeds", type=int, default=3, help="seeds per variant")
     parser.add_argument("--iterations", type=int, default=150, help="TRPO iterations")

@@ -35,6 +35,7 @@ import numpy as np
 
 from experiments.cli import (
     ENV_HELP,
+    ArgumentParser,
     HelpFormatter,
     check_env,
     check_finite,
@@ -62,8 +63,8 @@ class Checkpoint(NamedTuple):
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(
-        description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
+    parser = ArgumentParser(
+        "make_demos", description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
     )
     parser.add_argument("--env", default="Pendulum-v1", help=ENV_HELP)
     parser.add_argument("--out", type=Path, required=True, help="output directory (required)")

@@ -1,7 +1,7 @@
 """Reproduce the paper's figures and tables: the grids behind them and one results page.
 
-    python -m experiments.paper --budget smoke     # all of it on a 2-core CPU (under an hour)
-    python -m experiments.paper --budget paper --released-demos data/released   # a GPU
+    python -m experiments.paper --preset check     # all of it on a 2-core CPU (under an hour)
+    python -m experiments.paper --preset paper --released-demos data/released   # a GPU
     python -m experiments.paper --only fig2,table1 --envs Hopper,Pendulum-v1
     python -m experiments.paper --resume results/paper-20261123-120000
 
@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import sys
 import time
 import types
 from collections.abc import Sequence
@@ -28,7 +29,13 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.cli import HelpFormatter, check_output_directory, known_names
+from experiments.cli import (
+    ArgumentParser,
+    HelpFormatter,
+    check_output_directory,
+    known_names,
+    note_deprecated,
+)
 from pngail_jax import compilation, envs
 from pngail_jax.integrity import atomic_write_text, read_json, write_json
 from pngail_jax.methods import required_phases
@@ -96,7 +103,7 @@ class Budget:
 
 BUDGETS = {
     # Every figure on a 2-core CPU: a check that everything runs, not a result.
-    "smoke": Budget(
+    "check": Budget(
         iterations=20,
         seeds=2,
         chunk_iterations=10,
@@ -167,6 +174,10 @@ BUDGETS = {
         },
     ),
 }
+
+
+# Presets renamed so that one name means one scale in every program: {old: new}.
+RENAMED_BUDGETS = {"smoke": "check"}
 
 
 def task_kind(task: str) -> str:
@@ -827,9 +838,9 @@ def write_page(out: Path, options: dict, figures: list[Figure], grids, timings: 
             results[figure.name][task]["normalizer"] = config["resolved"].get("normalizer")
     budget = options["budget"]
     lines = [
-        f"# The paper's figures at the {budget} budget",
+        f"# The paper's figures at the {budget} preset",
         "",
-        f"Budget `{budget}`: {BUDGETS[budget].iterations:,} iterations, {BUDGETS[budget].seeds} "
+        f"Preset `{budget}`: {BUDGETS[budget].iterations:,} iterations, {BUDGETS[budget].seeds} "
         "seeds per method. Normalised return: (R - R_random) / (R_optimal - R_random), with "
         "the paper's Table 3 returns for the authors' files and each made set's own measured "
         "random and optimal returns. 'Final' is the last evaluation, 'average over the last "
@@ -837,8 +848,8 @@ def write_page(out: Path, options: dict, figures: list[Figure], grids, timings: 
         "the paper's Table 4 'average reward after training convergence'), 'average over all "
         "of training' the mean of every evaluation; mean ± sample std "
         "over seeds and a 95% percentile-bootstrap interval of the mean. "
-        + ("**A smoke budget checks that everything runs; its numbers are not results.**"
-           if budget != "paper" else ""),
+        + ("**The check preset checks that everything runs; its numbers are not results.**"
+           if budget in ("check", "test") else ""),
         "",
         f"Made with `{options['command']}`.",
         "",
@@ -853,7 +864,7 @@ def write_page(out: Path, options: dict, figures: list[Figure], grids, timings: 
             f"{', '.join(grid.methods)} | {wall} |"
         )
     lines.append("")
-    base = f"python -m experiments.paper --budget {budget}"
+    base = f"python -m experiments.paper --preset {budget}"
     if options.get("released_demos"):
         base += f" --released-demos {options['released_demos']}"
     for figure in figures:
@@ -872,8 +883,8 @@ def write_page(out: Path, options: dict, figures: list[Figure], grids, timings: 
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(
-        description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
+    parser = ArgumentParser(
+        "paper", description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
     )
     parser.add_argument(
         "--only",
@@ -885,12 +896,14 @@ def parse_args(argv=None) -> argparse.Namespace:
         f"of {', '.join(envs.ENV_NAMES)})",
     )
     parser.add_argument(
+        "--preset",
         "--budget",
-        choices=tuple(BUDGETS),
-        default="smoke",
-        help="smoke: everything on a CPU, a check not a result; cpu: 500 iterations x 5 "
-        "seeds (Pendulum-v1 grids on a CPU); paper: 5,000 iterations x 5 seeds (a GPU); test: "
-        "the test suite's",
+        dest="budget",
+        choices=(*BUDGETS, *RENAMED_BUDGETS),
+        help="check: everything on a CPU, 20 iterations x 2 seeds, a check not a result "
+        "(the default); cpu: 500 iterations x 5 seeds (Pendulum-v1 grids in half an hour, "
+        "MuJoCo grids in about 1.5 hours each on a 2-core CPU); paper: 5,000 iterations x 5 "
+        "seeds (a GPU); test: the test suite's. --budget is the old name",
     )
     parser.add_argument(
         "--released-demos",
@@ -909,9 +922,17 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--resume", type=Path, metavar="DIR", help="continue a run in DIR")
     compilation.add_arguments(parser)
     args = parser.parse_args(argv)
+    note_deprecated(argv, {"--budget": "--preset"})
     if args.resume is not None:
         _check_resume(parser, args)
         return args
+    if args.budget in RENAMED_BUDGETS:
+        print(
+            f"note: preset {args.budget!r} is now {RENAMED_BUDGETS[args.budget]!r} (the sweep's "
+            "smoke preset is 300 iterations x 3 seeds)",
+            file=sys.stderr,
+        )
+    args.budget = RENAMED_BUDGETS.get(args.budget, args.budget or "check")
     figures = (
         known_names(parser, args.only, FIGURES, "figure", flag="--only")
         if args.only
@@ -934,18 +955,17 @@ def parse_args(argv=None) -> argparse.Namespace:
 def _check_resume(parser: argparse.ArgumentParser, args) -> None:
     """``--resume DIR`` takes every option from DIR's paper.json: refuses others, and a DIR
     that is not a run of this program."""
-    given = [
-        flag for flag in ("only", "envs", "released_demos", "out", "physics") if getattr(args, flag)
-    ]
+    flags = {"only": "--only", "envs": "--envs", "released_demos": "--released-demos"}
+    flags |= {"out": "--out", "physics": "--physics", "budget": "--preset"}
+    given = [flag for name, flag in flags.items() if getattr(args, name) is not None]
     if given:
-        parser.error(f"--resume takes its options from the run: drop --{given[0]}")
+        parser.error(f"--resume takes its options from the run: drop {given[0]}")
     if not (args.resume / "paper.json").exists():
         parser.error(f"--resume {args.resume}: no paper.json there (not a run of this)")
 
 
 def command_line(argv) -> list[str]:
     import shlex
-    import sys
 
     return [shlex.quote(word) for word in (sys.argv[1:] if argv is None else argv)]
 
@@ -973,7 +993,7 @@ def main(argv=None) -> Path:
         write_json(out / "paper.json", options)
     print(
         f"{len(figures)} figure(s) from {len(grids)} grid(s) on {', '.join(options['envs'])} "
-        f"at the {options['budget']} budget; the authors' files for: "
+        f"at the {options['budget']} preset; the authors' files for: "
         f"{', '.join(released) or 'none'} -> {out}",
         flush=True,
     )
@@ -989,7 +1009,9 @@ def run_options(args, argv) -> tuple[Path, dict]:
     """The output directory and the run's options: a resumed run's paper.json, else the
     flags'."""
     if args.resume is not None:
-        return args.resume, read_json(args.resume / "paper.json")
+        options = read_json(args.resume / "paper.json")
+        options["budget"] = RENAMED_BUDGETS.get(options["budget"], options["budget"])
+        return args.resume, options
     return args.out, {
         "budget": args.budget,
         "only": args.figures,

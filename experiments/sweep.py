@@ -29,7 +29,14 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.cli import ENV_HELP, HelpFormatter, check_env, comma_floats, known_names
+from experiments.cli import (
+    ENV_HELP,
+    ArgumentParser,
+    HelpFormatter,
+    check_env,
+    comma_floats,
+    known_names,
+)
 from pngail_jax import compilation
 from pngail_jax import settings as run_settings
 from pngail_jax.run_config import (
@@ -77,7 +84,8 @@ def build_parser() -> argparse.ArgumentParser:
         f"  {name:14s} {preset.description} (r: {preset.confidence_source})"
         for name, preset in PRESETS.items()
     )
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
+        "sweep",
         description=__doc__.split("\n\n")[0],
         epilog=f"methods:\n{methods_help}",
         formatter_class=HelpFormatter,
@@ -665,7 +673,7 @@ def write_config(out: Path, run: SweepRun, argv: list[str]) -> None:
             "adversarial": dataclasses.asdict(run.trainer.config),
             "inputs": input_files(run.config, run.demos_path),
         },
-        "provenance": provenance(argv),
+        "provenance": provenance(argv, "experiments.sweep"),
     }
     write_json(out / "config.json", document)
 

@@ -23,10 +23,12 @@ import numpy as np
 
 from experiments.cli import (
     ENV_HELP,
+    ArgumentParser,
     HelpFormatter,
     check_env,
     check_output_directory,
     check_positive,
+    note_deprecated,
 )
 from pngail_jax import compilation
 from pngail_jax import settings as run_settings
@@ -47,8 +49,8 @@ METRIC_COLUMNS = (
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(
-        description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
+    parser = ArgumentParser(
+        "train_rl", description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
     )
     parser.add_argument("--env", default="Pendulum-v1", help=ENV_HELP)
     parser.add_argument("--iterations", type=int, default=100, help="TRPO iterations")
@@ -68,8 +70,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument(
         "--fisher",
         choices=("hessian", "gauss_newton"),
-        default="hessian",
-        help="Fisher-vector product form (the same matrix)",
+        default="gauss_newton",
+        help="Fisher-vector product form (the same matrix; hessian is the reference's form)",
     )
     parser.add_argument(
         "--fisher-subsample", type=int, default=1, help="Fisher products on every k-th step"
@@ -79,10 +81,13 @@ def parse_args(argv=None) -> argparse.Namespace:
         action="store_true",
         help="the reference's GAE: no bootstrapping through time limits",
     )
-    parser.add_argument("--fast-solver", action="store_true", help="the same as --solver fast")
+    parser.add_argument(
+        "--fast-solver", action="store_true", help="deprecated: the same as --solver fast"
+    )
     run_settings.add_arguments(parser)
     compilation.add_arguments(parser)
     args = parser.parse_args(argv)
+    note_deprecated(argv, {"--fast-solver": "--solver fast"})
     check_env(parser, args.env)
     if args.fast_solver:
         if args.solver not in (None, "fast"):

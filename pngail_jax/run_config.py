@@ -495,8 +495,10 @@ def _nested(cls, where: str, data: Mapping):
         _fail(f"{where}: {error}")
 
 
-def provenance(argv: list[str] | None = None) -> dict[str, Any]:
-    """Where and with what a run ran: versions, git commit, devices, the command line."""
+def provenance(argv: list[str] | None = None, program: str | None = None) -> dict[str, Any]:
+    """Where and with what a run ran: versions, git commit, devices, the command line
+    (``python -m <program> <argv>`` when ``program`` names the module, so that it can be run
+    again as it stands)."""
     import jax
 
     def version(package: str) -> str | None:
@@ -519,7 +521,10 @@ def provenance(argv: list[str] | None = None) -> dict[str, Any]:
         "device_count": len(devices),
         "local_device_count": len(jax.local_devices()),
         "process_count": jax.process_count(),
-        "command_line": [Path(sys.argv[0]).name, *(sys.argv[1:] if argv is None else argv)],
+        "command_line": [
+            *(["python", "-m", program] if program else [Path(sys.argv[0]).name]),
+            *(sys.argv[1:] if argv is None else argv),
+        ],
     }
 
 

@@ -345,3 +345,29 @@ def test_compare_settings_refuses_a_file_and_finished_work(tmp_path, capsys):
     with pytest.raises(SystemExit):
         compare_settings.parse_args([*flags, str(tmp_path / "new"), "--arms", "table,table"])
     assert "--arms: arm(s) ['table'] given more than once" in capsys.readouterr().err
+
+
+def test_one_name_and_one_default_per_concept_across_programs(tmp_path, capsys):
+    """The same concept has the same flag and default in every program; the old spellings
+    still parse, with a note; usage and errors say how to run the program."""
+    from experiments import train_rl
+    from pngail_jax.rl import TRPOConfig
+
+    fisher = train_rl.parse_args([]).fisher
+    assert fisher == RunConfig().fisher == TRPOConfig().fisher == "gauss_newton"
+    out = ["--env", "Hopper", "--out", str(tmp_path / "new")]
+    old = compare_settings.parse_args([*out, "--eval-episodes", "7"])
+    assert old.num_eval_episodes == 7
+    assert "--eval-episodes is deprecated; it is now --num-eval-episodes" in (
+        capsys.readouterr().err
+    )
+    assert compare_settings.parse_args([*out, "--num-eval-episodes", "7"]).num_eval_episodes == 7
+    assert train_rl.parse_args(["--env", "Hopper", "--fast-solver"]).solver == "fast"
+    assert "--fast-solver is deprecated; it is now --solver fast" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        sweep.parse_args(["--seeds", "0"])
+    err = capsys.readouterr().err
+    assert err.splitlines() == [  # one line, no usage block above it
+        "python -m experiments.sweep: error: --seeds must be a positive integer, got 0 "
+        "(usage: python -m experiments.sweep --help)"
+    ]

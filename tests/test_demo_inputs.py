@@ -578,8 +578,8 @@ def test_classify_labels_only_the_rows_the_file_allows(tmp_path, monkeypatch):
     monkeypatch.setattr(confidence_module, "train_classifier", untrained)
     monkeypatch.setattr(confidence_module, "risk_estimator_variance", lambda *_: jnp.zeros(()))
     path = _masked_npz(tmp_path / "masked.npz", num_allowed=20)
-    argv = ["--demos", str(path), "--label-ratio", "0.25", "--steps", "20", "--seeds", "3"]
-    summary = classify.main([*argv, "--methods", "bsc"])
+    argv = ["--demos", str(path), "--label-ratio", "0.25", "--classifier-steps", "20"]
+    summary = classify.main([*argv, "--seeds", "3", "--classifiers", "bsc"])
     assert summary["bsc"]["mae_mean"] == 0.0  # the 20 rows outside are never labelled
     assert summary["bsc"]["rmse_mean"] == 10.0  # round(0.25 * 40), all from the 20 allowed
 
@@ -592,7 +592,7 @@ def test_classify_refuses_a_mask_that_allows_too_few_rows(tmp_path):
         classify.main(["--demos", str(path), "--label-ratio", "0.25"])
     message = str(exit_info.value.code)
     assert message.startswith(f"classify: {path}: its labelled mask allows only 3 of 40 rows")
-    assert "fewer than the 10 asked for (lower --label-ratio or --traj-size)" in message
+    assert "fewer than the 10 asked for (lower --label-ratio or --num-demos)" in message
 
 
 def test_the_trainer_passes_the_mask_to_the_split_and_checks_ratios(tmp_path, monkeypatch):
@@ -620,17 +620,34 @@ def test_the_trainer_passes_the_mask_to_the_split_and_checks_ratios(tmp_path, mo
 # --- classify's flags and load errors ---------------------------------------------------
 
 
+def test_classify_speaks_the_sweeps_names_and_keeps_the_old_ones_with_a_note(capsys):
+    from experiments import classify
+
+    old = ["--steps", "7", "--eps", "0.05", "--traj-size", "9", "--methods", "bsc"]
+    args = classify.parse_args(["--demos", "any.npy", *old])
+    assert (args.classifier_steps, args.bsc_eps, args.num_demos) == (7, 0.05, 9)
+    assert args.classifiers == ["bsc"]
+    err = capsys.readouterr().err
+    for old_flag, new_flag in classify.DEPRECATED_FLAGS.items():
+        assert f"note: {old_flag} is deprecated; it is now {new_flag}" in err
+    new = ["--classifier-steps", "7", "--bsc-eps", "0.05", "--num-demos", "9"]
+    assert vars(classify.parse_args(["--demos", "any.npy", *new, "--classifiers", "bsc"])) == (
+        vars(args)
+    )
+    assert "deprecated" not in capsys.readouterr().err
+
+
 @pytest.mark.parametrize(
     "flags",
     [
         ["--noise", "nan"],
         ["--noise", "inf"],
         ["--noise", "-0.1"],
-        ["--eps", "nan"],
-        ["--eps", "0"],
+        ["--bsc-eps", "nan"],
+        ["--bsc-eps", "0"],
         ["--label-ratio", "nan"],
-        ["--traj-size", "0"],
-        ["--traj-size", "-3"],
+        ["--num-demos", "0"],
+        ["--num-demos", "-3"],
         ["--action-scale", "0"],
         ["--action-scale", "-2"],
         ["--action-scale", "nan"],

@@ -100,6 +100,8 @@ def test_figures_without_a_panel_on_the_tasks_asked_for_are_refused(tmp_path):
         (["--envs", "Hoper"], "Hoper"),
         (["--resume", "nowhere", "--only", "fig2"], "drop --only"),
         (["--resume", "nowhere"], "no paper.json"),
+        (["--resume", "nowhere", "--preset", "cpu"], "drop --preset"),  # not silently ignored
+        (["--preset", "huge"], "invalid choice: 'huge'"),
     ],
 )
 def test_bad_flags_are_named(flags, message, capsys):
@@ -108,15 +110,26 @@ def test_bad_flags_are_named(flags, message, capsys):
     assert message in capsys.readouterr().err
 
 
+def test_old_spellings_still_work_with_a_note_naming_the_new_one(tmp_path, capsys):
+    """--budget is --preset, and the old 'smoke' preset (20 x 2) is 'check': the sweep's
+    smoke preset is 300 x 3, and one name means one scale everywhere."""
+    args = paper.parse_args(["--budget", "smoke", "--out", str(tmp_path / "a")])
+    assert args.budget == "check" and paper.BUDGETS["check"].iterations == 20
+    err = capsys.readouterr().err
+    assert "--budget is deprecated; it is now --preset" in err and "now 'check'" in err
+    assert paper.parse_args(["--out", str(tmp_path / "b")]).budget == "check"  # the default
+
+
 @pytest.mark.filterwarnings("ignore:.*normalised returns run backwards")  # 4 iterations
 def test_a_tiny_fig2_run_writes_the_page_with_every_method_and_resumes(tmp_path):
     out = tmp_path / "paper"
-    argv = ["--budget", "test", "--only", "fig2", "--envs", "Pendulum-v1", "--out", str(out)]
+    argv = ["--preset", "test", "--only", "fig2", "--envs", "Pendulum-v1", "--out", str(out)]
     page = paper.main(argv)
     text = page.read_text()
     for method in paper.FIG2_METHODS:
         assert f"| Pendulum-v1 | {method} |" in text
     assert "--only fig2 --envs Pendulum-v1" in text and (out / "fig2.png").stat().st_size > 0
+    assert "Preset `test`" in text and "its numbers are not results" in text
     results = json.loads((out / "results.json").read_text())
     final = results["fig2"]["Pendulum-v1"]["pngail"]["final"]
     assert final["seeds"] == 2 and len(final["ci95"]) == 2
