@@ -38,8 +38,8 @@ from experiments.cli import (
 )
 from pngail_jax import compilation, envs
 from pngail_jax.integrity import atomic_write_text, read_json, write_json
-from pngail_jax.methods import required_phases
-from pngail_jax.report import group_label, late_evaluations
+from pngail_jax.methods import display_name, required_phases
+from pngail_jax.report import group_label, late_evaluations, line_style
 
 FIG2_METHODS = ("gail", "2iwil", "icgail", "wgail", "pngail")
 FIG3_METHODS = ("pngail", "pngail-no-bsc", "pngail-no-pn")
@@ -657,8 +657,8 @@ def read_curves(directory: Path) -> dict[tuple[str, str], dict[str, np.ndarray]]
 
 
 def series_statistics(series: Series, curves, summary) -> dict:
-    """Final and training-averaged normalised return (mean, std, 95% bootstrap interval of the
-    mean) of a series, and its classifier error."""
+    """Final and training-averaged normalised return (mean, std, standard error, 95% bootstrap
+    interval of the mean) of a series, and its classifier error."""
     from pngail_jax import stats
 
     matches = [key for key in curves if key[0] == series.method]
@@ -677,6 +677,7 @@ def series_statistics(series: Series, curves, summary) -> dict:
         result[name] = {
             "mean": summary_of["mean"],
             "std": summary_of["std"],
+            "se": summary_of["se"],
             "ci95": [low, high],
             "seeds": summary_of["num_seeds"],
         }
@@ -684,7 +685,7 @@ def series_statistics(series: Series, curves, summary) -> dict:
     cell = types.SimpleNamespace(method=series.method, setting=matches[0][1])
     row = summary["methods"].get(group_label(cell, settings), {})  # summary.json's key
     for name in ("average_return", "late_average_return"):
-        result[name] = [row.get(f"{name}_mean"), row.get(f"{name}_std")]
+        result[name] = [row.get(f"{name}_mean"), row.get(f"{name}_se")]
     for name in ("mae", "rmse"):
         result[f"confidence_{name}"] = [
             row.get(f"confidence_{name}_mean"),
@@ -697,8 +698,16 @@ def _number(value, digits: int = 2) -> str:
     return "n/a" if value is None or not math.isfinite(value) else f"{value:.{digits}f}"
 
 
-def _mean_std(entry: dict) -> str:
-    return f"{_number(entry['mean'])} ± {_number(entry['std'])}"
+def _mean_se(entry: dict) -> str:
+    """mean ± standard error over seeds (the one spread convention of every table)."""
+    if entry["seeds"] == 1:
+        return f"{_number(entry['mean'])} (n = 1)"
+    return f"{_number(entry['mean'])} ± {_number(entry['se'])}"
+
+
+def series_name(series: Series) -> str:
+    """A series' name in legends and tables: the paper's name of its method."""
+    return display_name(series.method) if series.label == series.method else series.label
 
 
 def _interval(entry: dict) -> str:
@@ -727,16 +736,21 @@ def plot_figure(path: Path, figure: Figure, results: dict) -> None:
             spread = (
                 np.nanstd(curve, axis=0, ddof=1) / math.sqrt(len(curve)) if len(curve) > 1 else 0
             )
-            axis.plot(steps, mean, label=series.label, linewidth=1.5)
-            axis.fill_between(steps, mean - spread, mean + spread, alpha=0.2)
+            (line,) = axis.plot(
+                steps, mean, label=series_name(series), linewidth=1.5, ls=line_style(series.method)
+            )
+            axis.fill_between(
+                steps, mean - spread, mean + spread, alpha=0.12, color=line.get_color(), lw=0
+            )
         axis.axhline(1.0, color="grey", linestyle=":", linewidth=1)
         axis.set_title(task)
-        axis.set_xlabel("environment steps per run (millions)")
+        axis.set_xlabel("M environment steps per run")
         axis.set_ylabel("normalised return")
-        axis.legend(fontsize=7)
+    handles, labels = axes.flat[0].get_legend_handles_labels()
     fig.suptitle(f"{figure.title} (mean ± s.e. over seeds)", fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.legend(handles, labels, loc="upper left", bbox_to_anchor=(1.0, 0.95), fontsize=8)
+    fig.savefig(path, dpi=110, bbox_inches="tight")  # the legend is outside the panels
     plt.close(fig)
 
 
@@ -763,17 +777,17 @@ def figure_markdown(figure: Figure, results: dict, command: str) -> list[str]:
     lines += [
         f"![{figure.name}]({figure.name}.png)",
         "",
-        "| task | series | final: mean ± std | final: 95% CI | average over the last 10%: "
-        "mean ± std | average over all of training: mean ± std | seeds |",
+        "| task | series | final: mean ± s.e. | final: 95% CI | average over the last 10%: "
+        "mean ± s.e. | average over all of training: mean ± s.e. | seeds |",
         "|---|---|---:|---:|---:|---:|---:|",
     ]
     for task, series_list in figure.panels.items():
         for series in series_list:
             entry = results[task][series.label]
             lines.append(
-                f"| {task} | {series.label} | {_mean_std(entry['final'])} | "
-                f"{_interval(entry['final'])} | {_mean_std(entry['late'])} | "
-                f"{_mean_std(entry['average'])} | {entry['final']['seeds']} |"
+                f"| {task} | {series_name(series)} | {_mean_se(entry['final'])} | "
+                f"{_interval(entry['final'])} | {_mean_se(entry['late'])} | "
+                f"{_mean_se(entry['average'])} | {entry['final']['seeds']} |"
             )
     return [*lines, ""]
 
@@ -786,7 +800,7 @@ def table4_markdown(figure: Figure, results: dict) -> list[str]:
     header = (
         "| method | "
         + " | ".join(
-            f"{task}: ours, last 10% | {task}: ours, all of training | {task}: paper"
+            f"{task}: ours, last 10% | {task}: ours, all of training | {task}: paper (± std)"
             for task in tasks
         )
         + " |"
@@ -798,7 +812,7 @@ def table4_markdown(figure: Figure, results: dict) -> list[str]:
         return f"{_number(mean, 1)} ± {_number(std, 1)}"
 
     for series in figure.panels[tasks[0]]:
-        row = [series.method]
+        row = [series_name(series)]
         for task in tasks:
             paper = PAPER_TABLE4.get(series.method)
             row += [
@@ -846,8 +860,9 @@ def write_page(out: Path, options: dict, figures: list[Figure], grids, timings: 
         "random and optimal returns. 'Final' is the last evaluation, 'average over the last "
         "10%' the mean of a seed's evaluations in the last tenth of training (our reading of "
         "the paper's Table 4 'average reward after training convergence'), 'average over all "
-        "of training' the mean of every evaluation; mean ± sample std "
-        "over seeds and a 95% percentile-bootstrap interval of the mean. "
+        "of training' the mean of every evaluation; mean ± standard error over seeds and a "
+        "95% percentile-bootstrap interval of the mean (the paper's own Table 4 numbers are "
+        "± its std). "
         + ("**The check preset checks that everything runs; its numbers are not results.**"
            if budget in ("check", "test") else ""),
         "",

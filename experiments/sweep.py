@@ -744,6 +744,10 @@ def run_chunks(run: SweepRun, out: Path, state, progress: Progress, writer: bool
         state, chunk_metrics = grid.run_chunk(state)
         chunk_metrics = grid.fetch(chunk_metrics)
         progress.timing["seconds"] += time.perf_counter() - chunk_start
+        # The cumulative seconds at each chunk's end (metrics.csv's wall clock); a run begun
+        # by an older version has none for its first chunks, and gets none.
+        chunk_ends = progress.timing.setdefault("chunk_seconds", [None] * chunk)
+        chunk_ends.append(progress.timing["seconds"])
         progress.timing["steps"] += (
             len(run.cells) * grid.iterations_per_chunk * config.settings.samples_per_iteration
         )
@@ -859,7 +863,9 @@ def write_outputs(out: Path, run: SweepRun, progress: Progress) -> str:
 
     config, cells = run.config, run.cells
     metrics = {**progress.metrics, **progress.init_metrics}
-    report.write_metrics_csv(out / "metrics.csv", cells, metrics, run.normalizer)
+    chunk_seconds = progress.timing.get("chunk_seconds", [])
+    known = chunk_seconds if None not in chunk_seconds else ()
+    report.write_metrics_csv(out / "metrics.csv", cells, metrics, run.normalizer, known)
     title = _title(config, len(cells))
     diverged = nonfinite_cells(progress.metrics, config.settings.eval_every)
     report.plot_curves(out / "curves.png", cells, metrics, run.normalizer, title, diverged)

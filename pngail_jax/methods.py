@@ -126,6 +126,37 @@ APPENDIX_METHOD_NAMES = tuple(APPENDIX_PRESETS)
 PRESETS.update(APPENDIX_PRESETS)
 ALL_METHOD_NAMES = tuple(PRESETS)
 
+# The paper's names, for legends and tables.
+DISPLAY_NAMES = {
+    "gail": "GAIL",
+    "2iwil": "2IWIL",
+    "icgail": "IC-GAIL",
+    "wgail": "WGAIL",
+    "pngail": "PN-GAIL",
+    "pngail-no-bsc": "PN-GAIL\\BSC",
+    "pngail-no-pn": "PN-GAIL\\PN",
+    "bc": "BC",
+    "bc-weighted": "BC, weighted",
+    "trex": "T-REX",
+    "drex": "D-REX",
+    "cail": "CAIL",
+    "firl-fkl": "f-IRL (FKL)",
+    "firl-rkl": "f-IRL (RKL)",
+    "firl-js": "f-IRL (JS)",
+}
+
+
+def display_name(name: str) -> str:
+    """The paper's name of a preset (``"pngail-no-bsc"``: ``"PN-GAIL\\BSC"``), else ``name``."""
+    return DISPLAY_NAMES.get(name, name)
+
+
+def reads_confidences(name: str) -> bool:
+    """Whether a preset's loss reads confidences (GAIL, WGAIL, BC, D-REX and f-IRL do not);
+    True for a name that is not a preset."""
+    return name not in PRESETS or PRESETS[name].confidence_source != "none"
+
+
 _DEFAULTS = {field.name: 0.0 for field in dataclasses.fields(MethodSpec)} | {
     "bsc_eps": 0.01,
     "adversarial_reward_coef": 1.0,

@@ -20,9 +20,12 @@ from pngail_jax.integrity import atomic_path, atomic_write_text, write_json
 CSV_COLUMNS = (
     "method",
     "seed",
-    "setting",
+    "setting",  # both grid axes in one label, e.g. "label_ratio=0.2,noise=0"
+    "label_ratio",  # one column per grid axis
+    "noise",
     "iteration",
     "env_steps",
+    "wall_seconds",  # training seconds (compile excluded) when the iteration's chunk ended
     "eval_return",
     "normalized_return",
     "disc_acc_agent",
@@ -62,10 +65,18 @@ def _format(value) -> str:
     return "" if not np.isfinite(value) else f"{value:.6g}"
 
 
-def write_metrics_csv(path: Path, cells, metrics, normalizer) -> None:
-    """One row per cell and iteration; empty fields where a value is undefined (NaN)."""
+def write_metrics_csv(path: Path, cells, metrics, normalizer, chunk_seconds=()) -> None:
+    """One row per cell and iteration; empty fields where a value is undefined (NaN).
+
+    ``chunk_seconds``: the cumulative training seconds at the end of each chunk (all cells run
+    a chunk's iterations in one program, so that is the finest wall clock there is); an
+    iteration gets its chunk's, empty where unknown (a run resumed from an older version)."""
     normalized = normalize(metrics["eval/return"], normalizer)
     num_iterations = metrics["env_steps"].shape[1]
+    per_chunk = num_iterations // len(chunk_seconds) if chunk_seconds else 0
+    wall = [
+        f"{chunk_seconds[i // per_chunk]:.1f}" if per_chunk else "" for i in range(num_iterations)
+    ]
     with atomic_path(path) as temporary, temporary.open("w", newline="") as file:
         writer = csv.writer(file)
         writer.writerow(CSV_COLUMNS)
@@ -77,9 +88,13 @@ def write_metrics_csv(path: Path, cells, metrics, normalizer) -> None:
                 }
                 values["env_steps"] = str(int(metrics["env_steps"][index, iteration]))
                 values["normalized_return"] = _format(normalized[index, iteration])
+                values["wall_seconds"] = wall[iteration]
+                values["iteration"] = str(iteration + 1)
+                values["label_ratio"] = f"{cell.label_ratio:g}"
+                values["noise"] = f"{cell.noise_std:g}"
                 writer.writerow(
-                    [cell.method, cell.seed, cell.setting, iteration + 1]
-                    + [values[column] for column in CSV_COLUMNS[4:]]
+                    [cell.method, cell.seed, cell.setting]
+                    + [values[column] for column in CSV_COLUMNS[3:]]
                 )
 
 
@@ -209,60 +224,83 @@ def _improvement_over_baselines(cells, settings, final, method="pngail") -> dict
     return result
 
 
-def _interval(row, name: str, digits: int = 2) -> str:
-    """IQM [95% CI] of the normalised ``name``, or of the raw one without a normaliser."""
-    if not np.isfinite(row[f"{name}_iqm"]):
-        name, digits = name.replace("_normalized", ""), 1
-    low, high = row[f"{name}_ci95"]
-    if not np.isfinite(row[f"{name}_iqm"]):
+def _interval(row, name: str, digits: int) -> str:
+    """IQM [95% CI] over seeds; the one value and n = 1 for a single seed."""
+    iqm = row[f"{name}_iqm"]
+    if not np.isfinite(iqm):
         return "n/a"
-    return f"{row[f'{name}_iqm']:.{digits}f} [{low:.{digits}f}, {high:.{digits}f}]"
+    if row["num_seeds"] == 1:
+        return f"{iqm:.{digits}f} (n = 1)"
+    low, high = row[f"{name}_ci95"]
+    return f"{iqm:.{digits}f} [{low:.{digits}f}, {high:.{digits}f}]"
 
 
 def _mean_se(row, name: str, digits: int) -> str:
+    """mean ± standard error over seeds (the one spread convention of every table here)."""
     mean, se = row[f"{name}_mean"], row[f"{name}_se"]
     if not np.isfinite(mean):
         return "n/a"
+    if row["num_seeds"] == 1:
+        return f"{mean:.{digits}f} (n = 1)"
     return f"{mean:.{digits}f}" + (f" ± {se:.{digits}f}" if np.isfinite(se) else "")
 
 
 def summary_markdown(summary, cells, metrics, title: str, notes: Sequence[str] = ()) -> str:
     """Markdown tables of ``summary``: per method, per seed, and PN-GAIL's probability of
-    improvement over each baseline."""
+    improvement over each baseline. Normalised columns only when the run has a normaliser;
+    no interval for a single seed; a classifier error only for methods that read
+    confidences (``methods.reads_confidences``)."""
+    from pngail_jax.methods import reads_confidences
+
     _, groups = group_cells(cells)
-    lines = [
-        f"# {title}",
-        "",
-        "| method | final return | final normalised*: IQM [95% CI] | mean ± s.e. | "
-        "average over the last 10%*: IQM [95% CI] | average over all of training*: "
-        "IQM [95% CI] | seeds | confidence MAE (D_u) |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|",
-    ]
+    normalised = any(
+        np.isfinite(row["final_normalized_return_mean"]) for row in summary["methods"].values()
+    )
+    kind, digits = ("normalised return", 2) if normalised else ("return", 1)
+    suffix = "_normalized_return" if normalised else "_return"
+    header = (
+        f"| method | seeds | final return: mean ± s.e. | final {kind}: IQM [95% CI] | "
+        + (f"final {kind}: mean ± s.e. | " if normalised else "")
+        + f"last 10% of training, {kind}: IQM [95% CI] | all of training, {kind}: "
+        "IQM [95% CI] | confidence MAE on D_u |"
+    )
+    lines = [f"# {title}", "", header, "|---" + "|---:" * (header.count("|") - 2) + "|"]
     for label, row in summary["methods"].items():
         mae = np.asarray(metrics["confidence/mae"])[groups[label]]
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             mae_text = f"{np.nanmean(mae):.3f}" if np.isfinite(mae).any() else "n/a"
-        lines.append(
-            f"| {label} | {_mean_se(row, 'final_return', 1)} | "
-            f"{_interval(row, 'final_normalized_return')} | "
-            f"{_mean_se(row, 'final_normalized_return', 2)} | "
-            f"{_interval(row, 'late_average_normalized_return')} | "
-            f"{_interval(row, 'average_normalized_return')} | {row['num_seeds']} | {mae_text} |"
-        )
+        if not reads_confidences(cells[groups[label][0]].method):
+            mae_text = "reads none"
+        columns = [
+            label,
+            str(row["num_seeds"]),
+            _mean_se(row, "final_return", 1),
+            _interval(row, f"final{suffix}", digits),
+            *([_mean_se(row, "final_normalized_return", 2)] if normalised else []),
+            _interval(row, f"late_average{suffix}", digits),
+            _interval(row, f"average{suffix}", digits),
+            mae_text,
+        ]
+        lines.append("| " + " | ".join(columns) + " |")
     lines += [
         "",
-        "Final return: deterministic (mean-action) evaluation at the last iteration; average "
-        "over the last 10%: the mean of a seed's evaluations in the last tenth of training "
-        "(our reading of the paper's Table 4 'average reward after training convergence'); "
-        "average over all of training: the mean of every evaluation of a seed, from the "
-        "first iteration on. Over seeds: interquartile mean with a 95% stratified-bootstrap "
-        "interval "
-        "(2,000 resamples), and mean ± standard error. *Raw returns (one decimal) where the "
-        "demonstrations carry no random and optimal returns. Confidence MAE: the confidences the "
-        "method's loss uses on the unlabelled rows (GAIL and WGAIL read none; IC-GAIL reads "
-        "only D_c's given ones, so its value is that of the mean labelled confidence, which it "
-        "never reads).",
+        "Final return: deterministic (mean-action) evaluation at the last iteration; last 10% "
+        "of training: the mean of a seed's evaluations in the last tenth of training (our "
+        "reading of the paper's Table 4 'average reward after training convergence'); all of "
+        "training: the mean of every evaluation of a seed, from the first iteration on. Over "
+        "seeds: interquartile mean with a 95% stratified-bootstrap interval (2,000 "
+        "resamples), and mean ± standard error (s.e., sample std / sqrt(n)); n = 1: one seed, "
+        "no interval. "
+        + (
+            "Normalised return: (R - R_random) / (R_optimal - R_random). "
+            if normalised
+            else "Raw returns: the demonstrations carry no random and optimal returns "
+            "(give --optimal-return for normalised ones). "
+        )
+        + "Confidence MAE: the confidences the method's loss uses on the unlabelled rows "
+        "(IC-GAIL reads only D_c's given ones, so its value is that of the mean labelled "
+        "confidence, which it never reads).",
     ]
     improvement = summary.get("probability_of_improvement", {})
     if improvement:
@@ -330,13 +368,15 @@ def plot_curves(path: Path, cells, metrics, normalizer, title: str, excluded=())
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from pngail_jax.methods import display_name
+
     returns = np.asarray(metrics["eval/return"], np.float64)
     values = normalize(returns, normalizer) if normalizer is not None else returns
     evaluated = ~np.isnan(returns).all(axis=0)
     settings = list(dict.fromkeys(cell.setting for cell in cells))
     methods = list(dict.fromkeys(cell.method for cell in cells))
     excluded = set(excluded)
-    colors = dict(zip(methods, plt.get_cmap("tab10").colors, strict=False))
+    colors = dict(zip(methods, plt.get_cmap("tab10").colors * 2, strict=False))
     figure, axes = plt.subplots(
         1, len(settings), figsize=(7 * len(settings), 4.8), squeeze=False, sharey=True
     )
@@ -349,19 +389,22 @@ def plot_curves(path: Path, cells, metrics, normalizer, title: str, excluded=())
             ]
             if not rows:
                 continue
-            steps = np.asarray(metrics["env_steps"])[rows[0], evaluated]
+            steps = np.asarray(metrics["env_steps"])[rows[0], evaluated] / 1e6
             curve = values[rows][:, evaluated]
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
                 mean = np.nanmean(curve, axis=0)
             low, high = np.array([stats.bootstrap_ci(column, np.mean) for column in curve.T]).T
-            axis.plot(steps, mean, color=colors[method], lw=1.8, label=method)
-            axis.fill_between(steps, low, high, color=colors[method], alpha=0.15)
+            style = line_style(method)
+            axis.plot(
+                steps, mean, color=colors[method], lw=1.8, ls=style, label=display_name(method)
+            )
+            axis.fill_between(steps, low, high, color=colors[method], alpha=0.12, lw=0)
         if normalizer is not None:
             axis.axhline(1.0, color="grey", ls="--", lw=0.8)
             axis.axhline(0.0, color="grey", ls=":", lw=0.8)
         axis.set(
-            xlabel="environment steps (per run)",
+            xlabel="M environment steps per run",
             ylabel="normalised return" if normalizer is not None else "return",
             title=setting if len(settings) > 1 else None,
         )
@@ -370,5 +413,15 @@ def plot_curves(path: Path, cells, metrics, normalizer, title: str, excluded=())
     figure.suptitle(f"{title}\nmean over seeds; shaded: 95% bootstrap interval of the mean")
     figure.tight_layout()
     with atomic_path(path) as temporary:
-        figure.savefig(temporary, dpi=120)
+        figure.savefig(temporary, dpi=120, bbox_inches="tight")  # the legend is outside
     plt.close(figure)
+
+
+def line_style(method: str) -> str:
+    """Dashed for PN-GAIL's ablations, dotted for methods beyond the paper's seven, so that
+    curves stay apart where their colours and bands overlap."""
+    from pngail_jax.methods import METHOD_NAMES
+
+    if method.startswith("pngail-no-"):
+        return "--"
+    return "-" if method in METHOD_NAMES else ":"

@@ -46,3 +46,14 @@ def authors_data() -> Path:
     root = Path(__file__).resolve().parents[1]
     candidates = (root / "data" / "released", root.parent / "shared" / "data" / "released")
     return next((folder for folder in candidates if folder.exists()), candidates[0])
+
+
+def metrics_numbers(path: Path) -> list[dict]:
+    """A sweep's metrics.csv without its wall-clock column: what a resumed or repeated run must
+    reproduce exactly (the wall clock is the one field that differs between two runs)."""
+    import csv
+
+    with open(path) as file:
+        rows = list(csv.DictReader(file))
+    assert rows and "wall_seconds" in rows[0], path
+    return [{k: v for k, v in row.items() if k != "wall_seconds"} for row in rows]

@@ -8,6 +8,7 @@ import pytest
 
 from experiments import paper
 from pngail_jax.demos import Demonstrations
+from pngail_jax.methods import display_name
 
 
 def test_fig2_and_fig3_share_one_grid_per_task_and_each_figure_has_its_grids():
@@ -127,7 +128,7 @@ def test_a_tiny_fig2_run_writes_the_page_with_every_method_and_resumes(tmp_path)
     page = paper.main(argv)
     text = page.read_text()
     for method in paper.FIG2_METHODS:
-        assert f"| Pendulum-v1 | {method} |" in text
+        assert f"| Pendulum-v1 | {display_name(method)} |" in text  # the paper's names
     assert "--only fig2 --envs Pendulum-v1" in text and (out / "fig2.png").stat().st_size > 0
     assert "Preset `test`" in text and "its numbers are not results" in text
     results = json.loads((out / "results.json").read_text())

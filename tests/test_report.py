@@ -74,10 +74,15 @@ def test_summary_groups_by_method_and_setting_and_drops_diverged_cells(tmp_path)
         is None
     )
 
-    report.write_metrics_csv(tmp_path / "m.csv", cells, metrics, NORMALIZER)
+    report.write_metrics_csv(tmp_path / "m.csv", cells, metrics, NORMALIZER, (1.5, 3.25))
     with open(tmp_path / "m.csv") as file:
         rows = list(csv.DictReader(file))
     assert len(rows) == len(cells) * 6
+    # one column per grid axis; each iteration carries its chunk's end (2 chunks of 3)
+    assert [(r["label_ratio"], r["noise"]) for r in rows[::6]] == [("0.1", "0")] * 6 + [
+        ("0.2", "0")
+    ] * 6
+    assert [r["wall_seconds"] for r in rows[:6]] == ["1.5"] * 3 + ["3.2"] * 3
     assert rows[0]["eval_return"] == ""  # not an evaluation iteration
     np.testing.assert_allclose(  # both written to 6 significant digits
         float(rows[2]["normalized_return"]),
@@ -90,6 +95,19 @@ def test_summary_groups_by_method_and_setting_and_drops_diverged_cells(tmp_path)
     markdown = report.summary_markdown(summary, cells, metrics, "test")
     # per method and setting, PN-GAIL's improvement over each baseline, and per seed
     assert markdown.count("\n| ") == (1 + 4) + (1 + 2) + (1 + 12)
+    assert "| gail [label_ratio=0.1,noise=0] | 3 |" in markdown
+    assert markdown.count("| reads none |") == 2  # GAIL reads no confidences
+    assert "mean ± standard error (s.e." in markdown
+
+
+def test_one_seed_gets_no_interval_and_raw_returns_no_normalised_column():
+    cells = make_cells(["gail", "pngail"], 1)
+    metrics = synthetic_metrics(cells)
+    summary = report.summarize(cells, metrics, None, 1000.0, 2.0)
+    markdown = report.summary_markdown(summary, cells, metrics, "t")
+    assert "normalised" not in markdown.split("\n")[2]  # the header: raw returns only
+    assert "(n = 1)" in markdown and "[" not in markdown.split("\n")[4]  # no interval
+    assert "give --optimal-return for normalised ones" in markdown
 
 
 def test_no_normaliser_gives_nan_normalised_returns():
@@ -139,4 +157,5 @@ def test_late_average_is_the_mean_of_the_last_tenth_of_the_evaluations():
             seed["late_average_normalized_return"], (evaluations[row, -3:].mean() + 1200) / 1000
         )
     markdown = report.summary_markdown(summary, cells, metrics, "t")
-    assert "average over the last 10%" in markdown and "average over all of training" in markdown
+    assert "last 10% of training, normalised return" in markdown
+    assert "all of training, normalised return" in markdown

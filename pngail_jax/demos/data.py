@@ -433,10 +433,11 @@ def load_released(
     the stored action columns; None: the file's known scale (``RELEASED_ACTION_SCALES``: 2 for
     the authors' Pendulum file, whose torques are stored / 2), else 1. ``metadata`` records the
     scale applied and, under ``action_scale_source``, whether it was the known one.
-    An authors' file (its name's environment in ``RELEASED_OBSERVATION_SIZES``) is split by that
+    ``observation_size`` (an environment's; the sweep passes it) splits the rows, and
+    ``action_size`` when given must be the remaining column count. Without it an authors'
+    file (its name's environment in ``RELEASED_OBSERVATION_SIZES``) is split by that
     environment's observation size and must hold its number of action columns
-    (``RELEASED_ACTION_SIZES``). Any other file needs ``observation_size`` (the environment's;
-    the sweep passes it), and ``action_size`` when given must be the remaining column count.
+    (``RELEASED_ACTION_SIZES``); any other file needs it.
     Errors name the rows or confidence file they are about.
     """
     mixture_path = Path(mixture_path)
@@ -456,7 +457,7 @@ def load_released(
     if conf_path is None and named:
         conf_path = released_confidence_path(mixture_path)
     where = f"{'mixture' if named else 'rows'} file {mixture_path}"
-    if env_name in RELEASED_OBSERVATION_SIZES:
+    if observation_size is None and env_name in RELEASED_OBSERVATION_SIZES:
         observation_size = RELEASED_OBSERVATION_SIZES[env_name]
         action_size = RELEASED_ACTION_SIZES[env_name]
         sizes_of = env_name
