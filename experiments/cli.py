@@ -7,6 +7,7 @@ message that names the flag, so a bad value never reaches the program as a trace
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import numbers
 from collections.abc import Sequence
@@ -39,6 +40,39 @@ class ArgumentParser(argparse.ArgumentParser):
 
     def error(self, message: str):
         self.exit(2, f"{self.prog}: error: {message} (usage: {self.prog} --help)\n")
+
+
+@contextlib.contextmanager
+def ticking(label: str, every: float | None = None, stream=None):
+    """Shows the elapsed time of a long step that prints nothing itself (a first compile takes
+    minutes on a CPU): on a terminal, ``label ... 42 s`` rewritten in place each second;
+    elsewhere (a log file), a line every ``every`` seconds (default 30)."""
+    import sys
+    import threading
+    import time
+
+    stream = stream or sys.stdout
+    live = stream.isatty()
+    interval = every if every is not None else (1.0 if live else 30.0)
+    start, done = time.perf_counter(), threading.Event()
+
+    def tick():
+        while not done.wait(interval):
+            elapsed = time.perf_counter() - start
+            text = f"{label} ... {elapsed:.0f} s"
+            stream.write(f"\r{text}" if live else f"{text}\n")
+            stream.flush()
+
+    print(f"{label} ...", file=stream, end="" if live else "\n", flush=True)
+    thread = threading.Thread(target=tick, daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        done.set()
+        thread.join()
+        if live:
+            stream.write("\n")
 
 
 def note_deprecated(argv: Sequence[str] | None, renamed: dict[str, str]) -> None:

@@ -758,9 +758,9 @@ def figure_markdown(figure: Figure, results: dict, command: str) -> list[str]:
     lines = [f"## {figure.title}", "", f"The paper: {figure.paper}.", "", f"    {command}", ""]
     if figure.name == "table1":
         lines += [
-            "| task | SC MAE | SC MAE, paper | BSC MAE | BSC MAE, paper | SC RMSE | BSC RMSE | "
-            "BSC RMSE, paper |",
-            "|---|---:|---:|---:|---:|---:|---:|---:|",
+            "| task | SC MAE | SC MAE, paper | BSC MAE | BSC MAE, paper | SC RMSE | "
+            "SC RMSE, paper | BSC RMSE | BSC RMSE, paper |",
+            "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
         ]
         for task in figure.panels:
             sc, bsc = results[task]["pngail-no-bsc"], results[task]["pngail"]
@@ -768,8 +768,8 @@ def figure_markdown(figure: Figure, results: dict, command: str) -> list[str]:
             lines.append(
                 f"| {task} | {_number(sc['confidence_mae'][0], 3)} | {_number(paper[0], 3)} | "
                 f"{_number(bsc['confidence_mae'][0], 3)} | {_number(paper[2], 3)} | "
-                f"{_number(sc['confidence_rmse'][0], 3)} | {_number(bsc['confidence_rmse'][0], 3)}"
-                f" | {_number(paper[3], 3)} |"
+                f"{_number(sc['confidence_rmse'][0], 3)} | {_number(paper[1], 3)} | "
+                f"{_number(bsc['confidence_rmse'][0], 3)} | {_number(paper[3], 3)} |"
             )
         return [*lines, ""]
     if figure.name == "table4":
@@ -830,6 +830,29 @@ def table4_markdown(figure: Figure, results: dict) -> list[str]:
     return lines
 
 
+def weak_expert_notes(out: Path, grids) -> list[str]:
+    """One warning line per made demonstration set whose best policy did not beat the random
+    one (tiny budgets): its normalised returns run backwards and its confidences mean
+    little, which the page must say, not only make_demos' terminal."""
+    from pngail_jax.demos import DemonstrationError, load_npz
+
+    notes = []
+    for task in dict.fromkeys(g.task for g in grids.values() if g.demos.ratio is not None):
+        path = out / "demos" / task / "demos.npz"
+        try:
+            metadata = load_npz(path).metadata
+        except (DemonstrationError, FileNotFoundError):
+            continue
+        if not metadata.get("optimal_beats_random", True):
+            notes.append(
+                f"**Warning: {task}'s made expert ({metadata['optimal_return']:.1f}) does not "
+                f"beat the random policy ({metadata['random_return']:.1f}).** Its normalised "
+                "returns run backwards and its confidences mean little: a larger preset trains "
+                "the expert longer."
+            )
+    return notes
+
+
 def write_page(out: Path, options: dict, figures: list[Figure], grids, timings: dict) -> Path:
     """``README.md``, one plot per figure and ``results.json`` from the grids' outputs."""
     from pngail_jax.report import json_safe
@@ -878,7 +901,7 @@ def write_page(out: Path, options: dict, figures: list[Figure], grids, timings: 
             f"| [{name}](grids/{name}/summary.md) | {grid.task} | {grid.demos.description} | "
             f"{', '.join(grid.methods)} | {wall} |"
         )
-    lines.append("")
+    lines += ["", *weak_expert_notes(out, grids), ""]
     base = f"python -m experiments.paper --preset {budget}"
     if options.get("released_demos"):
         base += f" --released-demos {options['released_demos']}"
@@ -1045,17 +1068,30 @@ def run_grids(grids, demos, out: Path, budget: Budget, cache_flags, physics) -> 
     timings_path = out / "timings.json"
     timings = read_json(timings_path) if timings_path.exists() else {}
     num_rows = {}  # of each demonstration set, read once, where a grid sizes its split by it
-    for name, grid in grids.items():
+    ran: list[float] = []  # seconds of the grids this call ran
+    for index, (name, grid) in enumerate(grids.items()):
         path, scale = demos[grid.demos]
         if grid.unlabelled_fraction != 1 and grid.demos not in num_rows:
             num_rows[grid.demos] = load_demonstrations(path, action_scale=scale).num_rows
         flags = sweep_arguments(grid, demos[grid.demos], budget, num_rows.get(grid.demos))
         flags += engine_flags(grid.task, physics)
+        print(f"\n== grid {index + 1} of {len(grids)}{plan_eta(ran, len(grids) - index)}")
         seconds = run_grid(grid, out / "grids" / name, flags, cache_flags)
         if seconds:
+            ran.append(seconds)
             timings[name] = timings.get(name, 0.0) + seconds
             write_json(timings_path, timings)
     return timings
+
+
+def plan_eta(seconds: list[float], remaining: int) -> str:
+    """', about T left for the plan' from the mean of the grids run so far (grids differ, so a
+    rough guide), or '' before any has run."""
+    from experiments.sweep import format_seconds
+
+    if not seconds:
+        return ""
+    return f", about {format_seconds(remaining * sum(seconds) / len(seconds))} left for the plan"
 
 
 if __name__ == "__main__":

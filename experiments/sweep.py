@@ -1,6 +1,7 @@
 """The main job: every method x seed (x label ratio x noise) as one compiled program.
 
     python -m experiments.sweep        # smoke scale: Pendulum-v1, 7 methods x 3 seeds
+    python -m experiments.sweep --preset check   # a first look: 20 iterations x 2 seeds
     python -m experiments.sweep --demos data/released/Pendulum-v1_mixture.npy \\
         --seeds 5 --iterations 1000
     python -m experiments.sweep --preset paper --demos ...   # 5,000 iterations, 5 seeds (GPU)
@@ -36,6 +37,7 @@ from experiments.cli import (
     check_env,
     comma_floats,
     known_names,
+    ticking,
 )
 from pngail_jax import compilation
 from pngail_jax import settings as run_settings
@@ -640,8 +642,8 @@ def build(config: RunConfig, saved: SavedRun | None) -> SweepRun:
             "actions beyond the bounds; the discriminator sees them clipped, as the agent's "
             "(docs/methods.md)"
         )
-    print("compiling ...", flush=True)
-    grid = Grid(trainer, inputs, chunk_blocks, devices)
+    with ticking("compiling"):
+        grid = Grid(trainer, inputs, chunk_blocks, devices)
     print(
         f"compiled in {grid.compile_seconds:.1f} s ({grid.num_cells} cells"
         f"{f', padded to {grid.num_padded}' if grid.num_padded != grid.num_cells else ''}, "

@@ -371,3 +371,17 @@ def test_one_name_and_one_default_per_concept_across_programs(tmp_path, capsys):
         "python -m experiments.sweep: error: --seeds must be a positive integer, got 0 "
         "(usage: python -m experiments.sweep --help)"
     ]
+
+
+def test_a_long_silent_step_shows_its_elapsed_time():
+    import io
+    import time
+
+    from experiments.cli import ticking
+
+    stream = io.StringIO()  # not a terminal: whole lines, every `every` seconds
+    with ticking("compiling", every=0.05, stream=stream):
+        time.sleep(0.2)
+    lines = stream.getvalue().splitlines()
+    assert lines[0] == "compiling ..." and len(lines) >= 3
+    assert all(line.startswith("compiling ... ") and line.endswith(" s") for line in lines[1:])

@@ -142,3 +142,26 @@ def test_a_tiny_fig2_run_writes_the_page_with_every_method_and_resumes(tmp_path)
     before = (out / "grids" / "Pendulum-v1-main" / "metrics.csv").read_bytes()
     assert paper.main(["--resume", str(out)]).read_text() == text
     assert (out / "grids" / "Pendulum-v1-main" / "metrics.csv").read_bytes() == before
+
+
+def test_the_page_warns_of_a_made_expert_worse_than_random_and_the_plan_has_an_eta(
+    tmp_path, recwarn
+):
+    from pngail_jax.demos import save_npz
+
+    directory = tmp_path / "demos" / "Pendulum-v1"
+    directory.mkdir(parents=True)
+    weak = Demonstrations(
+        np.zeros((4, 3), np.float32),
+        np.zeros((4, 1), np.float32),
+        np.ones(4, np.float32),
+        metadata={"random_return": -1200.0, "optimal_return": -1300.0, "ratio": "1:1",
+                  "optimal_beats_random": False},
+    )  # fmt: skip
+    save_npz(directory / "demos.npz", weak)
+    grids = {"g": paper.main_grid("Pendulum-v1", released=False)}
+    (note,) = paper.weak_expert_notes(tmp_path, grids)
+    assert "Pendulum-v1's made expert (-1300.0) does not beat the random policy" in note
+    assert paper.weak_expert_notes(tmp_path, {"g": paper.main_grid("Pendulum-v1", True)}) == []
+    assert paper.plan_eta([], 3) == ""
+    assert paper.plan_eta([60.0, 120.0], 2) == ", about 3m00s left for the plan"
