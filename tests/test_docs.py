@@ -1,0 +1,70 @@
+"""The docs say what the code does: every module is on the architecture page, every docs page
+is in the README's index, and every flag of a documented command is one its program knows."""
+
+import importlib
+import re
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+
+
+def test_every_module_is_on_the_architecture_page():
+    page = (ROOT / "docs" / "architecture.md").read_text()
+    modules = [
+        path
+        for folder in ("pngail_jax", "experiments")
+        for path in (ROOT / folder).rglob("*.py")
+        if path.name != "__init__.py"
+    ]
+    missing = [str(path.relative_to(ROOT)) for path in modules if path.stem not in page]
+    assert not missing, f"docs/architecture.md does not name {missing}"
+
+
+def test_every_docs_page_is_in_the_readmes_index():
+    readme = (ROOT / "README.md").read_text()
+    pages = sorted(path.name for path in (ROOT / "docs").glob("*.md"))
+    missing = [name for name in pages if f"- [docs/{name}](docs/{name})" not in readme]
+    assert not missing, f"the README's docs index lacks {missing}"
+
+
+def documented_commands():
+    """(page, program, flags) of every `python -m experiments.X ...` in the README and docs,
+    in code blocks and inline (continuation lines joined; a comment or a closing backtick
+    ends the command)."""
+    found = []
+    for page in PAGES:
+        text = re.sub(r"\\\n\s*", " ", page.read_text())
+        for match in re.finditer(r"python -m experiments\.(\w+)([^`\n]*)", text):
+            command = match.group(2).split("#")[0]
+            flags = re.findall(r"(?<!\S)(--[a-z][a-z0-9-]*)", command)
+            found.append((page.name, match.group(1), flags))
+    return found
+
+
+COMMANDS = documented_commands()
+
+
+def test_the_docs_document_commands_at_all():
+    programs = {program for _, program, _ in COMMANDS}
+    assert {"sweep", "paper", "classify", "make_demos", "train_rl"} <= programs, programs
+
+
+@pytest.mark.parametrize("program", sorted({program for _, program, _ in COMMANDS}))
+def test_every_documented_flag_exists(program, capsys):
+    module = importlib.import_module(f"experiments.{program}")
+    with pytest.raises(SystemExit):
+        module.parse_args(["--help"])
+    known = set(re.findall(r"--[a-z][a-z0-9-]*", capsys.readouterr().out))
+    unknown = sorted(
+        {
+            (page, flag)
+            for page, name, flags in COMMANDS
+            if name == program
+            for flag in flags
+            if flag not in known
+        }
+    )
+    assert not unknown, f"documented flags that experiments.{program} does not know: {unknown}"
