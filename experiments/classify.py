@@ -25,6 +25,7 @@ from experiments.cli import (
     check_positive,
     known_names,
     note_deprecated,
+    path_argument,
 )
 from pngail_jax.confidence import ClassifierConfig, ClassifierSpec, split_and_train
 from pngail_jax.demos import (
@@ -44,11 +45,14 @@ def parse_args(argv=None) -> argparse.Namespace:
         "classify", description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
     )
     parser.add_argument(
-        "--demos", type=Path, required=True, help="*_mixture.npy (released layout) or our .npz"
+        "--demos",
+        type=path_argument,
+        required=True,
+        help="*_mixture.npy (released layout) or our .npz",
     )
     parser.add_argument(
         "--conf",
-        type=Path,
+        type=path_argument,
         default=None,
         help="confidence file (default: the *_mixture_conf.npy sibling)",
     )
@@ -97,7 +101,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument(
         "--bsc-eps", "--eps", dest="bsc_eps", type=float, default=0.01, help="BSC clip"
     )
-    parser.add_argument("--json", type=Path, default=None, help="also write the results here")
+    parser.add_argument(
+        "--json", type=path_argument, default=None, help="also write the results here"
+    )
     parser.add_argument(
         "--overwrite", action="store_true", help="replace an existing --json file (default: refuse)"
     )

@@ -183,16 +183,50 @@ def check_finite(parser: argparse.ArgumentParser, args, names) -> None:
             parser.error(f"{_flag(name)} must be a finite number, got {value!r}")
 
 
-def check_output_directory(
+# -- the output contract -------------------------------------------------------------------
+#
+# An output directory is new, or empty, or a run of the same program (marked so when it was
+# created) that the user asked to resume or to replace with --overwrite. Anything else is
+# refused before any computation, naming what is in the way.
+
+MARKER = ".pngail-run.json"
+# Runs made before the marker existed are known by one file of their program's own.
+LEGACY_MARKS = {
+    "sweep": "config.json",
+    "paper": "paper.json",
+    "train_rl": "policy.json",
+    "make_demos": "demos.npz",
+    "compare_settings": "comparison.json",
+}
+RESUMABLE = {"sweep", "paper"}
+
+
+def output_owner(directory: Path) -> str | None:
+    """The program whose run ``directory`` holds (its marker, else a legacy file), or None."""
+    import json
+
+    marker = Path(directory) / MARKER
+    if marker.is_file():
+        try:
+            return str(json.loads(marker.read_text())["program"])
+        except (OSError, ValueError, KeyError, TypeError):
+            return None
+    for program, name in LEGACY_MARKS.items():
+        if (Path(directory) / name).exists():
+            return program
+    return None
+
+
+def claim_output(
     parser: argparse.ArgumentParser,
     directory: Path,
-    finished: str,
-    overwrite: bool,
+    program: str,
+    overwrite: bool = False,
     flag: str = "--out",
 ) -> None:
-    """Exits through ``parser.error`` naming ``flag`` when ``directory`` cannot be an output
-    directory (it, or the nearest existing folder above it, is a file), or when it already
-    holds finished work (its file ``finished``) and ``overwrite`` is not set."""
+    """Exits through ``parser.error`` unless ``directory`` may receive ``program``'s outputs:
+    it is new or empty, or holds a run of ``program`` and ``overwrite`` is set. (A resume
+    checks its run itself.) Nothing is written here."""
     directory = Path(directory)
     if directory.exists() and not directory.is_dir():
         parser.error(f"{flag} {directory} is a file, not a directory")
@@ -201,8 +235,57 @@ def check_output_directory(
             if not parent.is_dir():
                 parser.error(f"{flag} {directory}: {parent} is a file, not a directory")
             break
-    if not overwrite and (directory / finished).exists():
+    if not directory.exists():
+        return
+    contents = sorted(path.name for path in directory.iterdir())
+    if not contents:
+        return
+    owner = output_owner(directory)
+    if owner == program:
+        if overwrite:
+            return
+        resume = f"--resume {directory} to continue it, " if program in RESUMABLE else ""
         parser.error(
-            f"{flag} {directory} already holds finished work ({directory / finished}); "
-            f"pass --overwrite to replace it, or choose another {flag}"
+            f"{flag} {directory} already holds a run of experiments.{program}: {resume}pass "
+            f"--overwrite to replace it, or choose another {flag}"
         )
+    shown = ", ".join(contents[:5]) + (
+        f" and {len(contents) - 5} more" if len(contents) > 5 else ""
+    )
+    what = f"a run of experiments.{owner}" if owner else f"files it did not make ({shown})"
+    parser.error(
+        f"{flag} {directory} is not empty: it holds {what}; experiments.{program} writes only "
+        f"into a new or empty directory, or over its own run: choose another {flag}"
+    )
+
+
+def prepare_output(directory: Path, program: str, overwrite: bool = False) -> None:
+    """Creates ``directory`` and marks it as ``program``'s run; with ``overwrite``, first
+    empties it, which ``claim_output`` allowed only for a run of ``program``."""
+    import json
+    import shutil
+
+    from pngail_jax.integrity import atomic_write_text
+
+    directory = Path(directory)
+    if overwrite and directory.exists() and output_owner(directory) == program:
+        for path in directory.iterdir():
+            shutil.rmtree(path) if path.is_dir() and not path.is_symlink() else path.unlink()
+    directory.mkdir(parents=True, exist_ok=True)
+    if not (directory / MARKER).exists():
+        atomic_write_text(directory / MARKER, json.dumps({"program": program}) + "\n")
+
+
+def text_argument(text: str) -> str:
+    """An argparse ``type`` for a value that must not be empty (a path, a dataset id)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("must name a path, got ''")
+    return text
+
+
+def path_argument(text: str) -> Path:
+    """An argparse ``type`` for paths: an empty string is refused (``Path("")`` would mean
+    the current directory)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("must name a path, got ''")
+    return Path(text)

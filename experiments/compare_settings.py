@@ -34,10 +34,12 @@ from experiments.cli import (
     ArgumentParser,
     HelpFormatter,
     check_env,
-    check_output_directory,
     check_positive,
+    claim_output,
     known_names,
     note_deprecated,
+    path_argument,
+    prepare_output,
 )
 from pngail_jax.integrity import atomic_path, atomic_write_text, write_json
 from pngail_jax.report import json_safe
@@ -87,7 +89,9 @@ def parse_args(argv=None) -> argparse.Namespace:
         help="of the final evaluation",
     )
     parser.add_argument("--seed", type=int, default=0, help="base PRNG seed")
-    parser.add_argument("--out", type=Path, required=True, help="output directory (required)")
+    parser.add_argument(
+        "--out", type=path_argument, required=True, help="output directory (required)"
+    )
     parser.add_argument(
         "--overwrite",
         action="store_true",
@@ -96,7 +100,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     )
     args = parser.parse_args(argv)
     note_deprecated(argv, {"--eval-episodes": "--num-eval-episodes"})
-    check_output_directory(parser, args.out, COMPARISON_FILE, args.overwrite)
+    # Running into an unfinished comparison again is its resume (finished arms are reused).
+    unfinished = not (args.out / COMPARISON_FILE).exists()
+    claim_output(parser, args.out, "compare_settings", args.overwrite or unfinished)
     check_env(parser, args.env)
     args.arms = known_names(parser, args.arms, list(ARMS), "arm", flag="--arms")
     if args.env == "Pendulum-v1" and any("--solver" in ARMS[arm] for arm in args.arms):
@@ -121,6 +127,8 @@ def run_arm(args, arm: str) -> Path:
         *("--fisher", "gauss_newton", "--out", str(directory)),
         *ARMS[arm],
     ]
+    if directory.exists():  # an arm cut short: the comparison's own, started again
+        flags.append("--overwrite")
     print(f"{arm}: python -m experiments.train_rl {' '.join(flags)}", flush=True)
     train_rl.main(flags)
     return directory
@@ -208,7 +216,7 @@ def main(argv=None) -> dict:
 
     from pngail_jax import envs
 
-    args.out.mkdir(parents=True, exist_ok=True)
+    prepare_output(args.out, "compare_settings")  # never emptied: its arms are reused
     directories = {arm: run_arm(args, arm) for arm in args.arms}
     key = jax.random.key(args.seed + 10_000)  # evaluation keys unused by any training run
     physics = {"own": {}}

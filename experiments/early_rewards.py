@@ -26,7 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from experiments.cli import ArgumentParser, HelpFormatter
+from experiments.cli import ArgumentParser, HelpFormatter, path_argument
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import load_demonstrations
 from pngail_jax.grid import Cell, Grid, stack_cells
@@ -45,14 +45,18 @@ VARIANTS = (  # (label, method, label ratio)
 
 def parse_args(argv=None):
     parser = ArgumentParser("early_rewards", description=__doc__, formatter_class=HelpFormatter)
-    parser.add_argument("--demos", type=Path, required=True, help="Pendulum-v1_mixture.npy")
+    parser.add_argument(
+        "--demos", type=path_argument, required=True, help="Pendulum-v1_mixture.npy"
+    )
     parser.add_argument("--seeds", type=int, default=3, help="seeds per variant")
     parser.add_argument("--iterations", type=int, default=150, help="TRPO iterations")
     parser.add_argument("--every", type=int, default=10, help="iterations between readings")
     parser.add_argument(
         "--classifier-steps", type=int, default=25_000, help="confidence classifier steps"
     )
-    parser.add_argument("--out", type=Path, default=Path("early_rewards.json"), help="JSON file")
+    parser.add_argument(
+        "--out", type=path_argument, default=Path("early_rewards.json"), help="JSON file"
+    )
     args = parser.parse_args(argv)
     if args.seeds < 1 or args.every < 1 or args.iterations < args.every:
         parser.error("need --seeds >= 1 and --iterations >= --every >= 1")

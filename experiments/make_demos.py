@@ -39,8 +39,10 @@ from experiments.cli import (
     HelpFormatter,
     check_env,
     check_finite,
-    check_output_directory,
     check_positive,
+    claim_output,
+    path_argument,
+    prepare_output,
 )
 from experiments.train_rl import train_with_progress
 from pngail_jax import compilation
@@ -67,7 +69,9 @@ def parse_args(argv=None) -> argparse.Namespace:
         "make_demos", description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
     )
     parser.add_argument("--env", default="Pendulum-v1", help=ENV_HELP)
-    parser.add_argument("--out", type=Path, required=True, help="output directory (required)")
+    parser.add_argument(
+        "--out", type=path_argument, required=True, help="output directory (required)"
+    )
     parser.add_argument(
         "--overwrite",
         action="store_true",
@@ -99,7 +103,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.set_defaults(eval_every=10)
     compilation.add_arguments(parser)
     args = parser.parse_args(argv)
-    check_output_directory(parser, args.out, DEMOS_FILE, args.overwrite)
+    claim_output(parser, args.out, "make_demos", args.overwrite)
     check_env(parser, args.env)
     check_positive(parser, args, ("iterations", "seeds", "num_trajectories", "measure_episodes"))
     check_finite(parser, args, ("intermediate_target",))
@@ -141,7 +145,7 @@ def write_outputs(out: Path, demos: Demonstrations, normalizer: dict) -> Path:
 def main(argv=None) -> Path:
     args = parse_args(argv)
     compilation.from_arguments(args)
-    args.out.mkdir(parents=True, exist_ok=True)
+    prepare_output(args.out, "make_demos", args.overwrite)
     env = run_settings.make_env(args.env, args.settings)
     config = args.settings.trpo_config(args.iterations)
     trainer = TRPOTrainer(config, env)

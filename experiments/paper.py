@@ -32,9 +32,11 @@ import numpy as np
 from experiments.cli import (
     ArgumentParser,
     HelpFormatter,
-    check_output_directory,
+    claim_output,
     known_names,
     note_deprecated,
+    path_argument,
+    prepare_output,
 )
 from pngail_jax import compilation, envs
 from pngail_jax.integrity import atomic_write_text, read_json, write_json
@@ -945,7 +947,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     )
     parser.add_argument(
         "--released-demos",
-        type=Path,
+        type=path_argument,
         metavar="DIR",
         help="a folder of the authors' {env}_mixture.npy files (+ _mixture_conf.npy); tasks "
         "without one there use made demonstrations",
@@ -956,8 +958,14 @@ def parse_args(argv=None) -> argparse.Namespace:
         help="physics engine of gymnasium's MuJoCo tasks in every grid and make_demos run "
         "(default: c on a CPU, mjx on a GPU or TPU)",
     )
-    parser.add_argument("--out", type=Path, help="default results/paper-<timestamp>")
-    parser.add_argument("--resume", type=Path, metavar="DIR", help="continue a run in DIR")
+    parser.add_argument("--out", type=path_argument, help="default results/paper-<timestamp>")
+    parser.add_argument("--resume", type=path_argument, metavar="DIR", help="continue a run in DIR")
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace a run of this program already in --out (default: refuse; anything "
+        "else there is always refused)",
+    )
     compilation.add_arguments(parser)
     args = parser.parse_args(argv)
     note_deprecated(argv, {"--budget": "--preset"})
@@ -971,22 +979,22 @@ def parse_args(argv=None) -> argparse.Namespace:
             file=sys.stderr,
         )
     args.budget = RENAMED_BUDGETS.get(args.budget, args.budget or "check")
-    figures = (
+    figures = (  # an empty --only '' is refused, not read as "all" (known_names)
         known_names(parser, args.only, FIGURES, "figure", flag="--only")
-        if args.only
+        if args.only is not None
         else list(FIGURES)
     )
     args.figures = figures
     args.tasks = (
         known_names(parser, args.envs, envs.ENV_NAMES, "task", flag="--envs")
-        if args.envs
+        if args.envs is not None
         else list(PAPER_TASKS)
     )
     if args.released_demos is not None and not args.released_demos.is_dir():
         parser.error(f"--released-demos {args.released_demos} is not a directory")
     if args.out is None:
         args.out = Path("results") / f"paper-{time.strftime('%Y%m%d-%H%M%S')}"
-    check_output_directory(parser, args.out, "paper.json", overwrite=False)
+    claim_output(parser, args.out, "paper", args.overwrite)
     return args
 
 
@@ -995,6 +1003,8 @@ def _check_resume(parser: argparse.ArgumentParser, args) -> None:
     that is not a run of this program."""
     flags = {"only": "--only", "envs": "--envs", "released_demos": "--released-demos"}
     flags |= {"out": "--out", "physics": "--physics", "budget": "--preset"}
+    if args.overwrite:
+        parser.error("--resume continues a run; --overwrite replaces one: give one")
     given = [flag for name, flag in flags.items() if getattr(args, name) is not None]
     if given:
         parser.error(f"--resume takes its options from the run: drop {given[0]}")
@@ -1027,7 +1037,7 @@ def main(argv=None) -> Path:
             "7: Pendulum-v1; Fig. 8 and 10: Ant; Fig. 9: Ant, Pendulum-v1)"
         )
     if args.resume is None:
-        out.mkdir(parents=True, exist_ok=True)
+        prepare_output(out, "paper", args.overwrite)
         write_json(out / "paper.json", options)
     print(
         f"{len(figures)} figure(s) from {len(grids)} grid(s) on {', '.join(options['envs'])} "

@@ -35,8 +35,13 @@ from experiments.cli import (
     ArgumentParser,
     HelpFormatter,
     check_env,
+    claim_output,
     comma_floats,
     known_names,
+    output_owner,
+    path_argument,
+    prepare_output,
+    text_argument,
     ticking,
 )
 from pngail_jax import compilation
@@ -114,16 +119,21 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add(
         "--config",
-        type=Path,
+        type=path_argument,
         metavar="FILE",
         help="start a new run from a saved config.json (flags given override it) (default: none)",
     )
     add(
         "--demos",
+        type=text_argument,
         help="*_mixture.npy (authors' layout), *.npz, or minari:<dataset id> "
         "(default: made by experiments.make_demos and cached)",
     )
-    add("--conf", help="confidence file (default: the mixture's sibling; per episode for Minari)")
+    add(
+        "--conf",
+        type=text_argument,
+        help="confidence file (default: the mixture's sibling; per episode for Minari)",
+    )
     add(
         "--confidence-field",
         help="Minari: the per-episode field holding confidences (default: none)",
@@ -190,8 +200,19 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"comma-separated logging backends, from {', '.join(LOG_BACKENDS)}, fed once per "
         "chunk (default: none)",
     )
-    add("--out", type=Path, help="output directory (default runs/<timestamp>)")
-    add("--resume", type=Path, metavar="DIR", help="continue DIR's run (default: a new run)")
+    add("--out", type=path_argument, help="output directory (default runs/<timestamp>)")
+    add(
+        "--overwrite",
+        action="store_true",
+        help="replace a sweep run already in --out (default: refuse; anything else there is "
+        "always refused)",
+    )
+    add(
+        "--resume",
+        type=path_argument,
+        metavar="DIR",
+        help="continue DIR's run (default: a new run)",
+    )
     add(
         "--allow-changed-inputs",
         action="store_true",
@@ -233,15 +254,15 @@ def parse_args(argv=None) -> Invocation:
                 "--resume DIR takes no other flags (except the multi-host ones): the run's "
                 "config.json has them"
             )
+        owner = output_owner(args.resume) if args.resume.is_dir() else None
+        if owner not in (None, "sweep"):
+            parser.error(f"--resume {args.resume} holds a run of experiments.{owner}, not a sweep")
         return Invocation(None, args.resume, True, distributed, args, argv)
     config = config_from_flags(parser, args)
     if args.coordinator is not None and config.demos is None:
         parser.error("multi-host runs need --demos (a file every host can read)")
     out = args.out if args.out is not None else Path("runs") / time.strftime("%Y%m%d-%H%M%S")
-    if out.exists() and not out.is_dir():
-        parser.error(f"--out {out} is a file, not a directory")
-    if (out / "config.json").exists():
-        parser.error(f"{out} already holds a run: --resume {out}, or another --out")
+    claim_output(parser, out, "sweep", args.overwrite)
     return Invocation(config, out, False, distributed, args, argv)
 
 
@@ -528,6 +549,8 @@ def load_or_make_demos(config: RunConfig, saved_path: str | None = None, env=Non
         print(f"no --demos: making them with experiments.make_demos into {cached.parent}")
     from experiments import make_demos
 
+    # The cache is the sweep's own: a make_demos run cut short there is replaced.
+    remake = ["--overwrite"] if cached.parent.exists() else remake
     make_demos.main(["--env", config.env, "--out", str(cached.parent), *remake])
     return load_demonstrations(cached), str(cached.absolute())
 
@@ -953,7 +976,7 @@ def main(argv=None) -> Path:
         checkpoint = intact_checkpoint(out / "checkpoints")
     run = build(config, saved)
     if writer:
-        out.mkdir(parents=True, exist_ok=True)
+        prepare_output(out, "sweep", overwrite=saved is None and invocation.args.overwrite)
         if saved is None:
             write_config(out, run, invocation.argv)
     print(f"-> {out}", flush=True)

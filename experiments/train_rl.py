@@ -26,9 +26,11 @@ from experiments.cli import (
     ArgumentParser,
     HelpFormatter,
     check_env,
-    check_output_directory,
     check_positive,
+    claim_output,
     note_deprecated,
+    path_argument,
+    prepare_output,
 )
 from pngail_jax import compilation
 from pngail_jax import settings as run_settings
@@ -58,7 +60,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--seed", type=int, default=0, help="base PRNG seed")
     parser.add_argument(
         "--out",
-        type=Path,
+        type=path_argument,
         default=None,
         help="output directory (default runs/trpo-<env>-<timestamp>)",
     )
@@ -109,7 +111,7 @@ def parse_args(argv=None) -> argparse.Namespace:
         parser.error(str(error))
     if args.out is None:
         args.out = Path("runs") / f"trpo-{args.env}-{time.strftime('%Y%m%d-%H%M%S')}"
-    check_output_directory(parser, args.out, "policy.json", args.overwrite)
+    claim_output(parser, args.out, "train_rl", args.overwrite)
     return args
 
 
@@ -216,7 +218,7 @@ def main(argv=None) -> None:
         lambda x: jnp.broadcast_to(x, (args.seeds, *x.shape)), hyperparams
     )
     keys = jax.random.split(jax.random.key(args.seed), args.seeds)
-    args.out.mkdir(parents=True, exist_ok=True)
+    prepare_output(args.out, "train_rl", args.overwrite)
     run_config = {
         "env": args.env,
         "env_options": settings.env_options,

@@ -340,7 +340,9 @@ def test_compare_settings_refuses_a_file_and_finished_work(tmp_path, capsys):
     (tmp_path / "comparison.json").write_text("{}")
     with pytest.raises(SystemExit):
         compare_settings.parse_args([*flags, str(tmp_path)])
-    assert "comparison.json); pass --overwrite" in capsys.readouterr().err
+    assert "already holds a run of experiments.compare_settings: pass --overwrite" in (
+        capsys.readouterr().err
+    )
     assert compare_settings.parse_args([*flags, str(tmp_path), "--overwrite"]).overwrite
     with pytest.raises(SystemExit):
         compare_settings.parse_args([*flags, str(tmp_path / "new"), "--arms", "table,table"])

@@ -107,7 +107,9 @@ def test_cli_rejects_bad_arguments():
 def test_finished_work_is_not_overwritten_without_the_flag(run_dir, tmp_path, capsys):
     with pytest.raises(SystemExit):
         train_rl.parse_args(["--out", str(run_dir)])
-    assert f"already holds finished work ({run_dir / 'policy.json'})" in capsys.readouterr().err
+    assert f"{run_dir} already holds a run of experiments.train_rl: pass --overwrite" in (
+        capsys.readouterr().err
+    )
     assert train_rl.parse_args(["--out", str(run_dir), "--overwrite"]).overwrite
     a_file = tmp_path / "notes.txt"
     a_file.write_text("mine")

@@ -1,0 +1,148 @@
+"""The output contract every program follows: an output directory is new, or empty, or a run
+of the same program (marked when it was created) that the user asked to resume or to replace
+with --overwrite; anything else is refused before any computation, naming what is in the way,
+and nothing is written."""
+
+import argparse
+import json
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from experiments import cli, paper, sweep, train_rl
+from experiments.cli import MARKER, claim_output, output_owner, prepare_output
+
+PROGRAMS = ["sweep", "paper", "train_rl", "make_demos", "compare_settings"]
+
+
+class Refused(Exception):
+    pass
+
+
+class Parser(argparse.ArgumentParser):
+    def error(self, message):
+        raise Refused(message)
+
+
+def listing(directory):
+    return sorted(
+        (str(p.relative_to(directory)), p.read_bytes() if p.is_file() else None)
+        for p in directory.rglob("*")
+    )
+
+
+@settings(
+    max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    names=st.lists(
+        st.sampled_from(
+            ["README.md", "results.json", "metrics.csv", "notes", *cli.LEGACY_MARKS.values()]
+        ),
+        max_size=3,
+        unique=True,
+    ),
+    marker=st.none() | st.sampled_from(PROGRAMS),
+    program=st.sampled_from(PROGRAMS),
+    overwrite=st.booleans(),
+    exists=st.booleans(),
+)
+def test_the_decision_over_any_contents_and_flags(
+    tmp_path_factory, names, marker, program, overwrite, exists
+):
+    directory = tmp_path_factory.mktemp("out") / "run"
+    if exists:
+        directory.mkdir()
+        for name in names:
+            (directory / name).write_text("theirs")
+        if marker is not None:
+            (directory / MARKER).write_text(json.dumps({"program": marker}))
+    before = listing(directory) if exists else None
+    empty = not exists or not (names or marker)
+    owner = output_owner(directory) if exists else None
+    allowed = empty or (owner == program and overwrite)
+    try:
+        claim_output(Parser(), directory, program, overwrite)
+        assert allowed, (names, marker, program, overwrite)
+    except Refused as refusal:
+        assert not allowed
+        message = str(refusal)
+        if owner == program:
+            assert "pass --overwrite to replace it" in message
+        elif owner is not None:
+            assert f"it holds a run of experiments.{owner}" in message
+        else:
+            assert all(name in message for name in names)  # names what is in the way
+    assert (listing(directory) if exists else None) == before  # nothing written
+    assert exists or not directory.exists()
+
+
+def test_a_marker_wins_over_legacy_files_and_prepare_marks_and_empties_only_its_own(tmp_path):
+    run = tmp_path / "run"
+    prepare_output(run, "sweep")
+    assert output_owner(run) == "sweep"
+    (run / "metrics.csv").write_text("old")
+    (run / "checkpoints").mkdir()
+    prepare_output(run, "sweep", overwrite=True)  # its own run: emptied, marked again
+    assert sorted(p.name for p in run.iterdir()) == [MARKER]
+    theirs = tmp_path / "theirs"
+    theirs.mkdir()
+    (theirs / "keep.txt").write_text("mine")
+    (theirs / MARKER).write_text(json.dumps({"program": "paper"}))
+    prepare_output(theirs, "sweep", overwrite=True)  # not its own: nothing removed
+    assert (theirs / "keep.txt").read_text() == "mine"
+
+
+@pytest.mark.parametrize(
+    ("program", "argv", "message"),
+    [
+        (sweep, ["--out", ""], "argument --out: must name a path, got ''"),
+        (paper, ["--out", ""], "argument --out: must name a path, got ''"),
+        (paper, ["--only", ""], "--only: empty item in ''"),
+        (paper, ["--envs", ""], "--envs: empty item in ''"),
+        (train_rl, ["--out", ""], "argument --out: must name a path, got ''"),
+        (sweep, ["--demos", ""], "argument --demos: must name a path"),
+    ],
+)
+def test_empty_strings_are_refused_not_read_as_here_or_everything(program, argv, message, capsys):
+    with pytest.raises(SystemExit):
+        program.parse_args(argv)
+    assert message in capsys.readouterr().err
+
+
+def test_each_program_refuses_a_directory_it_did_not_make(tmp_path, capsys):
+    checkout = tmp_path / "checkout"  # e.g. a checkout's own README.md
+    checkout.mkdir()
+    (checkout / "README.md").write_text("the project's")
+    (checkout / "results.json").write_text("{}")
+    with pytest.raises(SystemExit):
+        paper.parse_args(["--out", str(checkout)])
+    err = capsys.readouterr().err
+    assert "is not empty: it holds files it did not make (README.md, results.json)" in err
+    metrics = tmp_path / "analysis"
+    metrics.mkdir()
+    (metrics / "metrics.csv").write_text("mine")
+    with pytest.raises(SystemExit):
+        sweep.parse_args(["--out", str(metrics)])
+    assert "files it did not make (metrics.csv)" in capsys.readouterr().err
+    finished_sweep = tmp_path / "sweep-run"
+    prepare_output(finished_sweep, "sweep")
+    (finished_sweep / "config.json").write_text("{}")
+    with pytest.raises(SystemExit):
+        train_rl.parse_args(["--out", str(finished_sweep)])
+    assert "it holds a run of experiments.sweep" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        sweep.parse_args(["--out", str(finished_sweep)])
+    assert f"--resume {finished_sweep} to continue it, pass --overwrite" in (
+        capsys.readouterr().err
+    )
+    assert sweep.parse_args(["--out", str(finished_sweep), "--overwrite"]).out == finished_sweep
+    paper_run = tmp_path / "paper-run"
+    prepare_output(paper_run, "paper")
+    with pytest.raises(SystemExit):
+        sweep.parse_args(["--resume", str(paper_run)])
+    assert "holds a run of experiments.paper, not a sweep" in capsys.readouterr().err
+    for name in ("README.md", "results.json"):
+        assert (checkout / name).exists()  # untouched
+    assert (metrics / "metrics.csv").read_text() == "mine"
