@@ -190,6 +190,7 @@ def check_finite(parser: argparse.ArgumentParser, args, names) -> None:
 # refused before any computation, naming what is in the way.
 
 MARKER = ".pngail-run.json"
+LOCK = ".pngail-run.lock"  # held while a process writes the run (run_lock)
 # Runs made before the marker existed are known by one file of their program's own.
 LEGACY_MARKS = {
     "sweep": "config.json",
@@ -217,6 +218,43 @@ def output_owner(directory: Path) -> str | None:
     return None
 
 
+def output_refusal(
+    directory: Path, program: str, overwrite: bool = False, flag: str = "--out"
+) -> str | None:
+    """Why ``directory`` may not receive ``program``'s outputs, or None when it may: it is new
+    or empty (its own marker alone, left by a start that failed, counts as empty), or holds a
+    run of ``program`` and ``overwrite`` is set. The run lock is not content. Reads only."""
+    directory = Path(directory)
+    if directory.exists() and not directory.is_dir():
+        return f"{flag} {directory} is a file, not a directory"
+    for parent in directory.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                return f"{flag} {directory}: {parent} is a file, not a directory"
+            break
+    if not directory.exists():
+        return None
+    contents = sorted(path.name for path in directory.iterdir() if path.name != LOCK)
+    owner = output_owner(directory)
+    if not contents or (contents == [MARKER] and owner == program):
+        return None
+    if owner == program:
+        if overwrite:
+            return None
+        resume = f"--resume {directory} to continue it, " if program in RESUMABLE else ""
+        return (
+            f"{flag} {directory} already holds a run of experiments.{program}: {resume}pass "
+            f"--overwrite to replace it, or choose another {flag}"
+        )
+    shown = ", ".join(contents[:5])
+    shown += f" and {len(contents) - 5} more" if len(contents) > 5 else ""
+    what = f"a run of experiments.{owner}" if owner else f"files it did not make ({shown})"
+    return (
+        f"{flag} {directory} is not empty: it holds {what}; experiments.{program} writes only "
+        f"into a new or empty directory, or over its own run: choose another {flag}"
+    )
+
+
 def claim_output(
     parser: argparse.ArgumentParser,
     directory: Path,
@@ -224,39 +262,10 @@ def claim_output(
     overwrite: bool = False,
     flag: str = "--out",
 ) -> None:
-    """Exits through ``parser.error`` unless ``directory`` may receive ``program``'s outputs:
-    it is new or empty, or holds a run of ``program`` and ``overwrite`` is set. (A resume
-    checks its run itself.) Nothing is written here."""
-    directory = Path(directory)
-    if directory.exists() and not directory.is_dir():
-        parser.error(f"{flag} {directory} is a file, not a directory")
-    for parent in directory.parents:
-        if parent.exists():
-            if not parent.is_dir():
-                parser.error(f"{flag} {directory}: {parent} is a file, not a directory")
-            break
-    if not directory.exists():
-        return
-    contents = sorted(path.name for path in directory.iterdir())
-    if not contents:
-        return
-    owner = output_owner(directory)
-    if owner == program:
-        if overwrite:
-            return
-        resume = f"--resume {directory} to continue it, " if program in RESUMABLE else ""
-        parser.error(
-            f"{flag} {directory} already holds a run of experiments.{program}: {resume}pass "
-            f"--overwrite to replace it, or choose another {flag}"
-        )
-    shown = ", ".join(contents[:5]) + (
-        f" and {len(contents) - 5} more" if len(contents) > 5 else ""
-    )
-    what = f"a run of experiments.{owner}" if owner else f"files it did not make ({shown})"
-    parser.error(
-        f"{flag} {directory} is not empty: it holds {what}; experiments.{program} writes only "
-        f"into a new or empty directory, or over its own run: choose another {flag}"
-    )
+    """Exits through ``parser.error`` with ``output_refusal``'s reason, if there is one."""
+    refusal = output_refusal(directory, program, overwrite, flag)
+    if refusal:
+        parser.error(refusal)
 
 
 def prepare_output(directory: Path, program: str, overwrite: bool = False) -> None:
@@ -270,10 +279,78 @@ def prepare_output(directory: Path, program: str, overwrite: bool = False) -> No
     directory = Path(directory)
     if overwrite and directory.exists() and output_owner(directory) == program:
         for path in directory.iterdir():
+            if path.name == LOCK:  # the lock of the process doing this
+                continue
             shutil.rmtree(path) if path.is_dir() and not path.is_symlink() else path.unlink()
     directory.mkdir(parents=True, exist_ok=True)
     if not (directory / MARKER).exists():
         atomic_write_text(directory / MARKER, json.dumps({"program": program}) + "\n")
+
+
+class RunLocked(Exception):
+    """Another live process holds the run's lock (the message names it)."""
+
+
+def _alive(pid: int) -> bool:
+    import os
+
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's process: alive
+        return True
+    return True
+
+
+@contextlib.contextmanager
+def run_lock(directory: Path, program: str):
+    """Holds ``directory``'s run lock while a program writes there: a second process on the
+    same run is refused (``RunLocked``, naming the holder's PID and host); a lock left by a
+    process that is gone (same host) is taken over with a note. Released on exit, also after
+    an error or Ctrl-C; a directory it created and nothing was written to is removed."""
+    import json
+    import os
+    import socket
+    import sys
+    import time
+
+    directory = Path(directory)
+    created = not directory.exists()
+    directory.mkdir(parents=True, exist_ok=True)
+    path = directory / LOCK
+    me = {"pid": os.getpid(), "host": socket.gethostname(), "program": program}
+    me["started"] = time.strftime("%Y-%m-%d %H:%M:%S")
+    for _ in range(2):
+        try:
+            descriptor = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        except FileExistsError:
+            try:
+                holder = json.loads(path.read_text())
+                pid, host = int(holder["pid"]), str(holder["host"])
+            except (OSError, ValueError, KeyError, TypeError):
+                holder, pid, host = {}, None, None
+            if pid is not None and (host != me["host"] or _alive(pid)):
+                raise RunLocked(
+                    f"{directory} is in use by experiments.{holder.get('program', '?')}, "
+                    f"process {pid} on {host} (since {holder.get('started', '?')}): wait for "
+                    f"it to end, or stop it; if that process is gone, delete {path}"
+                ) from None
+            print(
+                f"note: taking over {path}, left by process {pid} on {host}, which is gone",
+                file=sys.stderr,
+            )
+            path.unlink(missing_ok=True)
+            continue
+        with os.fdopen(descriptor, "w") as file:
+            json.dump(me, file)
+        break
+    try:
+        yield
+    finally:
+        path.unlink(missing_ok=True)
+        if created and not any(directory.iterdir()):  # refused before writing: leave no trace
+            directory.rmdir()
 
 
 def text_argument(text: str) -> str:

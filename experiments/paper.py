@@ -32,11 +32,13 @@ import numpy as np
 from experiments.cli import (
     ArgumentParser,
     HelpFormatter,
+    RunLocked,
     claim_output,
     known_names,
     note_deprecated,
     path_argument,
     prepare_output,
+    run_lock,
 )
 from pngail_jax import compilation, envs
 from pngail_jax.integrity import atomic_write_text, read_json, write_json
@@ -1020,6 +1022,19 @@ def command_line(argv) -> list[str]:
 
 def main(argv=None) -> Path:
     args = parse_args(argv)
+    out = args.resume if args.resume is not None else args.out
+    try:
+        with run_lock(out, "paper"):
+            return run_paper(args, argv)
+    except RunLocked as error:
+        raise SystemExit(f"cannot run: {error}") from None
+    except KeyboardInterrupt:
+        raise SystemExit(
+            f"\ninterrupted: finished grids are kept; --resume {out} continues the plan"
+        ) from None
+
+
+def run_paper(args, argv) -> Path:
     cache_flags = (
         ["--no-compile-cache"]
         if args.no_compile_cache

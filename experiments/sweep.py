@@ -34,13 +34,16 @@ from experiments.cli import (
     ENV_HELP,
     ArgumentParser,
     HelpFormatter,
+    RunLocked,
     check_env,
     claim_output,
     comma_floats,
     known_names,
     output_owner,
+    output_refusal,
     path_argument,
     prepare_output,
+    run_lock,
     text_argument,
     ticking,
 )
@@ -969,11 +972,75 @@ def export_policies(out: Path, run: SweepRun, host_state, progress: Progress, wr
 def main(argv=None) -> Path:
     invocation = parse_args(argv)
     config, saved, writer = start(invocation)
+    if not writer:  # another host of a multi-host run: process 0 holds the lock
+        return run_sweep(invocation, config, saved, writer)
+    try:
+        with run_lock(invocation.out, "sweep"):
+            return run_sweep(invocation, config, saved, writer)
+    except RunLocked as error:
+        raise SystemExit(f"cannot run: {error}") from None
+    except KeyboardInterrupt:
+        where = f"--resume {invocation.out}"
+        raise SystemExit(
+            f"\ninterrupted: finished chunks are kept; {where} continues from the last checkpoint"
+        ) from None
+
+
+def already_complete(out: Path) -> bool:
+    """Whether ``out``'s summary.json says its run is finished and every output is there (so
+    a resume has nothing to do: nothing is recomputed or rewritten)."""
+    from pngail_jax.integrity import IntegrityError, read_json
+
+    if not all((out / name).exists() for name in STALE_OUTPUTS):
+        return False
+    try:
+        summary = read_json(out / "summary.json", "run summary")
+    except (FileNotFoundError, IntegrityError):
+        return False
+    return bool(summary.get("complete")) and summary.get("iterations_done") == summary.get(
+        "iterations"
+    )
+
+
+STALE_OUTPUTS = ("summary.json", "summary.md", "metrics.csv", "curves.png", "policies")
+
+
+def drop_stale_outputs(out: Path, iterations_done: int) -> None:
+    """Removes outputs that claim more iterations than the checkpoint a resume starts from
+    (its newer checkpoints were damaged or deleted): they are written again as the run goes."""
+    from pngail_jax.integrity import IntegrityError, read_json
+
+    try:
+        claimed = read_json(out / "summary.json", "run summary").get("iterations_done", 0)
+    except (FileNotFoundError, IntegrityError):
+        return
+    if claimed <= iterations_done:
+        return
+    print(
+        f"note: the outputs say {claimed} iterations, the checkpoint holds {iterations_done}: "
+        "removing the outputs until the run reaches them again"
+    )
+    for name in STALE_OUTPUTS:
+        path = out / name
+        if path.is_dir():
+            shutil.rmtree(path)
+        else:
+            path.unlink(missing_ok=True)
+
+
+def run_sweep(invocation: Invocation, config: RunConfig, saved, writer: bool) -> Path:
     out = invocation.out
     checkpoint = None
-    if saved is not None:  # both checks before the minutes of compiling
+    if saved is not None:  # these checks before the minutes of compiling
         check_inputs(saved, invocation.args.allow_changed_inputs)
+        if already_complete(out):
+            print(f"{out}: the run is already complete; nothing to do")
+            return out
         checkpoint = intact_checkpoint(out / "checkpoints")
+    elif writer:  # a new run: the claim again, now that this process holds the lock
+        refusal = output_refusal(out, "sweep", invocation.args.overwrite)
+        if refusal:
+            raise SystemExit(refusal)
     run = build(config, saved)
     if writer:
         prepare_output(out, "sweep", overwrite=saved is None and invocation.args.overwrite)
@@ -981,6 +1048,8 @@ def main(argv=None) -> Path:
             write_config(out, run, invocation.argv)
     print(f"-> {out}", flush=True)
     state, progress = initial_state(run, checkpoint)
+    if writer and saved is not None:
+        drop_stale_outputs(out, progress.iterations_done(run.grid))
     logger = None
     if writer and config.log:
         from pngail_jax.tracking import open_logger

@@ -61,7 +61,8 @@ def test_the_decision_over_any_contents_and_flags(
     before = listing(directory) if exists else None
     empty = not exists or not (names or marker)
     owner = output_owner(directory) if exists else None
-    allowed = empty or (owner == program and overwrite)
+    marker_alone = not names and marker == program  # left by a start that failed: empty
+    allowed = empty or marker_alone or (owner == program and overwrite)
     try:
         claim_output(Parser(), directory, program, overwrite)
         assert allowed, (names, marker, program, overwrite)
@@ -146,3 +147,29 @@ def test_each_program_refuses_a_directory_it_did_not_make(tmp_path, capsys):
     for name in ("README.md", "results.json"):
         assert (checkout / name).exists()  # untouched
     assert (metrics / "metrics.csv").read_text() == "mine"
+
+
+def test_the_run_lock_refuses_a_live_holder_and_takes_over_a_dead_ones(tmp_path, capsys):
+    import os
+    import subprocess
+    import sys
+
+    from experiments.cli import LOCK, RunLocked, run_lock
+
+    with run_lock(tmp_path, "sweep"):
+        holder = json.loads((tmp_path / LOCK).read_text())
+        assert holder["pid"] == os.getpid()
+        with pytest.raises(RunLocked, match=rf"in use by experiments.sweep, process {os.getpid()}"):
+            with run_lock(tmp_path, "sweep"):
+                pass
+    assert not (tmp_path / LOCK).exists()  # released
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True, check=True)  # fmt: skip
+    pid = int(gone.stdout)
+    (tmp_path / LOCK).write_text(json.dumps({"pid": pid, "host": os.uname().nodename}))
+    with run_lock(tmp_path, "sweep"):
+        assert json.loads((tmp_path / LOCK).read_text())["pid"] == os.getpid()
+    assert f"taking over {tmp_path / LOCK}, left by process {pid}" in capsys.readouterr().err
+    with pytest.raises(KeyboardInterrupt), run_lock(tmp_path, "sweep"):
+        raise KeyboardInterrupt  # Ctrl-C: the lock goes with it
+    assert not (tmp_path / LOCK).exists()

@@ -323,3 +323,35 @@ def test_out_naming_a_file_is_refused(tmp_path, capsys):
         sweep.parse_args(["--out", str(a_file)])
     assert f"--out {a_file} is a file, not a directory" in capsys.readouterr().err
     assert a_file.read_text() == "mine"
+
+
+def test_a_finished_run_resumes_to_already_complete_and_a_held_run_is_refused(
+    finished, tmp_path, capsys
+):
+    import os
+
+    from experiments.cli import LOCK
+
+    out = copy_run(finished, tmp_path)
+    before = {p: p.stat().st_mtime_ns for p in out.rglob("*") if p.is_file()}
+    sweep.main(["--resume", str(out)])
+    printed = capsys.readouterr().out
+    assert "already complete; nothing to do" in printed and "compiling" not in printed
+    assert {p: p.stat().st_mtime_ns for p in out.rglob("*") if p.is_file()} == before
+    (out / LOCK).write_text(json.dumps({"pid": os.getpid(), "host": os.uname().nodename}))
+    with pytest.raises(SystemExit, match=rf"cannot run: {out} is in use by .* {os.getpid()}"):
+        sweep.main(["--resume", str(out)])
+    (out / LOCK).unlink()
+
+
+def test_outputs_never_claim_more_than_the_checkpoints_hold(finished, tmp_path, capsys):
+    """A finished run whose checkpoints were deleted starts again; its old outputs, which
+    claim the whole run, are removed first, and the run ends with the same numbers."""
+    out = copy_run(finished, tmp_path)
+    shutil.rmtree(out / "checkpoints")
+    (out / "metrics.csv").unlink()  # an output missing: not "already complete"
+    sweep.main(["--resume", str(out)])
+    printed = capsys.readouterr().out
+    assert "the outputs say 4 iterations, the checkpoint holds 0: removing" in printed
+    assert metrics_numbers(out / "metrics.csv") == metrics_numbers(finished / "metrics.csv")
+    assert json.loads((out / "summary.json").read_text())["complete"]
