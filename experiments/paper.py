@@ -41,7 +41,7 @@ from experiments.cli import (
     run_lock,
 )
 from pngail_jax import compilation, envs
-from pngail_jax.integrity import atomic_write_text, read_json, write_json
+from pngail_jax.integrity import atomic_write_text, read_json, seal, write_json
 from pngail_jax.methods import display_name, required_phases
 from pngail_jax.report import group_label, late_evaluations, line_style
 
@@ -614,12 +614,22 @@ def sweep_arguments(
     return flags
 
 
+def grid_complete(directory: Path) -> bool:
+    """Whether a grid's summary.json says it is complete; a damaged one says no (the sweep's
+    resume then writes it again from the checkpoints)."""
+    from pngail_jax.integrity import IntegrityError
+
+    try:
+        return bool(read_json(directory / "summary.json", "grid summary").get("complete"))
+    except (FileNotFoundError, IntegrityError, AttributeError):
+        return False
+
+
 def run_grid(grid: GridSpec, directory: Path, flags: list[str], cache_flags) -> float:
     """Runs (or resumes, or keeps) one grid; its wall-clock seconds in this call."""
     from experiments import sweep
 
-    summary = directory / "summary.json"
-    if summary.exists() and read_json(summary).get("complete"):
+    if grid_complete(directory):
         print(f"\n== {grid.name}: done, kept ({directory})", flush=True)
         return 0.0
     start = time.perf_counter()
@@ -1044,6 +1054,10 @@ def run_paper(args, argv) -> Path:
     budget = BUDGETS[options["budget"]]
     released_dir = Path(options["released_demos"]) if options["released_demos"] else None
     released = released_files(released_dir, options["envs"])
+    if args.resume is None:
+        options["inputs"] = released_inputs(released)
+    else:
+        check_paper_inputs(out, options, released)
     figures, grids = plan(options["only"], options["envs"], set(released))
     if not figures:
         raise SystemExit(
@@ -1054,6 +1068,7 @@ def run_paper(args, argv) -> Path:
     if args.resume is None:
         prepare_output(out, "paper", args.overwrite)
         write_json(out / "paper.json", options)
+        seal(out / PAPER_SEAL, options)
     print(
         f"{len(figures)} figure(s) from {len(grids)} grid(s) on {', '.join(options['envs'])} "
         f"at the {options['budget']} preset; the authors' files for: "
@@ -1068,12 +1083,73 @@ def run_paper(args, argv) -> Path:
     return page
 
 
+PAPER_SEAL = ".paper.sealed.json"
+
+
+def released_inputs(released: dict[str, Path]) -> dict[str, dict]:
+    """``{role: integrity.file_record}`` of the authors' files (and their confidence files)
+    a plan reads, which ``--resume`` checks."""
+    from pngail_jax.demos import released_confidence_path
+    from pngail_jax.integrity import file_record
+
+    records = {}
+    for task, path in released.items():
+        records[f"{task} demonstrations"] = file_record(path)
+        records[f"{task} confidences"] = file_record(released_confidence_path(path))
+    return records
+
+
+def check_paper_inputs(out: Path, options: dict, released: dict[str, Path]) -> None:
+    """Refuses a resume whose authors' files are gone, changed or no longer found (a moved
+    folder would otherwise make demonstrations and label the page as before)."""
+    from pngail_jax.integrity import changed_inputs
+
+    recorded = options.get("inputs")
+    if recorded is None:  # a run from before inputs were recorded
+        return
+    changes = changed_inputs(recorded)
+    missing = sorted(
+        role.removesuffix(" demonstrations")
+        for role in recorded
+        if role.endswith(" demonstrations") and role.removesuffix(" demonstrations") not in released
+    )
+    if missing and not changes:
+        changes = [f"the authors' files for {', '.join(missing)} are no longer found"]
+    if changes:
+        raise SystemExit(
+            f"--resume {out}: {'; '.join(changes)}. The rest of the plan would run on other "
+            "data than its start: restore the files (the folder in paper.json's "
+            "released_demos), or start a new run"
+        )
+
+
 def run_options(args, argv) -> tuple[Path, dict]:
-    """The output directory and the run's options: a resumed run's paper.json, else the
-    flags'."""
+    """The output directory and the run's options: a resumed run's paper.json (checked
+    against its seal and known presets), else the flags'."""
+    from pngail_jax.integrity import IntegrityError, sealed_differences
+
     if args.resume is not None:
-        options = read_json(args.resume / "paper.json")
-        options["budget"] = RENAMED_BUDGETS.get(options["budget"], options["budget"])
+        path = args.resume / "paper.json"
+        try:
+            options = read_json(path, "paper run options")
+            changes = sealed_differences(args.resume / PAPER_SEAL, options)
+        except IntegrityError as error:
+            raise SystemExit(f"--resume {args.resume}: {error}") from None
+        if changes:
+            raise SystemExit(
+                f"--resume {args.resume}: paper.json was changed since the run began ("
+                + "; ".join(changes[:5])
+                + "): restore it, or start a new run"
+            )
+        if not isinstance(options, dict) or "budget" not in options:
+            raise SystemExit(f"--resume {args.resume}: {path} is not a paper run's options")
+        budget = RENAMED_BUDGETS.get(options["budget"], options["budget"])
+        if budget not in BUDGETS:
+            raise SystemExit(
+                f"--resume {args.resume}: {path} names an unknown preset {options['budget']!r} "
+                f"(known: {', '.join(BUDGETS)})"
+            )
+        options["budget"] = budget
         return args.resume, options
     return args.out, {
         "budget": args.budget,
@@ -1089,9 +1165,14 @@ def run_grids(grids, demos, out: Path, budget: Budget, cache_flags, physics) -> 
     """Runs (or resumes, or keeps) every grid; each grid's wall-clock seconds over all calls,
     kept in ``out/timings.json``."""
     from pngail_jax.demos import load_demonstrations
+    from pngail_jax.integrity import IntegrityError
 
     timings_path = out / "timings.json"
-    timings = read_json(timings_path) if timings_path.exists() else {}
+    try:
+        timings = read_json(timings_path, "timings record") if timings_path.exists() else {}
+    except IntegrityError as error:
+        print(f"note: {error}; wall times start again from this call")
+        timings = {}
     num_rows = {}  # of each demonstration set, read once, where a grid sizes its split by it
     ran: list[float] = []  # seconds of the grids this call ran
     for index, (name, grid) in enumerate(grids.items()):

@@ -399,6 +399,35 @@ class SavedRun:
     normalizer: list[float] | None = None  # what the run normalised returns by
 
 
+SEAL = ".config.sealed.json"
+
+
+def sealed_part(document: dict) -> dict:
+    """What config.json's seal covers: everything but provenance (where it ran)."""
+    return {key: value for key, value in document.items() if key != "provenance"}
+
+
+def check_seal(directory: Path, document: dict) -> None:
+    """Refuses a config.json that differs from the seal written when the run began, naming
+    each changed field; a run from before seals exists goes on with a note."""
+    from pngail_jax.integrity import IntegrityError, sealed_differences
+
+    try:
+        changes = sealed_differences(directory / SEAL, sealed_part(document))
+    except IntegrityError as error:
+        raise SystemExit(f"--resume {directory}: {error}") from None
+    if changes is None:
+        print(f"note: {directory}/config.json has no seal (an older version made the run)")
+    elif changes:
+        raise SystemExit(
+            f"--resume {directory}: config.json was changed since the run began ("
+            + "; ".join(changes[:5])
+            + (f"; and {len(changes) - 5} more" if len(changes) > 5 else "")
+            + "): a run keeps what it began with; restore the file, or start a new run from "
+            "it with --config"
+        )
+
+
 def load_saved(directory: Path) -> SavedRun:
     from pngail_jax.integrity import IntegrityError, read_json
 
@@ -406,7 +435,13 @@ def load_saved(directory: Path) -> SavedRun:
     if not path.exists():
         raise SystemExit(f"--resume {directory}: no config.json there")
     try:
-        data = upgrade_saved_config(read_json(path, "run config"))
+        raw = read_json(path, "run config")
+    except IntegrityError as error:
+        raise SystemExit(f"--resume {directory}: {error}") from None
+    if isinstance(raw, dict):
+        check_seal(directory, raw)
+    try:
+        data = upgrade_saved_config(raw)
         config = RunConfig.from_dict(data)
         # The engine that ran goes on running (a run begun on a CPU resumed on a GPU would
         # otherwise switch to MJX, whose state the checkpoint does not hold).
@@ -684,7 +719,7 @@ def build(config: RunConfig, saved: SavedRun | None) -> SweepRun:
 def write_config(out: Path, run: SweepRun, argv: list[str]) -> None:
     """config.json: the RunConfig, what it resolved to (with the SHA-256 of every input file,
     which ``--resume`` checks), and provenance."""
-    from pngail_jax.integrity import write_json
+    from pngail_jax.integrity import seal, write_json
     from pngail_jax.run_config import provenance
 
     document = {
@@ -704,6 +739,9 @@ def write_config(out: Path, run: SweepRun, argv: list[str]) -> None:
         "provenance": provenance(argv, "experiments.sweep"),
     }
     write_json(out / "config.json", document)
+    # What the run is created with, apart from the file a user may edit: every resume
+    # compares config.json with it (provenance aside) and refuses a change, naming it.
+    seal(out / SEAL, sealed_part(document))
 
 
 # -- running chunks with progress and checkpoints --------------------------------------------

@@ -147,3 +147,47 @@ def changed_inputs(records: dict[str, dict]) -> list[str]:
         elif path.stat().st_size != record["bytes"] or file_digest(path) != record["sha256"]:
             changes.append(f"{role} {path} has changed since the run began")
     return changes
+
+
+def json_digest(document) -> str:
+    """``"sha256:<hex>"`` of a JSON document's canonical text (sorted keys, no spaces)."""
+    text = json.dumps(document, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return "sha256:" + hashlib.sha256(text.encode()).hexdigest()
+
+
+def seal(path: str | Path, document) -> None:
+    """Writes ``document`` and its digest to ``path``: what a run was created with, kept
+    apart from the file a user may edit, so that a resume can compare the two."""
+    write_json(path, {"sealed": document, "sha256": json_digest(document)})
+
+
+def sealed_differences(path: str | Path, document, prefix: str = "") -> list[str] | None:
+    """The fields where ``document`` differs from the sealed one at ``path`` (``"a.b: was X,
+    now Y"``), [] when equal, None when there is no seal (a run from an older version);
+    IntegrityError when the seal itself is damaged."""
+    path = Path(path)
+    if not path.exists():
+        return None
+    record = read_json(path, "sealed config")
+    sealed = record.get("sealed") if isinstance(record, dict) else None
+    if sealed is None or json_digest(sealed) != record.get("sha256"):
+        raise IntegrityError(f"{path}: damaged (its content differs from its digest)")
+    return _differences(sealed, document, prefix)
+
+
+def _differences(was, now, prefix: str) -> list[str]:
+    if isinstance(was, dict) and isinstance(now, dict):
+        found = []
+        for key in sorted(set(was) | set(now), key=str):
+            name = f"{prefix}{key}"
+            if key not in now:
+                found.append(f"{name}: removed (was {json.dumps(was[key])})")
+            elif key not in was:
+                found.append(f"{name}: added ({json.dumps(now[key])})")
+            else:
+                found += _differences(was[key], now[key], f"{name}.")
+        return found
+    if was != now:
+        return [f"{prefix.rstrip('.')}: was {json.dumps(was)}, now {json.dumps(now)}"]
+    return []
+

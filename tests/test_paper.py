@@ -165,3 +165,26 @@ def test_the_page_warns_of_a_made_expert_worse_than_random_and_the_plan_has_an_e
     assert paper.weak_expert_notes(tmp_path, {"g": paper.main_grid("Pendulum-v1", True)}) == []
     assert paper.plan_eta([], 3) == ""
     assert paper.plan_eta([60.0, 120.0], 2) == ", about 3m00s left for the plan"
+
+
+def test_a_resume_checks_the_authors_files_and_its_own_options(tmp_path):
+    mixture = tmp_path / "released" / "Pendulum-v1_mixture.npy"
+    mixture.parent.mkdir()
+    np.save(mixture, np.zeros((4, 4), np.float32))
+    np.save(mixture.with_name("Pendulum-v1_mixture_conf.npy"), np.ones((4, 1)))
+    released = {"Pendulum-v1": mixture}
+    options = {"inputs": paper.released_inputs(released)}
+    paper.check_paper_inputs(tmp_path, options, released)  # unchanged: goes on
+    with pytest.raises(SystemExit, match="authors' files for Pendulum-v1 are no longer found"):
+        paper.check_paper_inputs(tmp_path, options, {})  # the folder moved
+    np.save(mixture, np.ones((4, 4), np.float32))
+    with pytest.raises(SystemExit, match=f"demonstrations {mixture} has changed"):
+        paper.check_paper_inputs(tmp_path, options, released)
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "paper.json").write_text(json.dumps({"budget": "huge"}))
+    with pytest.raises(SystemExit, match="names an unknown preset 'huge' .known: check, paper, cpu, test"):
+        paper.main(["--resume", str(run)])
+    (run / "paper.json").write_text("{")
+    with pytest.raises(SystemExit, match="paper.json: damaged paper run options"):
+        paper.main(["--resume", str(run)])

@@ -178,7 +178,7 @@ def test_checkpoint_damage_of_every_kind_falls_back(finished, tmp_path, capsys, 
 
 def test_resume_refuses_changed_inputs_and_damaged_configs(finished, tmp_path, capsys):
     from pngail_jax.demos import load_npz
-    from pngail_jax.integrity import file_record
+    from pngail_jax.integrity import file_record, seal
 
     out = copy_run(finished, tmp_path)
     config = json.loads((out / "config.json").read_text())
@@ -187,6 +187,7 @@ def test_resume_refuses_changed_inputs_and_damaged_configs(finished, tmp_path, c
     config["resolved"]["demos_path"] = str(demos)
     config["resolved"]["inputs"]["demonstrations"] = file_record(demos)
     (out / "config.json").write_text(json.dumps(config))
+    seal(out / sweep.SEAL, sweep.sealed_part(config))  # as if the run had begun with it
     original = load_npz(demos)
     actions = original.actions.copy()
     actions[0] += 0.5
@@ -355,3 +356,37 @@ def test_outputs_never_claim_more_than_the_checkpoints_hold(finished, tmp_path, 
     assert "the outputs say 4 iterations, the checkpoint holds 0: removing" in printed
     assert metrics_numbers(out / "metrics.csv") == metrics_numbers(finished / "metrics.csv")
     assert json.loads((out / "summary.json").read_text())["complete"]
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "named"),
+    [
+        ("label_ratios", [0.1], "label_ratios: was [0.2], now [0.1]"),
+        ("iterations", 8, "iterations: was 4, now 8"),
+        ("resolved.demos_path", "/elsewhere/demos.npz", "resolved.demos_path: was "),
+    ],
+)
+def test_a_hand_edited_config_is_refused_naming_the_field(finished, tmp_path, field, value, named):
+    out = copy_run(finished, tmp_path)
+    (out / "metrics.csv").unlink()  # not "already complete": the resume would train
+    config = json.loads((out / "config.json").read_text())
+    where = config
+    *parents, key = field.split(".")
+    for parent in parents:
+        where = where[parent]
+    where[key] = value
+    (out / "config.json").write_text(json.dumps(config))
+    with pytest.raises(SystemExit, match="config.json was changed since the run began") as error:
+        sweep.main(["--resume", str(out)])
+    assert named in str(error.value)
+    original = json.loads((finished / "config.json").read_text())
+    original["provenance"]["git_commit"] = "edited"  # where it ran is not sealed
+    sweep.check_seal(out, original)  # no refusal
+
+
+def test_a_damaged_seal_is_refused(finished, tmp_path):
+    out = copy_run(finished, tmp_path)
+    seal = out / sweep.SEAL
+    seal.write_text(seal.read_text().replace("0.2", "0.3"))
+    with pytest.raises(SystemExit, match=r"\.config\.sealed\.json: damaged"):
+        sweep.main(["--resume", str(out)])
