@@ -10,6 +10,7 @@ incomplete directory and names the file at fault).
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Callable
 from pathlib import Path
 
@@ -105,6 +106,18 @@ def save_trpo_policies(
     )
 
 
+# The keys load_policy reads from policy.json.
+POLICY_KEYS = (
+    "observation_size",
+    "action_size",
+    "action_low",
+    "action_high",
+    "hidden_sizes",
+    "normalize_observations",
+    "final_eval_returns",
+)
+
+
 def load_policy(
     directory: str | Path, seed: int | None = None, verbose: bool = True
 ) -> Callable[[np.ndarray], np.ndarray]:
@@ -122,10 +135,15 @@ def load_policy(
     version = metadata.get("format_version") if isinstance(metadata, dict) else None
     if version not in READABLE_POLICY_FORMATS:
         raise IntegrityError(f"{metadata_path}: unsupported format_version {version!r}")
-    if version >= 2:
+    # digests.json, where it is, is always checked: a format_version edited back to 1 does
+    # not switch the check off.
+    if version >= 2 or (directory / "digests.json").exists():
         verify_manifest(directory)
     elif verbose:
         print(f"load_policy: {directory} was saved without digests (format 1): not verified")
+    missing = sorted(set(POLICY_KEYS) - set(metadata))
+    if missing:
+        raise IntegrityError(f"{metadata_path}: damaged policy description, lacks {missing}")
     returns = [np.nan if r is None else r for r in metadata["final_eval_returns"]]
     if seed is None:
         if not np.isfinite(returns).any():
@@ -136,8 +154,11 @@ def load_policy(
                 f"load_policy: seed {seed} of {len(returns)} (best final evaluation return "
                 f"{returns[seed]:.1f})"
             )
+    elif isinstance(seed, bool) or not isinstance(seed, numbers.Integral):
+        raise ValueError(f"seed must be an integer in [0, {len(returns)}), got {seed!r}")
     elif not 0 <= seed < len(returns):
         raise ValueError(f"seed must be in [0, {len(returns)}), got {seed}")
+    seed = int(seed)
     arrays = ocp.StandardCheckpointer().restore(directory / "policy_params")
     arrays = jax.tree.map(lambda x: jnp.asarray(x[seed]), arrays)
     policy = GaussianPolicy(metadata["action_size"], tuple(metadata["hidden_sizes"]))
@@ -159,6 +180,8 @@ def load_policy(
             raise ValueError(
                 f"observation must have shape (..., {observation_size}), got {obs.shape}"
             )
+        if not np.isfinite(obs).all():  # a NaN in would be a NaN action out, silently
+            raise ValueError("observation contains NaN or infinite values")
         return np.asarray(act(obs))
 
     policy_fn.seed = seed

@@ -183,7 +183,9 @@ def test_a_resume_checks_the_authors_files_and_its_own_options(tmp_path):
     run = tmp_path / "run"
     run.mkdir()
     (run / "paper.json").write_text(json.dumps({"budget": "huge"}))
-    with pytest.raises(SystemExit, match="names an unknown preset 'huge' .known: check, paper, cpu, test"):
+    with pytest.raises(
+        SystemExit, match="names an unknown preset 'huge' .known: check, paper, cpu, test"
+    ):
         paper.main(["--resume", str(run)])
     (run / "paper.json").write_text("{")
     with pytest.raises(SystemExit, match="paper.json: damaged paper run options"):

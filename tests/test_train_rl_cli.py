@@ -117,3 +117,28 @@ def test_finished_work_is_not_overwritten_without_the_flag(run_dir, tmp_path, ca
         train_rl.parse_args(["--out", str(a_file)])
     assert f"--out {a_file} is a file, not a directory" in capsys.readouterr().err
     assert a_file.read_text() == "mine"
+
+
+def test_load_policy_checks_cannot_be_switched_off_and_bad_inputs_are_named(run_dir, tmp_path):
+    import shutil
+
+    from pngail_jax.integrity import IntegrityError
+
+    copy = tmp_path / "policy"
+    shutil.copytree(run_dir, copy)
+    metadata = json.loads((copy / "policy.json").read_text())
+    policy = pngail_jax.load_policy(copy, verbose=False)
+    with pytest.raises(ValueError, match="observation contains NaN or infinite values"):
+        policy(np.array([np.nan, 0.0, 0.0]))
+    for seed in (0.5, "0", True):
+        with pytest.raises(ValueError, match="seed must be an integer in"):
+            pngail_jax.load_policy(copy, seed=seed, verbose=False)
+    assert pngail_jax.load_policy(copy, seed=np.int64(0), verbose=False).seed == 0
+    (copy / "policy.json").write_text(json.dumps({**metadata, "format_version": 1}))
+    with pytest.raises(IntegrityError, match="policy.json: damaged"):  # digests still checked
+        pngail_jax.load_policy(copy, verbose=False)
+    lacking = {k: v for k, v in metadata.items() if k != "hidden_sizes"}
+    (copy / "digests.json").unlink()
+    (copy / "policy.json").write_text(json.dumps({**lacking, "format_version": 1}))
+    with pytest.raises(IntegrityError, match=r"lacks \['hidden_sizes'\]"):
+        pngail_jax.load_policy(copy, verbose=False)
