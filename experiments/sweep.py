@@ -482,14 +482,25 @@ def check_inputs(saved: SavedRun, allow_changed: bool) -> None:
     print(f"WARNING: {listing}; going on (--allow-changed-inputs): the run mixes data sets")
 
 
+def minari_directory(dataset_id: str) -> Path | None:
+    """Where Minari keeps a local dataset (``MINARI_DATASETS_PATH``, default
+    ``~/.minari/datasets``), or None when it is not there."""
+    root = Path(os.environ.get("MINARI_DATASETS_PATH", "~/.minari/datasets")).expanduser()
+    directory = root / dataset_id
+    return directory if directory.is_dir() else None
+
+
 def input_files(config: RunConfig, demos_path: str) -> dict:
     """``{role: integrity.file_record}`` of the files a run reads its demonstrations from
-    (a Minari dataset is named by its id only)."""
+    (a local Minari dataset by its whole directory)."""
     from pngail_jax.demos import released_confidence_path
     from pngail_jax.integrity import file_record
 
     if demos_path.startswith(MINARI_PREFIX):
         files = {"confidence file": config.conf} if config.conf else {}
+        dataset = minari_directory(demos_path.removeprefix(MINARI_PREFIX))
+        if dataset is not None:  # its content, not only its id: a rebuilt dataset differs
+            files["Minari dataset"] = dataset
     else:
         files = {"demonstrations": demos_path}
         if config.conf or demos_path.endswith("_mixture.npy"):

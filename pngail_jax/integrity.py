@@ -80,9 +80,28 @@ def file_digest(path: str | Path) -> str:
 
 
 def file_record(path: str | Path) -> dict:
-    """``{"path", "bytes", "sha256"}`` of one file (the path made absolute)."""
+    """``{"path", "bytes", "sha256"}`` of one file (the path made absolute), or of a whole
+    directory (a Minari dataset): its files' total size, and a digest of their relative
+    paths and contents, so that a dataset rebuilt with other data is told apart."""
     path = Path(path).absolute()
+    if path.is_dir():
+        return {"path": str(path), "bytes": _directory_size(path), "sha256": _tree_digest(path)}
     return {"path": str(path), "bytes": path.stat().st_size, "sha256": file_digest(path)}
+
+
+def _tree_files(directory: Path) -> list[Path]:
+    return sorted(p for p in directory.rglob("*") if p.is_file())
+
+
+def _directory_size(directory: Path) -> int:
+    return sum(p.stat().st_size for p in _tree_files(directory))
+
+
+def _tree_digest(directory: Path) -> str:
+    digest = hashlib.sha256()
+    for path in _tree_files(directory):
+        digest.update(f"{path.relative_to(directory)}\0{file_digest(path)}\n".encode())
+    return f"sha256:{digest.hexdigest()}"
 
 
 def _files(directory: Path) -> list[Path]:
@@ -142,9 +161,11 @@ def changed_inputs(records: dict[str, dict]) -> list[str]:
     changes = []
     for role, record in records.items():
         path = Path(record["path"])
-        if not path.is_file():
+        if not path.exists():
             changes.append(f"{role} {path} is gone")
-        elif path.stat().st_size != record["bytes"] or file_digest(path) != record["sha256"]:
+        elif file_record(path)["bytes"] != record["bytes"] or (
+            file_record(path)["sha256"] != record["sha256"]
+        ):
             changes.append(f"{role} {path} has changed since the run began")
     return changes
 
@@ -190,4 +211,3 @@ def _differences(was, now, prefix: str) -> list[str]:
     if was != now:
         return [f"{prefix.rstrip('.')}: was {json.dumps(was)}, now {json.dumps(now)}"]
     return []
-

@@ -125,3 +125,22 @@ def test_changed_inputs_name_the_file(tmp_path):
     assert changed_inputs(records) == [f"demonstrations {demos} has changed since the run began"]
     demos.unlink()
     assert changed_inputs(records) == [f"demonstrations {demos} is gone"]
+
+
+def test_a_minari_dataset_is_recorded_by_its_content_not_only_its_id(tmp_path, monkeypatch):
+    from experiments import sweep
+    from pngail_jax.integrity import changed_inputs
+    from pngail_jax.run_config import RunConfig
+
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path))
+    dataset = tmp_path / "pendulum" / "mine-v0"
+    (dataset / "data").mkdir(parents=True)
+    (dataset / "data" / "main_data.hdf5").write_bytes(b"episodes")
+    (dataset / "metadata.json").write_text("{}")
+    config = RunConfig(demos="minari:pendulum/mine-v0")
+    records = sweep.input_files(config, "minari:pendulum/mine-v0")
+    assert list(records) == ["Minari dataset"] and records["Minari dataset"]["bytes"] == 10
+    assert changed_inputs(records) == []
+    (dataset / "data" / "main_data.hdf5").write_bytes(b"episodez")  # rebuilt, same size
+    assert changed_inputs(records) == [f"Minari dataset {dataset} has changed since the run began"]
+    assert sweep.input_files(config, "minari:pendulum/other-v0") == {}  # not there: id only
