@@ -342,9 +342,14 @@ def config_from_flags(parser, args) -> RunConfig:
             cpu_devices=args.cpu_devices,
             log=log,
         )
-        return base.replace(**{key: value for key, value in overrides.items() if value is not None})
+        config = base.replace(**{k: v for k, v in overrides.items() if v is not None})
     except ValueError as error:
         parser.error(_flag_message(str(error)))
+    try:  # a --config file's log backends too, before any compile or directory
+        check_backends(config.log)
+    except ImportError as error:
+        parser.error(f"log {list(config.log)}: {error}")
+    return config
 
 
 def _task_of(demos: str | None) -> str | None:
@@ -659,7 +664,10 @@ def build(config: RunConfig, saved: SavedRun | None) -> SweepRun:
     from pngail_jax.grid import Grid, make_cells, stack_cells
     from pngail_jax.train import AdversarialTrainer
 
-    env = run_settings.make_env(config.env, config.settings)
+    try:
+        env = run_settings.make_env(config.env, config.settings)
+    except ValueError as error:  # e.g. a custom factory that raised or returned no Env
+        raise SystemExit(f"environment: {error}") from None
     try:
         demos, demos_path = load_or_make_demos(config, saved.demos_path if saved else None, env)
     except (DemonstrationError, FileNotFoundError, ImportError) as error:

@@ -29,6 +29,8 @@ def enable_compilation_cache(directory: str | Path | None = None) -> Path:
     import jax
 
     directory = Path(directory) if directory is not None else default_cache_dir()
+    if directory.exists() and not directory.is_dir():
+        raise ValueError(f"compilation cache {directory} is a file, not a directory")
     directory.mkdir(parents=True, exist_ok=True)
     jax.config.update("jax_compilation_cache_dir", str(directory))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
@@ -56,4 +58,7 @@ def from_arguments(args) -> Path | None:
     """Applies the flags of ``add_arguments``: the cache directory in use, or None."""
     if args.no_compile_cache:
         return None
-    return enable_compilation_cache(args.compile_cache)
+    try:
+        return enable_compilation_cache(args.compile_cache)
+    except (ValueError, OSError) as error:
+        raise SystemExit(f"--compile-cache: {error}") from None

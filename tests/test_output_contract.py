@@ -173,3 +173,43 @@ def test_the_run_lock_refuses_a_live_holder_and_takes_over_a_dead_ones(tmp_path,
     with pytest.raises(KeyboardInterrupt), run_lock(tmp_path, "sweep"):
         raise KeyboardInterrupt  # Ctrl-C: the lock goes with it
     assert not (tmp_path / LOCK).exists()
+
+
+def test_a_failing_environment_factory_or_cache_path_is_one_line(tmp_path, monkeypatch):
+    import sys
+    import types
+
+    from pngail_jax import compilation, envs
+
+    module = types.ModuleType("user_envs")
+
+    def raises():
+        raise RuntimeError("boom")
+
+    module.raises, module.wrong = raises, lambda: 42
+    monkeypatch.setitem(sys.modules, "user_envs", module)
+    with pytest.raises(ValueError, match="user_envs:raises: the factory raised RuntimeError: boom"):
+        envs.make("user_envs:raises")
+    with pytest.raises(ValueError, match="the factory returned a int, not a pngail_jax.envs.Env"):
+        envs.make("user_envs:wrong")
+    cache_file = tmp_path / "cache"
+    cache_file.write_text("")
+    args = argparse.Namespace(no_compile_cache=False, compile_cache=cache_file)
+    with pytest.raises(SystemExit, match=f"--compile-cache: compilation cache {cache_file} is a"):
+        compilation.from_arguments(args)
+
+
+def test_a_config_files_log_backend_is_checked_before_anything_runs(tmp_path, monkeypatch, capsys):
+    from pngail_jax.run_config import RunConfig
+
+    def missing(backends):
+        if "wandb" in backends:
+            raise ImportError("the 'wandb' tracking backend needs wandb: pip install wandb")
+
+    monkeypatch.setattr(sweep, "check_backends", missing)
+    config = tmp_path / "config.json"
+    config.write_text(json.dumps({**RunConfig().to_dict(), "log": ["wandb"]}))
+    with pytest.raises(SystemExit):
+        sweep.parse_args(["--config", str(config), "--out", str(tmp_path / "run")])
+    assert "log ['wandb']: the 'wandb' tracking backend needs wandb" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()

@@ -91,7 +91,13 @@ def make(name: str, **options) -> Env:
     factory = _factory(name)
     if "max_episode_steps" in options:  # refused before the factory runs, as the built-ins do
         check_positive_int(name, "max_episode_steps", options["max_episode_steps"])
-    return _as_env(name, _build(factory, name, options))
+    try:
+        env = _build(factory, name, options)
+    except ValueError:
+        raise
+    except Exception as error:  # the user's code failed: one line naming it, chained
+        raise ValueError(f"{name}: the factory raised {type(error).__name__}: {error}") from error
+    return _as_env(name, env)
 
 
 def register(name: str, factory: Callable[..., Any], *, overwrite: bool = False) -> None:
