@@ -227,11 +227,16 @@ def output_refusal(
     directory = Path(directory)
     if directory.exists() and not directory.is_dir():
         return f"{flag} {directory} is a file, not a directory"
+    import os
+
     for parent in directory.parents:
         if parent.exists():
             if not parent.is_dir():
                 return f"{flag} {directory}: {parent} is a file, not a directory"
             break
+    nearest = directory if directory.exists() else next(p for p in directory.parents if p.exists())
+    if not os.access(nearest, os.W_OK | os.X_OK):  # e.g. a read-only disk: say so now
+        return f"{flag} {directory}: {nearest} is not writable (read-only disk or permissions)"
     if not directory.exists():
         return None
     contents = sorted(path.name for path in directory.iterdir() if path.name != LOCK)

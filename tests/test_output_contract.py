@@ -213,3 +213,15 @@ def test_a_config_files_log_backend_is_checked_before_anything_runs(tmp_path, mo
         sweep.parse_args(["--config", str(config), "--out", str(tmp_path / "run")])
     assert "log ['wandb']: the 'wandb' tracking backend needs wandb" in capsys.readouterr().err
     assert not (tmp_path / "run").exists()
+
+
+def test_an_unwritable_output_is_refused_before_any_computation(tmp_path, monkeypatch):
+    import os
+
+    real = os.access
+    monkeypatch.setattr(os, "access", lambda p, mode: p != tmp_path and real(p, mode))
+    reason = cli.output_refusal(tmp_path / "run", "sweep")  # as root, chmod would not tell
+    assert (
+        reason
+        == f"--out {tmp_path / 'run'}: {tmp_path} is not writable (read-only disk or permissions)"
+    )
