@@ -4,6 +4,7 @@ import csv
 import json
 
 import numpy as np
+import pytest
 
 from pngail_jax import report, stats
 from pngail_jax.grid import make_cells, nonfinite_cells
@@ -159,3 +160,25 @@ def test_late_average_is_the_mean_of_the_last_tenth_of_the_evaluations():
     markdown = report.summary_markdown(summary, cells, metrics, "t")
     assert "last 10% of training, normalised return" in markdown
     assert "all of training, normalised return" in markdown
+
+
+def test_seeds_puts_a_methods_seeds_side_by_side_with_their_training(tmp_path, capsys):
+    from experiments import seeds
+
+    cells = make_cells(["gail", "pngail"], 3)
+    metrics = synthetic_metrics(cells, num_iterations=20, eval_every=5)
+    summary = report.summarize(cells, metrics, NORMALIZER, 1000.0, 2.0)
+    report.write_metrics_csv(tmp_path / "metrics.csv", cells, metrics, NORMALIZER)
+    report.write_summary(tmp_path / ".", summary, "")
+    table = seeds.main([str(tmp_path), "--method", "pngail", "--share", "0.25"])
+    finals = [row["final_normalized_return"] for row in table]
+    assert finals == sorted(finals, reverse=True) and len(table) == 3  # best seed first
+    row = next(r for r in table if r["seed"] == 1)  # cell 4: pngail seed 1
+    np.testing.assert_allclose(row["kl_late"], metrics["trpo/kl"][4, -5:].mean(), rtol=1e-5)
+    np.testing.assert_allclose(
+        row["disc_acc_agent_all"], metrics["disc/acc_agent"][4].mean(), rtol=1e-4
+    )
+    np.testing.assert_allclose(row["confidence_mae"], metrics["confidence/mae"][4], rtol=1e-6)
+    assert "| seed | final |" in capsys.readouterr().out
+    with pytest.raises(SystemExit, match="no rows of method 'bc'"):
+        seeds.main([str(tmp_path), "--method", "bc"])
