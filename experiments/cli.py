@@ -191,13 +191,13 @@ def check_finite(parser: argparse.ArgumentParser, args, names) -> None:
 
 MARKER = ".pngail-run.json"
 LOCK = ".pngail-run.lock"  # held while a process writes the run (run_lock)
-# Runs made before the marker existed are known by one file of their program's own.
+# Runs made before the marker existed are known by files of their program's own (the most
+# specific first: train_rl writes a config.json too, without the sweep's "resolved").
 LEGACY_MARKS = {
-    "sweep": "config.json",
-    "paper": "paper.json",
-    "train_rl": "policy.json",
-    "make_demos": "demos.npz",
-    "compare_settings": "comparison.json",
+    "paper": ("paper.json",),
+    "compare_settings": ("comparison.json",),
+    "make_demos": ("demos.npz", "normalizer.json"),  # normalizer.json: one cut short
+    "train_rl": ("policy.json",),
 }
 RESUMABLE = {"sweep", "paper"}
 
@@ -206,15 +206,24 @@ def output_owner(directory: Path) -> str | None:
     """The program whose run ``directory`` holds (its marker, else a legacy file), or None."""
     import json
 
-    marker = Path(directory) / MARKER
+    directory = Path(directory)
+    marker = directory / MARKER
     if marker.is_file():
         try:
             return str(json.loads(marker.read_text())["program"])
         except (OSError, ValueError, KeyError, TypeError):
             return None
-    for program, name in LEGACY_MARKS.items():
-        if (Path(directory) / name).exists():
+    for program, names in LEGACY_MARKS.items():
+        if any((directory / name).exists() for name in names):
             return program
+    config = directory / "config.json"
+    if config.is_file():  # the sweep's has what it resolved; train_rl's (cut short) has not
+        try:
+            document = json.loads(config.read_text())
+        except (OSError, ValueError):
+            return None
+        if isinstance(document, dict):
+            return "sweep" if "resolved" in document else "train_rl" if "trpo" in document else None
     return None
 
 
@@ -335,6 +344,12 @@ def run_lock(directory: Path, program: str):
                 pid, host = int(holder["pid"]), str(holder["host"])
             except (OSError, ValueError, KeyError, TypeError):
                 holder, pid, host = {}, None, None
+                try:  # unreadable: being written this moment, or left half-written long ago
+                    young = time.time() - path.stat().st_mtime < 60
+                except OSError:
+                    young = False
+                if young:
+                    raise RunLocked(f"{directory} is being locked by another process") from None
             if pid is not None and (host != me["host"] or _alive(pid)):
                 raise RunLocked(
                     f"{directory} is in use by experiments.{holder.get('program', '?')}, "
@@ -350,6 +365,8 @@ def run_lock(directory: Path, program: str):
         with os.fdopen(descriptor, "w") as file:
             json.dump(me, file)
         break
+    else:  # another process took the lock between our two tries
+        raise RunLocked(f"{directory} was locked by another process as this one started")
     try:
         yield
     finally:

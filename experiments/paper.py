@@ -36,6 +36,7 @@ from experiments.cli import (
     claim_output,
     known_names,
     note_deprecated,
+    output_refusal,
     path_argument,
     prepare_output,
     run_lock,
@@ -635,10 +636,10 @@ def run_grid(grid: GridSpec, directory: Path, flags: list[str], cache_flags) -> 
     start = time.perf_counter()
     if (directory / "config.json").exists():
         print(f"\n== {grid.name}: resuming {directory}", flush=True)
-        sweep.main(["--resume", str(directory), *cache_flags])
+        sweep.main(["--resume", str(directory), *cache_flags], own_interrupt=False)
     else:
         print(f"\n== {grid.name}: {grid.demos.description}", flush=True)
-        sweep.main([*flags, "--out", str(directory), *cache_flags])
+        sweep.main([*flags, "--out", str(directory), *cache_flags], own_interrupt=False)
     return time.perf_counter() - start
 
 
@@ -1035,6 +1036,10 @@ def main(argv=None) -> Path:
     out = args.resume if args.resume is not None else args.out
     try:
         with run_lock(out, "paper"):
+            if args.resume is None:  # the claim again, now that this process holds the lock
+                refusal = output_refusal(out, "paper", args.overwrite)
+                if refusal:
+                    raise SystemExit(refusal)
             return run_paper(args, argv)
     except RunLocked as error:
         raise SystemExit(f"cannot run: {error}") from None

@@ -85,10 +85,12 @@ def seed_table(run: Path, method: str, setting: str | None = None, share: float 
         summary = read_json(run / "summary.json", "run summary")
     except IntegrityError as error:
         raise SystemExit(str(error)) from None
-    labels = [label for label in summary["methods"] if label.split(" [")[0] == method]
-    label = next((lab for lab in labels if setting in lab), labels[0] if labels else None)
+    # summary.json's key: the method, plus its setting when the grid has more than one
+    label = next(
+        (key for key in (f"{method} [{setting}]", method) if key in summary["methods"]), None
+    )
     if label is None:
-        raise SystemExit(f"{run}/summary.json has no method {method!r}")
+        raise SystemExit(f"{run}/summary.json has no method {method!r} at {setting!r}")
     per_seed = {row["seed"]: row for row in summary["methods"][label]["per_seed"]}
     table = []
     for seed, columns in sorted(training.items()):
@@ -96,6 +98,8 @@ def seed_table(run: Path, method: str, setting: str | None = None, share: float 
         row = {"seed": seed}
         for name in ("final_normalized_return", "late_average_normalized_return"):
             value = per_seed.get(seed, {}).get(name)
+            if value is None:  # no normaliser: the raw return, named so
+                value = per_seed.get(seed, {}).get(name.replace("_normalized", ""))
             row[name] = math.nan if value is None else value
         for name in ("confidence_mae", "confidence_rmse"):
             value = per_seed.get(seed, {}).get(name)

@@ -32,6 +32,7 @@ import numpy as np
 
 from experiments.cli import (
     ENV_HELP,
+    MARKER,
     ArgumentParser,
     HelpFormatter,
     RunLocked,
@@ -422,6 +423,11 @@ def check_seal(directory: Path, document: dict) -> None:
     except IntegrityError as error:
         raise SystemExit(f"--resume {directory}: {error}") from None
     if changes is None:
+        if (directory / MARKER).exists():  # made by a version that seals: the seal was removed
+            raise SystemExit(
+                f"--resume {directory}: its seal {SEAL} is missing, so config.json cannot be "
+                "checked; restore it, or start a new run"
+            )
         print(f"note: {directory}/config.json has no seal (an older version made the run)")
     elif changes:
         raise SystemExit(
@@ -757,10 +763,11 @@ def write_config(out: Path, run: SweepRun, argv: list[str]) -> None:
         },
         "provenance": provenance(argv, "experiments.sweep"),
     }
-    write_json(out / "config.json", document)
     # What the run is created with, apart from the file a user may edit: every resume
     # compares config.json with it (provenance aside) and refuses a change, naming it.
+    # Sealed first, so that a config.json never exists without its seal.
     seal(out / SEAL, sealed_part(document))
+    write_json(out / "config.json", document)
 
 
 # -- running chunks with progress and checkpoints --------------------------------------------
@@ -977,7 +984,7 @@ def write_outputs(out: Path, run: SweepRun, progress: Progress) -> str:
         notes.append(f"Partial: {done} of {config.iterations} iterations so far.")
     if config.iterations < 1000:
         notes.append(
-            f"Smoke scale ({config.iterations} iterations); the paper's budget is "
+            f"A reduced budget ({config.iterations} iterations); the paper's is "
             "`--preset paper` (5,000 iterations, GPU)."
         )
     markdown = report.summary_markdown(summary, cells, metrics, title, notes)
@@ -1026,7 +1033,10 @@ def export_policies(out: Path, run: SweepRun, host_state, progress: Progress, wr
     return written
 
 
-def main(argv=None) -> Path:
+def main(argv=None, own_interrupt: bool = True) -> Path:
+    """Runs the sweep of ``argv``. ``own_interrupt``: Ctrl-C ends in one line saying how to
+    continue (a caller that runs several sweeps, as experiments.paper, passes False and
+    says it in its own words)."""
     invocation = parse_args(argv)
     config, saved, writer = start(invocation)
     if not writer:  # another host of a multi-host run: process 0 holds the lock
@@ -1037,10 +1047,14 @@ def main(argv=None) -> Path:
     except RunLocked as error:
         raise SystemExit(f"cannot run: {error}") from None
     except KeyboardInterrupt:
-        where = f"--resume {invocation.out}"
-        raise SystemExit(
-            f"\ninterrupted: finished chunks are kept; {where} continues from the last checkpoint"
-        ) from None
+        if not own_interrupt:
+            raise
+        out = invocation.out
+        if (out / "config.json").exists():
+            message = f"finished chunks are kept; --resume {out} continues from the last one"
+        else:
+            message = "before the run began: nothing was written"
+        raise SystemExit(f"\ninterrupted {message}") from None
 
 
 def already_complete(out: Path) -> bool:
@@ -1099,10 +1113,10 @@ def run_sweep(invocation: Invocation, config: RunConfig, saved, writer: bool) ->
         if refusal:
             raise SystemExit(refusal)
     run = build(config, saved)
-    if writer:
-        prepare_output(out, "sweep", overwrite=saved is None and invocation.args.overwrite)
-        if saved is None:
-            write_config(out, run, invocation.argv)
+    if writer and saved is None:  # a resumed run keeps its directory as it is (no marker
+        # added to an older run: its missing seal would then read as removed)
+        prepare_output(out, "sweep", overwrite=invocation.args.overwrite)
+        write_config(out, run, invocation.argv)
     print(f"-> {out}", flush=True)
     state, progress = initial_state(run, checkpoint)
     if writer and saved is not None:

@@ -208,7 +208,10 @@ def main(argv=None) -> None:
     args = parse_args(argv)
     compilation.from_arguments(args)
     settings = args.settings
-    env = run_settings.make_env(args.env, settings)
+    try:
+        env = run_settings.make_env(args.env, settings)
+    except ValueError as error:  # e.g. a custom factory that raised or returned no Env
+        raise SystemExit(f"environment: {error}") from None
     config = settings.trpo_config(
         args.iterations, fisher=args.fisher, fisher_subsample=args.fisher_subsample
     )

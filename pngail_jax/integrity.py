@@ -163,10 +163,10 @@ def changed_inputs(records: dict[str, dict]) -> list[str]:
         path = Path(record["path"])
         if not path.exists():
             changes.append(f"{role} {path} is gone")
-        elif file_record(path)["bytes"] != record["bytes"] or (
-            file_record(path)["sha256"] != record["sha256"]
-        ):
-            changes.append(f"{role} {path} has changed since the run began")
+        else:
+            now = file_record(path)
+            if now["bytes"] != record["bytes"] or now["sha256"] != record["sha256"]:
+                changes.append(f"{role} {path} has changed since the run began")
     return changes
 
 

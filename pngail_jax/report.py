@@ -198,6 +198,7 @@ def summarize(cells, metrics, normalizer, train_env_steps_per_second, compile_se
         ),
         "train_env_steps_per_second": float(train_env_steps_per_second),
         "compile_seconds": float(compile_seconds),
+        "normalizer": None if normalizer is None else [float(x) for x in normalizer],
     }
 
 
@@ -253,9 +254,12 @@ def summary_markdown(summary, cells, metrics, title: str, notes: Sequence[str] =
     from pngail_jax.methods import reads_confidences
 
     _, groups = group_cells(cells)
-    normalised = any(
-        np.isfinite(row["final_normalized_return_mean"]) for row in summary["methods"].values()
-    )
+    if "normalizer" in summary:  # what the run normalised by (finite values or not)
+        normalised = summary["normalizer"] is not None
+    else:
+        normalised = any(
+            np.isfinite(row["final_normalized_return_mean"]) for row in summary["methods"].values()
+        )
     kind, digits = ("normalised return", 2) if normalised else ("return", 1)
     suffix = "_normalized_return" if normalised else "_return"
     header = (

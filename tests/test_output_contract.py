@@ -38,7 +38,8 @@ def listing(directory):
 @given(
     names=st.lists(
         st.sampled_from(
-            ["README.md", "results.json", "metrics.csv", "notes", *cli.LEGACY_MARKS.values()]
+            ["README.md", "results.json", "metrics.csv", "notes", "config.json"]
+            + [name for names in cli.LEGACY_MARKS.values() for name in names]
         ),
         max_size=3,
         unique=True,
@@ -225,3 +226,21 @@ def test_an_unwritable_output_is_refused_before_any_computation(tmp_path, monkey
         reason
         == f"--out {tmp_path / 'run'}: {tmp_path} is not writable (read-only disk or permissions)"
     )
+
+
+def test_runs_made_before_the_marker_are_known_by_their_own_files(tmp_path):
+    def folder(name, files):
+        directory = tmp_path / name
+        directory.mkdir()
+        for file, text in files.items():
+            (directory / file).write_text(text)
+        return directory
+
+    assert output_owner(folder("sweep", {"config.json": '{"resolved": {}}'})) == "sweep"
+    trpo = folder("trpo", {"config.json": '{"trpo": {}}', "policy.json": "{}"})
+    assert output_owner(trpo) == "train_rl"  # not a sweep: its config.json has no "resolved"
+    assert output_owner(folder("cut", {"config.json": '{"trpo": {}}'})) == "train_rl"
+    assert output_owner(folder("demos", {"normalizer.json": "{}"})) == "make_demos"
+    assert output_owner(folder("mine", {"config.json": '{"lr": 3}'})) is None  # not ours
+    reason = cli.output_refusal(tmp_path / "mine", "sweep", overwrite=True)
+    assert "files it did not make (config.json)" in reason  # --overwrite cannot empty it

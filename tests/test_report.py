@@ -182,3 +182,15 @@ def test_seeds_puts_a_methods_seeds_side_by_side_with_their_training(tmp_path, c
     assert "| seed | final |" in capsys.readouterr().out
     with pytest.raises(SystemExit, match="no rows of method 'bc'"):
         seeds.main([str(tmp_path), "--method", "bc"])
+    # Two settings: each one's numbers from its own rows and summary entry, exactly.
+    cells = make_cells(["pngail"], 2, noise_stds=(0.0, 0.1))
+    metrics = synthetic_metrics(cells, num_iterations=10, eval_every=5)
+    summary = report.summarize(cells, metrics, NORMALIZER, 1000.0, 2.0)
+    report.write_metrics_csv(tmp_path / "metrics.csv", cells, metrics, NORMALIZER)
+    report.write_summary(tmp_path / ".", summary, "")
+    _, table = seeds.seed_table(tmp_path, "pngail", "label_ratio=0.2,noise=0")
+    finals = {row["seed"]: row["final_normalized_return"] for row in table}
+    expected = report.normalize(metrics["eval/return"][:2, -1], NORMALIZER)
+    np.testing.assert_allclose([finals[0], finals[1]], expected)
+    with pytest.raises(SystemExit, match="several settings, pick one with --setting"):
+        seeds.seed_table(tmp_path, "pngail")

@@ -390,3 +390,6 @@ def test_a_damaged_seal_is_refused(finished, tmp_path):
     seal.write_text(seal.read_text().replace("0.2", "0.3"))
     with pytest.raises(SystemExit, match=r"\.config\.sealed\.json: damaged"):
         sweep.main(["--resume", str(out)])
+    seal.unlink()  # a run that carries the marker was sealed: a missing seal is refused
+    with pytest.raises(SystemExit, match=r"its seal \.config\.sealed\.json is missing"):
+        sweep.main(["--resume", str(out)])
