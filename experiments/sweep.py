@@ -925,16 +925,26 @@ def _save_checkpoint(directory: Path, progress: Progress, host_state, writer: bo
     from pngail_jax.integrity import atomic_path, write_json, write_manifest
 
     path = directory / f"chunk_{progress.chunks_done:04d}"
-    save_tree(path / "state", host_state)
-    if not writer:
-        return
-    metrics = {name.replace("/", ":"): value for name, value in progress.metrics.items()}
-    with atomic_path(path / "metrics.npz") as temporary:
-        np.savez(temporary, **metrics)
-    write_json(
-        path / "progress.json", {"chunks_done": progress.chunks_done, "timing": progress.timing}
-    )
-    write_manifest(path)
+    try:
+        save_tree(path / "state", host_state)
+        if not writer:
+            return
+        metrics = {name.replace("/", ":"): value for name, value in progress.metrics.items()}
+        with atomic_path(path / "metrics.npz") as temporary:
+            np.savez(temporary, **metrics)
+        write_json(
+            path / "progress.json",
+            {"chunks_done": progress.chunks_done, "timing": progress.timing},
+        )
+        write_manifest(path)
+    except OSError as error:  # a full disk, a lost mount: one line, and no half checkpoint
+        shutil.rmtree(path, ignore_errors=True)
+        for partial in directory.glob("*.orbax-checkpoint-tmp*"):
+            shutil.rmtree(partial, ignore_errors=True)
+        raise SystemExit(
+            f"cannot write checkpoint {path}: {error.strerror or error}; the chunks before it "
+            f"are kept: free space (or fix the disk), then --resume {directory.parent}"
+        ) from None
     for old in sorted(directory.glob("chunk_*"))[:-2]:
         shutil.rmtree(old)
 

@@ -4,6 +4,7 @@ import csv
 import dataclasses
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -393,3 +394,22 @@ def test_a_damaged_seal_is_refused(finished, tmp_path):
     seal.unlink()  # a run that carries the marker was sealed: a missing seal is refused
     with pytest.raises(SystemExit, match=r"its seal \.config\.sealed\.json is missing"):
         sweep.main(["--resume", str(out)])
+
+
+def test_a_full_disk_while_checkpointing_is_one_line_and_leaves_no_half_checkpoint(
+    tmp_path, monkeypatch
+):
+    import errno
+
+    from pngail_jax import checkpoint
+
+    def full(directory, tree):
+        Path(directory).mkdir(parents=True)  # orbax got as far as its folder
+        (Path(directory).parent.parent / "x.orbax-checkpoint-tmp-1").mkdir()
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(checkpoint, "save_tree", full)
+    progress = sweep.Progress(3, {}, {"eval/return": np.zeros((1, 2))}, {"seconds": 1.0})
+    with pytest.raises(SystemExit, match=r"cannot write checkpoint .*chunk_0003: No space left"):
+        sweep._save_checkpoint(tmp_path / "checkpoints", progress, {}, writer=True)
+    assert not any((tmp_path / "checkpoints").iterdir())  # no chunk_0003, no orbax temporary
