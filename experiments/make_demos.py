@@ -145,8 +145,11 @@ def write_outputs(out: Path, demos: Demonstrations, normalizer: dict) -> Path:
 def main(argv=None) -> Path:
     args = parse_args(argv)
     compilation.from_arguments(args)
-    prepare_output(args.out, "make_demos", args.overwrite)
-    env = run_settings.make_env(args.env, args.settings)
+    try:
+        env = run_settings.make_env(args.env, args.settings)
+    except ValueError as error:  # e.g. a custom factory that raised or returned no Env
+        raise SystemExit(f"environment: {error}") from None
+    prepare_output(args.out, "make_demos", args.overwrite)  # an old run kept until here
     config = args.settings.trpo_config(args.iterations)
     trainer = TRPOTrainer(config, env)
     policy = trainer.trpo.policy
