@@ -141,8 +141,9 @@ BUDGETS = {
         settings={"pendulum": [], "mujoco": []},
         demo_settings={"pendulum": [], "mujoco": []},
     ),
-    # The largest a 2-core CPU allows for Pendulum-v1 grids (about half an hour each, 45
-    # cells); MuJoCo tasks at this budget would take days there.
+    # A tenth of the paper's budget (2.5 M steps per run): Pendulum-v1 grids in about half
+    # an hour each on a 2-core CPU, the MuJoCo grids of the authors' files on the C engine in
+    # 1.5-2 hours each (Hopper-v4: 122 minutes beside other jobs; docs/results.md).
     "cpu": Budget(
         iterations=500,
         seeds=5,
@@ -955,7 +956,7 @@ def parse_args(argv=None) -> argparse.Namespace:
         choices=(*BUDGETS, *RENAMED_BUDGETS),
         help="check: everything on a CPU, 20 iterations x 2 seeds, a check not a result "
         "(the default); cpu: 500 iterations x 5 seeds (Pendulum-v1 grids in half an hour, "
-        "MuJoCo grids in about 1.5 hours each on a 2-core CPU); paper: 5,000 iterations x 5 "
+        "MuJoCo grids in 1.5-2 hours each on a 2-core CPU); paper: 5,000 iterations x 5 "
         "seeds (a GPU); test: the test suite's. --budget is the old name",
     )
     parser.add_argument(
