@@ -49,7 +49,7 @@ from pngail_jax import compilation
 from pngail_jax import settings as run_settings
 from pngail_jax.checkpoint import save_trpo_policies
 from pngail_jax.demos import Demonstrations, save_npz
-from pngail_jax.demos.generate import normalized_return, rollout_episodes, uniform_random_actions
+from pngail_jax.demos.generate import normalized_return, random_policy_return, rollout_episodes
 from pngail_jax.integrity import atomic_path, atomic_write_text
 from pngail_jax.rl import TRPOHyperparams, TRPOTrainer
 
@@ -191,10 +191,7 @@ def main(argv=None) -> Path:
 
     print("2/3 measuring random and optimal returns", flush=True)
     random_key, optimal_key, intermediate_key = jax.random.split(measure_key, 3)
-    random_episodes = jax.jit(lambda keys: rollout_episodes(env, uniform_random_actions(env), keys))
-    random_return = float(
-        random_episodes(jax.random.split(random_key, args.measure_episodes)).returns.mean()
-    )
+    random_return = random_policy_return(env, random_key, args.measure_episodes)
     best = max(snapshots, key=lambda snapshot: snapshot.eval_return)
     optimal_return = float(measure(best, optimal_key, args.measure_episodes).returns.mean())
     beats_random = optimal_return > random_return

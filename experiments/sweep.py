@@ -637,13 +637,10 @@ def resolve_normalizer(config: RunConfig, demos, env) -> tuple[list[float] | Non
         return [config.random_return, config.optimal_return], "--random-return, --optimal-return"
     import jax
 
-    from pngail_jax.demos.generate import rollout_episodes, uniform_random_actions
+    from pngail_jax.demos.generate import random_policy_return
 
-    keys = jax.random.split(
-        jax.random.fold_in(jax.random.key(config.seed), 7), RANDOM_RETURN_EPISODES
-    )
-    episodes = jax.jit(lambda k: rollout_episodes(env, uniform_random_actions(env), k))(keys)
-    random_return = float(episodes.returns.mean())
+    key = jax.random.fold_in(jax.random.key(config.seed), 7)
+    random_return = random_policy_return(env, key, RANDOM_RETURN_EPISODES)
     if not config.optimal_return > random_return:
         raise SystemExit(
             f"--optimal-return {config.optimal_return:g} is not above the random policy's "

@@ -70,6 +70,14 @@ def uniform_random_actions(env: envs.Env):
     return act
 
 
+def random_policy_return(env: envs.Env, key: jax.Array, num_episodes: int) -> float:
+    """The mean return of ``num_episodes`` episodes of uniform random actions (the
+    normalised return's 0), episode ``i`` drawn from ``split(key, num_episodes)[i]``."""
+    keys = jax.random.split(key, num_episodes)
+    episodes = jax.jit(lambda k: rollout_episodes(env, uniform_random_actions(env), k))(keys)
+    return float(episodes.returns.mean())
+
+
 def normalized_return(returns, random_return: float, optimal_return: float):
     """(R - R_random) / (R_optimal - R_random), the paper's normalisation."""
     return (np.asarray(returns) - random_return) / (optimal_return - random_return)
