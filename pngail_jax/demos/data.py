@@ -448,41 +448,12 @@ def load_released(
         )
     named = mixture_path.name.endswith("_mixture.npy")
     env_name = mixture_path.name.removesuffix("_mixture.npy") if named else None
-    source = "given"
-    if action_scale is None:
-        action_scale = RELEASED_ACTION_SCALES.get(env_name, 1.0)
-        source = "known" if env_name in RELEASED_ACTION_SCALES else "default"
-    if not (math.isfinite(action_scale) and action_scale > 0):
-        raise DemonstrationError(f"action_scale must be positive and finite, got {action_scale!r}")
+    action_scale, source = _action_scale(env_name, action_scale)
     if conf_path is None and named:
         conf_path = released_confidence_path(mixture_path)
     where = f"{'mixture' if named else 'rows'} file {mixture_path}"
-    if observation_size is None and env_name in RELEASED_OBSERVATION_SIZES:
-        observation_size = RELEASED_OBSERVATION_SIZES[env_name]
-        action_size = RELEASED_ACTION_SIZES[env_name]
-        sizes_of = env_name
-    elif observation_size is None:
-        known = f"unknown environment {env_name!r}" if named else "not an authors' file"
-        raise DemonstrationError(
-            f"{where}: {known}; give the environment (--env; in Python, observation_size) "
-            f"to split its rows [observation, action] (authors' files: "
-            f"{', '.join(RELEASED_OBSERVATION_SIZES)})"
-        )
-    else:
-        sizes_of = "the environment's"
-    rows = _load_numpy(mixture_path, where.removesuffix(f" {mixture_path}"))
+    rows, observation_size = _rows(mixture_path, where, env_name, observation_size, action_size)
     confidence = None if conf_path is None else _load_numpy(conf_path, "confidence file")
-    if rows.ndim == 2 and action_size is not None:
-        if rows.shape[1] != observation_size + action_size:
-            raise DemonstrationError(
-                f"{where}: rows have {rows.shape[1]} columns, but {sizes_of} rows [s, a] have "
-                f"{observation_size} + {action_size} columns (observation + action)"
-            )
-    if rows.ndim != 2 or not 0 < observation_size < rows.shape[1]:
-        raise DemonstrationError(
-            f"{where}: rows of shape {rows.shape} cannot be split "
-            f"into {observation_size} observation columns and actions"
-        )
     if confidence is not None:
         confidence = _released_confidence(confidence, conf_path, mixture_path, len(rows))
     metadata = {
@@ -498,16 +469,9 @@ def load_released(
             "optimal_return": optimal_return,
             "normalizer_source": "paper Table 3",
         }
-    trajectory_ids = None
-    if trajectory_length is not None:
-        per_row = np.zeros(len(rows)) if confidence is None else confidence
-        trajectory_ids = _consecutive_trajectories(per_row, trajectory_length, where)
-    elif env_name in RELEASED_TRAJECTORY_LENGTHS:
-        trajectory_length = RELEASED_TRAJECTORY_LENGTHS[env_name]
-        try:
-            trajectory_ids = _consecutive_trajectories(confidence, trajectory_length, where)
-        except DemonstrationError:  # not the documented layout: rows without trajectories
-            trajectory_length = None
+    trajectory_ids, trajectory_length = _trajectories(
+        env_name, trajectory_length, confidence, len(rows), where
+    )
     if trajectory_ids is not None:
         metadata["trajectory_length"] = trajectory_length
     with np.errstate(over="ignore"):  # an overflow to inf is refused below, naming the file
@@ -522,6 +486,63 @@ def load_released(
         )
     except DemonstrationError as error:
         raise DemonstrationError(f"{where}: {error}") from None
+
+
+def _action_scale(env_name: str | None, action_scale: float | None) -> tuple[float, str]:
+    """The scale to apply and where it came from: "given", "known" (an authors' file's,
+    ``RELEASED_ACTION_SCALES``) or "default" (1)."""
+    source = "given"
+    if action_scale is None:
+        action_scale = RELEASED_ACTION_SCALES.get(env_name, 1.0)
+        source = "known" if env_name in RELEASED_ACTION_SCALES else "default"
+    if not (math.isfinite(action_scale) and action_scale > 0):
+        raise DemonstrationError(f"action_scale must be positive and finite, got {action_scale!r}")
+    return action_scale, source
+
+
+def _rows(path: Path, where: str, env_name, observation_size, action_size):
+    """(float[N, O + A] rows, O) of a rows file, split by the given sizes or an authors' file's
+    known ones; raises naming the file when they do not fit or none are known."""
+    sizes_of = "the environment's"
+    if observation_size is None and env_name in RELEASED_OBSERVATION_SIZES:
+        observation_size = RELEASED_OBSERVATION_SIZES[env_name]
+        action_size = RELEASED_ACTION_SIZES[env_name]
+        sizes_of = env_name
+    elif observation_size is None:
+        known = f"unknown environment {env_name!r}" if env_name else "not an authors' file"
+        raise DemonstrationError(
+            f"{where}: {known}; give the environment (--env; in Python, observation_size) "
+            f"to split its rows [observation, action] (authors' files: "
+            f"{', '.join(RELEASED_OBSERVATION_SIZES)})"
+        )
+    rows = _load_numpy(path, where.removesuffix(f" {path}"))
+    if rows.ndim == 2 and action_size is not None:
+        if rows.shape[1] != observation_size + action_size:
+            raise DemonstrationError(
+                f"{where}: rows have {rows.shape[1]} columns, but {sizes_of} rows [s, a] have "
+                f"{observation_size} + {action_size} columns (observation + action)"
+            )
+    if rows.ndim != 2 or not 0 < observation_size < rows.shape[1]:
+        raise DemonstrationError(
+            f"{where}: rows of shape {rows.shape} cannot be split "
+            f"into {observation_size} observation columns and actions"
+        )
+    return rows, observation_size
+
+
+def _trajectories(env_name, trajectory_length, confidence, num_rows: int, where: str):
+    """(int32[N] trajectory ids or None, their length): consecutive trajectories of the given
+    length, else of the file's documented layout when it fits, else none."""
+    if trajectory_length is not None:
+        per_row = np.zeros(num_rows) if confidence is None else confidence
+        return _consecutive_trajectories(per_row, trajectory_length, where), trajectory_length
+    if env_name in RELEASED_TRAJECTORY_LENGTHS:
+        length = RELEASED_TRAJECTORY_LENGTHS[env_name]
+        try:
+            return _consecutive_trajectories(confidence, length, where), length
+        except DemonstrationError:  # not the documented layout: rows without trajectories
+            pass
+    return None, None
 
 
 def _consecutive_trajectories(confidence: np.ndarray, length: int, where: str) -> np.ndarray:
