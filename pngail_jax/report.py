@@ -287,8 +287,21 @@ def summary_markdown(summary, cells, metrics, title: str, notes: Sequence[str] =
             mae_text,
         ]
         lines.append("| " + " | ".join(columns) + " |")
+    lines += ["", _table_note(normalised)]
+    lines += _improvement_lines(summary.get("probability_of_improvement", {}))
+    lines += _per_seed_lines(summary)
     lines += [
         "",
+        f"Training throughput: {summary['train_env_steps_per_second']:,.0f} env steps/s "
+        f"(adversarial phase, all cells); compile {summary['compile_seconds']:.1f} s.",
+    ]
+    lines += [f"\n{note}" for note in notes]
+    return "\n".join(lines) + "\n"
+
+
+def _table_note(normalised: bool) -> str:
+    """What summary.md's main table's columns and spreads are."""
+    return (
         "Final return: deterministic (mean-action) evaluation at the last iteration; last 10% "
         "of training: the mean of a seed's evaluations in the last tenth of training (our "
         "reading of the paper's Table 4 'average reward after training convergence'); all of "
@@ -304,22 +317,31 @@ def summary_markdown(summary, cells, metrics, title: str, notes: Sequence[str] =
         )
         + "Confidence MAE: the confidences the method's loss uses on the unlabelled rows "
         "(IC-GAIL reads only D_c's given ones, so its value is that of the mean labelled "
-        "confidence, which it never reads).",
+        "confidence, which it never reads)."
+    )
+
+
+def _improvement_lines(improvement: dict) -> list[str]:
+    """summary.md's table of PN-GAIL's probability of improvement over each baseline."""
+    if not improvement:
+        return []
+    lines = [
+        "",
+        "Probability of improvement: P(a PN-GAIL seed's final return > a baseline seed's), "
+        "95% bootstrap interval.",
+        "",
+        "| over | P(PN-GAIL > baseline) | 95% CI |",
+        "|---|---:|---:|",
     ]
-    improvement = summary.get("probability_of_improvement", {})
-    if improvement:
-        lines += [
-            "",
-            "Probability of improvement: P(a PN-GAIL seed's final return > a baseline seed's), "
-            "95% bootstrap interval.",
-            "",
-            "| over | P(PN-GAIL > baseline) | 95% CI |",
-            "|---|---:|---:|",
-        ]
-        for label, value in improvement.items():
-            low, high = value["ci95"]
-            lines.append(f"| {label} | {value['estimate']:.2f} | [{low:.2f}, {high:.2f}] |")
-    lines += [
+    for label, value in improvement.items():
+        low, high = value["ci95"]
+        lines.append(f"| {label} | {value['estimate']:.2f} | [{low:.2f}, {high:.2f}] |")
+    return lines
+
+
+def _per_seed_lines(summary: dict) -> list[str]:
+    """summary.md's per-seed table: each seed's three returns, raw and normalised."""
+    lines = [
         "",
         "Per seed:",
         "",
@@ -336,13 +358,7 @@ def summary_markdown(summary, cells, metrics, title: str, notes: Sequence[str] =
             )
             cells_text = " | ".join("n/a" if not np.isfinite(v) else f"{v:.2f}" for v in numbers)
             lines.append(f"| {label} | {seed['seed']} | {cells_text} |")
-    lines += [
-        "",
-        f"Training throughput: {summary['train_env_steps_per_second']:,.0f} env steps/s "
-        f"(adversarial phase, all cells); compile {summary['compile_seconds']:.1f} s.",
-    ]
-    lines += [f"\n{note}" for note in notes]
-    return "\n".join(lines) + "\n"
+    return lines
 
 
 def json_safe(value):
