@@ -128,37 +128,8 @@ def load_policy(
     With several seeds, ``seed=None`` picks the best final evaluation return and says which.
     """
     directory = Path(directory).absolute()
-    metadata_path = directory / "policy.json"
-    if not metadata_path.exists():
-        raise FileNotFoundError(f"no policy.json in {directory}: not a saved policy directory")
-    metadata = read_json(metadata_path, "policy description")
-    version = metadata.get("format_version") if isinstance(metadata, dict) else None
-    if version not in READABLE_POLICY_FORMATS:
-        raise IntegrityError(f"{metadata_path}: unsupported format_version {version!r}")
-    # digests.json, where it is, is always checked: a format_version edited back to 1 does
-    # not switch the check off.
-    if version >= 2 or (directory / "digests.json").exists():
-        verify_manifest(directory)
-    elif verbose:
-        print(f"load_policy: {directory} was saved without digests (format 1): not verified")
-    missing = sorted(set(POLICY_KEYS) - set(metadata))
-    if missing:
-        raise IntegrityError(f"{metadata_path}: damaged policy description, lacks {missing}")
-    returns = [np.nan if r is None else r for r in metadata["final_eval_returns"]]
-    if seed is None:
-        if not np.isfinite(returns).any():
-            raise ValueError(f"{metadata_path}: no seed has a finite final return; pass seed=")
-        seed = int(np.nanargmax(returns))
-        if verbose and len(returns) > 1:
-            print(
-                f"load_policy: seed {seed} of {len(returns)} (best final evaluation return "
-                f"{returns[seed]:.1f})"
-            )
-    elif isinstance(seed, bool) or not isinstance(seed, numbers.Integral):
-        raise ValueError(f"seed must be an integer in [0, {len(returns)}), got {seed!r}")
-    elif not 0 <= seed < len(returns):
-        raise ValueError(f"seed must be in [0, {len(returns)}), got {seed}")
-    seed = int(seed)
+    metadata = _policy_metadata(directory, verbose)
+    seed = _pick_seed(metadata, seed, directory / "policy.json", verbose)
     arrays = ocp.StandardCheckpointer().restore(directory / "policy_params")
     arrays = jax.tree.map(lambda x: jnp.asarray(x[seed]), arrays)
     policy = GaussianPolicy(metadata["action_size"], tuple(metadata["hidden_sizes"]))
@@ -187,6 +158,47 @@ def load_policy(
     policy_fn.seed = seed
     policy_fn.metadata = metadata
     return policy_fn
+
+
+def _policy_metadata(directory: Path, verbose: bool) -> dict:
+    """policy.json of a saved policy, its files checked against digests.json (whenever that
+    is there), and the keys ``load_policy`` reads present."""
+    metadata_path = directory / "policy.json"
+    if not metadata_path.exists():
+        raise FileNotFoundError(f"no policy.json in {directory}: not a saved policy directory")
+    metadata = read_json(metadata_path, "policy description")
+    version = metadata.get("format_version") if isinstance(metadata, dict) else None
+    if version not in READABLE_POLICY_FORMATS:
+        raise IntegrityError(f"{metadata_path}: unsupported format_version {version!r}")
+    # digests.json, where it is, is always checked: a format_version edited back to 1 does
+    # not switch the check off.
+    if version >= 2 or (directory / "digests.json").exists():
+        verify_manifest(directory)
+    elif verbose:
+        print(f"load_policy: {directory} was saved without digests (format 1): not verified")
+    missing = sorted(set(POLICY_KEYS) - set(metadata))
+    if missing:
+        raise IntegrityError(f"{metadata_path}: damaged policy description, lacks {missing}")
+    return metadata
+
+
+def _pick_seed(metadata: dict, seed, metadata_path: Path, verbose: bool) -> int:
+    """``seed`` checked, or the seed with the best final evaluation return (said so)."""
+    returns = [np.nan if r is None else r for r in metadata["final_eval_returns"]]
+    if seed is None:
+        if not np.isfinite(returns).any():
+            raise ValueError(f"{metadata_path}: no seed has a finite final return; pass seed=")
+        seed = int(np.nanargmax(returns))
+        if verbose and len(returns) > 1:
+            print(
+                f"load_policy: seed {seed} of {len(returns)} (best final evaluation return "
+                f"{returns[seed]:.1f})"
+            )
+    elif isinstance(seed, bool) or not isinstance(seed, numbers.Integral):
+        raise ValueError(f"seed must be an integer in [0, {len(returns)}), got {seed!r}")
+    elif not 0 <= seed < len(returns):
+        raise ValueError(f"seed must be in [0, {len(returns)}), got {seed}")
+    return int(seed)
 
 
 def is_key(x) -> bool:
