@@ -663,7 +663,7 @@ def build(config: RunConfig, saved: SavedRun | None) -> SweepRun:
     """Environment, demonstrations, trainer and the compiled grid of ``config``."""
     import jax
 
-    from pngail_jax.demos import DemonstrationError, action_scale_note
+    from pngail_jax.demos import DemonstrationError
     from pngail_jax.grid import Grid, make_cells, stack_cells
     from pngail_jax.train import AdversarialTrainer
 
@@ -706,6 +706,26 @@ def build(config: RunConfig, saved: SavedRun | None) -> SweepRun:
         f"  {run_settings.describe(config.settings, env)}",
         flush=True,
     )
+    announce_inputs(demos, trainer, normalizer, normalizer_source, config, saved)
+    with ticking("compiling"):
+        grid = Grid(trainer, inputs, chunk_blocks, devices)
+    print(
+        f"compiled in {grid.compile_seconds:.1f} s ({grid.num_cells} cells"
+        f"{f', padded to {grid.num_padded}' if grid.num_padded != grid.num_cells else ''}, "
+        f"{grid.iterations_per_chunk} iterations per chunk)",
+        flush=True,
+    )
+    action_scale = float(demos.metadata.get("action_scale", 1.0))
+    return SweepRun(
+        config, env, trainer, cells, grid, demos_path, normalizer, action_scale, normalizer_source
+    )
+
+
+def announce_inputs(demos, trainer, normalizer, normalizer_source, config, saved) -> None:
+    """The notes on what the run reads: its normaliser, an applied action scale, clipped
+    demonstration actions."""
+    from pngail_jax.demos import action_scale_note
+
     if normalizer is None:
         print(
             "note: the demonstrations carry no random/optimal returns: no normalised return "
@@ -716,7 +736,6 @@ def build(config: RunConfig, saved: SavedRun | None) -> SweepRun:
             f"normalised return: random {normalizer[0]:.1f}, optimal {normalizer[1]:.1f} "
             f"({normalizer_source})"
         )
-    action_scale = float(demos.metadata.get("action_scale", 1.0))
     if action_scale_note(demos):
         print(action_scale_note(demos))
     if trainer.num_clipped_rows:
@@ -725,17 +744,6 @@ def build(config: RunConfig, saved: SavedRun | None) -> SweepRun:
             "actions beyond the bounds; the discriminator sees them clipped, as the agent's "
             "(docs/methods.md)"
         )
-    with ticking("compiling"):
-        grid = Grid(trainer, inputs, chunk_blocks, devices)
-    print(
-        f"compiled in {grid.compile_seconds:.1f} s ({grid.num_cells} cells"
-        f"{f', padded to {grid.num_padded}' if grid.num_padded != grid.num_cells else ''}, "
-        f"{grid.iterations_per_chunk} iterations per chunk)",
-        flush=True,
-    )
-    return SweepRun(
-        config, env, trainer, cells, grid, demos_path, normalizer, action_scale, normalizer_source
-    )
 
 
 def write_config(out: Path, run: SweepRun, argv: list[str]) -> None:
