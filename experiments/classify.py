@@ -109,6 +109,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     )
     args = parser.parse_args(argv)
     note_deprecated(argv, DEPRECATED_FLAGS)
+    check_arguments(parser, args)
+    return args
+
+
+def check_arguments(parser: argparse.ArgumentParser, args) -> None:
+    """Exits through ``parser.error`` naming the first flag with a bad value."""
     args.classifiers = known_names(parser, args.classifiers, METHODS, "classifier")
     if not 0 < args.label_ratio < 1:  # also refuses nan
         parser.error(f"--label-ratio must be in (0, 1), got {args.label_ratio}")
@@ -130,7 +136,6 @@ def parse_args(argv=None) -> argparse.Namespace:
         parser.error(f"--json {args.json} is a directory; give the path of a file to write")
     if args.json is not None and args.json.exists() and not args.overwrite:
         parser.error(f"--json {args.json} exists: choose another file, or pass --overwrite")
-    return args
 
 
 # The sweep's names for the same things (the old spellings still work, with a note).
