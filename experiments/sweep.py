@@ -127,39 +127,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="FILE",
         help="start a new run from a saved config.json (flags given override it) (default: none)",
     )
-    add(
-        "--demos",
-        type=text_argument,
-        help="*_mixture.npy (authors' layout), *.npz, or minari:<dataset id> "
-        "(default: made by experiments.make_demos and cached)",
-    )
-    add(
-        "--conf",
-        type=text_argument,
-        help="confidence file (default: the mixture's sibling; per episode for Minari)",
-    )
-    add(
-        "--confidence-field",
-        help="Minari: the per-episode field holding confidences (default: none)",
-    )
-    add(
-        "--action-scale",
-        type=float,
-        help="multiplies stored actions (default: an authors' file's known scale, 2 for "
-        "their Pendulum file, whose torques are stored halved; else 1)",
-    )
-    add(
-        "--optimal-return",
-        type=float,
-        help="the normalised return's 1: the best return the task allows (default: the "
-        "demonstrations' own, Table 3 for an authors' file; none for a file of rows)",
-    )
-    add(
-        "--random-return",
-        type=float,
-        help="the normalised return's 0 (default: the demonstrations' own; with "
-        "--optimal-return alone, measured from uniform random actions)",
-    )
+    _add_demonstration_flags(add)
     add(
         "--num-demos",
         type=int,
@@ -204,6 +172,52 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"comma-separated logging backends, from {', '.join(LOG_BACKENDS)}, fed once per "
         "chunk (default: none)",
     )
+    _add_output_flags(add)
+    run_settings.add_arguments(parser)
+    compilation.add_arguments(parser)
+    _add_multihost_flags(parser)
+    return parser
+
+
+def _add_demonstration_flags(add) -> None:
+    """The flags that name the demonstrations and how to read them."""
+    add(
+        "--demos",
+        type=text_argument,
+        help="*_mixture.npy (authors' layout), *.npz, or minari:<dataset id> "
+        "(default: made by experiments.make_demos and cached)",
+    )
+    add(
+        "--conf",
+        type=text_argument,
+        help="confidence file (default: the mixture's sibling; per episode for Minari)",
+    )
+    add(
+        "--confidence-field",
+        help="Minari: the per-episode field holding confidences (default: none)",
+    )
+    add(
+        "--action-scale",
+        type=float,
+        help="multiplies stored actions (default: an authors' file's known scale, 2 for "
+        "their Pendulum file, whose torques are stored halved; else 1)",
+    )
+    add(
+        "--optimal-return",
+        type=float,
+        help="the normalised return's 1: the best return the task allows (default: the "
+        "demonstrations' own, Table 3 for an authors' file; none for a file of rows)",
+    )
+    add(
+        "--random-return",
+        type=float,
+        help="the normalised return's 0 (default: the demonstrations' own; with "
+        "--optimal-return alone, measured from uniform random actions)",
+    )
+
+
+def _add_output_flags(add) -> None:
+    """Where a run writes, and how it continues or replaces one."""
     add("--out", type=path_argument, help="output directory (default runs/<timestamp>)")
     add(
         "--overwrite",
@@ -223,8 +237,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="with --resume: go on although a demonstration, confidence or cache file differs "
         "from the one the run began with (the run then mixes two data sets) (default: refuse)",
     )
-    run_settings.add_arguments(parser)
-    compilation.add_arguments(parser)
+
+
+def _add_multihost_flags(parser) -> None:
     multihost = parser.add_argument_group(
         "multi-host (run the same command on every host; process 0 writes the outputs)"
     )
@@ -233,7 +248,6 @@ def build_parser() -> argparse.ArgumentParser:
     )
     multihost.add_argument("--num-processes", type=int, help="(default: one host)")
     multihost.add_argument("--process-id", type=int, help="(default: one host)")
-    return parser
 
 
 def parse_args(argv=None) -> Invocation:
