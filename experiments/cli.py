@@ -385,6 +385,4 @@ def text_argument(text: str) -> str:
 def path_argument(text: str) -> Path:
     """An argparse ``type`` for paths: an empty string is refused (``Path("")`` would mean
     the current directory)."""
-    if not text.strip():
-        raise argparse.ArgumentTypeError("must name a path, got ''")
-    return Path(text)
+    return Path(text_argument(text))
