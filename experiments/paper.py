@@ -1199,7 +1199,7 @@ def run_grids(grids, demos, out: Path, budget: Budget, cache_flags, physics) -> 
 def plan_eta(seconds: list[float], remaining: int) -> str:
     """', about T left for the plan' from the mean of the grids run so far (grids differ, so a
     rough guide), or '' before any has run."""
-    from experiments.sweep import format_seconds
+    from pngail_jax.runner import format_seconds
 
     if not seconds:
         return ""

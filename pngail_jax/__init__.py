@@ -1,6 +1,35 @@
-"""pngail-jax: PN-GAIL and its baselines for imitation from imperfect demonstrations, in JAX."""
+"""pngail-jax: PN-GAIL and its baselines for imitation from imperfect demonstrations, in JAX.
+
+The user's path, importable from here (each loaded on first use, so ``import pngail_jax``
+stays fast): ``run`` / ``RunConfig`` / ``RunResult`` / ``RunError`` (a whole run with its
+outputs, ``pngail_jax.runner``), ``load_demonstrations``, the trainers (``AdversarialTrainer``,
+``AdversarialConfig``), grids (``make_cells``, ``stack_cells``, ``Grid``) and ``load_policy``.
+"""
+
+import importlib
 
 __version__ = "0.1.0"
+
+# name -> the module that defines it
+_EXPORTS = {
+    "run": "pngail_jax.runner",
+    "RunResult": "pngail_jax.runner",
+    "RunError": "pngail_jax.runner",
+    "RunConfig": "pngail_jax.run_config",
+    "load_demonstrations": "pngail_jax.demos",
+    "AdversarialTrainer": "pngail_jax.train",
+    "AdversarialConfig": "pngail_jax.train",
+    "make_cells": "pngail_jax.grid",
+    "stack_cells": "pngail_jax.grid",
+    "Grid": "pngail_jax.grid",
+}
+__all__ = ["load_policy", *_EXPORTS]
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(_EXPORTS[name]), name)
+    raise AttributeError(f"module 'pngail_jax' has no attribute {name!r}")
 
 
 def load_policy(directory, seed=None, verbose=True):

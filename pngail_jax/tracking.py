@@ -1,4 +1,5 @@
-"""Optional experiment tracking for the sweep program: TensorBoard and Weights & Biases.
+"""Feedback on long work: optional experiment tracking (TensorBoard, Weights & Biases) and
+``ticking``, the elapsed time of a step that prints nothing itself.
 
 Off by default: ``open_logger(directory, [], ...)`` is ``None``. After each chunk the sweep
 calls ``RunLogger.log_chunk(cells, metrics, first_iteration)`` with the chunk's host metrics
@@ -14,6 +15,7 @@ setting reads ``gail_label_ratio_0.2_noise_0``, the same in both backends.
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import json
 import re
@@ -191,3 +193,36 @@ def open_logger(
         RunLogger(writers).close()  # the backends opened before the failure
         raise
     return RunLogger(writers)
+
+
+@contextlib.contextmanager
+def ticking(label: str, every: float | None = None, stream=None):
+    """Shows the elapsed time of a long step that prints nothing itself (a first compile takes
+    minutes on a CPU): on a terminal, ``label ... 42 s`` rewritten in place each second;
+    elsewhere (a log file), a line every ``every`` seconds (default 30)."""
+    import sys
+    import threading
+    import time
+
+    stream = stream or sys.stdout
+    live = stream.isatty()
+    interval = every if every is not None else (1.0 if live else 30.0)
+    start, done = time.perf_counter(), threading.Event()
+
+    def tick():
+        while not done.wait(interval):
+            elapsed = time.perf_counter() - start
+            text = f"{label} ... {elapsed:.0f} s"
+            stream.write(f"\r{text}" if live else f"{text}\n")
+            stream.flush()
+
+    print(f"{label} ...", file=stream, end="" if live else "\n", flush=True)
+    thread = threading.Thread(target=tick, daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        done.set()
+        thread.join()
+        if live:
+            stream.write("\n")

@@ -4,6 +4,9 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
+import pytest
+
 
 def run_x64(test_file: str, function_name: str) -> dict:
     """Runs ``function_name()`` from ``test_file`` in a fresh Python with float64 JAX.
@@ -57,3 +60,32 @@ def metrics_numbers(path: Path) -> list[dict]:
         rows = list(csv.DictReader(file))
     assert rows and "wall_seconds" in rows[0], path
     return [{k: v for k, v in row.items() if k != "wall_seconds"} for row in rows]
+
+
+# -- a tiny sweep (Pendulum-v1, 100 rows, 2 methods x 2 seeds x 4 iterations) ---------------
+# Shared by the sweep's and the runner's tests.
+
+
+@pytest.fixture(scope="module")
+def demos_path(tmp_path_factory):
+    from pngail_jax.demos import Demonstrations, save_npz
+
+    rng = np.random.default_rng(0)
+    demos = Demonstrations(
+        observations=rng.normal(size=(100, 3)).astype(np.float32),
+        actions=rng.uniform(-2, 2, size=(100, 1)).astype(np.float32),
+        confidence=np.repeat([1.0, 0.4, 0.45, 0.5, 0.35], 20).astype(np.float32),
+        metadata={"env": "Pendulum-v1", "random_return": -1200.0, "optimal_return": -150.0},
+    )
+    path = tmp_path_factory.mktemp("demos") / "demos.npz"
+    save_npz(path, demos)
+    return path
+
+
+def tiny_sweep_args(demos_path, out):
+    return [
+        "--demos", str(demos_path), "--methods", "gail,pngail", "--seeds", "2",
+        "--iterations", "4", "--eval-every", "1", "--chunk-iterations", "2",
+        "--num-envs", "4", "--unroll-length", "50", "--classifier-steps", "50",
+        "--cpu-devices", "1", "--out", str(out),
+    ]  # fmt: skip

@@ -379,7 +379,7 @@ def test_a_long_silent_step_shows_its_elapsed_time():
     import io
     import time
 
-    from experiments.cli import ticking
+    from pngail_jax.tracking import ticking
 
     stream = io.StringIO()  # not a terminal: whole lines, every `every` seconds
     with ticking("compiling", every=0.05, stream=stream):

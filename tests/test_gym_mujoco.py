@@ -182,6 +182,7 @@ def test_c_engine_sweep_resumed_after_a_kill_equals_the_uninterrupted_run(tmp_pa
     tests/test_sweep.py kills a run for real) resumes to the same metrics, bit for bit;
     config.json records the engine, and a resume keeps it."""
     from experiments import sweep
+    from pngail_jax import runner
     from pngail_jax.demos import Demonstrations, save_npz
 
     rng = np.random.default_rng(0)
@@ -229,7 +230,7 @@ def test_c_engine_sweep_resumed_after_a_kill_equals_the_uninterrupted_run(tmp_pa
     shutil.rmtree(killed / "policies")
     for name in ("metrics.csv", "summary.json", "summary.md", "curves.png"):
         (killed / name).unlink()
-    assert sweep.load_saved(killed).config.settings.physics == "c"
+    assert runner.load_saved(killed).config.settings.physics == "c"
     sweep.main(["--resume", str(killed)])
     assert metrics_numbers(killed / "metrics.csv") == metrics_numbers(whole / "metrics.csv")
     resumed, uninterrupted = (

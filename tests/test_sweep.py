@@ -8,10 +8,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import metrics_numbers
+from conftest import metrics_numbers, tiny_sweep_args
 
 from experiments import sweep
-from pngail_jax.demos import Demonstrations, save_npz
+from pngail_jax import runner
+from pngail_jax.demos import save_npz
 
 SUMMARY_KEYS = {  # the fields of every earlier summary.json, and the new interval ones
     "final_return_mean",
@@ -22,29 +23,6 @@ SUMMARY_KEYS = {  # the fields of every earlier summary.json, and the new interv
     "final_normalized_return_iqm",
     "final_normalized_return_ci95",
 }
-
-
-@pytest.fixture(scope="module")
-def demos_path(tmp_path_factory):
-    rng = np.random.default_rng(0)
-    demos = Demonstrations(
-        observations=rng.normal(size=(100, 3)).astype(np.float32),
-        actions=rng.uniform(-2, 2, size=(100, 1)).astype(np.float32),
-        confidence=np.repeat([1.0, 0.4, 0.45, 0.5, 0.35], 20).astype(np.float32),
-        metadata={"env": "Pendulum-v1", "random_return": -1200.0, "optimal_return": -150.0},
-    )
-    path = tmp_path_factory.mktemp("demos") / "demos.npz"
-    save_npz(path, demos)
-    return path
-
-
-def tiny_sweep_args(demos_path, out):
-    return [
-        "--demos", str(demos_path), "--methods", "gail,pngail", "--seeds", "2",
-        "--iterations", "4", "--eval-every", "1", "--chunk-iterations", "2",
-        "--num-envs", "4", "--unroll-length", "50", "--classifier-steps", "50",
-        "--cpu-devices", "1", "--out", str(out),
-    ]  # fmt: skip
 
 
 def read_csv(path):
@@ -114,14 +92,14 @@ class Killed(BaseException):
 
 def test_a_killed_run_says_partial_and_resumes_exactly(finished, demos_path, tmp_path, monkeypatch):
     out = tmp_path / "run"
-    save = sweep._save_checkpoint
+    save = runner._save_checkpoint
 
     def killed_at_the_second_checkpoint(directory, progress, host_state, writer):
         if progress.chunks_done == 2:
             raise Killed
         save(directory, progress, host_state, writer)
 
-    monkeypatch.setattr(sweep, "_save_checkpoint", killed_at_the_second_checkpoint)
+    monkeypatch.setattr(runner, "_save_checkpoint", killed_at_the_second_checkpoint)
     with pytest.raises(Killed):
         sweep.main(tiny_sweep_args(demos_path, out))
     monkeypatch.undo()
@@ -170,10 +148,10 @@ def test_checkpoint_damage_of_every_kind_falls_back(finished, tmp_path, capsys, 
     else:
         target = newest / file
         flip_a_bit(target, position=2)
-    assert sweep.intact_checkpoint(checkpoints) == checkpoints / "chunk_0001"
+    assert runner.intact_checkpoint(checkpoints) == checkpoints / "chunk_0001"
     assert f"chunk_0002 is damaged or incomplete: {newest}" in capsys.readouterr().out
     flip_a_bit(largest_file(checkpoints / "chunk_0001" / "state"))
-    assert sweep.intact_checkpoint(checkpoints) is None
+    assert runner.intact_checkpoint(checkpoints) is None
     assert "no older checkpoint to fall back on" in capsys.readouterr().out
 
 
@@ -188,7 +166,7 @@ def test_resume_refuses_changed_inputs_and_damaged_configs(finished, tmp_path, c
     config["resolved"]["demos_path"] = str(demos)
     config["resolved"]["inputs"]["demonstrations"] = file_record(demos)
     (out / "config.json").write_text(json.dumps(config))
-    seal(out / sweep.SEAL, sweep.sealed_part(config))  # as if the run had begun with it
+    seal(out / runner.SEAL, runner.sealed_part(config))  # as if the run had begun with it
     original = load_npz(demos)
     actions = original.actions.copy()
     actions[0] += 0.5
@@ -289,16 +267,16 @@ def test_every_flag_has_help_and_its_default():
 def test_presets_and_chunking():
     config = sweep.parse_args(["--preset", "paper", "--seeds", "2"]).config
     assert (config.iterations, config.seeds) == (5000, 2)  # explicit flags beat the preset
-    assert sweep.blocks_per_chunk(30, 5) == 5
-    assert sweep.blocks_per_chunk(30, 4) == 3
-    assert sweep.blocks_per_chunk(7, 5) == 1
+    assert runner.blocks_per_chunk(30, 5) == 5
+    assert runner.blocks_per_chunk(30, 4) == 3
+    assert runner.blocks_per_chunk(7, 5) == 1
 
 
 def test_a_damaged_demonstration_cache_is_made_again(demos_path, tmp_path, monkeypatch, capsys):
     from experiments import make_demos
     from pngail_jax.run_config import RunConfig
 
-    monkeypatch.setattr(sweep, "DEMO_CACHE", tmp_path)
+    monkeypatch.setattr(runner, "DEMO_CACHE", tmp_path)
     cached = tmp_path / "Pendulum-v1" / "demos.npz"
     cached.parent.mkdir()
     cached.write_bytes(demos_path.read_bytes()[:300])  # a truncated copy
@@ -309,7 +287,9 @@ def test_a_damaged_demonstration_cache_is_made_again(demos_path, tmp_path, monke
         shutil.copy(demos_path, cached)
 
     monkeypatch.setattr(make_demos, "main", fake_make_demos)
-    demos, path = sweep.load_or_make_demos(RunConfig(env="Pendulum-v1"))
+    demos, path = runner.load_or_make_demos(
+        RunConfig(env="Pendulum-v1"), make_demos=sweep.make_cached_demos
+    )
     printed = capsys.readouterr().out
     assert "the cached demonstrations are damaged" in printed and str(cached) in printed
     assert calls == [
@@ -382,12 +362,12 @@ def test_a_hand_edited_config_is_refused_naming_the_field(finished, tmp_path, fi
     assert named in str(error.value)
     original = json.loads((finished / "config.json").read_text())
     original["provenance"]["git_commit"] = "edited"  # where it ran is not sealed
-    sweep.check_seal(out, original)  # no refusal
+    runner.check_seal(out, original)  # no refusal
 
 
 def test_a_damaged_seal_is_refused(finished, tmp_path):
     out = copy_run(finished, tmp_path)
-    seal = out / sweep.SEAL
+    seal = out / runner.SEAL
     seal.write_text(seal.read_text().replace("0.2", "0.3"))
     with pytest.raises(SystemExit, match=r"\.config\.sealed\.json: damaged"):
         sweep.main(["--resume", str(out)])
@@ -409,7 +389,9 @@ def test_a_full_disk_while_checkpointing_is_one_line_and_leaves_no_half_checkpoi
         raise OSError(errno.ENOSPC, "No space left on device")
 
     monkeypatch.setattr(checkpoint, "save_tree", full)
-    progress = sweep.Progress(3, {}, {"eval/return": np.zeros((1, 2))}, {"seconds": 1.0})
-    with pytest.raises(SystemExit, match=r"cannot write checkpoint .*chunk_0003: No space left"):
-        sweep._save_checkpoint(tmp_path / "checkpoints", progress, {}, writer=True)
+    progress = runner.Progress(3, {}, {"eval/return": np.zeros((1, 2))}, {"seconds": 1.0})
+    with pytest.raises(
+        runner.RunError, match=r"cannot write checkpoint .*chunk_0003: No space left"
+    ):
+        runner._save_checkpoint(tmp_path / "checkpoints", progress, {}, writer=True)
     assert not any((tmp_path / "checkpoints").iterdir())  # no chunk_0003, no orbax temporary

@@ -1,0 +1,185 @@
+"""The output contract: which program's run a directory holds, whether a program may write
+there, and the lock a writing process holds.
+
+An output directory is new, or empty, or a run of the same program (marked so when it was
+created) that the user asked to resume or to replace with ``overwrite``. Anything else is
+refused before any computation, naming what is in the way. ``pngail_jax.runner`` and every
+command-line program go through these functions.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from pathlib import Path
+
+MARKER = ".pngail-run.json"
+LOCK = ".pngail-run.lock"  # held while a process writes the run (run_lock)
+# Runs made before the marker existed are known by files of their program's own (the most
+# specific first: train_rl writes a config.json too, without the sweep's "resolved").
+LEGACY_MARKS = {
+    "paper": ("paper.json",),
+    "compare_settings": ("comparison.json",),
+    "make_demos": ("demos.npz", "normalizer.json"),  # normalizer.json: one cut short
+    "train_rl": ("policy.json",),
+}
+RESUMABLE = {"sweep", "paper"}
+
+
+def output_owner(directory: Path) -> str | None:
+    """The program whose run ``directory`` holds (its marker, else a legacy file), or None."""
+    import json
+
+    directory = Path(directory)
+    marker = directory / MARKER
+    if marker.is_file():
+        try:
+            return str(json.loads(marker.read_text())["program"])
+        except (OSError, ValueError, KeyError, TypeError):
+            return None
+    for program, names in LEGACY_MARKS.items():
+        if any((directory / name).exists() for name in names):
+            return program
+    config = directory / "config.json"
+    if config.is_file():  # the sweep's has what it resolved; train_rl's (cut short) has not
+        try:
+            document = json.loads(config.read_text())
+        except (OSError, ValueError):
+            return None
+        if isinstance(document, dict):
+            return "sweep" if "resolved" in document else "train_rl" if "trpo" in document else None
+    return None
+
+
+def output_refusal(
+    directory: Path, program: str, overwrite: bool = False, flag: str = "--out"
+) -> str | None:
+    """Why ``directory`` may not receive ``program``'s outputs, or None when it may: it is new
+    or empty (its own marker alone, left by a start that failed, counts as empty), or holds a
+    run of ``program`` and ``overwrite`` is set. The run lock is not content. Reads only."""
+    directory = Path(directory)
+    if directory.exists() and not directory.is_dir():
+        return f"{flag} {directory} is a file, not a directory"
+    import os
+
+    for parent in directory.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                return f"{flag} {directory}: {parent} is a file, not a directory"
+            break
+    nearest = directory if directory.exists() else next(p for p in directory.parents if p.exists())
+    if not os.access(nearest, os.W_OK | os.X_OK):  # e.g. a read-only disk: say so now
+        return f"{flag} {directory}: {nearest} is not writable (read-only disk or permissions)"
+    if not directory.exists():
+        return None
+    contents = sorted(path.name for path in directory.iterdir() if path.name != LOCK)
+    owner = output_owner(directory)
+    if not contents or (contents == [MARKER] and owner == program):
+        return None
+    if owner == program:
+        if overwrite:
+            return None
+        resume = f"--resume {directory} to continue it, " if program in RESUMABLE else ""
+        return (
+            f"{flag} {directory} already holds a run of experiments.{program}: {resume}pass "
+            f"--overwrite to replace it, or choose another {flag}"
+        )
+    shown = ", ".join(contents[:5])
+    shown += f" and {len(contents) - 5} more" if len(contents) > 5 else ""
+    what = f"a run of experiments.{owner}" if owner else f"files it did not make ({shown})"
+    return (
+        f"{flag} {directory} is not empty: it holds {what}; experiments.{program} writes only "
+        f"into a new or empty directory, or over its own run: choose another {flag}"
+    )
+
+
+def prepare_output(directory: Path, program: str, overwrite: bool = False) -> None:
+    """Creates ``directory`` and marks it as ``program``'s run; with ``overwrite``, first
+    empties it, which ``claim_output`` allowed only for a run of ``program``."""
+    import json
+    import shutil
+
+    from pngail_jax.integrity import atomic_write_text
+
+    directory = Path(directory)
+    if overwrite and directory.exists() and output_owner(directory) == program:
+        for path in directory.iterdir():
+            if path.name == LOCK:  # the lock of the process doing this
+                continue
+            shutil.rmtree(path) if path.is_dir() and not path.is_symlink() else path.unlink()
+    directory.mkdir(parents=True, exist_ok=True)
+    if not (directory / MARKER).exists():
+        atomic_write_text(directory / MARKER, json.dumps({"program": program}) + "\n")
+
+
+class RunLocked(Exception):
+    """Another live process holds the run's lock (the message names it)."""
+
+
+def _alive(pid: int) -> bool:
+    import os
+
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's process: alive
+        return True
+    return True
+
+
+@contextlib.contextmanager
+def run_lock(directory: Path, program: str):
+    """Holds ``directory``'s run lock while a program writes there: a second process on the
+    same run is refused (``RunLocked``, naming the holder's PID and host); a lock left by a
+    process that is gone (same host) is taken over with a note. Released on exit, also after
+    an error or Ctrl-C; a directory it created and nothing was written to is removed."""
+    import json
+    import os
+    import socket
+    import sys
+    import time
+
+    directory = Path(directory)
+    created = not directory.exists()
+    directory.mkdir(parents=True, exist_ok=True)
+    path = directory / LOCK
+    me = {"pid": os.getpid(), "host": socket.gethostname(), "program": program}
+    me["started"] = time.strftime("%Y-%m-%d %H:%M:%S")
+    for _ in range(2):
+        try:
+            descriptor = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        except FileExistsError:
+            try:
+                holder = json.loads(path.read_text())
+                pid, host = int(holder["pid"]), str(holder["host"])
+            except (OSError, ValueError, KeyError, TypeError):
+                holder, pid, host = {}, None, None
+                try:  # unreadable: being written this moment, or left half-written long ago
+                    young = time.time() - path.stat().st_mtime < 60
+                except OSError:
+                    young = False
+                if young:
+                    raise RunLocked(f"{directory} is being locked by another process") from None
+            if pid is not None and (host != me["host"] or _alive(pid)):
+                raise RunLocked(
+                    f"{directory} is in use by experiments.{holder.get('program', '?')}, "
+                    f"process {pid} on {host} (since {holder.get('started', '?')}): wait for "
+                    f"it to end, or stop it; if that process is gone, delete {path}"
+                ) from None
+            print(
+                f"note: taking over {path}, left by process {pid} on {host}, which is gone",
+                file=sys.stderr,
+            )
+            path.unlink(missing_ok=True)
+            continue
+        with os.fdopen(descriptor, "w") as file:
+            json.dump(me, file)
+        break
+    else:  # another process took the lock between our two tries
+        raise RunLocked(f"{directory} was locked by another process as this one started")
+    try:
+        yield
+    finally:
+        path.unlink(missing_ok=True)
+        if created and not any(directory.iterdir()):  # refused before writing: leave no trace
+            directory.rmdir()
