@@ -7,7 +7,6 @@ message that names the flag, so a bad value never reaches the program as a trace
 from __future__ import annotations
 
 import argparse
-import contextlib
 import math
 import numbers
 from collections.abc import Sequence

@@ -86,14 +86,10 @@ PAPER_TABLE1 = {  # task: (SC MAE, SC RMSE, BSC MAE, BSC RMSE), means over the p
 }
 
 
-def _flags(text: str) -> list[str]:
-    return text.split()
-
-
 @dataclasses.dataclass(frozen=True)
 class Budget:
-    """How long every grid and demonstration run is; ``settings`` are sweep flags per task
-    kind (None: the task's row of ``pngail_jax.settings``)."""
+    """How long every grid and demonstration run is; ``settings`` and ``demo_settings`` are
+    ``RunSettings`` fields per task kind over the task's row of ``pngail_jax.settings``."""
 
     iterations: int
     seeds: int
@@ -102,10 +98,22 @@ class Budget:
     demo_iterations: dict[str, int]  # per task kind: "pendulum" / "mujoco"
     demo_seeds: int
     measure_episodes: int
-    settings: dict[str, list[str]]  # sweep / make_demos flags per task kind
-    demo_settings: dict[str, list[str]]
+    settings: dict[str, dict[str, int]]  # per task kind
+    demo_settings: dict[str, dict[str, int]]
+
+    def run_settings(self, task: str, physics: str | None, demos: bool = False):
+        """The ``RunSettings`` of ``task``'s grids (``demos``: of its demonstration making,
+        which evaluates every 10 iterations unless the budget says otherwise) on
+        ``physics`` (gymnasium's MuJoCo tasks only; None: the platform's engine)."""
+        from pngail_jax.settings import settings_for
+
+        kind = task_kind(task)
+        fields = {"eval_every": 10, **self.demo_settings[kind]} if demos else self.settings[kind]
+        engine = physics if task in envs.GYM_TASKS else None
+        return settings_for(task, **fields, physics=engine)
 
 
+NO_SETTINGS = {"pendulum": {}, "mujoco": {}}  # every task's own row
 BUDGETS = {
     # Every figure on a 2-core CPU: a check that everything runs, not a result.
     "check": Budget(
@@ -117,17 +125,23 @@ BUDGETS = {
         demo_seeds=1,
         measure_episodes=2,
         settings={
-            "pendulum": ["--eval-every", "10", "--num-eval-episodes", "8"],
-            "mujoco": _flags(
-                "--num-envs 5 --unroll-length 100 --eval-every 10 --num-eval-episodes 1"
-            ),
-        },
+            "pendulum": {"eval_every": 10, "num_eval_episodes": 8},
+            "mujoco": {
+                "num_envs": 5,
+                "unroll_length": 100,
+                "eval_every": 10,
+                "num_eval_episodes": 1,
+            },
+        },  # fmt: skip
         demo_settings={
-            "pendulum": ["--eval-every", "10"],
-            "mujoco": _flags(
-                "--num-envs 5 --unroll-length 100 --eval-every 5 --num-eval-episodes 1"
-            ),
-        },
+            "pendulum": {"eval_every": 10},
+            "mujoco": {
+                "num_envs": 5,
+                "unroll_length": 100,
+                "eval_every": 5,
+                "num_eval_episodes": 1,
+            },
+        },  # fmt: skip
     ),
     # The paper's budget: 5,000 TRPO iterations of about 5,000 steps, 5 seeds (a GPU).
     "paper": Budget(
@@ -138,8 +152,8 @@ BUDGETS = {
         demo_iterations={"pendulum": 300, "mujoco": 2_000},
         demo_seeds=3,
         measure_episodes=64,
-        settings={"pendulum": [], "mujoco": []},
-        demo_settings={"pendulum": [], "mujoco": []},
+        settings=NO_SETTINGS,
+        demo_settings=NO_SETTINGS,
     ),
     # A tenth of the paper's budget (2.5 M steps per run): Pendulum-v1 grids in about half
     # an hour each on a 2-core CPU, the MuJoCo grids of the authors' files on the C engine in
@@ -152,8 +166,8 @@ BUDGETS = {
         demo_iterations={"pendulum": 150, "mujoco": 300},
         demo_seeds=3,
         measure_episodes=64,
-        settings={"pendulum": [], "mujoco": []},
-        demo_settings={"pendulum": [], "mujoco": []},
+        settings=NO_SETTINGS,
+        demo_settings=NO_SETTINGS,
     ),
     # The test suite's: Pendulum-v1 in seconds.
     "test": Budget(
@@ -165,19 +179,18 @@ BUDGETS = {
         demo_seeds=1,
         measure_episodes=2,
         settings={
-            "pendulum": _flags(
-                "--num-envs 4 --unroll-length 50 --eval-every 2 --num-eval-episodes 2"
-            ),
-            "mujoco": _flags(
-                "--num-envs 2 --unroll-length 16 --eval-every 2 --num-eval-episodes 1"
-            ),
-        },
+            "pendulum": {
+                "num_envs": 4,
+                "unroll_length": 50,
+                "eval_every": 2,
+                "num_eval_episodes": 2,
+            },
+            "mujoco": {"num_envs": 2, "unroll_length": 16, "eval_every": 2, "num_eval_episodes": 1},
+        },  # fmt: skip
         demo_settings={
-            "pendulum": _flags("--num-envs 4 --unroll-length 50 --eval-every 2"),
-            "mujoco": _flags(
-                "--num-envs 2 --unroll-length 16 --eval-every 1 --num-eval-episodes 1"
-            ),
-        },
+            "pendulum": {"num_envs": 4, "unroll_length": 50, "eval_every": 2},
+            "mujoco": {"num_envs": 2, "unroll_length": 16, "eval_every": 1, "num_eval_episodes": 1},
+        },  # fmt: skip
     ),
 }
 
@@ -490,17 +503,9 @@ def released_files(directory: Path | None, tasks: Sequence[str]) -> dict[str, Pa
     return found
 
 
-def engine_flags(task: str, physics: str | None) -> list[str]:
-    """The sweep and make_demos flags that run ``task`` on ``physics`` (gymnasium's MuJoCo
-    tasks only; None: the platform's engine, no flag)."""
-    return ["--physics", physics] if physics and task in envs.GYM_TASKS else []
-
-
-def demo_paths(
-    grids, out: Path, budget: Budget, released: dict[str, Path], cache_flags, physics=None
-):
+def demo_paths(grids, out: Path, budget: Budget, released: dict[str, Path], physics=None):
     """The demonstrations file of every grid's set (made, mixed and saved when missing);
-    made ones on ``physics`` (``engine_flags``)."""
+    made ones on ``physics`` (``Budget.run_settings``)."""
     from pngail_jax.demos import RELEASED_ACTION_SCALES, load_npz, save_npz
     from pngail_jax.integrity import atomic_path
     from pngail_jax.run_config import TASK_NUM_DEMOS
@@ -520,27 +525,11 @@ def demo_paths(
             for s in made
             if s.task == task
         }
-        num_optimal = max(c[0] for c in counts.values())
-        num_intermediate = max(c[1] for c in counts.values())
         directory = out / "demos" / task
         full = directory / "demos.npz"
         if not full.exists():
-            from experiments import make_demos
-
-            kind = task_kind(task)
-            print(f"\n== demonstrations for {task}: make_demos into {directory}", flush=True)
-            make_demos.main(
-                [
-                    "--env", task, "--out", str(directory), "--overwrite",
-                    "--iterations", str(budget.demo_iterations[kind]),
-                    "--seeds", str(budget.demo_seeds),
-                    "--num-trajectories", str(num_optimal + num_intermediate),
-                    "--ratio", f"{num_optimal}:{num_intermediate}",
-                    "--measure-episodes", str(budget.measure_episodes),
-                    *budget.demo_settings[kind], *cache_flags,
-                    *engine_flags(task, physics),
-                ]
-            )  # fmt: skip
+            print(f"\n== demonstrations for {task}: making them into {directory}", flush=True)
+            make_demonstrations(demo_config(task, budget, counts, physics), directory)
         source = load_npz(full)
         for demo_set, (optimal, intermediate) in counts.items():
             path = directory / f"{demo_set.name}.npz"
@@ -549,6 +538,36 @@ def demo_paths(
                     save_npz(temporary, mixture(source, optimal, intermediate, demo_set))
             paths[demo_set] = (path, 1.0)
     return paths
+
+
+def demo_config(task: str, budget: Budget, counts: dict, physics: str | None):
+    """The making of ``task``'s demonstrations: enough optimal and intermediate trajectories
+    for every set of ``counts`` (``{DemoSet: (optimal, intermediate)}``) at ``budget``."""
+    from pngail_jax.demos.make import MakeDemosConfig
+
+    num_optimal = max(c[0] for c in counts.values())
+    num_intermediate = max(c[1] for c in counts.values())
+    return MakeDemosConfig(
+        env=task,
+        iterations=budget.demo_iterations[task_kind(task)],
+        seeds=budget.demo_seeds,
+        num_trajectories=num_optimal + num_intermediate,
+        ratio=f"{num_optimal}:{num_intermediate}",
+        measure_episodes=budget.measure_episodes,
+        settings=budget.run_settings(task, physics, demos=True),
+    )
+
+
+def make_demonstrations(config, directory: Path) -> None:
+    """``pngail_jax.demos.make.make_demonstrations`` into the plan's own ``directory`` (a
+    making cut short there is replaced); a refusal ends the program in one line."""
+    from pngail_jax.demos import make
+    from pngail_jax.runner import RunError
+
+    try:
+        make.make_demonstrations(config, directory, overwrite=True)
+    except RunError as error:
+        raise SystemExit(str(error)) from None
 
 
 def mixture(source, num_optimal: int, num_intermediate: int, demo_set: DemoSet):
@@ -586,34 +605,42 @@ def mixture(source, num_optimal: int, num_intermediate: int, demo_set: DemoSet):
 # -- grids -----------------------------------------------------------------------------------
 
 
-def sweep_arguments(
-    grid: GridSpec, demos: tuple[Path, float], budget: Budget, num_rows: int | None
+def grid_config(
+    grid: GridSpec,
+    demos: tuple[Path, float],
+    budget: Budget,
+    num_rows: int | None,
+    physics: str | None = None,
 ):
-    """The ``experiments.sweep`` flags of a grid (without ``--out``); ``num_rows``, the
-    demonstrations' row count, is read only by a grid with fewer unlabelled rows (Fig. 6)."""
-    from pngail_jax.run_config import RunConfig
+    """The ``RunConfig`` of a grid; ``num_rows``, the demonstrations' row count, is read only
+    by a grid with fewer unlabelled rows (Fig. 6)."""
+    from pngail_jax.run_config import RunConfig, task_classifier
 
     path, scale = demos
-    label_ratios = ",".join(f"{r:g}" for r in grid.label_ratios)
-    flags = []
+    label_ratios, num_demos = grid.label_ratios, None
     if grid.unlabelled_fraction != 1:  # the same n_c labelled rows, fewer unlabelled ones
         num_demos = RunConfig(env=grid.task).task_num_demos(num_rows)
         num_labelled = round(grid.label_ratios[0] * num_demos)
-        reduced = num_labelled + round(grid.unlabelled_fraction * (num_demos - num_labelled))
-        flags += ["--num-demos", str(reduced)]
-        label_ratios = f"{num_labelled / reduced:.6g}"
-    flags += [
-        "--env", grid.task, "--demos", str(path), "--methods", ",".join(grid.methods),
-        "--seeds", str(budget.seeds), "--iterations", str(budget.iterations),
-        "--chunk-iterations", str(budget.chunk_iterations), "--label-ratio", label_ratios,
-        "--noise", ",".join(f"{s:g}" for s in grid.noise_stds),
-        *budget.settings[task_kind(grid.task)],
-    ]  # fmt: skip
-    if scale != 1.0:
-        flags += ["--action-scale", f"{scale:g}"]
+        num_demos = num_labelled + round(grid.unlabelled_fraction * (num_demos - num_labelled))
+        label_ratios = (float(f"{num_labelled / num_demos:.6g}"),)
+    classifier = task_classifier(grid.task)
     if budget.classifier_steps is not None:
-        flags += ["--classifier-steps", str(budget.classifier_steps)]
-    return flags
+        classifier = dataclasses.replace(classifier, num_steps=budget.classifier_steps)
+    return RunConfig.preset(
+        "smoke",
+        env=grid.task,
+        settings=budget.run_settings(grid.task, physics),
+        classifier=classifier,
+        methods=tuple(grid.methods),
+        seeds=budget.seeds,
+        iterations=budget.iterations,
+        chunk_iterations=budget.chunk_iterations,
+        label_ratios=tuple(label_ratios),
+        noise_stds=tuple(grid.noise_stds),
+        demos=str(Path(path).absolute()),
+        action_scale=None if scale == 1.0 else scale,
+        num_demos=num_demos,
+    )
 
 
 def grid_complete(directory: Path) -> bool:
@@ -627,20 +654,24 @@ def grid_complete(directory: Path) -> bool:
         return False
 
 
-def run_grid(grid: GridSpec, directory: Path, flags: list[str], cache_flags) -> float:
-    """Runs (or resumes, or keeps) one grid; its wall-clock seconds in this call."""
-    from experiments import sweep
+def run_grid(grid: GridSpec, directory: Path, config, command: list[str]) -> float:
+    """Runs (or resumes, or keeps) one grid with ``pngail_jax.runner.run``; its wall-clock
+    seconds in this call."""
+    from pngail_jax import runner
 
     if grid_complete(directory):
         print(f"\n== {grid.name}: done, kept ({directory})", flush=True)
         return 0.0
     start = time.perf_counter()
-    if (directory / "config.json").exists():
+    resume = (directory / "config.json").exists()
+    if resume:
         print(f"\n== {grid.name}: resuming {directory}", flush=True)
-        sweep.main(["--resume", str(directory), *cache_flags], own_interrupt=False)
     else:
         print(f"\n== {grid.name}: {grid.demos.description}", flush=True)
-        sweep.main([*flags, "--out", str(directory), *cache_flags], own_interrupt=False)
+    try:
+        runner.run(None if resume else config, directory, resume=resume, command=command)
+    except runner.RunError as error:
+        raise SystemExit(str(error)) from None
     return time.perf_counter() - start
 
 
@@ -1051,11 +1082,7 @@ def main(argv=None) -> Path:
 
 
 def run_paper(args, argv) -> Path:
-    cache_flags = (
-        ["--no-compile-cache"]
-        if args.no_compile_cache
-        else (["--compile-cache", str(args.compile_cache)] if args.compile_cache else [])
-    )
+    compilation.from_arguments(args)
     out, options = run_options(args, argv)
     budget = BUDGETS[options["budget"]]
     released_dir = Path(options["released_demos"]) if options["released_demos"] else None
@@ -1082,8 +1109,8 @@ def run_paper(args, argv) -> Path:
         flush=True,
     )
     physics = options.get("physics")  # absent from runs begun before the flag existed
-    demos = demo_paths(grids, out, budget, released, cache_flags, physics)
-    timings = run_grids(grids, demos, out, budget, cache_flags, physics)
+    demos = demo_paths(grids, out, budget, released, physics)
+    timings = run_grids(grids, demos, out, budget, physics, options["command"].split())
     page = write_page(out, options, figures, grids, timings)
     print(f"\nwrote {page}")
     return page
@@ -1167,9 +1194,9 @@ def run_options(args, argv) -> tuple[Path, dict]:
     }
 
 
-def run_grids(grids, demos, out: Path, budget: Budget, cache_flags, physics) -> dict:
+def run_grids(grids, demos, out: Path, budget: Budget, physics, command: list[str]) -> dict:
     """Runs (or resumes, or keeps) every grid; each grid's wall-clock seconds over all calls,
-    kept in ``out/timings.json``."""
+    kept in ``out/timings.json``. ``command``: the plan's, recorded in each grid's config."""
     from pngail_jax.demos import load_demonstrations
     from pngail_jax.integrity import IntegrityError
 
@@ -1185,10 +1212,9 @@ def run_grids(grids, demos, out: Path, budget: Budget, cache_flags, physics) -> 
         path, scale = demos[grid.demos]
         if grid.unlabelled_fraction != 1 and grid.demos not in num_rows:
             num_rows[grid.demos] = load_demonstrations(path, action_scale=scale).num_rows
-        flags = sweep_arguments(grid, demos[grid.demos], budget, num_rows.get(grid.demos))
-        flags += engine_flags(grid.task, physics)
+        config = grid_config(grid, demos[grid.demos], budget, num_rows.get(grid.demos), physics)
         print(f"\n== grid {index + 1} of {len(grids)}{plan_eta(ran, len(grids) - index)}")
-        seconds = run_grid(grid, out / "grids" / name, flags, cache_flags)
+        seconds = run_grid(grid, out / "grids" / name, config, command)
         if seconds:
             ran.append(seconds)
             timings[name] = timings.get(name, 0.0) + seconds

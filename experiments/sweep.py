@@ -414,21 +414,7 @@ def start(invocation: Invocation) -> tuple[RunConfig, runner.SavedRun | None]:
         jax.distributed.initialize(**invocation.distributed)
         if jax.process_index() != 0:
             sys.stdout = open(os.devnull, "w")  # noqa: SIM115  process 0 reports
-    if saved and saved.device_count != len(jax.devices()):
-        print(
-            f"WARNING: resuming on {len(jax.devices())} devices, the run began on "
-            f"{saved.device_count}: a different sharding can change the last bits, and "
-            "the rest of the run with them"
-        )
     return config, saved
-
-
-def make_cached_demos(env: str, directory: Path, overwrite: bool) -> None:
-    """The runner's demonstrations maker: ``experiments.make_demos`` into ``directory``."""
-    from experiments import make_demos
-
-    overwriting = ["--overwrite"] if overwrite else []
-    make_demos.main(["--env", env, "--out", str(directory), *overwriting])
 
 
 def main(argv=None, own_interrupt: bool = True) -> Path:
@@ -444,7 +430,6 @@ def main(argv=None, own_interrupt: bool = True) -> Path:
             resume=saved is not None,
             overwrite=invocation.args.overwrite,
             allow_changed_inputs=invocation.args.allow_changed_inputs,
-            make_demos=make_cached_demos,
             command=["python", "-m", "experiments.sweep", *invocation.argv],
             saved=saved,
         )

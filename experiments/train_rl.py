@@ -14,7 +14,6 @@ import argparse
 import csv
 import dataclasses
 import time
-import warnings
 from pathlib import Path
 
 import jax
@@ -32,10 +31,9 @@ from experiments.cli import (
     path_argument,
     prepare_output,
 )
-from pngail_jax import compilation
+from pngail_jax import compilation, runner
 from pngail_jax import settings as run_settings
 from pngail_jax.checkpoint import save_trpo_policies
-from pngail_jax.grid import Grid
 from pngail_jax.integrity import atomic_path, write_json
 from pngail_jax.rl import TRPOHyperparams, TRPOTrainer
 
@@ -115,13 +113,6 @@ def parse_args(argv=None) -> argparse.Namespace:
     return args
 
 
-def nanmean(values, axis=None):
-    """Mean ignoring NaN (iterations where no training episode finished), NaN if all are."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        return np.nanmean(values, axis=axis)
-
-
 def write_metrics_csv(path: Path, metrics: dict[str, np.ndarray]) -> None:
     num_seeds, num_iterations = metrics["env_steps"].shape
     with atomic_path(path) as temporary, temporary.open("w", newline="") as file:
@@ -153,7 +144,7 @@ def plot_learning_curve(path: Path, metrics: dict[str, np.ndarray], title: str) 
         )
     mean = metrics["eval/return"][:, evaluated].mean(axis=0)
     axis.plot(steps[evaluated], mean, color="black", lw=2, marker="o", ms=3, label="mean")
-    train_mean = nanmean(metrics["train/episode_return"], axis=0)
+    train_mean = runner.nanmean(metrics["train/episode_return"], axis=0)
     # Iterations where no episode ended are NaN (a 1000-step episode ends every fifth
     # 200-step iteration): joined over them, or matplotlib draws isolated, invisible points.
     ended = np.isfinite(train_mean)
@@ -167,41 +158,6 @@ def plot_learning_curve(path: Path, metrics: dict[str, np.ndarray], title: str) 
     with atomic_path(path) as temporary:
         figure.savefig(temporary, dpi=120)
     plt.close(figure)
-
-
-def train_with_progress(trainer: TRPOTrainer, hyperparams, keys, on_block=None):
-    """Runs ``trainer`` for stacked seeds, one compiled block of ``eval_every`` iterations at a
-    time (``pngail_jax.grid.Grid``), printing progress after each.
-
-    Calls ``on_block(iteration, trpo_state, block_metrics)`` if given (e.g. to keep
-    checkpoints). The numbers are those of the whole-scan ``trainer.train``. Returns
-    ``(final TRPOState, metrics)`` with metrics float[seeds, num_iterations].
-    """
-    config = trainer.config
-    grid = Grid(trainer, (hyperparams, keys), blocks_per_chunk=1)
-    print(f"compiled in {grid.compile_seconds:.1f} s", flush=True)
-    state, _ = grid.init()
-    chunks = []
-    for done_blocks in range(1, config.num_evaluations + 1):
-        block_start = time.perf_counter()
-        state, metrics = grid.run_chunk(state)
-        metrics = grid.fetch(metrics)
-        chunks.append(metrics)
-        seconds = time.perf_counter() - block_start
-        rate = grid.num_cells * config.eval_every * config.batch_size / seconds
-        print(
-            f"iter {done_blocks * config.eval_every:5d}  "
-            f"eval {np.mean(metrics['eval/return'][:, -1]):9.1f} "
-            f"[{', '.join(f'{r:.0f}' for r in metrics['eval/return'][:, -1])}]  "
-            f"train {nanmean(metrics['train/episode_return'][:, -1]):9.1f}  "
-            f"{rate:10,.0f} steps/s",
-            flush=True,
-        )
-        if on_block is not None:
-            host_state = grid.fetch(trainer.policy_state(state))
-            on_block(done_blocks * config.eval_every, host_state, metrics)
-    metrics = {name: np.concatenate([c[name] for c in chunks], axis=1) for name in chunks[0]}
-    return grid.fetch(trainer.policy_state(state)), metrics
 
 
 def main(argv=None) -> None:
@@ -239,7 +195,7 @@ def main(argv=None) -> None:
         flush=True,
     )
     start = time.perf_counter()
-    state, metrics = train_with_progress(trainer, seeds_hyperparams, keys)
+    state, metrics = runner.train_seeds(trainer, seeds_hyperparams, keys)
     final_returns = metrics["eval/return"][:, -1]
     write_metrics_csv(args.out / "metrics.csv", metrics)
     plot_learning_curve(

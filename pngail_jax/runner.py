@@ -27,8 +27,10 @@ import dataclasses
 import os
 import shutil
 import time
-from collections.abc import Callable, Sequence
+import warnings
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -37,11 +39,12 @@ from pngail_jax.outputs import MARKER, RunLocked, output_refusal, prepare_output
 from pngail_jax.run_config import RunConfig, upgrade_saved_config
 from pngail_jax.tracking import ticking
 
+if TYPE_CHECKING:
+    from pngail_jax.rl import TRPOTrainer
+
 DEMO_CACHE = Path("runs") / "demos-cache"
 MINARI_PREFIX = "minari:"
 PROGRAM = "sweep"  # the owner its directories are marked with (pngail_jax.outputs)
-# Makes demonstrations of a task into a directory's demos.npz: (env name, directory, overwrite).
-MakeDemos = Callable[[str, Path, bool], None]
 
 
 class RunError(Exception):
@@ -197,13 +200,12 @@ class BuiltRun:
     normalizer_source: str = "none"
 
 
-def load_or_make_demos(
-    config: RunConfig, saved_path: str | None = None, env=None, make_demos: MakeDemos | None = None
-):
+def load_or_make_demos(config: RunConfig, saved_path: str | None = None, env=None):
     """The demonstrations and the path they came from: ``config.demos`` (a file of rows that
-    is not an authors' one is split by ``env``'s sizes), else made by ``make_demos`` once
-    and reused from ``DEMO_CACHE/<env>/``."""
-    from pngail_jax.demos import load_demonstrations
+    is not an authors' one is split by ``env``'s sizes), else made once with
+    ``pngail_jax.demos.make`` (its defaults: 1:4 optimal to intermediate trajectories) and
+    reused from ``DEMO_CACHE/<env>/``."""
+    from pngail_jax.demos import DemonstrationError, load_demonstrations
 
     source = saved_path or config.demos
     if source is not None:
@@ -216,15 +218,7 @@ def load_or_make_demos(
             action_size=None if env is None else env.action_size,
         )
         return demos, source
-    from pngail_jax.demos import DemonstrationError
-
-    if make_demos is None:
-        raise RunError(
-            "no demonstrations: set RunConfig.demos to a file of them (docs/demonstrations.md), "
-            "or make some with python -m experiments.make_demos"
-        )
     cached = DEMO_CACHE / config.env / "demos.npz"
-    overwrite = False
     if cached.exists():
         try:
             demos = load_demonstrations(cached)
@@ -232,11 +226,14 @@ def load_or_make_demos(
             return demos, str(cached.absolute())
         except DemonstrationError as error:
             print(f"the cached demonstrations are damaged: {error}; making them again")
-            overwrite = True
     else:
-        print(f"no --demos: making them with experiments.make_demos into {cached.parent}")
+        print(f"no demonstrations given: making them into {cached.parent}")
+    from pngail_jax.demos import make
+
     # The cache is the runner's own: a making cut short there is replaced.
-    make_demos(config.env, cached.parent, overwrite or cached.parent.exists())
+    make.make_demonstrations(
+        make.MakeDemosConfig(env=config.env), cached.parent, overwrite=cached.parent.exists()
+    )
     return load_demonstrations(cached), str(cached.absolute())
 
 
@@ -284,9 +281,7 @@ def blocks_per_chunk(num_evaluations: int, target_blocks: int) -> int:
     )
 
 
-def build(
-    config: RunConfig, saved: SavedRun | None, make_demos: MakeDemos | None = None
-) -> BuiltRun:
+def build(config: RunConfig, saved: SavedRun | None) -> BuiltRun:
     """Environment, demonstrations, trainer and the compiled grid of ``config`` (a resumed
     run's demonstrations from the path it began with)."""
     import jax
@@ -300,9 +295,7 @@ def build(
     except ValueError as error:  # e.g. a custom factory that raised or returned no Env
         raise RunError(f"environment: {error}") from None
     try:
-        demos, demos_path = load_or_make_demos(
-            config, saved.demos_path if saved else None, env, make_demos
-        )
+        demos, demos_path = load_or_make_demos(config, saved.demos_path if saved else None, env)
     except (DemonstrationError, FileNotFoundError, ImportError) as error:
         raise RunError(f"demonstrations: {error}") from None
     try:
@@ -788,7 +781,6 @@ def run(
     resume: bool = False,
     overwrite: bool = False,
     allow_changed_inputs: bool = False,
-    make_demos: MakeDemos | None = None,
     command: Sequence[str] | None = None,
     saved: SavedRun | None = None,
 ) -> RunResult | None:
@@ -799,8 +791,8 @@ def run(
     its ``config.json`` holds (``config`` must then be None or that same config; ``saved``
     passes it when the caller has read it already, with ``load_saved``). ``overwrite``:
     replace a finished or unfinished run of the sweep in ``out``. ``allow_changed_inputs``:
-    resume although a demonstration file changed since the run began. ``make_demos``: makes
-    demonstrations when ``config.demos`` is None (``DEMO_CACHE``). ``command``: the command
+    resume although a demonstration file changed since the run began (``config.demos`` None:
+    they are made once and cached, ``load_or_make_demos``). ``command``: the command
     line recorded in ``config.json`` (default: this process's).
     Raises ``RunError`` naming the problem (before any computation where it can be seen then).
     """
@@ -815,6 +807,12 @@ def run(
                 "to continue the run as it began"
             )
         config = saved.config
+        if saved.device_count != len(jax.devices()):
+            print(
+                f"WARNING: resuming on {len(jax.devices())} devices, the run began on "
+                f"{saved.device_count}: a different sharding can change the last bits, and "
+                "the rest of the run with them"
+            )
     elif config is None:
         raise RunError("run: give a RunConfig (or resume=True to continue the run in out)")
     else:
@@ -822,11 +820,11 @@ def run(
     writer = jax.process_index() == 0
     if not writer:  # another host of a multi-host run: process 0 holds the lock
         return _run_locked(config, out, saved, writer, overwrite, allow_changed_inputs,
-                           make_demos, command)  # fmt: skip
+                           command)  # fmt: skip
     try:
         with run_lock(out, PROGRAM):
             return _run_locked(config, out, saved, writer, overwrite, allow_changed_inputs,
-                               make_demos, command)  # fmt: skip
+                               command)  # fmt: skip
     except RunLocked as error:
         raise RunError(f"cannot run: {error}") from None
 
@@ -843,7 +841,7 @@ def _absolute_paths(config: RunConfig) -> RunConfig:
 
 
 def _run_locked(
-    config, out, saved, writer, overwrite, allow_changed_inputs, make_demos, command
+    config, out, saved, writer, overwrite, allow_changed_inputs, command
 ) -> RunResult | None:
     checkpoint = None
     if saved is not None:  # these checks before the minutes of compiling
@@ -856,7 +854,7 @@ def _run_locked(
         refusal = output_refusal(out, PROGRAM, overwrite)
         if refusal:
             raise RunError(refusal)
-    built = build(config, saved, make_demos)
+    built = build(config, saved)
     if writer and saved is None:  # a resumed run keeps its directory as it is (no marker
         # added to an older run: its missing seal would then read as removed)
         prepare_output(out, PROGRAM, overwrite=overwrite)
@@ -900,3 +898,50 @@ def _result(out: Path) -> RunResult:
 
     summary = read_json(out / OUTPUT_FILES["summary"], "run summary")
     return RunResult(out, summary, (out / OUTPUT_FILES["summary_md"]).read_text())
+
+
+# -- a TRPO run of stacked seeds (train_rl, make_demos) ------------------------------------
+
+
+def nanmean(values, axis=None):
+    """Mean ignoring NaN (iterations where no training episode finished), NaN if all are."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmean(values, axis=axis)
+
+
+def train_seeds(trainer: TRPOTrainer, hyperparams, keys, on_block=None):
+    """Runs ``trainer`` for stacked seeds, one compiled block of ``eval_every`` iterations at a
+    time (``pngail_jax.grid.Grid``), printing progress after each.
+
+    Calls ``on_block(iteration, trpo_state, block_metrics)`` if given (e.g. to keep
+    checkpoints). The numbers are those of the whole-scan ``trainer.train``. Returns
+    ``(final TRPOState, metrics)`` with metrics float[seeds, num_iterations].
+    """
+    config = trainer.config
+    from pngail_jax.grid import Grid
+
+    grid = Grid(trainer, (hyperparams, keys), blocks_per_chunk=1)
+    print(f"compiled in {grid.compile_seconds:.1f} s", flush=True)
+    state, _ = grid.init()
+    chunks = []
+    for done_blocks in range(1, config.num_evaluations + 1):
+        block_start = time.perf_counter()
+        state, metrics = grid.run_chunk(state)
+        metrics = grid.fetch(metrics)
+        chunks.append(metrics)
+        seconds = time.perf_counter() - block_start
+        rate = grid.num_cells * config.eval_every * config.batch_size / seconds
+        print(
+            f"iter {done_blocks * config.eval_every:5d}  "
+            f"eval {np.mean(metrics['eval/return'][:, -1]):9.1f} "
+            f"[{', '.join(f'{r:.0f}' for r in metrics['eval/return'][:, -1])}]  "
+            f"train {nanmean(metrics['train/episode_return'][:, -1]):9.1f}  "
+            f"{rate:10,.0f} steps/s",
+            flush=True,
+        )
+        if on_block is not None:
+            host_state = grid.fetch(trainer.policy_state(state))
+            on_block(done_blocks * config.eval_every, host_state, metrics)
+    metrics = {name: np.concatenate([c[name] for c in chunks], axis=1) for name in chunks[0]}
+    return grid.fetch(trainer.policy_state(state)), metrics

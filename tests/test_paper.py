@@ -45,9 +45,9 @@ def test_every_built_figure_plans_on_all_six_tasks():
     ]
     # Fig. 6 keeps the labelled rows and scales the unlabelled ones: 200 + 0.5 * 800.
     grid = grids["Pendulum-v1-unlabelled-0.5"]
-    flags = paper.sweep_arguments(grid, ("x.npz", 1.0), paper.BUDGETS["test"], 1000)
-    assert flags[flags.index("--num-demos") + 1] == "600"
-    assert float(flags[flags.index("--label-ratio") + 1]) == pytest.approx(200 / 600)
+    config = paper.grid_config(grid, ("x.npz", 1.0), paper.BUDGETS["test"], 1000)
+    assert config.num_demos == 600
+    assert config.label_ratios == (pytest.approx(200 / 600),)
 
 
 def test_trajectory_counts_reach_the_tasks_rows_at_the_ratio():
@@ -190,3 +190,35 @@ def test_a_resume_checks_the_authors_files_and_its_own_options(tmp_path):
     (run / "paper.json").write_text("{")
     with pytest.raises(SystemExit, match="paper.json: damaged paper run options"):
         paper.main(["--resume", str(run)])
+
+
+def test_a_grid_config_is_the_sweep_config_of_the_same_flags(tmp_path):
+    """The paper builds RunConfigs for the library runner; each is the config the sweep makes
+    of the flags that say the same (so a grid can be rerun by hand with the sweep)."""
+    from experiments import sweep
+
+    demos = tmp_path / "demos.npz"
+    demos.write_bytes(b"")  # the sweep checks that the file exists, not what it holds
+    _, grids = paper.plan(["fig2", "fig4"], ["Hopper-v4", "Pendulum-v1"], set())
+    grid = grids["Hopper-v4-main"]
+    budget = paper.BUDGETS["check"]
+    config = paper.grid_config(grid, (demos, 1.0), budget, None, physics="c")
+    flags = [
+        "--env", "Hopper-v4", "--demos", str(demos), "--methods", ",".join(grid.methods),
+        "--seeds", "2", "--iterations", "20", "--chunk-iterations", "10",
+        "--label-ratio", "0.2", "--noise", "0", "--num-envs", "5", "--unroll-length", "100",
+        "--eval-every", "10", "--num-eval-episodes", "1", "--classifier-steps", "500",
+        "--physics", "c", "--out", str(tmp_path / "out"),
+    ]  # fmt: skip
+    assert config == sweep.parse_args(flags).config
+    noisy = grids["Pendulum-v1-noise"]
+    released = tmp_path / "Pendulum-v1_mixture.npy"  # an authors' file, torques halved
+    released.write_bytes(b"")
+    config = paper.grid_config(noisy, (released, 2.0), paper.BUDGETS["cpu"], None)
+    flags = [
+        "--env", "Pendulum-v1", "--demos", str(released), "--methods", ",".join(noisy.methods),
+        "--seeds", "5", "--iterations", "500", "--chunk-iterations", "100",
+        "--label-ratio", "0.2", "--noise", "0,0.2,0.4", "--action-scale", "2",
+        "--out", str(tmp_path / "out"),
+    ]  # fmt: skip
+    assert config == sweep.parse_args(flags).config

@@ -8,7 +8,7 @@ import pytest
 from conftest import metrics_numbers, tiny_sweep_args
 
 from experiments import sweep
-from pngail_jax import RunConfig, RunError, run, runner
+from pngail_jax import RunConfig, RunError, run
 
 
 @pytest.fixture(scope="module")
@@ -75,10 +75,3 @@ def test_run_refuses_in_one_line_and_resumes_a_finished_run_without_work(
     with pytest.raises(RunError, match="files it did not make"):
         run(config, occupied)
     assert [p.name for p in occupied.iterdir()] == ["notes.txt"]
-
-
-def test_made_demonstrations_need_a_maker(tmp_path, monkeypatch):
-    monkeypatch.setattr(runner, "DEMO_CACHE", tmp_path / "cache")
-    with pytest.raises(RunError, match="no demonstrations: set RunConfig.demos"):
-        runner.load_or_make_demos(RunConfig(env="Pendulum-v1"))
-    assert not (tmp_path / "cache").exists()

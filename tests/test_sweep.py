@@ -273,7 +273,7 @@ def test_presets_and_chunking():
 
 
 def test_a_damaged_demonstration_cache_is_made_again(demos_path, tmp_path, monkeypatch, capsys):
-    from experiments import make_demos
+    from pngail_jax.demos import make
     from pngail_jax.run_config import RunConfig
 
     monkeypatch.setattr(runner, "DEMO_CACHE", tmp_path)
@@ -282,19 +282,16 @@ def test_a_damaged_demonstration_cache_is_made_again(demos_path, tmp_path, monke
     cached.write_bytes(demos_path.read_bytes()[:300])  # a truncated copy
     calls = []
 
-    def fake_make_demos(argv):  # stands in for minutes of TRPO
-        calls.append(argv)
+    def fake_make(config, out, overwrite=False):  # stands in for minutes of TRPO
+        calls.append((config, out, overwrite))
         shutil.copy(demos_path, cached)
 
-    monkeypatch.setattr(make_demos, "main", fake_make_demos)
-    demos, path = runner.load_or_make_demos(
-        RunConfig(env="Pendulum-v1"), make_demos=sweep.make_cached_demos
-    )
+    monkeypatch.setattr(make, "make_demonstrations", fake_make)
+    demos, path = runner.load_or_make_demos(RunConfig(env="Pendulum-v1"))
     printed = capsys.readouterr().out
     assert "the cached demonstrations are damaged" in printed and str(cached) in printed
-    assert calls == [
-        ["--env", "Pendulum-v1", "--out", str(tmp_path / "Pendulum-v1"), "--overwrite"]
-    ]
+    # The making's defaults (the command line's), over the runner's own damaged cache.
+    assert calls == [(make.MakeDemosConfig(env="Pendulum-v1"), tmp_path / "Pendulum-v1", True)]
     assert demos.num_rows == 100 and path == str(cached.absolute())
 
 

@@ -1,0 +1,370 @@
+"""Imperfect demonstrations made from scratch: an optimal and an intermediate TRPO policy, mixed.
+
+    from pngail_jax.demos.make import MakeDemosConfig, make_demonstrations
+
+    path = make_demonstrations(MakeDemosConfig(env="Pendulum-v1"), "demos/pendulum")
+
+1. ``train_candidates``: TRPO on the true reward (``seeds`` in one program), keeping every
+   evaluated checkpoint (``checkpoints/iter_XXXX/``, loadable with ``pngail_jax.load_policy``).
+2. ``pick_policies``: the optimal policy is the best-evaluated checkpoint; the intermediate
+   policy is the earlier checkpoint whose evaluated normalised return is closest to
+   ``intermediate_target`` (0.45: the authors' Pendulum set has intermediate confidences of
+   0.37-0.50), not the optimal policy plus noise. The random (uniform actions) and optimal
+   returns are measured on fresh episodes (the paper's Table 3).
+3. ``roll_out_mixture``: ``num_trajectories`` deterministic (mean-action) episodes at the
+   optimal:intermediate ``ratio`` (1:4 as the paper's Pendulum set), each trajectory labelled
+   with its return normalised between random and optimal (clipped to [0, 1]); actions clipped
+   to the bounds, as the environment applies them; the normaliser in the metadata.
+
+``demos.npz`` is written last and atomically (a temporary sibling renamed onto it), so its
+presence means the making finished; ``python -m experiments.make_demos`` is this with flags.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import time
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from pngail_jax import settings as run_settings
+from pngail_jax.demos.data import Demonstrations, save_npz
+
+DEMOS_FILE = "demos.npz"  # written last: its presence marks a finished run
+PROGRAM = "make_demos"  # the owner its directories are marked with (pngail_jax.outputs)
+
+
+@dataclasses.dataclass(frozen=True)
+class MakeDemosConfig:
+    """What to make: TRPO's budget, the mixture and its measurement. ``settings`` None: the
+    task's row of ``pngail_jax.settings`` with an evaluation every 10 iterations (the
+    intermediate policy is picked among the evaluated checkpoints: finer than the table's)."""
+
+    env: str = "Pendulum-v1"
+    iterations: int = 150  # TRPO iterations
+    seeds: int = 3  # TRPO seeds; the best is optimal
+    seed: int = 0  # base PRNG seed
+    ratio: str = "1:4"  # optimal:intermediate trajectories
+    num_trajectories: int = 5  # trajectories in the mixture
+    intermediate_target: float = 0.45  # normalised return the intermediate policy is picked near
+    measure_episodes: int = 64  # episodes for the random and optimal returns
+    settings: run_settings.RunSettings | None = None
+
+    def __post_init__(self):
+        if self.settings is None:
+            object.__setattr__(self, "settings", run_settings.settings_for(self.env, eval_every=10))
+        for name in ("iterations", "seeds", "num_trajectories", "measure_episodes"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        self.ratio_parts  # noqa: B018  (checks the ratio)
+        if self.iterations % self.settings.eval_every:
+            raise ValueError("iterations must be a multiple of eval_every")
+        if not 0 < self.intermediate_target < 1:
+            raise ValueError(
+                f"intermediate_target must be in (0, 1), got {self.intermediate_target}"
+            )
+        self.trpo_config  # noqa: B018  (the TRPO config's own checks)
+
+    @property
+    def ratio_parts(self) -> tuple[float, float]:
+        try:
+            optimal, intermediate = (float(x) for x in self.ratio.split(":"))
+        except ValueError:
+            raise ValueError(f"ratio must look like 1:4, got {self.ratio!r}") from None
+        total = optimal + intermediate
+        if not (optimal >= 0 and intermediate >= 0 and 0 < total < math.inf):  # no NaN
+            raise ValueError(
+                f"ratio parts must be finite, non-negative and not both 0, got {self.ratio!r}"
+            )
+        return optimal, intermediate
+
+    @property
+    def num_optimal(self) -> int:
+        optimal, intermediate = self.ratio_parts
+        return round(self.num_trajectories * optimal / (optimal + intermediate))
+
+    @property
+    def trpo_config(self):
+        return self.settings.trpo_config(self.iterations)
+
+
+class Checkpoint(NamedTuple):
+    """One evaluated policy of the TRPO run: where it came from and its evaluated return."""
+
+    iteration: int
+    seed: int
+    policy_params: Any
+    normalizer: Any
+    eval_return: float
+
+
+@dataclasses.dataclass(frozen=True)
+class Picked:
+    """The mixture's two policies and the returns that normalise confidences."""
+
+    optimal: Checkpoint
+    intermediate: Checkpoint
+    random_return: float
+    optimal_return: float
+    intermediate_return: float
+
+
+def make_demonstrations(config: MakeDemosConfig, out, *, overwrite: bool = False) -> Path:
+    """Makes ``config``'s demonstrations into ``out`` (``demos.npz``, ``normalizer.json``,
+    ``checkpoints/``) and returns the path of ``demos.npz``. ``out`` must be new, empty or,
+    with ``overwrite``, an earlier making's (``pngail_jax.outputs``); refusals raise
+    ``pngail_jax.runner.RunError`` with one line."""
+    from pngail_jax.outputs import output_refusal, prepare_output
+    from pngail_jax.runner import RunError
+
+    out = Path(out)
+    refusal = output_refusal(out, PROGRAM, overwrite)
+    if refusal:
+        raise RunError(refusal)
+    try:
+        env = run_settings.make_env(config.env, config.settings)
+    except ValueError as error:  # e.g. a custom factory that raised or returned no Env
+        raise RunError(f"environment: {error}") from None
+    prepare_output(out, PROGRAM, overwrite)  # an old run kept until here
+    start = time.perf_counter()
+    snapshots = train_candidates(config, env, out)
+    print("2/3 measuring random and optimal returns", flush=True)
+    episodes = Episodes(env, config.trpo_config)
+    picked = pick_policies(config, env, snapshots, episodes)
+    demos = roll_out_mixture(config, env, picked, episodes)
+    path = write_outputs(out, demos, {k: demos.metadata[k] for k in NORMALIZER_KEYS})
+    print(policies_table(picked))
+    _, first_rows = np.unique(demos.trajectory_ids, return_index=True)
+    confidences = [float(c) for c in demos.confidence[np.sort(first_rows)]]
+    print(
+        f"\n{demos.num_rows} rows in {len(confidences)} trajectories, confidences "
+        f"{[round(c, 2) for c in confidences]}; wrote {path} "
+        f"in {time.perf_counter() - start:.0f} s"
+    )
+    return path
+
+
+def train_candidates(config: MakeDemosConfig, env, out: Path) -> list[Checkpoint]:
+    """TRPO on the true reward, every evaluated checkpoint of every seed kept (in memory and
+    under ``out/checkpoints/iter_XXXX/``)."""
+    import jax
+    import jax.numpy as jnp
+
+    from pngail_jax.checkpoint import save_trpo_policies
+    from pngail_jax.rl import TRPOHyperparams, TRPOTrainer
+    from pngail_jax.runner import train_seeds
+
+    trpo_config = config.trpo_config
+    trainer = TRPOTrainer(trpo_config, env)
+    hyperparams = jax.tree.map(
+        lambda x: jnp.broadcast_to(x, (config.seeds, *x.shape)), TRPOHyperparams.create()
+    )
+    snapshots: list[Checkpoint] = []
+
+    def keep(iteration, state, metrics):
+        returns = metrics["eval/return"][:, -1]
+        save_trpo_policies(
+            out / "checkpoints" / f"iter_{iteration:04d}", env, trpo_config, state, returns
+        )
+        for seed in range(config.seeds):
+            pick = jax.tree.map(lambda x, s=seed: x[s], (state.policy_params, state.normalizer))
+            snapshots.append(Checkpoint(iteration, seed, *pick, float(returns[seed])))
+
+    print(
+        f"1/3 training TRPO on {config.env} ({config.seeds} seeds x {config.iterations} "
+        f"iterations; {run_settings.describe(config.settings)})",
+        flush=True,
+    )
+    train_key = _keys(config)[0]
+    train_seeds(trainer, hyperparams, jax.random.split(train_key, config.seeds), on_block=keep)
+    return snapshots
+
+
+def _keys(config: MakeDemosConfig):
+    """(training, measuring, rolling out): the three uses of the base seed."""
+    import jax
+
+    return jax.random.split(jax.random.key(config.seed), 3)
+
+
+class Episodes:
+    """Deterministic episodes of any checkpoint, one compiled program for all of them (the
+    parameters are arguments, not constants)."""
+
+    def __init__(self, env, trpo_config):
+        import jax
+
+        from pngail_jax.demos.generate import rollout_episodes
+        from pngail_jax.rl import TRPOTrainer
+
+        policy = TRPOTrainer(trpo_config, env).trpo.policy
+
+        @jax.jit
+        def episodes(params, normalizer, keys):
+            def act(obs, key):
+                return policy.apply(params, normalizer(obs))[0]
+
+            return rollout_episodes(env, act, keys)
+
+        self._episodes = episodes
+
+    def __call__(self, snapshot: Checkpoint, key, num_episodes: int):
+        import jax
+
+        keys = jax.random.split(key, num_episodes)
+        return self._episodes(snapshot.policy_params, snapshot.normalizer, keys)
+
+
+def pick_policies(
+    config: MakeDemosConfig, env, snapshots: list[Checkpoint], episodes: Episodes
+) -> Picked:
+    """The best checkpoint (optimal), the earlier one nearest ``intermediate_target``, and
+    the random, optimal and intermediate returns measured on fresh episodes."""
+    import jax
+
+    from pngail_jax.demos.generate import normalized_return, random_policy_return
+
+    random_key, optimal_key, intermediate_key = jax.random.split(_keys(config)[1], 3)
+    random_return = random_policy_return(env, random_key, config.measure_episodes)
+    best = max(snapshots, key=lambda snapshot: snapshot.eval_return)
+    optimal_return = float(episodes(best, optimal_key, config.measure_episodes).returns.mean())
+    if not optimal_return > random_return:
+        print(
+            f"WARNING: the best policy ({optimal_return:.1f}) does not beat the random one "
+            f"({random_return:.1f}); confidences will be meaningless. Train longer "
+            "(--iterations).",
+            flush=True,
+        )
+    # An earlier checkpoint; if the best came first, any other one (and say so).
+    candidates = [s for s in snapshots if s.iteration < best.iteration]
+    if not candidates:
+        print(
+            "WARNING: the best checkpoint is the first one; the intermediate policy is "
+            "picked among the later ones",
+            flush=True,
+        )
+        candidates = [s for s in snapshots if s is not best] or snapshots
+    intermediate = min(
+        candidates,
+        key=lambda s: abs(
+            normalized_return(s.eval_return, random_return, optimal_return)
+            - config.intermediate_target
+        ),
+    )
+    intermediate_return = float(
+        episodes(intermediate, intermediate_key, config.measure_episodes).returns.mean()
+    )
+    return Picked(best, intermediate, random_return, optimal_return, intermediate_return)
+
+
+def roll_out_mixture(
+    config: MakeDemosConfig, env, picked: Picked, episodes: Episodes
+) -> Demonstrations:
+    """``num_trajectories`` deterministic episodes of the two policies at ``ratio`` (the
+    optimal ones first), each labelled with its clipped normalised return."""
+    import jax
+
+    num_optimal = config.num_optimal
+    print(
+        f"3/3 rolling out {num_optimal} optimal + "
+        f"{config.num_trajectories - num_optimal} intermediate trajectories",
+        flush=True,
+    )
+    optimal_key, intermediate_key = jax.random.split(_keys(config)[2])
+    sources = [
+        (picked.optimal, optimal_key, num_optimal),
+        (picked.intermediate, intermediate_key, config.num_trajectories - num_optimal),
+    ]
+    parts = [episodes(snapshot, key, count) for snapshot, key, count in sources if count > 0]
+    rows, trajectory_returns = _labelled_rows(parts, env, picked)
+    metadata = {
+        "env": config.env,
+        "action_scale": 1.0,
+        "random_return": picked.random_return,
+        "optimal_return": picked.optimal_return,
+        "intermediate_return": picked.intermediate_return,
+        "optimal_checkpoint": {"iteration": picked.optimal.iteration, "seed": picked.optimal.seed},
+        "intermediate_checkpoint": {
+            "iteration": picked.intermediate.iteration,
+            "seed": picked.intermediate.seed,
+        },
+        "ratio": config.ratio,
+        # The optimal policy's trajectories come first (ids 0 .. num_optimal - 1).
+        "num_optimal_trajectories": num_optimal,
+        "trajectory_returns": trajectory_returns,
+        "optimal_beats_random": picked.optimal_return > picked.random_return,
+        "source": "experiments.make_demos (deterministic TRPO policies)",
+        "env_options": config.settings.env_options,
+    }
+    demos = Demonstrations(**{k: np.concatenate(v) for k, v in rows.items()}, metadata=metadata)
+    demos.check_env(env)
+    return demos
+
+
+def _labelled_rows(parts, env, picked: Picked):
+    """Rows of the valid steps of each episode, labelled with the episode's confidence."""
+    import jax
+
+    from pngail_jax.demos.generate import normalized_return
+
+    rows = {"observations": [], "actions": [], "confidence": [], "trajectory_ids": []}
+    trajectory_returns = []
+    for episodes in parts:
+        episodes = jax.device_get(episodes)
+        for index in range(len(episodes.returns)):
+            valid = episodes.valid[index]
+            confidence = float(
+                np.clip(
+                    normalized_return(
+                        episodes.returns[index], picked.random_return, picked.optimal_return
+                    ),
+                    0.0,
+                    1.0,
+                )
+            )
+            trajectory_returns.append(float(episodes.returns[index]))
+            rows["observations"].append(episodes.observations[index][valid])
+            rows["actions"].append(
+                np.clip(episodes.actions[index][valid], env.action_low, env.action_high)
+            )
+            rows["confidence"].append(np.full(valid.sum(), confidence, np.float32))
+            rows["trajectory_ids"].append(np.full(valid.sum(), len(trajectory_returns) - 1))
+    return rows, trajectory_returns
+
+
+NORMALIZER_KEYS = ("env", "random_return", "optimal_return")
+
+
+def write_outputs(out: Path, demos: Demonstrations, normalizer: dict) -> Path:
+    """``normalizer.json``, then ``demos.npz`` (the mark of a finished run), each written to
+    a temporary sibling and renamed, so a kill never leaves a truncated file behind."""
+    from pngail_jax.integrity import atomic_path, atomic_write_text
+
+    atomic_write_text(out / "normalizer.json", json.dumps(normalizer, indent=2))
+    path = out / DEMOS_FILE
+    with atomic_path(path) as temporary:  # keeps the .npz suffix np.savez would append
+        save_npz(temporary, demos)
+    return path
+
+
+def policies_table(picked: Picked) -> str:
+    """The three policies' returns, raw and normalised, as a Markdown table."""
+    from pngail_jax.demos.generate import normalized_return
+
+    best, intermediate = picked.optimal, picked.intermediate
+    normalised = normalized_return(
+        picked.intermediate_return, picked.random_return, picked.optimal_return
+    )
+    return (
+        f"\n| policy | return | normalised |\n|---|---:|---:|\n"
+        f"| random (uniform actions) | {picked.random_return:.1f} | 0.00 |\n"
+        f"| optimal (iter {best.iteration}, seed {best.seed}) | "
+        f"{picked.optimal_return:.1f} | 1.00 |\n"
+        f"| intermediate (iter {intermediate.iteration}, seed {intermediate.seed}) | "
+        f"{picked.intermediate_return:.1f} | {normalised:.2f} |"
+    )
