@@ -297,190 +297,204 @@ def _appendix_cost(name: str) -> int:
     return APPENDIX_COST_ORDER.index(group) if group in APPENDIX_COST_ORDER else 0
 
 
-def plan(figures: Sequence[str], tasks: Sequence[str], released: set[str]):
-    """The figures asked for (on the tasks asked for) and the grids behind them."""
-    grids: dict[str, GridSpec] = {}
-    made: list[Figure] = []
+class Planner:
+    """The grids a plan has so far, for the figures' builders: each adds the grids it reads
+    (a grid two figures share is run once) and returns its ``Figure``."""
 
-    def add(grid: GridSpec) -> str:
-        grids.setdefault(grid.name, grid)
+    def __init__(self, tasks: Sequence[str], released: set[str]):
+        self.tasks, self.released = list(tasks), released
+        self.grids: dict[str, GridSpec] = {}
+
+    def add(self, grid: GridSpec) -> str:
+        self.grids.setdefault(grid.name, grid)
         return grid.name
 
-    def per_method(grid: GridSpec, methods) -> list[Series]:
-        name = add(grid)
+    def per_method(self, grid: GridSpec, methods) -> list[Series]:
+        name = self.add(grid)
         return [Series(method, name, method) for method in methods]
 
-    def main_of(task):
-        return main_grid(task, task in released)
+    def main_of(self, task: str) -> GridSpec:
+        return main_grid(task, task in self.released)
 
-    def pick(families):
-        return [task for family in families for task in tasks if envs.task_family(task) == family]
+    def pick(self, families) -> list[str]:
+        """The plan's tasks of ``families`` (a figure's tasks), in the families' order."""
+        return [
+            task for family in families for task in self.tasks if envs.task_family(task) == family
+        ]
 
-    for figure in figures:
-        if figure in ("fig2", "fig3"):
-            methods = FIG2_METHODS if figure == "fig2" else FIG3_METHODS
-            what = "PN-GAIL and the baselines" if figure == "fig2" else "the ablations"
-            claim = "every baseline" if figure == "fig2" else "both ablations"
-            made.append(
-                Figure(
-                    figure,
-                    f"Fig. {figure[3:]}: {what}, every task",
-                    f"PN-GAIL above {claim} on all six tasks (the figure is a plot; its values "
-                    "are not in the text)",
-                    {task: per_method(main_of(task), methods) for task in tasks},
-                )
-            )
-        elif figure == "table1":
-            made.append(
-                Figure(
-                    figure,
-                    "Table 1: the confidence classifiers' error on D_u (SC vs BSC)",
-                    "BSC's MAE and RMSE below SC's on every task",
-                    {
-                        task: per_method(main_of(task), ("pngail-no-bsc", "pngail"))
-                        for task in tasks
-                    },
-                )
-            )
-        elif figure in ("fig5", "table4"):
-            panels = {}
-            for task in pick(("Pendulum-v1", "Ant")):
-                demos = main_of(task).demos if task == "Pendulum-v1" else DemoSet(task, (1, 10))
-                groups = appendix_groups(task)
-                for name in sorted(groups, key=_appendix_cost):  # the cheap grids first
-                    add(GridSpec(name, task, demos, groups[name]))
-                panels[task] = [
-                    series
-                    for name, methods in groups.items()
-                    for series in per_method(GridSpec(name, task, demos, methods), methods)
-                ]
-            made.append(
-                Figure(
-                    figure,
-                    "Fig. 5: PN-GAIL against the appendix baselines"
-                    if figure == "fig5"
-                    else "Table 4: average return during training, against the appendix baselines",
-                    "PN-GAIL above CAIL, T-REX, D-REX and f-IRL (the demonstrations of Fig. 2 "
-                    "on Pendulum-v1, of Fig. 8 on Ant; rankings by every trajectory's "
-                    "confidence)",
-                    panels,
-                )
-            )
-        elif figure == "fig4":
-            panels = {}
-            for task in pick(("Ant", "Hopper")):
-                grid = dataclasses.replace(
-                    main_of(task), name=f"{task}-label-ratios", methods=("pngail",),
-                    label_ratios=LABEL_RATIOS,
-                )  # fmt: skip
-                name = add(grid)
-                panels[task] = [
-                    Series(f"label ratio {r:g}", name, "pngail", f"label_ratio={r:g},noise=0")
-                    for r in LABEL_RATIOS
-                ]
-            if "Pendulum-v1" in tasks:
-                grid = dataclasses.replace(
-                    main_of("Pendulum-v1"), name="Pendulum-v1-noise", methods=("pngail",),
-                    noise_stds=NOISE_STDS,
-                )  # fmt: skip
-                name = add(grid)
-                panels["Pendulum-v1"] = [
-                    Series(f"noise {s:g}", name, "pngail", f"label_ratio=0.2,noise={s:g}")
-                    for s in NOISE_STDS
-                ]
-            made.append(
-                Figure(
-                    figure,
-                    "Fig. 4: label ratios 0.2-0.03 (Ant, Hopper), confidence noise (Pendulum-v1)",
-                    "only a marginal decline as the label ratio falls; robust to noise",
-                    panels,
-                )
-            )
-        elif figure == "fig6":
-            panels = {}
-            for task in pick(("Pendulum-v1",)):
-                panels[task] = []
-                for fraction in UNLABELLED_FRACTIONS:
-                    grid = dataclasses.replace(
-                        main_of(task), name=f"{task}-unlabelled-{fraction:g}",
-                        methods=("pngail",), unlabelled_fraction=fraction,
-                    )  # fmt: skip
-                    name = add(grid) if fraction != 1 else add(main_of(task))
-                    panels[task].append(Series(f"{fraction:g} of D_u", name, "pngail"))
-            made.append(
-                Figure(
-                    figure,
-                    "Fig. 6: fewer unlabelled rows (the paper does not name its task: ours is "
-                    "Pendulum-v1)",
-                    "returns rise with the amount of unlabelled data",
-                    panels,
-                )
-            )
-        elif figure == "fig7":
-            panels = {}
-            for task in pick(("Pendulum-v1",)):
-                panels[task] = []
-                for ratio in ((2, 3), (1, 4), (1, 9)):
-                    grid = GridSpec(
-                        f"{task}-made-{ratio[0]}to{ratio[1]}-pngail", task, DemoSet(task, ratio),
-                        ("pngail",),
-                    )  # fmt: skip
-                    if main_of(task).demos == grid.demos:  # the main grid has these cells
-                        grid = main_of(task)
-                    panels[task].append(Series(f"{ratio[0]}:{ratio[1]}", add(grid), "pngail"))
-            made.append(
-                Figure(
-                    figure,
-                    "Fig. 7: optimal:intermediate 2:3, 1:4, 1:9 (Pendulum-v1, made sets)",
-                    "the more optimal demonstrations, the higher the return",
-                    panels,
-                )
-            )
-        elif figure in ("fig8", "fig9"):
-            ratio = (1, 10) if figure == "fig8" else (2, 1)
-            task_names = ("Ant",) if figure == "fig8" else ("Ant", "Pendulum-v1")
-            panels = {
-                task: per_method(
-                    GridSpec(
-                        f"{task}-made-{ratio[0]}to{ratio[1]}",
-                        task,
-                        DemoSet(task, ratio),
-                        FIG2_METHODS,
-                    ),
-                    FIG2_METHODS,
-                )  # fmt: skip
-                for task in pick(task_names)
-            }
-            made.append(
-                Figure(
-                    figure,
-                    f"Fig. {figure[3:]}: optimal:intermediate {ratio[0]}:{ratio[1]} "
-                    f"({', '.join(task_names)}, made sets)",
-                    "only PN-GAIL learns from the extreme 1:10 mixture"
-                    if figure == "fig8"
-                    else "PN-GAIL stays best when optimal demonstrations dominate",
-                    panels,
-                )
-            )
-        elif figure == "fig10":
-            panels = {}
-            for task in pick(("Ant",)):
-                panels[task] = []
-                for fraction in INTERMEDIATE_FRACTIONS:
-                    demos = DemoSet(task, (1, 4), fraction)
-                    grid = GridSpec(f"{task}-{demos.name}-pngail", task, demos, ("pngail",))
-                    name = add(grid) if fraction != 1 else add(main_grid(task, False))
-                    panels[task].append(Series(f"{fraction:g} of non-optimal", name, "pngail"))
-            made.append(
-                Figure(
-                    figure,
-                    "Fig. 10: fewer non-optimal demonstrations (Ant, made 1:4 set)",
-                    "no significant decline with fewer non-optimal demonstrations",
-                    panels,
-                )
-            )
-    made = [figure for figure in made if figure.panels]
-    return made, grids
+
+def plan(figures: Sequence[str], tasks: Sequence[str], released: set[str]):
+    """The figures asked for (on the tasks asked for) and the grids behind them."""
+    planner = Planner(tasks, released)
+    made = [FIGURE_BUILDERS[figure](planner, figure) for figure in figures]
+    return [figure for figure in made if figure.panels], planner.grids
+
+
+def fig2_or_fig3(planner: Planner, figure: str) -> Figure:
+    methods = FIG2_METHODS if figure == "fig2" else FIG3_METHODS
+    what = "PN-GAIL and the baselines" if figure == "fig2" else "the ablations"
+    claim = "every baseline" if figure == "fig2" else "both ablations"
+    return Figure(
+        figure,
+        f"Fig. {figure[3:]}: {what}, every task",
+        f"PN-GAIL above {claim} on all six tasks (the figure is a plot; its values are not in "
+        "the text)",
+        {task: planner.per_method(planner.main_of(task), methods) for task in planner.tasks},
+    )
+
+
+def table1(planner: Planner, figure: str) -> Figure:
+    return Figure(
+        figure,
+        "Table 1: the confidence classifiers' error on D_u (SC vs BSC)",
+        "BSC's MAE and RMSE below SC's on every task",
+        {
+            task: planner.per_method(planner.main_of(task), ("pngail-no-bsc", "pngail"))
+            for task in planner.tasks
+        },
+    )
+
+
+def fig5_or_table4(planner: Planner, figure: str) -> Figure:
+    panels = {}
+    for task in planner.pick(("Pendulum-v1", "Ant")):
+        main = planner.main_of(task)
+        demos = main.demos if task == "Pendulum-v1" else DemoSet(task, (1, 10))
+        groups = appendix_groups(task)
+        for name in sorted(groups, key=_appendix_cost):  # the cheap grids first
+            planner.add(GridSpec(name, task, demos, groups[name]))
+        panels[task] = [
+            series
+            for name, methods in groups.items()
+            for series in planner.per_method(GridSpec(name, task, demos, methods), methods)
+        ]
+    return Figure(
+        figure,
+        "Fig. 5: PN-GAIL against the appendix baselines"
+        if figure == "fig5"
+        else "Table 4: average return during training, against the appendix baselines",
+        "PN-GAIL above CAIL, T-REX, D-REX and f-IRL (the demonstrations of Fig. 2 on "
+        "Pendulum-v1, of Fig. 8 on Ant; rankings by every trajectory's confidence)",
+        panels,
+    )
+
+
+def fig4(planner: Planner, figure: str) -> Figure:
+    panels = {}
+    for task in planner.pick(("Ant", "Hopper")):
+        grid = dataclasses.replace(
+            planner.main_of(task), name=f"{task}-label-ratios", methods=("pngail",),
+            label_ratios=LABEL_RATIOS,
+        )  # fmt: skip
+        name = planner.add(grid)
+        panels[task] = [
+            Series(f"label ratio {r:g}", name, "pngail", f"label_ratio={r:g},noise=0")
+            for r in LABEL_RATIOS
+        ]
+    if "Pendulum-v1" in planner.tasks:
+        grid = dataclasses.replace(
+            planner.main_of("Pendulum-v1"), name="Pendulum-v1-noise", methods=("pngail",),
+            noise_stds=NOISE_STDS,
+        )  # fmt: skip
+        name = planner.add(grid)
+        panels["Pendulum-v1"] = [
+            Series(f"noise {s:g}", name, "pngail", f"label_ratio=0.2,noise={s:g}")
+            for s in NOISE_STDS
+        ]
+    return Figure(
+        figure,
+        "Fig. 4: label ratios 0.2-0.03 (Ant, Hopper), confidence noise (Pendulum-v1)",
+        "only a marginal decline as the label ratio falls; robust to noise",
+        panels,
+    )
+
+
+def fig6(planner: Planner, figure: str) -> Figure:
+    panels = {}
+    for task in planner.pick(("Pendulum-v1",)):
+        panels[task] = []
+        for fraction in UNLABELLED_FRACTIONS:
+            main = planner.main_of(task)
+            grid = dataclasses.replace(
+                main, name=f"{task}-unlabelled-{fraction:g}", methods=("pngail",),
+                unlabelled_fraction=fraction,
+            )  # fmt: skip
+            name = planner.add(grid if fraction != 1 else main)
+            panels[task].append(Series(f"{fraction:g} of D_u", name, "pngail"))
+    return Figure(
+        figure,
+        "Fig. 6: fewer unlabelled rows (the paper does not name its task: ours is Pendulum-v1)",
+        "returns rise with the amount of unlabelled data",
+        panels,
+    )
+
+
+def fig7(planner: Planner, figure: str) -> Figure:
+    panels = {}
+    for task in planner.pick(("Pendulum-v1",)):
+        panels[task] = []
+        for ratio in ((2, 3), (1, 4), (1, 9)):
+            grid = GridSpec(
+                f"{task}-made-{ratio[0]}to{ratio[1]}-pngail", task, DemoSet(task, ratio),
+                ("pngail",),
+            )  # fmt: skip
+            if planner.main_of(task).demos == grid.demos:  # the main grid has these cells
+                grid = planner.main_of(task)
+            panels[task].append(Series(f"{ratio[0]}:{ratio[1]}", planner.add(grid), "pngail"))
+    return Figure(
+        figure,
+        "Fig. 7: optimal:intermediate 2:3, 1:4, 1:9 (Pendulum-v1, made sets)",
+        "the more optimal demonstrations, the higher the return",
+        panels,
+    )
+
+
+def fig8_or_fig9(planner: Planner, figure: str) -> Figure:
+    ratio = (1, 10) if figure == "fig8" else (2, 1)
+    task_names = ("Ant",) if figure == "fig8" else ("Ant", "Pendulum-v1")
+    panels = {
+        task: planner.per_method(
+            GridSpec(
+                f"{task}-made-{ratio[0]}to{ratio[1]}", task, DemoSet(task, ratio), FIG2_METHODS
+            ),
+            FIG2_METHODS,
+        )  # fmt: skip
+        for task in planner.pick(task_names)
+    }
+    return Figure(
+        figure,
+        f"Fig. {figure[3:]}: optimal:intermediate {ratio[0]}:{ratio[1]} "
+        f"({', '.join(task_names)}, made sets)",
+        "only PN-GAIL learns from the extreme 1:10 mixture"
+        if figure == "fig8"
+        else "PN-GAIL stays best when optimal demonstrations dominate",
+        panels,
+    )
+
+
+def fig10(planner: Planner, figure: str) -> Figure:
+    panels = {}
+    for task in planner.pick(("Ant",)):
+        panels[task] = []
+        for fraction in INTERMEDIATE_FRACTIONS:
+            demos = DemoSet(task, (1, 4), fraction)
+            grid = GridSpec(f"{task}-{demos.name}-pngail", task, demos, ("pngail",))
+            name = planner.add(grid if fraction != 1 else main_grid(task, False))
+            panels[task].append(Series(f"{fraction:g} of non-optimal", name, "pngail"))
+    return Figure(
+        figure,
+        "Fig. 10: fewer non-optimal demonstrations (Ant, made 1:4 set)",
+        "no significant decline with fewer non-optimal demonstrations",
+        panels,
+    )
+
+
+# Each figure's builder: (planner, figure name) -> Figure, adding the grids it reads.
+FIGURE_BUILDERS = {
+    "fig2": fig2_or_fig3, "fig3": fig2_or_fig3, "table1": table1, "fig4": fig4,
+    "fig5": fig5_or_table4, "table4": fig5_or_table4, "fig6": fig6, "fig7": fig7,
+    "fig8": fig8_or_fig9, "fig9": fig8_or_fig9, "fig10": fig10,
+}  # fmt: skip
 
 
 # -- demonstrations --------------------------------------------------------------------------
@@ -507,6 +521,7 @@ def demo_paths(grids, out: Path, budget: Budget, released: dict[str, Path], phys
     """The demonstrations file of every grid's set (made, mixed and saved when missing);
     made ones on ``physics`` (``Budget.run_settings``)."""
     from pngail_jax.demos import RELEASED_ACTION_SCALES, load_npz, save_npz
+    from pngail_jax.demos.make import cut_mixture
     from pngail_jax.integrity import atomic_path
     from pngail_jax.run_config import TASK_NUM_DEMOS
 
@@ -535,7 +550,11 @@ def demo_paths(grids, out: Path, budget: Budget, released: dict[str, Path], phys
             path = directory / f"{demo_set.name}.npz"
             if not path.exists():
                 with atomic_path(path) as temporary:
-                    save_npz(temporary, mixture(source, optimal, intermediate, demo_set))
+                    mixed = cut_mixture(source, optimal, intermediate, demo_set.name)
+                    mixed.metadata["source"] = (
+                        f"experiments.paper: {demo_set.description}, from the made set"
+                    )
+                    save_npz(temporary, mixed)
             paths[demo_set] = (path, 1.0)
     return paths
 
@@ -568,38 +587,6 @@ def make_demonstrations(config, directory: Path) -> None:
         make.make_demonstrations(config, directory, overwrite=True)
     except RunError as error:
         raise SystemExit(str(error)) from None
-
-
-def mixture(source, num_optimal: int, num_intermediate: int, demo_set: DemoSet):
-    """The first ``num_optimal`` optimal and ``num_intermediate`` intermediate trajectories
-    of a made set (optimal ones first, as ``make_demos`` writes them), ids renumbered."""
-    from pngail_jax.demos import Demonstrations
-
-    made_optimal = source.metadata["num_optimal_trajectories"]
-    made_total = len(source.metadata["trajectory_returns"])
-    if num_optimal > made_optimal or num_intermediate > made_total - made_optimal:
-        raise ValueError(
-            f"{demo_set.name}: needs {num_optimal} optimal + {num_intermediate} intermediate "
-            f"trajectories, the made set has {made_optimal} + {made_total - made_optimal}"
-        )
-    kept = [*range(num_optimal), *range(made_optimal, made_optimal + num_intermediate)]
-    rows = np.isin(source.trajectory_ids, kept)
-    renumber = np.zeros(made_total, np.int64)
-    renumber[kept] = np.arange(len(kept))
-    returns = source.metadata["trajectory_returns"]
-    return Demonstrations(
-        observations=source.observations[rows],
-        actions=source.actions[rows],
-        confidence=source.confidence[rows],
-        trajectory_ids=renumber[source.trajectory_ids[rows]],
-        metadata={
-            **source.metadata,
-            "ratio": f"{num_optimal}:{num_intermediate}",
-            "num_optimal_trajectories": num_optimal,
-            "trajectory_returns": [returns[i] for i in kept],
-            "source": f"experiments.paper: {demo_set.description}, from the made set",
-        },
-    )
 
 
 # -- grids -----------------------------------------------------------------------------------

@@ -78,14 +78,15 @@ def made_set(lengths, num_optimal):
 
 def test_a_mixture_takes_the_first_trajectories_of_each_kind_and_renumbers_them():
     source = made_set([3, 2, 4, 1, 5], num_optimal=2)  # optimal: 0, 1; intermediate: 2, 3, 4
-    demo_set = paper.DemoSet("Pendulum-v1", (1, 2))
-    mixed = paper.mixture(source, 1, 2, demo_set)
+    from pngail_jax.demos.make import cut_mixture
+
+    mixed = cut_mixture(source, 1, 2, "made-1to2")
     np.testing.assert_array_equal(mixed.trajectory_ids, [0, 0, 0, 1, 1, 1, 1, 2])
     np.testing.assert_array_equal(mixed.observations[:, 0], [0, 2, 4, 10, 12, 14, 16, 18])
     assert mixed.metadata["trajectory_returns"] == [100.0, 80.0, 70.0]
     assert mixed.metadata["num_optimal_trajectories"] == 1 and mixed.metadata["ratio"] == "1:2"
     with pytest.raises(ValueError, match="needs 1 optimal \\+ 4 intermediate .* has 2 \\+ 3"):
-        paper.mixture(source, 1, 4, demo_set)
+        cut_mixture(source, 1, 4)
 
 
 def test_figures_without_a_panel_on_the_tasks_asked_for_are_refused(tmp_path):
