@@ -156,7 +156,7 @@ def test_table1_pendulum_bsc_beats_sc():
 
     Actions in the environment's units (the file's known scale, x 2, applied by default).
     Measured here: BSC 0.093 +- 0.005, SC 0.132 +- 0.003 (about 11 s for all 10 runs)."""
-    from experiments import classify
+    from pngail_jax.programs import classify
 
     summary = classify.main(
         ["--demos", str(AUTHORS_PENDULUM / "Pendulum-v1_mixture.npy"), "--seeds", "5"]

@@ -17,9 +17,9 @@ from hypothesis import given
 from hypothesis import settings as hypothesis_settings
 from hypothesis import strategies as st
 
-from experiments import cli, compare_settings, sweep
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.methods import METHOD_NAMES
+from pngail_jax.programs import cli, compare_settings, sweep
 from pngail_jax.run_config import FISHER_FORMS, LOG_BACKENDS, RunConfig
 from pngail_jax.settings import RunSettings
 
@@ -352,7 +352,7 @@ def test_compare_settings_refuses_a_file_and_finished_work(tmp_path, capsys):
 def test_one_name_and_one_default_per_concept_across_programs(tmp_path, capsys):
     """The same concept has the same flag and default in every program; the old spellings
     still parse, with a note; usage and errors say how to run the program."""
-    from experiments import train_rl
+    from pngail_jax.programs import train_rl
     from pngail_jax.rl import TRPOConfig
 
     fisher = train_rl.parse_args([]).fisher

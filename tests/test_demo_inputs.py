@@ -561,8 +561,8 @@ def _masked_npz(path: Path, num_allowed: int) -> Path:
 
 
 def test_classify_labels_only_the_rows_the_file_allows(tmp_path, monkeypatch):
-    from experiments import classify
     from pngail_jax import confidence as confidence_module
+    from pngail_jax.programs import classify
 
     def count_labelled(predicted, true_confidence, labelled):
         """In place of MAE / RMSE: labelled rows outside the mask, and labelled rows."""
@@ -585,7 +585,7 @@ def test_classify_labels_only_the_rows_the_file_allows(tmp_path, monkeypatch):
 
 
 def test_classify_refuses_a_mask_that_allows_too_few_rows(tmp_path):
-    from experiments import classify
+    from pngail_jax.programs import classify
 
     path = _masked_npz(tmp_path / "masked.npz", num_allowed=3)
     with pytest.raises(SystemExit) as exit_info:
@@ -621,7 +621,7 @@ def test_the_trainer_passes_the_mask_to_the_split_and_checks_ratios(tmp_path, mo
 
 
 def test_classify_speaks_the_sweeps_names_and_keeps_the_old_ones_with_a_note(capsys):
-    from experiments import classify
+    from pngail_jax.programs import classify
 
     old = ["--steps", "7", "--eps", "0.05", "--traj-size", "9", "--methods", "bsc"]
     args = classify.parse_args(["--demos", "any.npy", *old])
@@ -656,7 +656,7 @@ def test_classify_speaks_the_sweeps_names_and_keeps_the_old_ones_with_a_note(cap
     ],
 )
 def test_classify_refuses_bad_flags_naming_them(capsys, flags):
-    from experiments import classify
+    from pngail_jax.programs import classify
 
     with pytest.raises(SystemExit) as exit_info:
         classify.parse_args(["--demos", "any.npy", *flags])
@@ -667,7 +667,7 @@ def test_classify_refuses_bad_flags_naming_them(capsys, flags):
 
 
 def test_classify_load_errors_are_one_line_naming_the_file(tmp_path):
-    from experiments import classify
+    from pngail_jax.programs import classify
 
     mixture = write_released(tmp_path, bytes(range(7, 250, 3)))
     for demos, expected in [

@@ -15,7 +15,7 @@ def test_every_module_is_on_the_architecture_page():
     page = (ROOT / "docs" / "architecture.md").read_text()
     modules = [
         path
-        for folder in ("pngail_jax", "experiments")
+        for folder in ("pngail_jax",)
         for path in (ROOT / folder).rglob("*.py")
         if path.name != "__init__.py"
     ]
@@ -54,7 +54,7 @@ def test_the_docs_document_commands_at_all():
 
 @pytest.mark.parametrize("program", sorted({program for _, program, _ in COMMANDS}))
 def test_every_documented_flag_exists(program, capsys):
-    module = importlib.import_module(f"experiments.{program}")
+    module = importlib.import_module(f"pngail_jax.programs.{program}")
     with pytest.raises(SystemExit):
         module.parse_args(["--help"])
     known = set(re.findall(r"--[a-z][a-z0-9-]*", capsys.readouterr().out))
@@ -68,3 +68,22 @@ def test_every_documented_flag_exists(program, capsys):
         }
     )
     assert not unknown, f"documented flags that experiments.{program} does not know: {unknown}"
+
+
+def test_every_program_runs_from_a_checkout_and_as_an_installed_command():
+    """Each program has its one-line ``python -m experiments.<program>`` entry point (the
+    checkout's) and its console script (pyproject.toml); the documented ones are among them."""
+    import tomllib
+
+    from pngail_jax.programs import commands
+
+    scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
+    for program in commands.PROGRAMS:
+        entry = (ROOT / "experiments" / f"{program}.py").read_text()
+        assert f"from pngail_jax.programs.{program} import main" in entry, program
+        name = f"pngail-{program.replace('_', '-')}"
+        assert scripts[name] == f"pngail_jax.programs.commands:{program}", name
+        assert callable(getattr(commands, program))
+    assert {program for _, program, _ in COMMANDS} <= set(commands.PROGRAMS)
+    entries = {path.stem for path in (ROOT / "experiments").glob("*.py")} - {"__init__"}
+    assert entries == set(commands.PROGRAMS)

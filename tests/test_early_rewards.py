@@ -6,7 +6,7 @@ import math
 import pytest
 from conftest import authors_data
 
-from experiments import early_rewards
+from pngail_jax.programs import early_rewards
 
 PENDULUM = authors_data() / "Pendulum-v1_mixture.npy"
 

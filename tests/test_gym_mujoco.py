@@ -181,9 +181,9 @@ def test_c_engine_sweep_resumed_after_a_kill_equals_the_uninterrupted_run(tmp_pa
     A copy of a finished run cut back to its first checkpoint (what a kill after it leaves;
     tests/test_sweep.py kills a run for real) resumes to the same metrics, bit for bit;
     config.json records the engine, and a resume keeps it."""
-    from experiments import sweep
     from pngail_jax import runner
     from pngail_jax.demos import Demonstrations, save_npz
+    from pngail_jax.programs import sweep
 
     rng = np.random.default_rng(0)
     demos = Demonstrations(

@@ -10,8 +10,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from experiments import cli, paper, sweep, train_rl
-from experiments.cli import MARKER, claim_output, output_owner, prepare_output
+from pngail_jax.programs import cli, paper, sweep, train_rl
+from pngail_jax.programs.cli import MARKER, claim_output, output_owner, prepare_output
 
 PROGRAMS = ["sweep", "paper", "train_rl", "make_demos", "compare_settings"]
 
@@ -155,7 +155,7 @@ def test_the_run_lock_refuses_a_live_holder_and_takes_over_a_dead_ones(tmp_path,
     import subprocess
     import sys
 
-    from experiments.cli import LOCK, RunLocked, run_lock
+    from pngail_jax.programs.cli import LOCK, RunLocked, run_lock
 
     with run_lock(tmp_path, "sweep"):
         holder = json.loads((tmp_path / LOCK).read_text())

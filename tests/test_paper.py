@@ -6,9 +6,9 @@ import json
 import numpy as np
 import pytest
 
-from experiments import paper
 from pngail_jax.demos import Demonstrations
 from pngail_jax.methods import display_name
+from pngail_jax.programs import paper
 
 
 def test_fig2_and_fig3_share_one_grid_per_task_and_each_figure_has_its_grids():
@@ -196,7 +196,7 @@ def test_a_resume_checks_the_authors_files_and_its_own_options(tmp_path):
 def test_a_grid_config_is_the_sweep_config_of_the_same_flags(tmp_path):
     """The paper builds RunConfigs for the library runner; each is the config the sweep makes
     of the flags that say the same (so a grid can be rerun by hand with the sweep)."""
-    from experiments import sweep
+    from pngail_jax.programs import sweep
 
     demos = tmp_path / "demos.npz"
     demos.write_bytes(b"")  # the sweep checks that the file exists, not what it holds

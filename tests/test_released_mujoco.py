@@ -4,9 +4,9 @@ are not in this repository) and the paper's per-task settings (Table 3, appendix
 import numpy as np
 import pytest
 
-from experiments import sweep
 from pngail_jax import envs
 from pngail_jax.demos import DemonstrationError, load_released
+from pngail_jax.programs import sweep
 from pngail_jax.run_config import RunConfig
 
 # The released files' shapes, [s, a] columns, and the paper's Table 3 for each task.

@@ -163,7 +163,7 @@ def test_late_average_is_the_mean_of_the_last_tenth_of_the_evaluations():
 
 
 def test_seeds_puts_a_methods_seeds_side_by_side_with_their_training(tmp_path, capsys):
-    from experiments import seeds
+    from pngail_jax.programs import seeds
 
     cells = make_cells(["gail", "pngail"], 3)
     metrics = synthetic_metrics(cells, num_iterations=20, eval_every=5)

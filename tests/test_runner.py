@@ -7,8 +7,8 @@ import json
 import pytest
 from conftest import metrics_numbers, tiny_sweep_args
 
-from experiments import sweep
 from pngail_jax import RunConfig, RunError, run
+from pngail_jax.programs import sweep
 
 
 @pytest.fixture(scope="module")

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from conftest import metrics_numbers, tiny_sweep_args
 
-from experiments import sweep
 from pngail_jax import runner
 from pngail_jax.demos import save_npz
+from pngail_jax.programs import sweep
 
 SUMMARY_KEYS = {  # the fields of every earlier summary.json, and the new interval ones
     "final_return_mean",
@@ -309,7 +309,7 @@ def test_a_finished_run_resumes_to_already_complete_and_a_held_run_is_refused(
 ):
     import os
 
-    from experiments.cli import LOCK
+    from pngail_jax.programs.cli import LOCK
 
     out = copy_run(finished, tmp_path)
     before = {p: p.stat().st_mtime_ns for p in out.rglob("*") if p.is_file()}

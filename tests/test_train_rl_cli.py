@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 import pngail_jax
-from experiments import train_rl
 from pngail_jax.networks import GaussianPolicy
+from pngail_jax.programs import train_rl
 
 
 @pytest.fixture(scope="module")

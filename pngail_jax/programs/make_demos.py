@@ -1,0 +1,123 @@
+"""Generate imperfect demonstrations: an optimal and an intermediate TRPO policy, mixed.
+
+    python -m experiments.make_demos --env Pendulum-v1 --out demos/pendulum
+
+The flags of ``pngail_jax.demos.make.MakeDemosConfig`` and one call of
+``make_demonstrations``, which says what is made and how: a TRPO run on the true reward whose
+evaluated checkpoints are kept (``checkpoints/iter_XXXX/``), the best one as the optimal
+policy and an earlier one near ``--intermediate-target`` as the intermediate one, the random
+and optimal returns measured (Table 3), and ``--num-trajectories`` deterministic episodes at
+the optimal:intermediate ``--ratio`` labelled with their normalised returns in ``demos.npz``.
+
+``demos.npz`` is written last and atomically (a temporary sibling renamed onto it), so its
+presence means the run finished; a second run into the same ``--out`` refuses to replace it
+unless ``--overwrite`` is given (``experiments.sweep`` only calls this for a missing cache).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import re
+from pathlib import Path
+
+from pngail_jax import compilation
+from pngail_jax import settings as run_settings
+from pngail_jax.demos.make import MakeDemosConfig, make_demonstrations
+from pngail_jax.programs.cli import (
+    ENV_HELP,
+    ArgumentParser,
+    HelpFormatter,
+    check_env,
+    check_finite,
+    check_positive,
+    claim_output,
+    path_argument,
+)
+from pngail_jax.runner import RunError
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    parser = ArgumentParser(
+        "make_demos", description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
+    )
+    parser.add_argument("--env", default="Pendulum-v1", help=ENV_HELP)
+    parser.add_argument(
+        "--out", type=path_argument, required=True, help="output directory (required)"
+    )
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an earlier run's demos.npz, normalizer.json and checkpoints in --out "
+        "(default: refuse)",
+    )
+    parser.add_argument("--iterations", type=int, default=150, help="TRPO iterations")
+    parser.add_argument("--seeds", type=int, default=3, help="TRPO seeds; the best is optimal")
+    parser.add_argument("--seed", type=int, default=0, help="base PRNG seed")
+    parser.add_argument("--ratio", default="1:4", help="optimal:intermediate trajectories")
+    parser.add_argument(
+        "--num-trajectories", type=int, default=5, help="trajectories in the mixture"
+    )
+    parser.add_argument(
+        "--intermediate-target",
+        type=float,
+        default=0.45,
+        help="normalised return the intermediate policy is picked near",
+    )
+    parser.add_argument(
+        "--measure-episodes",
+        type=int,
+        default=64,
+        help="episodes for the random and optimal returns",
+    )
+    run_settings.add_arguments(parser)
+    # Checkpoints are kept at every evaluation, and the intermediate policy is picked among
+    # them: finer than the table's evaluation interval by default.
+    parser.set_defaults(eval_every=10)
+    compilation.add_arguments(parser)
+    args = parser.parse_args(argv)
+    claim_output(parser, args.out, "make_demos", args.overwrite)
+    check_env(parser, args.env)
+    check_positive(parser, args, ("iterations", "seeds", "num_trajectories", "measure_episodes"))
+    check_finite(parser, args, ("intermediate_target",))
+    try:
+        args.settings = run_settings.from_arguments(args.env, args)
+        args.config = config_of(args)
+    except ValueError as error:
+        parser.error(flag_words(str(error)))
+    return args
+
+
+def flag_words(message: str) -> str:
+    """A ``MakeDemosConfig`` error in the command line's words: its field names as flags."""
+    names = [field.name for field in dataclasses.fields(MakeDemosConfig)] + ["eval_every"]
+    pattern = r"\b(" + "|".join(names) + r")\b"
+    return re.sub(pattern, lambda match: "--" + match.group(1).replace("_", "-"), message)
+
+
+def config_of(args: argparse.Namespace) -> MakeDemosConfig:
+    """The library's config of the checked flags."""
+    return MakeDemosConfig(
+        env=args.env,
+        iterations=args.iterations,
+        seeds=args.seeds,
+        seed=args.seed,
+        ratio=args.ratio,
+        num_trajectories=args.num_trajectories,
+        intermediate_target=args.intermediate_target,
+        measure_episodes=args.measure_episodes,
+        settings=args.settings,
+    )
+
+
+def main(argv=None) -> Path:
+    args = parse_args(argv)
+    compilation.from_arguments(args)
+    try:
+        return make_demonstrations(args.config, args.out, overwrite=args.overwrite)
+    except RunError as error:
+        raise SystemExit(str(error)) from None
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,451 @@
+"""The main job: every method x seed (x label ratio x noise) as one compiled program.
+
+    python -m experiments.sweep        # smoke scale: Pendulum-v1, 7 methods x 3 seeds
+    python -m experiments.sweep --preset check   # a first look: 20 iterations x 2 seeds
+    python -m experiments.sweep --demos data/released/Pendulum-v1_mixture.npy \\
+        --seeds 5 --iterations 1000
+    python -m experiments.sweep --preset paper --demos ...   # 5,000 iterations, 5 seeds (GPU)
+    python -m experiments.sweep --config runs/A/config.json --seeds 10   # a new run like A
+    python -m experiments.sweep --resume runs/20261122-210000
+
+The command line fills in a ``pngail_jax.run_config.RunConfig``. Without ``--demos`` the
+demonstrations are made by ``experiments.make_demos`` (1:4 optimal to intermediate
+trajectories) once and reused from ``runs/demos-cache/<env>/``. Writes to ``--out`` (default
+``runs/<timestamp>``): ``config.json`` (the config, what it resolved to, and provenance),
+``metrics.csv``, ``curves.png``, ``summary.md``, ``summary.json``, ``policies/<method>/``
+(every seed's final policy, for ``pngail_jax.load_policy``) and ``checkpoints/`` (the whole
+grid's state after every chunk; ``--resume DIR`` continues from the last one to the numbers
+of an uninterrupted run).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import sys
+import time
+from pathlib import Path
+
+from pngail_jax import compilation, runner
+from pngail_jax import settings as run_settings
+from pngail_jax.programs.cli import (
+    ENV_HELP,
+    ArgumentParser,
+    HelpFormatter,
+    check_env,
+    claim_output,
+    comma_floats,
+    known_names,
+    output_owner,
+    path_argument,
+    text_argument,
+)
+from pngail_jax.run_config import (
+    FISHER_FORMS,
+    LOG_BACKENDS,
+    PRESETS_BY_NAME,
+    RunConfig,
+    task_classifier,
+)
+from pngail_jax.tracking import check_backends
+
+MINARI_PREFIX = runner.MINARI_PREFIX
+SMOKE = RunConfig.preset("smoke")
+# Flags that --resume DIR accepts: the run's config.json has every other value.
+RESUME_FLAGS = (
+    "--resume",
+    "--allow-changed-inputs",
+    "--coordinator",
+    "--num-processes",
+    "--process-id",
+    "--compile-cache",
+    "--no-compile-cache",
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class Invocation:
+    """What one command asks for: a config (None until a resumed run's is read), where to
+    write, and how to start (multi-host, compilation cache)."""
+
+    config: RunConfig | None
+    out: Path
+    resume: bool
+    distributed: dict
+    args: argparse.Namespace  # the parsed flags (compilation cache, ...)
+    argv: list[str]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from pngail_jax.methods import ALL_METHOD_NAMES, METHOD_NAMES, PRESETS
+
+    methods_help = "\n".join(
+        f"  {name:14s} {preset.description} (r: {preset.confidence_source})"
+        for name, preset in PRESETS.items()
+    )
+    parser = ArgumentParser(
+        "sweep",
+        description=__doc__.split("\n\n")[0],
+        epilog=f"methods:\n{methods_help}",
+        formatter_class=HelpFormatter,
+    )
+    add = parser.add_argument
+    add(
+        "--env",
+        help=f"{ENV_HELP} (default: the task of an authors' --demos file, e.g. Hopper-v4 for "
+        f"Hopper-v2_mixture.npy; else {SMOKE.env})",
+    )
+    add(
+        "--methods",
+        help=f"comma-separated, from {', '.join(ALL_METHOD_NAMES)} (default: the paper's "
+        f"seven, {', '.join(METHOD_NAMES)})",
+    )
+    add("--seeds", type=int, help=f"seeds per method and setting (default {SMOKE.seeds})")
+    add("--iterations", type=int, help=f"TRPO iterations per run (default {SMOKE.iterations})")
+    add(
+        "--preset",
+        choices=sorted(PRESETS_BY_NAME),
+        help="named scale: "
+        + "; ".join(f"{name} {values}" for name, values in PRESETS_BY_NAME.items())
+        + " (default smoke); explicit flags override it",
+    )
+    add(
+        "--config",
+        type=path_argument,
+        metavar="FILE",
+        help="start a new run from a saved config.json (flags given override it) (default: none)",
+    )
+    _add_demonstration_flags(add)
+    add(
+        "--num-demos",
+        type=int,
+        help="rows per split, n_c + n_u (default: the task's Table 3 size, capped at the "
+        "demonstrations' rows; every row for a task without one)",
+    )
+    add("--label-ratio", help="comma-separated values: a grid axis (default 0.2)")
+    add("--noise", help="confidence noise std, comma-separated: a grid axis (default 0)")
+    add("--seed", type=int, help="base PRNG seed (default 0)")
+    add(
+        "--chunk-iterations",
+        type=int,
+        help="iterations per compiled chunk: progress, checkpoint, log "
+        f"(default {SMOKE.chunk_iterations})",
+    )
+    add(
+        "--classifier-steps",
+        type=int,
+        help=f"confidence classifier steps (default {SMOKE.classifier.num_steps:,}; "
+        f"{task_classifier('Walker2d').num_steps:,} on Walker2d, the paper's)",
+    )
+    add("--bsc-eps", type=float, help="BSC's clip (default 0.01; 0.05 on Walker2d, the paper's)")
+    add(
+        "--fisher",
+        choices=FISHER_FORMS,
+        help="Fisher-vector product: the same matrix either way (the Hessian of the mean KL at "
+        "the current policy); gauss_newton is 1.7x faster here (default gauss_newton)",
+    )
+    add(
+        "--fisher-subsample",
+        type=int,
+        help="Fisher products on every k-th time step (default 1: all)",
+    )
+    add(
+        "--cpu-devices",
+        type=int,
+        help="on a CPU, split it into this many XLA devices and shard the grid over them "
+        "(default 1: on 2 cores one device already uses both, and 2 measured no faster)",
+    )
+    add(
+        "--log",
+        help=f"comma-separated logging backends, from {', '.join(LOG_BACKENDS)}, fed once per "
+        "chunk (default: none)",
+    )
+    _add_output_flags(add)
+    run_settings.add_arguments(parser)
+    compilation.add_arguments(parser)
+    _add_multihost_flags(parser)
+    return parser
+
+
+def _add_demonstration_flags(add) -> None:
+    """The flags that name the demonstrations and how to read them."""
+    add(
+        "--demos",
+        type=text_argument,
+        help="*_mixture.npy (authors' layout), *.npz, or minari:<dataset id> "
+        "(default: made by experiments.make_demos and cached)",
+    )
+    add(
+        "--conf",
+        type=text_argument,
+        help="confidence file (default: the mixture's sibling; per episode for Minari)",
+    )
+    add(
+        "--confidence-field",
+        help="Minari: the per-episode field holding confidences (default: none)",
+    )
+    add(
+        "--action-scale",
+        type=float,
+        help="multiplies stored actions (default: an authors' file's known scale, 2 for "
+        "their Pendulum file, whose torques are stored halved; else 1)",
+    )
+    add(
+        "--optimal-return",
+        type=float,
+        help="the normalised return's 1: the best return the task allows (default: the "
+        "demonstrations' own, Table 3 for an authors' file; none for a file of rows)",
+    )
+    add(
+        "--random-return",
+        type=float,
+        help="the normalised return's 0 (default: the demonstrations' own; with "
+        "--optimal-return alone, measured from uniform random actions)",
+    )
+
+
+def _add_output_flags(add) -> None:
+    """Where a run writes, and how it continues or replaces one."""
+    add("--out", type=path_argument, help="output directory (default runs/<timestamp>)")
+    add(
+        "--overwrite",
+        action="store_true",
+        help="replace a sweep run already in --out (default: refuse; anything else there is "
+        "always refused)",
+    )
+    add(
+        "--resume",
+        type=path_argument,
+        metavar="DIR",
+        help="continue DIR's run (default: a new run)",
+    )
+    add(
+        "--allow-changed-inputs",
+        action="store_true",
+        help="with --resume: go on although a demonstration, confidence or cache file differs "
+        "from the one the run began with (the run then mixes two data sets) (default: refuse)",
+    )
+
+
+def _add_multihost_flags(parser) -> None:
+    multihost = parser.add_argument_group(
+        "multi-host (run the same command on every host; process 0 writes the outputs)"
+    )
+    multihost.add_argument(
+        "--coordinator", help="host:port of process 0, for jax.distributed (default: one host)"
+    )
+    multihost.add_argument("--num-processes", type=int, help="(default: one host)")
+    multihost.add_argument("--process-id", type=int, help="(default: one host)")
+
+
+def parse_args(argv=None) -> Invocation:
+    """The ``Invocation`` of the flags in ``argv``; exits naming the flag on a bad value."""
+    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = parser.parse_args(argv)
+    distributed = {
+        "coordinator_address": args.coordinator,
+        "num_processes": args.num_processes,
+        "process_id": args.process_id,
+    }
+    given = [value is not None for value in distributed.values()]
+    if any(given) and not all(given):
+        parser.error("--coordinator, --num-processes and --process-id go together")
+    if args.allow_changed_inputs and args.resume is None:
+        parser.error("--allow-changed-inputs goes with --resume DIR")
+    if args.resume is not None:
+        flags = [a.split("=")[0] for a in argv if a.startswith("--")]
+        if any(flag not in RESUME_FLAGS for flag in flags):
+            parser.error(
+                "--resume DIR takes no other flags (except the multi-host ones): the run's "
+                "config.json has them"
+            )
+        owner = output_owner(args.resume) if args.resume.is_dir() else None
+        if owner not in (None, "sweep"):
+            parser.error(f"--resume {args.resume} holds a run of experiments.{owner}, not a sweep")
+        return Invocation(None, args.resume, True, distributed, args, argv)
+    config = config_from_flags(parser, args)
+    if args.coordinator is not None and config.demos is None:
+        parser.error("multi-host runs need --demos (a file every host can read)")
+    out = args.out if args.out is not None else Path("runs") / time.strftime("%Y%m%d-%H%M%S")
+    claim_output(parser, out, "sweep", args.overwrite)
+    return Invocation(config, out, False, distributed, args, argv)
+
+
+def config_from_flags(parser, args) -> RunConfig:
+    """The preset or saved config the flags name, with every flag given applied."""
+    from pngail_jax.methods import ALL_METHOD_NAMES
+
+    if args.config is not None and args.preset is not None:
+        parser.error("--config and --preset both set the starting point: give one")
+    try:
+        if args.config is not None:
+            base = RunConfig.from_json(args.config)
+        else:
+            base = RunConfig.preset(args.preset or "smoke")
+    except ValueError as error:
+        parser.error(f"--{'config' if args.config else 'preset'}: {error}")
+    demos = args.demos
+    env = check_env(parser, args.env or _task_of(demos) or base.env)
+    if demos is not None and not demos.startswith(MINARI_PREFIX):
+        if not Path(demos).exists():
+            parser.error(f"--demos {demos} does not exist")
+        demos = str(Path(demos).absolute())
+    if args.conf is not None and not Path(args.conf).exists():
+        parser.error(f"--conf {args.conf} does not exist")
+    conf = None if args.conf is None else str(Path(args.conf).absolute())
+    log = None
+    if args.log is not None:
+        log = tuple(known_names(parser, args.log, LOG_BACKENDS, "log backend", flag="--log"))
+        try:
+            check_backends(log)
+        except ImportError as error:
+            parser.error(f"--log: {error}")
+    if demos is not None and demos != base.demos:  # another data set: not the saved one's
+        base = dataclasses.replace(
+            base,
+            conf=None,
+            confidence_field=None,
+            action_scale=None,
+            random_return=None,
+            optimal_return=None,
+        )
+    try:
+        settings_base = base.settings if env == base.env else None
+        settings = run_settings.from_arguments(env, args, base=settings_base)
+        # Another task: its own settings row and classifier, as RunConfig.replace gives.
+        classifier = base.classifier if env == base.env else task_classifier(env)
+        if args.classifier_steps is not None:
+            classifier = dataclasses.replace(classifier, num_steps=args.classifier_steps)
+        overrides = dict(
+            env=env,
+            settings=settings,
+            methods=None
+            if args.methods is None
+            else tuple(
+                known_names(parser, args.methods, ALL_METHOD_NAMES, "method", flag="--methods")
+            ),
+            seeds=args.seeds,
+            iterations=args.iterations,
+            label_ratios=comma_floats(parser, "--label-ratio", args.label_ratio),
+            noise_stds=comma_floats(parser, "--noise", args.noise),
+            seed=args.seed,
+            demos=demos,
+            conf=conf,
+            confidence_field=args.confidence_field,
+            action_scale=args.action_scale,
+            random_return=args.random_return,
+            optimal_return=args.optimal_return,
+            num_demos=args.num_demos,
+            chunk_iterations=args.chunk_iterations,
+            classifier=classifier,
+            bsc_eps=args.bsc_eps,
+            fisher=args.fisher,
+            fisher_subsample=args.fisher_subsample,
+            cpu_devices=args.cpu_devices,
+            log=log,
+        )
+        config = base.replace(**{k: v for k, v in overrides.items() if v is not None})
+    except ValueError as error:
+        parser.error(_flag_message(str(error)))
+    try:  # a --config file's log backends too, before any compile or directory
+        check_backends(config.log)
+    except ImportError as error:
+        parser.error(f"log {list(config.log)}: {error}")
+    return config
+
+
+def _task_of(demos: str | None) -> str | None:
+    """The task of an authors' released file (``Hopper-v2_mixture.npy``: Hopper-v4), so
+    ``--demos`` alone picks it."""
+    from pngail_jax.demos import released_task
+
+    return None if demos is None else released_task(demos)
+
+
+def _flag_message(message: str) -> str:
+    """A RunConfig error in the command line's words (field names as flags)."""
+    for field, flag in (
+        ("label ratios", "--label-ratio values"),
+        ("noise stds", "--noise values"),
+        ("iterations (", "--iterations ("),
+        ("iterations must", "--iterations must"),
+        ("methods must", "--methods must"),
+        ("seeds must", "--seeds must"),
+        ("chunk_iterations", "--chunk-iterations"),
+        ("fisher_subsample", "--fisher-subsample"),
+        ("cpu_devices", "--cpu-devices"),
+        ("num_demos", "--num-demos"),
+        ("action_scale", "--action-scale"),
+        ("random_return", "--random-return"),
+        ("optimal_return", "--optimal-return"),
+        ("bsc_eps", "--bsc-eps"),
+        ("ClassifierConfig.num_steps", "--classifier-steps"),
+        ("seed must", "--seed must"),
+        ("conf:", "--conf:"),
+        ("confidence_field", "--confidence-field"),
+        ("demos:", "--demos:"),
+    ):
+        if message.startswith(field):
+            return flag + message[len(field) :]
+    return message
+
+
+# -- starting: devices, compilation cache, multi-host; then the runner ----------------------
+
+
+def start(invocation: Invocation) -> tuple[RunConfig, runner.SavedRun | None]:
+    """Reads a resumed run's config, sets up devices, compilation cache and multi-host.
+
+    Returns the config and the saved run (None for a new one).
+    """
+    saved = runner.load_saved(invocation.out) if invocation.resume else None
+    config = saved.config if saved else invocation.config
+    cpu_devices = config.cpu_devices
+    if saved and cpu_devices is None and saved.platform == "cpu":
+        cpu_devices = saved.local_device_count  # the same sharding as before
+    runner.configure_devices(cpu_devices)
+    import jax
+
+    compilation.from_arguments(invocation.args)
+    if invocation.distributed["coordinator_address"] is not None:
+        jax.config.update("jax_cpu_collectives_implementation", "gloo")
+        jax.distributed.initialize(**invocation.distributed)
+        if jax.process_index() != 0:
+            sys.stdout = open(os.devnull, "w")  # noqa: SIM115  process 0 reports
+    return config, saved
+
+
+def main(argv=None, own_interrupt: bool = True) -> Path:
+    """Runs the sweep of ``argv`` (``pngail_jax.runner.run``). ``own_interrupt``: Ctrl-C ends
+    in one line saying how to continue (a caller that runs several sweeps, as
+    experiments.paper, passes False and says it in its own words)."""
+    invocation = parse_args(argv)
+    try:
+        config, saved = start(invocation)
+        runner.run(
+            None if saved else config,
+            invocation.out,
+            resume=saved is not None,
+            overwrite=invocation.args.overwrite,
+            allow_changed_inputs=invocation.args.allow_changed_inputs,
+            command=["python", "-m", "experiments.sweep", *invocation.argv],
+            saved=saved,
+        )
+    except runner.RunError as error:
+        raise SystemExit(str(error)) from None
+    except KeyboardInterrupt:
+        if not own_interrupt:
+            raise
+        out = invocation.out
+        if (out / "config.json").exists():
+            message = f"finished chunks are kept; --resume {out} continues from the last one"
+        else:
+            message = "before the run began: nothing was written"
+        raise SystemExit(f"\ninterrupted {message}") from None
+    return invocation.out
+
+
+if __name__ == "__main__":
+    main()
