@@ -16,27 +16,17 @@ this machine type (measured by the project, not in this run).
 from __future__ import annotations
 
 import argparse
-import json
-import time
 from pathlib import Path
 
 import jax
 import jax.numpy as jnp
+from common import compile_and_run, context, markdown_table, write_rows
 
 from pngail_jax.confidence import ClassifierConfig, ClassifierSpec, split_and_train
 from pngail_jax.demos import load_released
 
 # The authors' Pendulum set, downloaded into data/released/ (docs/demonstrations.md).
 DEFAULT_DEMOS = Path(__file__).resolve().parents[1] / "data/released/Pendulum-v1_mixture.npy"
-
-
-def timed(function, *args):
-    start = time.perf_counter()
-    compiled = jax.jit(function).lower(*args).compile()
-    compile_seconds = time.perf_counter() - start
-    start = time.perf_counter()
-    result = jax.block_until_ready(compiled(*args))
-    return result, compile_seconds, time.perf_counter() - start
 
 
 def main(argv=None) -> list[dict]:
@@ -56,7 +46,6 @@ def main(argv=None) -> list[dict]:
         lambda *x: jnp.repeat(jnp.stack(x), args.seeds, axis=0), *(spec for _, spec in specs)
     )
     keys = jnp.tile(jax.random.split(jax.random.key(0), args.seeds), len(specs))
-    device = jax.devices()[0]
     rows = []
     for batch_size in (int(b) for b in args.batch_sizes.split(",")):
         config = ClassifierConfig(
@@ -68,8 +57,8 @@ def main(argv=None) -> list[dict]:
         def run(spec, key, config=config):
             return split_and_train(config, spec, inputs, confidence, demos.num_rows, 0.2, 0.0, key)
 
-        results, compile_seconds, run_seconds = timed(jax.vmap(run), stacked, keys)
-        _, single_compile, single_run = timed(run, ClassifierSpec.bsc(), keys[0])
+        results, compile_seconds, run_seconds = compile_and_run(jax.vmap(run), stacked, keys)
+        _, single_compile, single_run = compile_and_run(run, ClassifierSpec.bsc(), keys[0])
         num_runs = len(specs) * args.seeds
         row = {
             "name": "classifier",
@@ -81,8 +70,7 @@ def main(argv=None) -> list[dict]:
             "seconds_per_run": run_seconds / num_runs,
             "single_run_seconds": single_run,
             "grid_over_single_ratio": run_seconds / (num_runs * single_run),
-            "device": f"{device.platform}",
-            "jax_version": jax.__version__,
+            **context(),
         }
         for index, (name, _) in enumerate(specs):
             part = slice(index * args.seeds, (index + 1) * args.seeds)
@@ -98,20 +86,19 @@ def main(argv=None) -> list[dict]:
             flush=True,
         )
 
-    print(
-        "\n| labelled+unlabelled per step | runs | run s | s per run | 1 run alone s | "
-        "grid / N singles | SC MAE | BSC MAE | BSC RMSE | BSC clip active |"
-    )
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
-    for r in rows:
-        print(
-            f"| {r['batch']} | {r['runs']} | {r['run_seconds']:.1f} | {r['seconds_per_run']:.2f}"
-            f" | {r['single_run_seconds']:.1f} | {r['grid_over_single_ratio']:.2f} | "
-            f"{r['sc_mae']:.3f} | {r['bsc_mae']:.3f} | {r['bsc_rmse']:.3f} | "
-            f"{r['bsc_clip_active']:.0%} |"
-        )
-    if args.json:
-        args.json.write_text(json.dumps(rows, indent=2))
+    header = [
+        "labelled+unlabelled per step", "runs", "run s", "s per run", "1 run alone s",
+        "grid / N singles", "SC MAE", "BSC MAE", "BSC RMSE", "BSC clip active",
+    ]  # fmt: skip
+    cells = [
+        [r["batch"], r["runs"], f"{r['run_seconds']:.1f}", f"{r['seconds_per_run']:.2f}",
+         f"{r['single_run_seconds']:.1f}", f"{r['grid_over_single_ratio']:.2f}",
+         f"{r['sc_mae']:.3f}", f"{r['bsc_mae']:.3f}", f"{r['bsc_rmse']:.3f}",
+         f"{r['bsc_clip_active']:.0%}"]
+        for r in rows
+    ]  # fmt: skip
+    print("\n" + markdown_table(header, cells, "lrrrrrrrrr"))
+    write_rows(args.json, rows)
     return rows
 
 

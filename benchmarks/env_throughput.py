@@ -19,16 +19,11 @@ solver makes HalfCheetah diverge now and then).
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import statistics
 import sys
-import time
 from pathlib import Path
 
 import jax
-import jax.numpy as jnp
-import numpy as np
+from common import context, env_ceiling, markdown_table, mebibytes, scan_length, write_rows
 
 from pngail_jax import envs
 
@@ -36,70 +31,6 @@ CPU_WIDTHS = (1, 4, 16, 64, 256)
 GPU_WIDTHS = (1, 64, 512, 2048, 8192)
 QUICK_PENDULUM_WIDTHS = (1, 16, 256)
 QUICK_MUJOCO_WIDTHS = (16,)
-NUM_REPEATS = 3
-
-
-def scan_length(env_name: str, width: int, quick: bool) -> int:
-    """Steps per timed call: long enough to dwarf dispatch, short enough for a slow CPU."""
-    if env_name == "Pendulum-v1":
-        return 2000
-    steps = 100 if width <= 64 else 40
-    return steps // 2 if quick else steps
-
-
-def peak_memory_bytes(compiled) -> int | None:
-    """XLA's estimate of a compiled program's device buffers: args + outputs + temps - aliases."""
-    memory = compiled.memory_analysis()
-    if memory is None:
-        return None
-    return int(
-        memory.argument_size_in_bytes
-        + memory.output_size_in_bytes
-        + memory.temp_size_in_bytes
-        - memory.alias_size_in_bytes
-    )
-
-
-def measure(env, width: int, num_steps: int, key: jax.Array) -> dict:
-    """Compiles and times ``num_steps`` vmapped steps of ``width`` parallel copies of ``env``."""
-    reset_key, action_key = jax.random.split(key)
-    states = jax.jit(jax.vmap(env.reset))(jax.random.split(reset_key, width))
-    actions = jax.random.uniform(
-        action_key,
-        (num_steps, width, env.action_size),
-        minval=env.action_low,
-        maxval=env.action_high,
-    )
-    step = jax.vmap(env.step)
-
-    def rollout(states, actions):
-        def body(states, action):
-            states = step(states, action)
-            return states, ~jnp.isfinite(states.reward)
-
-        states, non_finite = jax.lax.scan(body, states, actions)
-        return states, non_finite.any(axis=0)
-
-    start = time.perf_counter()
-    compiled = jax.jit(rollout).lower(states, actions).compile()
-    compile_seconds = time.perf_counter() - start
-    timings = []
-    diverged = np.zeros(width, bool)
-    for _ in range(NUM_REPEATS):
-        start = time.perf_counter()
-        states, non_finite = compiled(states, actions)
-        jax.block_until_ready(non_finite)
-        timings.append(time.perf_counter() - start)
-        diverged |= np.asarray(non_finite)
-    peak = peak_memory_bytes(compiled)
-    # A slot whose physics diverged (NaN) keeps stepping at the same cost, so the timing
-    # stands; the fraction is reported because it is part of a solver setting's cost.
-    return {
-        "steps_per_second": width * num_steps / statistics.median(timings),
-        "compile_seconds": compile_seconds,
-        "peak_memory_bytes": peak,
-        "diverged_fraction": float(diverged.mean()),
-    }
 
 
 def configurations(env_names, quick: bool, on_gpu: bool, fast_solver_only: bool):
@@ -124,21 +55,15 @@ def configurations(env_names, quick: bool, on_gpu: bool, fast_solver_only: bool)
         yield name, "fast", envs.FAST_SOLVER, widths
 
 
-def markdown_table(rows: list[dict]) -> str:
-    lines = [
-        "| env | solver | width | steps/s | compile s | peak memory MiB | diverged |",
-        "|---|---|---:|---:|---:|---:|---:|",
-    ]
-    for row in rows:
-        memory = (
-            "-" if row["peak_memory_bytes"] is None else f"{row['peak_memory_bytes'] / 2**20:.1f}"
-        )
-        lines.append(
-            f"| {row['env']} | {row['solver']} | {row['width']} | "
-            f"{row['steps_per_second']:,.0f} | {row['compile_seconds']:.1f} | {memory} | "
-            f"{row['diverged_fraction']:.0%} |"
-        )
-    return "\n".join(lines)
+def rows_table(rows: list[dict]) -> str:
+    header = ["env", "solver", "width", "steps/s", "compile s", "peak memory MiB", "diverged"]
+    cells = [
+        [row["env"], row["solver"], row["width"], f"{row['steps_per_second']:,.0f}",
+         f"{row['compile_seconds']:.1f}", mebibytes(row["peak_memory_bytes"]),
+         f"{row['diverged_fraction']:.0%}"]
+        for row in rows
+    ]  # fmt: skip
+    return markdown_table(header, cells, "llrrrrr")
 
 
 def plot(rows: list[dict], path: Path) -> None:
@@ -222,16 +147,10 @@ def main(argv=None) -> None:
         widths_override = tuple(int(w) for w in args.widths.split(","))
         if min(widths_override) < 1:
             parser.error("--widths must be positive integers")
-    device = jax.devices()[0]
-    device_name = (
-        f"cpu ({os.cpu_count()} cores)"
-        if device.platform == "cpu"
-        else f"{device.platform}: {device.device_kind}"
-    )
-    on_gpu = device.platform == "gpu"
+    on_gpu = jax.devices()[0].platform == "gpu"
     key = jax.random.key(args.seed)
     rows = []
-    print(f"device {device_name}, jax {jax.__version__}", flush=True)
+    print(f"device {context()['device']}, jax {jax.__version__}", flush=True)
     for name, solver, options, widths in configurations(
         names, args.quick, on_gpu, args.fast_solver_only
     ):
@@ -239,7 +158,7 @@ def main(argv=None) -> None:
         for width in widths_override or widths:
             key, measure_key = jax.random.split(key)
             num_steps = scan_length(name, width, args.quick)
-            result = measure(env, width, num_steps, measure_key)
+            result = env_ceiling(env, width, num_steps, measure_key)
             row = {
                 "name": "env_step",
                 "env": name,
@@ -247,8 +166,7 @@ def main(argv=None) -> None:
                 "width": width,
                 "num_steps": num_steps,
                 **result,
-                "device": device_name,
-                "jax_version": jax.__version__,
+                **context(),
             }
             rows.append(row)
             warning = ""
@@ -261,15 +179,13 @@ def main(argv=None) -> None:
                 flush=True,
             )
 
-    table = markdown_table(rows)
+    table = rows_table(rows)
     print("\n" + table)
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "env_throughput.json").write_text(json.dumps(rows, indent=2))
+    write_rows(args.out / "env_throughput.json", rows)
     (args.out / "env_throughput.md").write_text(table + "\n")
     plot(rows, args.out / "env_throughput.png")
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(rows, indent=2))
+    write_rows(args.json, rows)
     print(f"\nwrote {args.out}/env_throughput.{{json,md,png}}", file=sys.stderr)
 
 

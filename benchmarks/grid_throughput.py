@@ -100,9 +100,18 @@ from pathlib import Path
 
 import jax
 import numpy as np
-from env_throughput import NUM_REPEATS, measure, peak_memory_bytes, scan_length
+from common import (
+    NUM_REPEATS,
+    context,
+    env_ceiling,
+    markdown_table,
+    mebibytes,
+    median_seconds,
+    peak_memory_bytes,
+    scan_length,
+    write_rows,
+)  # fmt: skip
 from jax import monitoring
-from trpo_throughput import device_description
 
 from pngail_jax import envs
 from pngail_jax import settings as run_settings
@@ -176,17 +185,6 @@ def counting_cache_hits():
         yield hits
     finally:
         monitoring.unregister_event_listener(listener)
-
-
-def median_seconds(program, *args) -> float:
-    """Median wall time of NUM_REPEATS calls of ``program(*args)``, after one warm-up call."""
-    jax.block_until_ready(program(*args))
-    timings = []
-    for _ in range(NUM_REPEATS):
-        start = time.perf_counter()
-        jax.block_until_ready(program(*args))
-        timings.append(time.perf_counter() - start)
-    return statistics.median(timings)
 
 
 def evaluation_seconds(trpo: TRPO, state: TrainState) -> float:
@@ -352,7 +350,7 @@ def measure_rows(args, env, demos, devices, common: dict) -> list[dict]:
     for size in args.sizes:
         width = settings.num_envs * size
         key, env_key, grid_key = jax.random.split(key, 3)
-        env_speed = measure(env, width, scan_length(args.env, width, False), env_key)
+        env_speed = env_ceiling(env, width, scan_length(args.env, width, False), env_key)
         env_speed = env_speed["steps_per_second"]
         print(f"{size} cells, width {width}: env only {env_speed:,.0f} steps/s", flush=True)
         result = measure_grid(args, train, full_trpo, size, devices, grid_key)
@@ -402,28 +400,27 @@ def _seconds(value: float | None) -> str:
     return "-" if value is None else f"{value:.1f} s"
 
 
-def markdown_table(rows: list[dict]) -> str:
-    lines = [
-        "| cells | steps/s training | steps/s incl. eval (untrained / full episodes) | "
-        "env-only steps/s | train/env | eval share (untrained / full episodes) | "
-        "compile s cold / warm | peak memory MiB |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|",
-    ]
+def rows_table(rows: list[dict]) -> str:
+    header = [
+        "cells", "steps/s training", "steps/s incl. eval (untrained / full episodes)",
+        "env-only steps/s", "train/env", "eval share (untrained / full episodes)",
+        "compile s cold / warm", "peak memory MiB",
+    ]  # fmt: skip
+    cells = []
     for row in rows:
-        memory = row["peak_memory_bytes"]
-        memory = "-" if memory is None else f"{memory / 2**20:.1f}"
-        cells = row["cells"]
-        if row["padded_cells"] != cells:
-            cells = f"{cells} (padded to {row['padded_cells']})"
-        lines.append(
-            f"| {cells} | {row['steps_per_second']:,.0f} | "
+        size = row["cells"]
+        if row["padded_cells"] != size:
+            size = f"{size} (padded to {row['padded_cells']})"
+        cells.append([
+            size, f"{row['steps_per_second']:,.0f}",
             f"{row['steps_per_second_with_eval']:,.0f} / "
-            f"{row['steps_per_second_with_full_eval']:,.0f} | "
-            f"{row['env_steps_per_second']:,.0f} | {row['train_over_env_ratio']:.4f} | "
-            f"{row['eval_share']:.1%} / {row['eval_share_full_episodes']:.1%} | "
-            f"{row['compile_seconds']:.1f} / {_seconds(row['compile_seconds_warm'])} | {memory} |"
-        )
-    return "\n".join(lines)
+            f"{row['steps_per_second_with_full_eval']:,.0f}",
+            f"{row['env_steps_per_second']:,.0f}", f"{row['train_over_env_ratio']:.4f}",
+            f"{row['eval_share']:.1%} / {row['eval_share_full_episodes']:.1%}",
+            f"{row['compile_seconds']:.1f} / {_seconds(row['compile_seconds_warm'])}",
+            mebibytes(row["peak_memory_bytes"]),
+        ])  # fmt: skip
+    return markdown_table(header, cells, "rrrrrrrr")
 
 
 def rerun_with_host_devices(num_devices: int, argv) -> int:
@@ -531,15 +528,14 @@ def measure_environment(args, devices) -> list[dict]:
     env = run_settings.make_env(args.env, settings)
     demos, demos_note = load_demos(args.demos, args.env, env)
     print(
-        f"device {device_description()} x{len(devices)} used, jax {jax.__version__}; "
+        f"device {context()['device']} x{len(devices)} used, jax {jax.__version__}; "
         f"{args.env}: {run_settings.describe(settings, env)}; {args.iterations} iterations per "
         f"timed chunk, {args.classifier_steps:,} classifier steps (untimed)\n"
         f"demonstrations: {demos_note}",
         flush=True,
     )
     common = {
-        "device": device_description(),
-        "jax_version": jax.__version__,
+        **context(),
         "synthetic_demos": demos_note.startswith("SYNTHETIC"),
         "physics": getattr(env, "physics", None),
     }
@@ -615,11 +611,8 @@ def main(argv=None) -> None:
         print("\n" + physics_table(rows), flush=True)
     else:
         rows = run(argv)
-    json_path = parse_args(rest).json
-    if json_path and rows:
-        json_path.parent.mkdir(parents=True, exist_ok=True)
-        json_path.write_text(json.dumps(rows, indent=2))
-        print(f"\nwrote {json_path}", file=sys.stderr)
+    if rows:
+        write_rows(parse_args(rest).json, rows)
 
 
 def run(argv: list[str]) -> list[dict]:
@@ -638,7 +631,7 @@ def run(argv: list[str]) -> list[dict]:
         compile_worker(args, devices)
         return []
     rows = measure_environment(args, devices)
-    print(markdown_table(rows), flush=True)
+    print(rows_table(rows), flush=True)
     return rows
 
 

@@ -55,7 +55,6 @@ from __future__ import annotations
 
 import argparse
 import functools
-import json
 import math
 import statistics
 import time
@@ -64,8 +63,8 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 import optax
+from common import context, markdown_table, write_rows
 from flax import struct
-from trpo_throughput import device_description
 
 from pngail_jax import envs
 from pngail_jax.losses import ConfidenceStats, discriminator_loss, policy_reward
@@ -455,18 +454,14 @@ def make_rows(results: dict[str, dict[str, float]], common: dict) -> list[dict]:
     ]
 
 
-def markdown_table(rows: list[dict]) -> str:
-    cells = rows[0]["cells"]
-    lines = [
-        f"| phase | ms per call ({cells} cells) | share of iteration | compile s |",
-        "|---|---:|---:|---:|",
-    ]
-    for row in rows:
-        lines.append(
-            f"| {row['phase']} | {row['milliseconds']:,.3f} | {row['share_of_iteration']:.2%} | "
-            f"{row['compile_seconds']:.1f} |"
-        )
-    return "\n".join(lines)
+def rows_table(rows: list[dict]) -> str:
+    header = ["phase", f"ms per call ({rows[0]['cells']} cells)", "share of iteration", "compile s"]
+    cells = [
+        [row["phase"], f"{row['milliseconds']:,.3f}", f"{row['share_of_iteration']:.2%}",
+         f"{row['compile_seconds']:.1f}"]
+        for row in rows
+    ]  # fmt: skip
+    return markdown_table(header, cells, "lrrr")
 
 
 def summary(rows: list[dict], eval_every: int) -> str:
@@ -549,8 +544,7 @@ def main(argv=None) -> None:
         "unroll_length": config.unroll_length,
         "fisher": config.fisher,
         "gae_form": config.gae_form,
-        "device": device_description(),
-        "jax_version": jax.__version__,
+        **context(),
     }
     print(
         f"{args.env}, {args.cells} cells, {describe(settings)}; fisher {config.fisher}, "
@@ -562,11 +556,9 @@ def main(argv=None) -> None:
         Phases(trpo, args.demo_rows), evaluation_trpo, args.cells, jax.random.key(args.seed)
     )
     rows = make_rows(timer.time_all(args.rounds), common)
-    print("\n" + markdown_table(rows) + "\n")
+    print("\n" + rows_table(rows) + "\n")
     print(summary(rows, settings.eval_every), flush=True)
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(rows, indent=2))
+    write_rows(args.json, rows)
 
 
 if __name__ == "__main__":

@@ -17,13 +17,12 @@ collision code. MJX compiles each task for 20-40 s on a CPU.
 from __future__ import annotations
 
 import argparse
-import json
-import sys
 from pathlib import Path
 
 import gymnasium as gym
 import jax
 import numpy as np
+from common import write_rows
 
 from pngail_jax import envs
 
@@ -98,9 +97,7 @@ def main(argv=None) -> None:
             rows.append(row)
             cells = " | ".join(f"{worst[c]:.1e}" for c in checkpoints)
             print(f"| {name} | {physics} | {cells} | {row['return_difference']:+.3g} |", flush=True)
-    if args.json:
-        args.json.write_text(json.dumps(rows, indent=2))
-        print(f"wrote {args.json}", file=sys.stderr)
+    write_rows(args.json, rows)
 
 
 if __name__ == "__main__":

@@ -28,10 +28,10 @@ compile.
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import time
 
+import common
 import jax
 import numpy as np
 
@@ -204,7 +204,7 @@ def print_tables(rows: list[dict]) -> None:
         print(f"Note: {note}.")
 
 
-def main() -> None:
+def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--envs", help=f"comma-separated, default {','.join(TASKS)}")
     parser.add_argument("--num-envs", type=int, help="parallel envs (default 16)")
@@ -212,7 +212,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--json", metavar="PATH", help="write the rows as a JSON list")
     parser.add_argument("--quick", action="store_true", help="HalfCheetah, Hopper, 8 x 100")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     defaults = ("HalfCheetah,Hopper", 8, 100) if args.quick else (",".join(TASKS), 16, 200)
     names = (args.envs or defaults[0]).split(",")
     num_envs = args.num_envs or defaults[1]
@@ -222,8 +222,7 @@ def main() -> None:
     if num_steps < 10 or num_envs < 2:
         parser.error("need --steps >= 10 and --num-envs >= 2")
 
-    device = jax.devices()[0]
-    context = {"device": device.device_kind or device.platform, "jax_version": jax.__version__}
+    context = common.context()
     print(f"{num_envs} envs x {num_steps} steps on {context['device']}, jax {jax.__version__}")
     key = jax.random.key(args.seed)
     rows = []
@@ -231,10 +230,7 @@ def main() -> None:
         task_key = jax.random.fold_in(key, TASKS.index(name))  # independent of --envs order
         rows += compare_task(name, num_envs, num_steps, task_key, context)
     print_tables(rows)
-    if args.json:
-        with open(args.json, "w") as file:
-            json.dump(rows, file, indent=2)
-        print(f"wrote {args.json}")
+    common.write_rows(args.json, rows)
 
 
 if __name__ == "__main__":

@@ -36,7 +36,16 @@ from pathlib import Path
 
 import jax
 import numpy as np
-from env_throughput import NUM_REPEATS, measure, peak_memory_bytes, scan_length
+from common import (
+    NUM_REPEATS,
+    context,
+    env_ceiling,
+    markdown_table,
+    mebibytes,
+    peak_memory_bytes,
+    scan_length,
+    write_rows,
+)  # fmt: skip
 
 from pngail_jax import envs
 from pngail_jax.rl.train import TRPO, TRPOConfig, TRPOHyperparams
@@ -169,7 +178,7 @@ def training_rows(names, seed_counts, brax_seed_counts, variants, num_iterations
         for num_seeds in seed_counts if name == "Pendulum-v1" else brax_seed_counts:
             width = make_config(name, "reference").num_envs * num_seeds
             key, env_key, init_key = jax.random.split(key, 3)
-            env_speed = measure(env, width, scan_length(name, width, False), env_key)
+            env_speed = env_ceiling(env, width, scan_length(name, width, False), env_key)
             env_speed = env_speed["steps_per_second"]
             print(f"{name} width {width}: env only {env_speed:,.0f} steps/s", flush=True)
             states = initial_states(name, env, num_seeds, init_key)
@@ -197,22 +206,19 @@ def training_rows(names, seed_counts, brax_seed_counts, variants, num_iterations
     return rows
 
 
-def markdown_table(rows: list[dict]) -> str:
-    lines = [
-        "| env | fisher | subsample | seeds | width | compile s | train steps/s | "
-        "env-only steps/s | train/env | peak MiB | vs 4,400 |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
-    ]
-    for row in rows:
-        memory = row["peak_memory_bytes"]
-        memory = "-" if memory is None else f"{memory / 2**20:.1f}"
-        lines.append(
-            f"| {row['env']} | {row['fisher']} | {row['fisher_subsample']} | {row['seeds']} | "
-            f"{row['width']} | {row['compile_seconds']:.1f} | {row['steps_per_second']:,.0f} | "
-            f"{row['env_steps_per_second']:,.0f} | {row['train_over_env_ratio']:.3f} | "
-            f"{memory} | {row['speedup_vs_reference']:.1f}x |"
-        )
-    return "\n".join(lines)
+def rows_table(rows: list[dict]) -> str:
+    header = [
+        "env", "fisher", "subsample", "seeds", "width", "compile s", "train steps/s",
+        "env-only steps/s", "train/env", "peak MiB", "vs 4,400",
+    ]  # fmt: skip
+    cells = [
+        [row["env"], row["fisher"], row["fisher_subsample"], row["seeds"], row["width"],
+         f"{row['compile_seconds']:.1f}", f"{row['steps_per_second']:,.0f}",
+         f"{row['env_steps_per_second']:,.0f}", f"{row['train_over_env_ratio']:.3f}",
+         mebibytes(row["peak_memory_bytes"]), f"{row['speedup_vs_reference']:.1f}x"]
+        for row in rows
+    ]  # fmt: skip
+    return markdown_table(header, cells, "llrrrrrrrrr")
 
 
 def main(argv=None) -> None:
@@ -238,7 +244,7 @@ def main(argv=None) -> None:
     seed_counts = (1, 5) if args.quick else tuple(int(s) for s in args.seeds.split(","))
     brax_seed_counts = tuple(int(s) for s in (args.brax_seeds or args.seeds).split(","))
     variants = QUICK_VARIANTS if args.quick else tuple(VARIANTS)
-    common = {"device": device_description(), "jax_version": jax.__version__}
+    common = context()
     print(f"device {common['device']}, jax {jax.__version__}", flush=True)
     if args.devices:
         rows = sharding_rows(args.devices, args.iterations, common)
@@ -249,17 +255,8 @@ def main(argv=None) -> None:
         sizes = [(name, make_config(name, "reference")) for name in names]
         sizes = "; ".join(f"{n}: {c.num_envs} envs x {c.unroll_length} steps" for n, c in sizes)
         print(f"\n{sizes}; {args.iterations} iterations per call; speed-up {REFERENCE_NOTE}.\n")
-        print(markdown_table(rows), flush=True)
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(rows, indent=2))
-
-
-def device_description() -> str:
-    device = jax.devices()[0]
-    if device.platform == "cpu":
-        return f"cpu ({os.cpu_count()} cores)"
-    return f"{device.platform}: {device.device_kind}"
+        print(rows_table(rows), flush=True)
+    write_rows(args.json, rows)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,104 @@
+"""Every benchmark script runs on a tiny configuration and writes its rows, so none can fall out
+of step with the library unnoticed (the numbers are not checked: they are timings)."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+sys.path.insert(0, str(BENCHMARKS))  # the scripts import their helper module, common.py
+
+pytestmark = pytest.mark.slow
+
+
+def rows_of(module_name: str, argv: list[str], json_path: Path) -> list[dict]:
+    module = __import__(module_name)
+    module.main([*argv, "--json", str(json_path)])
+    rows = json.loads(json_path.read_text())
+    assert rows and all(row["device"] and row["jax_version"] for row in rows if "device" in row)
+    return rows
+
+
+def positive(value) -> bool:
+    return isinstance(value, (int, float)) and math.isfinite(value) and value > 0
+
+
+def test_every_benchmark_has_a_smoke_test():
+    scripts = {path.stem for path in BENCHMARKS.glob("*.py")} - {"common"}
+    tested = {name.removeprefix("test_") for name in globals() if name.startswith("test_")}
+    assert scripts <= tested, f"benchmarks without a smoke test: {sorted(scripts - tested)}"
+
+
+def test_common_markdown_table_and_rows(tmp_path):
+    import common
+
+    table = common.markdown_table(["a", "b"], [["x", "1.0"]], "lr")
+    assert table == "| a | b |\n|---|---:|\n| x | 1.0 |"
+    with pytest.raises(ValueError, match="one cell per column"):
+        common.markdown_table(["a", "b"], [["x"]], "lr")
+    common.write_rows(tmp_path / "sub" / "rows.json", [{"a": 1}])
+    assert json.loads((tmp_path / "sub" / "rows.json").read_text()) == [{"a": 1}]
+    assert common.mebibytes(None) == "-" and common.mebibytes(2**21) == "2.0"
+
+
+def test_env_throughput(tmp_path):
+    argv = ["--envs", "Pendulum-v1", "--widths", "4", "--out", str(tmp_path / "out")]
+    rows = rows_of("env_throughput", argv, tmp_path / "rows.json")
+    assert [row["width"] for row in rows] == [4] and positive(rows[0]["steps_per_second"])
+    assert (tmp_path / "out" / "env_throughput.md").read_text().startswith("| env |")
+
+
+def test_grid_throughput(tmp_path):
+    argv = [
+        "--env", "Pendulum-v1", "--sizes", "1", "--iterations", "1", "--classifier-steps", "10",
+        "--no-compile-times", "--num-envs", "4", "--unroll-length", "50",
+    ]  # fmt: skip
+    (row,) = rows_of("grid_throughput", argv, tmp_path / "rows.json")
+    assert row["cells"] == 1 and positive(row["steps_per_second"])
+    assert positive(row["env_steps_per_second"]) and row["nonfinite_cells"] == 0
+
+
+def test_trpo_throughput(tmp_path):
+    argv = ["--envs", "Pendulum-v1", "--seeds", "1", "--iterations", "1"]
+    rows = rows_of("trpo_throughput", argv, tmp_path / "rows.json")
+    assert len(rows) == 4
+    assert all(row["finite"] and positive(row["steps_per_second"]) for row in rows)
+
+
+def test_iteration_phases(tmp_path):
+    argv = ["--cells", "1", "--num-envs", "4", "--unroll-length", "50", "--demo-rows", "100",
+            "--rounds", "1"]  # fmt: skip
+    rows = rows_of("iteration_phases", argv, tmp_path / "rows.json")
+    assert all(positive(row["milliseconds"]) for row in rows)
+    assert {"gae/sequential", "gae/associative"} <= {row["phase"] for row in rows}
+
+
+def test_classifier_throughput(tmp_path):
+    rng = np.random.default_rng(0)  # a file in the authors' layout: rows [obs, action / 2]
+    mixture = tmp_path / "Pendulum-v1_mixture.npy"
+    np.save(mixture, rng.normal(size=(50, 4)).astype(np.float32))
+    np.save(tmp_path / "Pendulum-v1_mixture_conf.npy", rng.uniform(size=(50, 1)))
+    argv = ["--demos", str(mixture), "--seeds", "2", "--steps", "20", "--batch-sizes", "1"]
+    (row,) = rows_of("classifier_throughput", argv, tmp_path / "rows.json")
+    assert row["runs"] == 4 and 0 <= row["bsc_mae"] <= 1 and positive(row["run_seconds"])
+
+
+def test_physics_agreement(tmp_path):
+    argv = ["--tasks", "Hopper-v4", "--physics", "c", "--steps", "20"]
+    (row,) = rows_of("physics_agreement", argv, tmp_path / "rows.json")
+    # The C engine is gymnasium's own physics: the same trajectory to float rounding.
+    assert row["physics"] == "c" and abs(row["return_difference"]) < 1e-6
+
+
+def test_solver_accuracy(tmp_path):
+    argv = ["--envs", "Hopper", "--num-envs", "2", "--steps", "10"]
+    rows = rows_of("solver_accuracy", argv, tmp_path / "rows.json")
+    assert {row["env"] for row in rows} == {"Hopper"} and all(
+        positive(row["steps_per_s"]) for row in rows
+    )
