@@ -24,7 +24,7 @@ order of ``pngail_jax.train.AdversarialTrainer``'s iteration:
   copy of the sequential recurrence with ``lax.scan(..., unroll=K)``, K in ``UNROLLS`` below
   the unroll length (fully unrolled, Pendulum's 200 steps took a minute to compile and ran
   13x slower on a 2-core CPU); the run checks it against the library's numbers first.
-- ``value_fit``: ``trpo._fit_value``, ``num_value_minibatches`` dependent Adam steps.
+- ``value_fit``: ``trpo.fit_value``, ``num_value_minibatches`` dependent Adam steps.
 - ``conjugate_gradient``: ``num_cg_iterations`` dependent products with the Fisher product of
   ``--fisher`` (its set-up included: for Gauss-Newton, the policy's linearisation).
 - ``line_search``: ``backtracking_line_search`` over ``num_backtracks`` fractions (evaluated
@@ -248,27 +248,24 @@ class Phases:
         next_values = self.trpo.value.apply(state.value_params, normalizer(transitions.final_obs))
         return normalizer, obs, values, next_values
 
-    def policy_batch(self, hyperparams, transitions, rewards, obs, values, next_values):
-        """``trpo.update``'s GAE, advantage standardisation and flattening (not timed)."""
-        advantages, targets = advantages_and_targets(
-            hyperparams, transitions, rewards, values, next_values, self.config.gae_form
-        )
-        advantages = advantages[0]
-        advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
+    def policy_batch(self, hyperparams, state, transitions, rewards):
+        """``trpo.update``'s first step (``TRPO.advantages_and_targets``), flattened as the
+        value fit and the policy step take it (not timed)."""
+        targets = self.trpo.advantages_and_targets(hyperparams.trpo, state, transitions, rewards)
 
         def flat(x):
             return x.reshape(self.config.batch_size, *x.shape[2:])
 
         return PolicyBatch(
-            obs=flat(obs),
+            obs=flat(targets.obs),
             actions=flat(transitions.action),
             log_prob=flat(transitions.log_prob),
-            advantages=flat(advantages),
-            targets=flat(targets[1]),
+            advantages=flat(targets.advantages),
+            targets=flat(targets.value_targets),
         )
 
     def fit_value(self, hyperparams, state, batch: PolicyBatch):
-        return self.trpo._fit_value(hyperparams.trpo, state, batch.obs, batch.targets, state.key)
+        return self.trpo.fit_value(hyperparams.trpo, state, batch.obs, batch.targets, state.key)
 
     def policy_problem(self, hyperparams, state, batch: PolicyBatch):
         """``TRPO.policy_objective`` at the current parameters:
@@ -402,11 +399,9 @@ def compile_phases(phases: Phases, evaluation_trpo: TRPO | None, cells: int, key
     _, rewards = timer.compile(
         "discriminator", phases.discriminator_step, hyperparams, spec, discriminator, transitions
     )
-    _, obs, values, next_values = timer.compile("values", phases.values, after_rollout, transitions)
+    _, _, values, next_values = timer.compile("values", phases.values, after_rollout, transitions)
     compile_gae(timer, phases, hyperparams, transitions, rewards, values, next_values)
-    batch = jax.jit(jax.vmap(phases.policy_batch))(
-        hyperparams, transitions, rewards, obs, values, next_values
-    )
+    batch = jax.jit(jax.vmap(phases.policy_batch))(hyperparams, after_rollout, transitions, rewards)
     timer.compile("value_fit", phases.fit_value, hyperparams, after_rollout, batch)
     loss_gradient = jax.jit(jax.vmap(phases.loss_gradient))(hyperparams, after_rollout, batch)
     direction = timer.compile(

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -141,6 +142,15 @@ class TrainState:
     # bool[K]: the demonstration trajectories whose ranking T-REX and CAIL may see (a share
     # ``label_ratio`` of them, at least 2, drawn per seed: the label information PN-GAIL gets).
     ranked_trajectories: jax.Array | None = None
+
+
+class DiscriminatorBatch(NamedTuple):
+    """One iteration's discriminator batch: the rollout's B rows and B split rows."""
+
+    agent_obs: jax.Array  # float[B, O]
+    agent_inputs: jax.Array  # float[B, O + A], actions clipped to the bounds
+    rows: jax.Array  # int[B], indices into the split
+    demo_inputs: jax.Array  # float[B, O + A]
 
 
 @struct.dataclass
@@ -474,59 +484,21 @@ class AdversarialTrainer:
         return jnp.exp(0.5 * (log_prob - logits))
 
     def _iteration(self, hyperparams: Hyperparams, spec: MethodSpec, state: TrainState):
-        config, trpo_config, phases = self.config, self.config.trpo, self.config.phases
+        """One iteration, as named steps: rollout; WGAIL's weights (refreshed on schedule);
+        the discriminator's batch and gradient; the policy's reward from the discriminator
+        (and the learned rewards) before any step; the discriminator's Adam step (CAIL's
+        rounds instead, in its cells); TRPO's update (a cloned policy kept, in BC's cells)."""
+        phases = self.config.phases
         trpo_state, transitions = self.trpo.rollout(state.trpo)
-        refresh = (
-            (state.iteration > 0)
-            & (state.iteration % config.wgail_refresh_every == 0)
-            & (state.iteration <= config.wgail_refresh_until)
-        )
-        weights = jnp.where(refresh, self._importance_weights(state), state.importance_weights)
-        agent_obs = transitions.obs.reshape(trpo_config.batch_size, -1)
-        agent_inputs = jnp.concatenate(
-            [transitions.obs, jnp.clip(transitions.action, *self._action_bounds)], axis=-1
-        ).reshape(trpo_config.batch_size, -1)
+        weights = self._refreshed_weights(state)
         key, batch_key = jax.random.split(state.key)
-        rows = jax.random.randint(batch_key, (trpo_config.batch_size,), 0, self.num_demos)
-        demo_batch = self._demo_inputs[state.demo_rows[rows]]
-
-        def loss_fn(params, confidence, stats):
-            logits_agent = self.discriminator.apply(params, agent_inputs)
-            logits_demo = self.discriminator.apply(params, demo_batch)
-            loss, metrics = discriminator_loss(
-                spec,
-                logits_agent,
-                logits_demo,
-                confidence[rows],
-                state.labelled[rows],
-                weights[rows],
-                stats,
-            )
-            return loss, (metrics, logits_agent)
-
-        grads, (disc_metrics, logits_agent) = jax.grad(loss_fn, has_aux=True)(
-            state.discriminator_params, state.confidence, state.stats
+        batch = self._discriminator_batch(state, transitions, batch_key)
+        grads, disc_metrics, logits_agent = self._discriminator_gradient(
+            spec, state, batch, weights
         )
-        # The reward comes from the discriminator (and learned rewards) before this
-        # iteration's steps.
-        rewards = policy_reward(logits_agent)
-        if phases:  # every method whose reward is not (only) adversarial has a phase
-            rewards = spec.adversarial_reward_coef * rewards
-        phase_fields, phase_metrics = {}, {}
-        if state.ranking_reward_params is not None:
-            rewards += spec.ranking_reward_coef * self._ranking_reward(
-                spec, state.ranking_reward_params, agent_obs
-            )
-        if "firl" in phases:
-            # f-IRL's order: the discriminator and the reward learn from this rollout, then
-            # the policy improves under the updated reward.
-            phase_fields["firl"], phase_metrics = self._firl_update(
-                spec, state, transitions.obs, jax.random.fold_in(batch_key, 2)
-            )
-            rewards += spec.firl_coef * self.firl_reward.apply(
-                phase_fields["firl"].reward_params, agent_obs
-            )
-        rewards = rewards.reshape(trpo_config.unroll_length, trpo_config.num_envs)
+        rewards, phase_fields, phase_metrics = self._policy_rewards(
+            spec, state, transitions, batch, logits_agent, batch_key
+        )
         disc_params, disc_optimizer_state = self._adam_step(
             state.discriminator_params,
             state.discriminator_optimizer_state,
@@ -535,7 +507,7 @@ class AdversarialTrainer:
         )
         if "cail" in phases:  # CAIL's cells take the discriminator of its rounds instead
             (cail_params, cail_optimizer_state, beta), cail_metrics = self._cail_rounds(
-                spec, state, agent_inputs, jax.random.fold_in(batch_key, 1)
+                spec, state, batch.agent_inputs, jax.random.fold_in(batch_key, 1)
             )
             use = spec.cail_coef > 0
             disc_params = _tree_where(use, cail_params, disc_params)
@@ -559,6 +531,77 @@ class AdversarialTrainer:
         )
         metrics = {**trpo_metrics, **disc_metrics, **phase_metrics}
         return state, {**metrics, "env_steps": updated.env_steps}
+
+    def _refreshed_weights(self, state: TrainState) -> jax.Array:
+        """WGAIL's importance weights float[M], recomputed at iterations
+        ``wgail_refresh_every``, 2 x that, ... up to ``wgail_refresh_until``, else kept."""
+        config = self.config
+        refresh = (
+            (state.iteration > 0)
+            & (state.iteration % config.wgail_refresh_every == 0)
+            & (state.iteration <= config.wgail_refresh_until)
+        )
+        return jnp.where(refresh, self._importance_weights(state), state.importance_weights)
+
+    def _discriminator_batch(self, state: TrainState, transitions, key) -> DiscriminatorBatch:
+        """The rollout's rows (actions clipped to the bounds, as the demonstrations') and as
+        many split rows drawn with replacement."""
+        trpo_config = self.config.trpo
+        agent_obs = transitions.obs.reshape(trpo_config.batch_size, -1)
+        agent_inputs = jnp.concatenate(
+            [transitions.obs, jnp.clip(transitions.action, *self._action_bounds)], axis=-1
+        ).reshape(trpo_config.batch_size, -1)
+        rows = jax.random.randint(key, (trpo_config.batch_size,), 0, self.num_demos)
+        return DiscriminatorBatch(
+            agent_obs, agent_inputs, rows, self._demo_inputs[state.demo_rows[rows]]
+        )
+
+    def _discriminator_gradient(self, spec, state: TrainState, batch, weights):
+        """The gradient of the method's discriminator loss at the current parameters, its
+        metrics, and the agent rows' logits (the policy's reward reads them)."""
+
+        def loss_fn(params, confidence, stats):
+            logits_agent = self.discriminator.apply(params, batch.agent_inputs)
+            logits_demo = self.discriminator.apply(params, batch.demo_inputs)
+            loss, metrics = discriminator_loss(
+                spec,
+                logits_agent,
+                logits_demo,
+                confidence[batch.rows],
+                state.labelled[batch.rows],
+                weights[batch.rows],
+                stats,
+            )
+            return loss, (metrics, logits_agent)
+
+        grads, (metrics, logits_agent) = jax.grad(loss_fn, has_aux=True)(
+            state.discriminator_params, state.confidence, state.stats
+        )
+        return grads, metrics, logits_agent
+
+    def _policy_rewards(self, spec, state: TrainState, transitions, batch, logits_agent, key):
+        """The reward float[T, N] TRPO learns from: the adversarial one from the discriminator
+        before this iteration's step, plus the learned rewards of the method's phases (f-IRL's
+        after its own update on this rollout, in its order). Returns the reward, the phase's
+        new state fields and its metrics."""
+        trpo_config, phases = self.config.trpo, self.config.phases
+        rewards = policy_reward(logits_agent)
+        if phases:  # every method whose reward is not (only) adversarial has a phase
+            rewards = spec.adversarial_reward_coef * rewards
+        phase_fields, phase_metrics = {}, {}
+        if state.ranking_reward_params is not None:
+            rewards += spec.ranking_reward_coef * self._ranking_reward(
+                spec, state.ranking_reward_params, batch.agent_obs
+            )
+        if "firl" in phases:
+            phase_fields["firl"], phase_metrics = self._firl_update(
+                spec, state, transitions.obs, jax.random.fold_in(key, 2)
+            )
+            rewards += spec.firl_coef * self.firl_reward.apply(
+                phase_fields["firl"].reward_params, batch.agent_obs
+            )
+        rewards = rewards.reshape(trpo_config.unroll_length, trpo_config.num_envs)
+        return rewards, phase_fields, phase_metrics
 
     def _adam_step(self, params, optimizer_state, grads, learning_rate):
         """One Adam step (``scale_by_adam``, then ``-learning_rate``): (params, state)."""

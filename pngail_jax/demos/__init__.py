@@ -1,22 +1,24 @@
-"""Imperfect demonstrations: the ``Demonstrations`` type, loaders, savers and splits."""
+"""Imperfect demonstrations: the ``Demonstrations`` type, loaders, savers and splits.
 
-from pngail_jax.demos.data import (
-    ACTION_BOUND_MULTIPLE,
+By job: ``types`` (``Demonstrations``, ``DemonstrationError``), ``files`` (safe .npy/.npz
+parsing), ``released`` (the authors' files), ``npz`` (our schema), ``minari``, ``splits``,
+``data`` (``load_demonstrations``, any source by name), ``generate`` (rollouts, returns) and
+``make`` (demonstrations made from scratch).
+"""
+
+from pngail_jax.demos.data import load_demonstrations
+from pngail_jax.demos.minari import load_minari
+from pngail_jax.demos.npz import load_npz, save_npz
+from pngail_jax.demos.released import (
     RELEASED_ACTION_SCALES,
     RELEASED_TASKS,
-    DemonstrationError,
-    Demonstrations,
-    Split,
     action_scale_note,
-    load_demonstrations,
-    load_minari,
-    load_npz,
     load_released,
-    make_split,
     released_confidence_path,
     released_task,
-    save_npz,
 )
+from pngail_jax.demos.splits import Split, make_split
+from pngail_jax.demos.types import ACTION_BOUND_MULTIPLE, DemonstrationError, Demonstrations
 
 __all__ = [
     "ACTION_BOUND_MULTIPLE",

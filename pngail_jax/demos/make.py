@@ -32,7 +32,8 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from pngail_jax import settings as run_settings
-from pngail_jax.demos.data import Demonstrations, save_npz
+from pngail_jax.demos.npz import save_npz
+from pngail_jax.demos.types import Demonstrations
 
 DEMOS_FILE = "demos.npz"  # written last: its presence marks a finished run
 PROGRAM = "make_demos"  # the owner its directories are marked with (pngail_jax.outputs)

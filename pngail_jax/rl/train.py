@@ -192,6 +192,31 @@ class PolicyObjective(NamedTuple):
     old_log_std: jax.Array
 
 
+class LearningTargets(NamedTuple):
+    """What ``TRPO.advantages_and_targets`` gives the value and policy steps."""
+
+    normalizer: ObservationNormalizer  # updated on this rollout when normalisation is on
+    obs: jax.Array  # float[T, N, O], normalised
+    advantages: jax.Array  # float[T, N], standardised
+    value_targets: jax.Array  # float[T, N]
+
+
+def episode_metrics(transitions: Transitions, rewards: jax.Array) -> dict[str, jax.Array]:
+    """The mean return of the episodes that ended in the rollout (NaN when none did) and the
+    mean reward the update learnt from."""
+    finished = transitions.done | transitions.truncated
+    num_finished = finished.sum()
+    return {
+        "train/episode_return": jnp.where(
+            num_finished > 0,
+            jnp.where(finished, transitions.episode_return, 0.0).sum()
+            / jnp.maximum(num_finished, 1),
+            jnp.nan,
+        ),
+        "train/reward": rewards.mean(),
+    }
+
+
 @struct.dataclass
 class TRPOState:
     policy_params: dict
@@ -263,15 +288,49 @@ class TRPO:
         """
         config = self.config
         chex.assert_shape(rewards, (config.unroll_length, config.num_envs))
+        targets = self.advantages_and_targets(hyperparams, state, transitions, rewards)
+        flat = lambda x: x.reshape(config.batch_size, *x.shape[2:])  # noqa: E731
+        key, value_key = jax.random.split(state.key)
+        value_params, value_optimizer_state, value_loss = self.fit_value(
+            hyperparams, state, flat(targets.obs), flat(targets.value_targets), value_key
+        )
+        policy_params, policy_metrics = self.policy_step(
+            hyperparams,
+            state.policy_params,
+            flat(targets.obs),
+            flat(transitions.action),
+            flat(transitions.log_prob),
+            flat(targets.advantages),
+        )
+        metrics = {
+            **episode_metrics(transitions, rewards),
+            "value/loss": value_loss,
+            **policy_metrics,
+            **rollout_metrics(transitions),
+        }
+        state = state.replace(
+            policy_params=policy_params,
+            value_params=value_params,
+            value_optimizer_state=value_optimizer_state,
+            normalizer=targets.normalizer,
+            key=key,
+        )
+        return state, metrics
+
+    def advantages_and_targets(
+        self, hyperparams: TRPOHyperparams, state: TRPOState, transitions, rewards
+    ) -> LearningTargets:
+        """The update's first step: the observation normaliser updated (when it is on), the
+        normalised observations, and from one GAE pass both the policy's standardised
+        advantages (lambda) and the value targets, bootstrapped discounted returns (lambda =
+        1) as the reference's; each float[T, N] (observations float[T, N, O])."""
+        config = self.config
         normalizer = state.normalizer
         if config.normalize_observations:
             normalizer = normalizer.update(transitions.obs)
         obs = normalizer(transitions.obs)
         values = self.value.apply(state.value_params, obs)
         next_values = self.value.apply(state.value_params, normalizer(transitions.final_obs))
-
-        # One pass for both lambdas: the policy's advantages (lam) and the value targets,
-        # bootstrapped discounted returns (lambda = 1) as the reference's.
         both_advantages, both_targets = generalized_advantages(
             rewards,
             values,
@@ -285,43 +344,7 @@ class TRPO:
         )
         advantages, targets = both_advantages[0], both_targets[1]
         advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
-
-        flat = lambda x: x.reshape(config.batch_size, *x.shape[2:])  # noqa: E731
-        key, value_key = jax.random.split(state.key)
-        value_params, value_optimizer_state, value_loss = self._fit_value(
-            hyperparams, state, flat(obs), flat(targets), value_key
-        )
-        policy_params, policy_metrics = self._policy_step(
-            hyperparams,
-            state.policy_params,
-            flat(obs),
-            flat(transitions.action),
-            flat(transitions.log_prob),
-            flat(advantages),
-        )
-
-        finished = transitions.done | transitions.truncated
-        num_finished = finished.sum()
-        metrics = {
-            "train/episode_return": jnp.where(
-                num_finished > 0,
-                jnp.where(finished, transitions.episode_return, 0.0).sum()
-                / jnp.maximum(num_finished, 1),
-                jnp.nan,
-            ),
-            "train/reward": rewards.mean(),
-            "value/loss": value_loss,
-            **policy_metrics,
-            **rollout_metrics(transitions),
-        }
-        state = state.replace(
-            policy_params=policy_params,
-            value_params=value_params,
-            value_optimizer_state=value_optimizer_state,
-            normalizer=normalizer,
-            key=key,
-        )
-        return state, metrics
+        return LearningTargets(normalizer, obs, advantages, targets)
 
     def log_prob(self, state: TRPOState, obs: jax.Array, action: jax.Array) -> jax.Array:
         """log pi(action | obs) of the current policy: obs float[..., O], action float[..., A]."""
@@ -331,8 +354,10 @@ class TRPO:
     def evaluate(self, state: TRPOState, keys: jax.Array) -> jax.Array:
         return evaluate(self.env, self.policy, state.policy_params, state.normalizer, keys)
 
-    def _fit_value(self, hyperparams, state, obs, targets, key):
-        """Adam over one permutation of the batch in ``num_value_minibatches`` steps."""
+    def fit_value(self, hyperparams, state, obs, targets, key):
+        """The update's value step: Adam over one permutation of the flattened batch (obs
+        float[B, O], targets float[B]) in ``num_value_minibatches`` steps. Returns the value
+        parameters, their optimiser state and the mean loss."""
         num_minibatches = self.config.num_value_minibatches
         minibatch_size = self.config.batch_size // num_minibatches
         order = jax.random.permutation(key, self.config.batch_size)
@@ -393,7 +418,9 @@ class TRPO:
             old_log_std=old_log_std,
         )
 
-    def _policy_step(self, hyperparams, policy_params, obs, actions, old_log_prob, advantages):
+    def policy_step(self, hyperparams, policy_params, obs, actions, old_log_prob, advantages):
+        """The update's policy step: one natural-gradient step (conjugate gradient, then a
+        backtracking line search within ``max_kl``) on a flattened batch, with its metrics."""
         objective = self.policy_objective(
             hyperparams, policy_params, obs, actions, old_log_prob, advantages
         )

@@ -1,0 +1,58 @@
+"""The vmappable split of a grid cell: labelled rows (D_c) and unlabelled rows (D_u) drawn
+from a key, with their confidences (noised when the cell asks), as traced arrays."""
+
+from __future__ import annotations
+
+import chex
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+
+@struct.dataclass
+class Split:
+    """One seed's D_c / D_u split of ``traj_size`` rows; leaves are [traj_size]."""
+
+    indices: jax.Array  # int32, rows of the full set
+    confidence: jax.Array  # float32, confidences the learner sees (after any noise)
+    true_confidence: jax.Array  # float32, before noise (for MAE / RMSE)
+    labelled: jax.Array  # bool, D_c
+
+
+def make_split(
+    key: jax.Array,
+    confidence: jax.Array,
+    traj_size: int,
+    label_ratio: float | jax.Array,
+    noise_std: float | jax.Array = 0.0,
+    allowed: jax.Array | None = None,
+) -> Split:
+    """Draws ``traj_size`` rows; the first ``round(label_ratio * traj_size)`` are labelled.
+
+    ``allowed`` (bool[N], None = every row) marks the rows whose confidence a learner may see
+    (``Demonstrations.labelled``). The rows are drawn uniformly as without it; the drawn
+    allowed rows then come first, each group in drawn order, and only they are labelled: the
+    first ``min(round(label_ratio * traj_size), allowed rows drawn)``. With every row allowed
+    the split is the one drawn without ``allowed``, bit for bit.
+
+    Confidence noise ``clip(r + N(0, noise_std^2), 0, 1)`` as the paper's robustness test.
+    ``traj_size`` is static (a shape); ``label_ratio``, ``noise_std`` and ``allowed`` are
+    values, so a grid can vmap over them.
+    """
+    order_key, noise_key = jax.random.split(key)
+    indices = jax.random.permutation(order_key, confidence.shape[0])[:traj_size]
+    num_labelled = jnp.round(label_ratio * traj_size)
+    if allowed is not None:
+        chex.assert_shape(allowed, confidence.shape[:1])
+        allowed_drawn = jnp.asarray(allowed, bool)[indices]
+        # A stable sort keeps the drawn order within each group: all allowed = no reordering.
+        indices = indices[jnp.argsort((~allowed_drawn).astype(jnp.int32), stable=True)]
+        num_labelled = jnp.minimum(num_labelled, allowed_drawn.sum())
+    true_confidence = confidence[indices]
+    noise = noise_std * jax.random.normal(noise_key, true_confidence.shape)
+    return Split(
+        indices=indices.astype(jnp.int32),
+        confidence=jnp.clip(true_confidence + noise, 0.0, 1.0),
+        true_confidence=true_confidence,
+        labelled=jnp.arange(traj_size) < num_labelled,
+    )
