@@ -18,6 +18,7 @@ import functools
 import math
 import time
 from collections.abc import Sequence
+from typing import Protocol
 
 import jax
 import jax.numpy as jnp
@@ -29,6 +30,23 @@ from pngail_jax.methods import MethodSpec, method_spec, stack
 from pngail_jax.train import Hyperparams
 
 GRID_AXIS = "grid"
+
+
+class Trainer(Protocol):
+    """What ``Grid`` needs of a trainer (``AdversarialTrainer`` and ``rl.TRPOTrainer`` have
+    it): pure ``init(*cell_inputs, key) -> (state, metrics)`` and ``run_blocks(*cell_inputs,
+    state, num_blocks) -> (state, metrics)``, where a block is ``eval_every`` iterations
+    ending in an evaluation, and ``policy_state(state)``, the TRPO state of its policy."""
+
+    @property
+    def eval_every(self) -> int: ...
+
+    def init(self, *inputs): ...
+
+    def run_blocks(self, *inputs, num_blocks: int): ...
+
+    @staticmethod
+    def policy_state(state): ...
 
 
 @dataclasses.dataclass(frozen=True)
@@ -124,7 +142,7 @@ class Grid:
 
     def __init__(
         self,
-        trainer,
+        trainer: Trainer,
         inputs: tuple,
         blocks_per_chunk: int,
         devices: Sequence[jax.Device] | None = None,
@@ -134,7 +152,7 @@ class Grid:
         self.num_devices = len(devices)
         self.num_padded = math.ceil(self.num_cells / self.num_devices) * self.num_devices
         self.blocks_per_chunk = blocks_per_chunk
-        self.iterations_per_chunk = blocks_per_chunk * trainer.trpo.config.eval_every
+        self.iterations_per_chunk = blocks_per_chunk * trainer.eval_every
         inputs = _pad(tuple(inputs), self.num_padded)
         if self.num_devices > 1:
             mesh = jax.make_mesh(

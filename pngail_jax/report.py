@@ -98,6 +98,41 @@ def write_metrics_csv(path: Path, cells, metrics, normalizer, chunk_seconds=()) 
                 )
 
 
+def read_evaluations(
+    path: Path, value: str, *, evaluated_by: str | None = None, group_by: Sequence[str] = ()
+) -> dict[tuple, tuple[np.ndarray, np.ndarray]]:
+    """The evaluations in a ``metrics.csv`` (the sweep's or ``train_rl``'s), per group (the
+    values of the ``group_by`` columns, e.g. method and setting): the environment steps
+    int[I] of the evaluated iterations and the ``value`` column float[seeds, I] (NaN where
+    empty). A row counts as evaluated where its ``evaluated_by`` column (default: ``value``)
+    is neither empty nor NaN; seeds of a group evaluated at different iterations are refused
+    (ValueError)."""
+    evaluated_by = evaluated_by or value
+    rows: dict[tuple, dict[int, dict[int, float]]] = {}
+    steps: dict[int, int] = {}
+    with Path(path).open() as file:
+        for row in csv.DictReader(file):
+            marker = row[evaluated_by]
+            if marker == "" or math.isnan(float(marker)):
+                continue
+            group = tuple(row[column] for column in group_by)
+            number = float(row[value]) if row[value] else math.nan
+            rows.setdefault(group, {}).setdefault(int(row["seed"]), {})[int(row["iteration"])] = (
+                number
+            )
+            steps[int(row["iteration"])] = int(float(row["env_steps"]))
+    evaluations = {}
+    for group, seeds in rows.items():
+        iterations = sorted(next(iter(seeds.values())))
+        if any(sorted(evaluated) != iterations for evaluated in seeds.values()):
+            raise ValueError(f"{path}: the seeds of {group} were evaluated at different iterations")
+        evaluations[group] = (
+            np.array([steps[i] for i in iterations]),
+            np.array([[seeds[s][i] for i in iterations] for s in sorted(seeds)]),
+        )
+    return evaluations
+
+
 def group_label(cell, settings: Sequence[str]) -> str:
     """The method's name, plus its setting when the grid has more than one."""
     return cell.method if len(settings) == 1 else f"{cell.method} [{cell.setting}]"

@@ -320,6 +320,11 @@ class AdversarialTrainer:
                     f"are among the trajectories of at least {length} steps"
                 )
 
+    @property
+    def eval_every(self) -> int:
+        """Iterations per block of ``run_blocks`` (``grid.Trainer``)."""
+        return self.config.trpo.eval_every
+
     def init(self, hyperparams: Hyperparams, spec: MethodSpec, key: jax.Array):
         split_key, classifier_key, trpo_key, disc_key, eval_key, carry_key = jax.random.split(
             key, 6

@@ -194,3 +194,36 @@ def test_seeds_puts_a_methods_seeds_side_by_side_with_their_training(tmp_path, c
     np.testing.assert_allclose([finals[0], finals[1]], expected)
     with pytest.raises(SystemExit, match="several settings, pick one with --setting"):
         seeds.seed_table(tmp_path, "pngail")
+
+
+def test_read_evaluations_keeps_the_evaluated_rows_per_group(tmp_path):
+    """The one metrics.csv reader of the paper page and compare_settings: rows between
+    evaluations (empty or NaN) are skipped; groups by the named columns; seeds in order."""
+    path = tmp_path / "metrics.csv"
+    path.write_text(
+        "method,setting,seed,iteration,env_steps,eval_return,normalized_return\n"
+        "gail,s,1,1,10,,\n"
+        "gail,s,1,2,20,-5.0,0.5\n"
+        "gail,s,0,2,20,-7.0,0.25\n"
+        "pngail,s,0,2,20,-1.0,\n"
+        "gail,s,0,4,40,-3.0,0.75\n"
+        "gail,s,1,4,40,-2.0,0.8\n"
+        "gail,s,1,3,30,nan,\n"
+    )
+    curves = report.read_evaluations(
+        path, "normalized_return", evaluated_by="eval_return", group_by=("method", "setting")
+    )
+    assert set(curves) == {("gail", "s"), ("pngail", "s")}
+    steps, values = curves[("gail", "s")]
+    assert steps.tolist() == [20, 40] and values.tolist() == [[0.25, 0.75], [0.5, 0.8]]
+    steps, values = curves[("pngail", "s")]
+    assert steps.tolist() == [20] and np.isnan(values).all()  # evaluated, no normaliser
+    with path.open("a") as file:  # seed 0 evaluated at 6, seed 1 not: ragged, refused
+        file.write("gail,s,0,6,60,-1.0,0.9\n")
+    with pytest.raises(ValueError, match="evaluated at different iterations"):
+        report.read_evaluations(path, "eval_return", group_by=("method",))
+    path.write_text(
+        "seed,iteration,env_steps,eval/return\n0,1,10,nan\n0,2,20,-5\n1,2,20,-6\n1,1,10,nan\n"
+    )
+    ((steps, values),) = report.read_evaluations(path, "eval/return").values()
+    assert steps.tolist() == [20] and values.tolist() == [[-5.0], [-6.0]]

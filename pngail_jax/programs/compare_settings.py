@@ -22,7 +22,6 @@ mean final return is at least the baseline's mean minus one standard error.
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import math
 from pathlib import Path
@@ -135,19 +134,11 @@ def run_arm(args, arm: str) -> Path:
 
 
 def read_curves(directory: Path) -> tuple[np.ndarray, np.ndarray]:
-    """(env_steps float[I], eval returns float[seeds, I]) at the evaluated iterations."""
-    steps, returns = {}, {}
-    with (directory / "metrics.csv").open() as file:
-        for row in csv.DictReader(file):
-            value = float(row["eval/return"])
-            if math.isnan(value):
-                continue
-            iteration, seed = int(row["iteration"]), int(row["seed"])
-            steps[iteration] = float(row["env_steps"])
-            returns.setdefault(seed, {})[iteration] = value
-    iterations = sorted(steps)
-    table = np.array([[returns[s][i] for i in iterations] for s in sorted(returns)])
-    return np.array([steps[i] for i in iterations]), table
+    """(env_steps int[I], eval returns float[seeds, I]) at the evaluated iterations."""
+    from pngail_jax.report import read_evaluations
+
+    ((steps, returns),) = read_evaluations(directory / "metrics.csv", "eval/return").values()
+    return steps, returns
 
 
 def make_evaluator(env_name: str, solver: dict, metadata: dict, num_episodes: int, key):

@@ -667,27 +667,18 @@ def run_grid(grid: GridSpec, directory: Path, config, command: list[str]) -> flo
 
 def read_curves(directory: Path) -> dict[tuple[str, str], dict[str, np.ndarray]]:
     """(method, setting) -> {"steps": int[T], "normalized": float[seeds, T]} from a grid's
-    metrics.csv, evaluated iterations only."""
-    import csv
+    metrics.csv, evaluated iterations only (``report.read_evaluations``)."""
+    from pngail_jax.report import read_evaluations
 
-    rows: dict[tuple[str, str], dict[int, dict[int, float]]] = {}
-    steps: dict[int, int] = {}
-    with (directory / "metrics.csv").open() as file:
-        for row in csv.DictReader(file):
-            if row["eval_return"] == "":
-                continue
-            key = (row["method"], row["setting"])
-            value = float(row["normalized_return"]) if row["normalized_return"] else math.nan
-            rows.setdefault(key, {}).setdefault(int(row["seed"]), {})[int(row["iteration"])] = value
-            steps[int(row["iteration"])] = int(row["env_steps"])
-    curves = {}
-    for key, seeds in rows.items():
-        iterations = sorted(next(iter(seeds.values())))
-        curves[key] = {
-            "steps": np.array([steps[i] for i in iterations]),
-            "normalized": np.array([[seeds[s][i] for i in iterations] for s in sorted(seeds)]),
-        }
-    return curves
+    evaluations = read_evaluations(
+        directory / "metrics.csv",
+        "normalized_return",
+        evaluated_by="eval_return",
+        group_by=("method", "setting"),
+    )
+    return {
+        key: {"steps": steps, "normalized": values} for key, (steps, values) in evaluations.items()
+    }
 
 
 def series_statistics(series: Series, curves, summary) -> dict:

@@ -510,6 +510,11 @@ class TRPOTrainer:
         self.trpo = TRPO(config, env)
         self.reward_fn = reward_fn
 
+    @property
+    def eval_every(self) -> int:
+        """Iterations per block of ``run_blocks`` (``grid.Trainer``)."""
+        return self.config.eval_every
+
     def init(self, hyperparams: TRPOHyperparams, key: jax.Array):
         del hyperparams  # the same signature as every trainer's; TRPO's init reads none
         init_key, eval_key = jax.random.split(key)
