@@ -73,6 +73,7 @@ def key(seed):
     return jax.random.key(seed)
 
 
+@pytest.mark.slow
 def test_a_grid_of_the_appendix_methods_equals_its_cells_run_alone():
     trainer = trainer_for(METHODS)
     cells = make_cells(METHODS, 1)
@@ -116,6 +117,7 @@ def ranked_problem(num_trajectories=4, steps=20):
     )
 
 
+@pytest.mark.slow
 def test_cail_learns_confidences_that_rank_trajectories_of_known_quality():
     """CAIL as its codebase runs it (10 rounds of lookahead, a step of 0.1 on beta and an Adam
     step of the discriminator per iteration; beta renormalised to mean 1 and clipped to
@@ -148,6 +150,7 @@ def test_cail_learns_confidences_that_rank_trajectories_of_known_quality():
     assert not np.array_equal(returns[3], returns[4])  # CAIL with beta = 1 is not GAIL
 
 
+@pytest.mark.slow
 def test_cails_gradient_gate_skips_only_disagreeing_steps_after_pretraining():
     """CAILConfig(pretrain_iterations=N) steps the discriminator only where its gradient and
     the ranking loss's agree from iteration N on (a count of skipped steps per iteration);

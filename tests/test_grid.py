@@ -98,6 +98,7 @@ def run_single_and_grid() -> dict:
     }
 
 
+@pytest.mark.slow
 def test_grid_matches_runs_one_at_a_time():
     results = run_single_and_grid()
     for name, (grid_values, single_values) in results.items():
@@ -128,6 +129,7 @@ def sharded_vs_unsharded() -> dict:
     }
 
 
+@pytest.mark.slow
 def test_sharded_over_four_devices_matches_one_device():
     from conftest import run_in_subprocess
 
@@ -141,6 +143,7 @@ def test_sharded_over_four_devices_matches_one_device():
         assert_close_across_programs(sharded, unsharded, name)
 
 
+@pytest.mark.slow
 def test_chunks_match_the_whole_scan_and_repeat_bit_identically():
     env, demos, config = small_setup()
     trainer = AdversarialTrainer(config, env, demos)
@@ -154,6 +157,7 @@ def test_chunks_match_the_whole_scan_and_repeat_bit_identically():
         np.testing.assert_array_equal(first[name], second[name], err_msg=name)
 
 
+@pytest.mark.slow
 def test_resume_from_a_checkpoint_is_bit_exact(tmp_path):
     env, demos, config = small_setup()
     trainer = AdversarialTrainer(config, env, demos)
@@ -170,6 +174,7 @@ def test_resume_from_a_checkpoint_is_bit_exact(tmp_path):
         np.testing.assert_array_equal(resumed[name], uninterrupted[name], err_msg=name)
 
 
+@pytest.mark.slow
 def test_a_nan_cell_is_reported_and_leaves_the_others_alone():
     env, demos, config = small_setup()
     trainer = AdversarialTrainer(config, env, demos)
@@ -263,6 +268,7 @@ def test_given_confidences_need_no_classifier_and_classifier_fills_unlabelled_ro
     )
 
 
+@pytest.mark.slow
 def test_methods_that_read_no_confidences_run_without_them():
     """GAIL without confidences is GAIL with any: the same numbers up to the float error
     between two programs; PN-GAIL is refused."""
@@ -305,6 +311,7 @@ def multihost_worker(process_id: int, port: int) -> dict:
     }
 
 
+@pytest.mark.slow
 def test_two_processes_match_one():
     import json
     import os

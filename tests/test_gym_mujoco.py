@@ -156,6 +156,7 @@ def _hopper_grid_setup():
     return AdversarialTrainer(config, env, demos), small_grid_inputs()
 
 
+@pytest.mark.slow
 def test_c_engine_grid_cells_equal_single_runs():
     """The callback under jit(vmap) over cells: the grid's first chunk equals each cell run
     alone (the physics is exact per env; only XLA's float32 reductions may differ between
@@ -176,6 +177,7 @@ def test_c_engine_grid_cells_equal_single_runs():
             assert_close_across_programs(np.asarray(one[name])[:1], first[name][index], name)
 
 
+@pytest.mark.slow
 def test_c_engine_sweep_resumed_after_a_kill_equals_the_uninterrupted_run(tmp_path):
     """The sweep on Hopper-v4's C engine: chunks, checkpoints and --resume as on any task.
     A copy of a finished run cut back to its first checkpoint (what a kill after it leaves;

@@ -94,6 +94,7 @@ def x64_trajectory_errors() -> dict:
     }
 
 
+@pytest.mark.slow
 def test_whole_trajectory_matches_under_x64():
     """200 steps from one state in float64: MJX and C MuJoCo agree to ~1e-13 here."""
     errors = run_x64(__file__, "x64_trajectory_errors")

@@ -26,6 +26,7 @@ SHARED_PENDULUM = authors_data()
     not (SHARED_PENDULUM / "Pendulum-v1_mixture.npy").exists(),
     reason=f"the authors' Pendulum set is not in {SHARED_PENDULUM}",
 )
+@pytest.mark.slow
 def test_gail_learns_pendulum_from_the_optimal_trajectory():
     """Rows 0-199 of the released set come from the optimal policy (r = 1). From random
     (about -1200), GAIL's final return after 150 iterations varies a lot between seeds, and a
@@ -51,6 +52,7 @@ def test_gail_learns_pendulum_from_the_optimal_trajectory():
     assert np.isfinite(np.asarray(metrics["disc/loss"])).all()
 
 
+@pytest.mark.slow
 def test_gail_learns_pendulum_from_a_controllers_trajectory():
     """The same learning test on a file-free trajectory, so it runs everywhere (CI has no
     authors' files): one 200-step episode of the hand-written swing-up controller of
@@ -70,6 +72,7 @@ def test_gail_learns_pendulum_from_a_controllers_trajectory():
     assert np.median(final) > -600, final
 
 
+@pytest.mark.slow
 def test_demonstration_actions_reach_every_learned_comparison_clipped_as_the_agents():
     """The agent's actions reach the discriminator clipped to the bounds (what the physics
     applies), so the demonstrations' must too: otherwise |a| > bound alone tells them apart
