@@ -1,0 +1,209 @@
+"""Running a plan: each grid's demonstrations (the authors' file, or made once per task and
+cut at each ratio a figure asks for), its ``RunConfig`` (``grid_config``) and one
+``pngail_jax.runner.run`` call per grid, resumed or kept as it stands."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+from pngail_jax import envs
+from pngail_jax.integrity import read_json, write_json
+from pngail_jax.paper.plan import Budget, GridSpec, task_kind
+
+# -- demonstrations --------------------------------------------------------------------------
+
+
+def released_files(directory: Path | None, tasks: Sequence[str]) -> dict[str, Path]:
+    """Task -> the authors' file in ``directory``, for each of ``tasks`` that has a usable one
+    (a file serves every variant of its task, ``envs.task_family``: Hopper-v2's serves
+    Hopper-v4 and Brax's Hopper)."""
+    from pngail_jax.demos import RELEASED_TASKS
+
+    if directory is None:
+        return {}
+    found = {}
+    for file_env, file_task in RELEASED_TASKS.items():
+        path = directory / f"{file_env}_mixture.npy"
+        for task in tasks:
+            if path.exists() and envs.task_family(task) == envs.task_family(file_task):
+                found[task] = path
+    return found
+
+
+def demo_paths(grids, out: Path, budget: Budget, released: dict[str, Path], physics=None):
+    """The demonstrations file of every grid's set (made, mixed and saved when missing);
+    made ones on ``physics`` (``Budget.run_settings``)."""
+    from pngail_jax.demos import RELEASED_ACTION_SCALES, load_npz, save_npz
+    from pngail_jax.demos.make import cut_mixture
+    from pngail_jax.integrity import atomic_path
+    from pngail_jax.run_config import TASK_NUM_DEMOS
+
+    sets = list(dict.fromkeys(grid.demos for grid in grids.values()))
+    paths = {}
+    for demo_set in sets:
+        if demo_set.ratio is None:
+            path = released[demo_set.task]
+            scale = RELEASED_ACTION_SCALES.get(path.name.removesuffix("_mixture.npy"), 1.0)
+            paths[demo_set] = (path, scale)
+    made = [s for s in sets if s.ratio is not None]
+    for task in dict.fromkeys(s.task for s in made):
+        episode_steps = envs.make(task).max_episode_steps
+        counts = {
+            s: s.trajectory_counts(TASK_NUM_DEMOS.get(envs.task_family(task), 1), episode_steps)
+            for s in made
+            if s.task == task
+        }
+        directory = out / "demos" / task
+        full = directory / "demos.npz"
+        if not full.exists():
+            print(f"\n== demonstrations for {task}: making them into {directory}", flush=True)
+            make_demonstrations(demo_config(task, budget, counts, physics), directory)
+        source = load_npz(full)
+        for demo_set, (optimal, intermediate) in counts.items():
+            path = directory / f"{demo_set.name}.npz"
+            if not path.exists():
+                with atomic_path(path) as temporary:
+                    mixed = cut_mixture(source, optimal, intermediate, demo_set.name)
+                    mixed.metadata["source"] = (
+                        f"experiments.paper: {demo_set.description}, from the made set"
+                    )
+                    save_npz(temporary, mixed)
+            paths[demo_set] = (path, 1.0)
+    return paths
+
+
+def demo_config(task: str, budget: Budget, counts: dict, physics: str | None):
+    """The making of ``task``'s demonstrations: enough optimal and intermediate trajectories
+    for every set of ``counts`` (``{DemoSet: (optimal, intermediate)}``) at ``budget``."""
+    from pngail_jax.demos.make import MakeDemosConfig
+
+    num_optimal = max(c[0] for c in counts.values())
+    num_intermediate = max(c[1] for c in counts.values())
+    return MakeDemosConfig(
+        env=task,
+        iterations=budget.demo_iterations[task_kind(task)],
+        seeds=budget.demo_seeds,
+        num_trajectories=num_optimal + num_intermediate,
+        ratio=f"{num_optimal}:{num_intermediate}",
+        measure_episodes=budget.measure_episodes,
+        settings=budget.run_settings(task, physics, demos=True),
+    )
+
+
+def make_demonstrations(config, directory: Path) -> None:
+    """``pngail_jax.demos.make.make_demonstrations`` into the plan's own ``directory`` (a
+    making cut short there is replaced)."""
+    from pngail_jax.demos import make
+
+    make.make_demonstrations(config, directory, overwrite=True)
+
+
+# -- grids -----------------------------------------------------------------------------------
+
+
+def grid_config(
+    grid: GridSpec,
+    demos: tuple[Path, float],
+    budget: Budget,
+    num_rows: int | None,
+    physics: str | None = None,
+):
+    """The ``RunConfig`` of a grid; ``num_rows``, the demonstrations' row count, is read only
+    by a grid with fewer unlabelled rows (Fig. 6)."""
+    from pngail_jax.run_config import RunConfig, task_classifier
+
+    path, scale = demos
+    label_ratios, num_demos = grid.label_ratios, None
+    if grid.unlabelled_fraction != 1:  # the same n_c labelled rows, fewer unlabelled ones
+        num_demos = RunConfig(env=grid.task).task_num_demos(num_rows)
+        num_labelled = round(grid.label_ratios[0] * num_demos)
+        num_demos = num_labelled + round(grid.unlabelled_fraction * (num_demos - num_labelled))
+        label_ratios = (float(f"{num_labelled / num_demos:.6g}"),)
+    classifier = task_classifier(grid.task)
+    if budget.classifier_steps is not None:
+        classifier = dataclasses.replace(classifier, num_steps=budget.classifier_steps)
+    return RunConfig.preset(
+        "smoke",
+        env=grid.task,
+        settings=budget.run_settings(grid.task, physics),
+        classifier=classifier,
+        methods=tuple(grid.methods),
+        seeds=budget.seeds,
+        iterations=budget.iterations,
+        chunk_iterations=budget.chunk_iterations,
+        label_ratios=tuple(label_ratios),
+        noise_stds=tuple(grid.noise_stds),
+        demos=str(Path(path).absolute()),
+        action_scale=None if scale == 1.0 else scale,
+        num_demos=num_demos,
+    )
+
+
+def grid_complete(directory: Path) -> bool:
+    """Whether a grid's summary.json says it is complete; a damaged one says no (the sweep's
+    resume then writes it again from the checkpoints)."""
+    from pngail_jax.integrity import IntegrityError
+
+    try:
+        return bool(read_json(directory / "summary.json", "grid summary").get("complete"))
+    except (FileNotFoundError, IntegrityError, AttributeError):
+        return False
+
+
+def run_grid(grid: GridSpec, directory: Path, config, command: list[str]) -> float:
+    """Runs (or resumes, or keeps) one grid with ``pngail_jax.runner.run``; its wall-clock
+    seconds in this call. A refusal raises ``RunError``."""
+    from pngail_jax import runner
+
+    if grid_complete(directory):
+        print(f"\n== {grid.name}: done, kept ({directory})", flush=True)
+        return 0.0
+    start = time.perf_counter()
+    resume = (directory / "config.json").exists()
+    if resume:
+        print(f"\n== {grid.name}: resuming {directory}", flush=True)
+    else:
+        print(f"\n== {grid.name}: {grid.demos.description}", flush=True)
+    runner.run(None if resume else config, directory, resume=resume, command=command)
+    return time.perf_counter() - start
+
+
+def run_grids(grids, demos, out: Path, budget: Budget, physics, command: list[str]) -> dict:
+    """Runs (or resumes, or keeps) every grid; each grid's wall-clock seconds over all calls,
+    kept in ``out/timings.json``. ``command``: the plan's, recorded in each grid's config."""
+    from pngail_jax.demos import load_demonstrations
+    from pngail_jax.integrity import IntegrityError
+
+    timings_path = out / "timings.json"
+    try:
+        timings = read_json(timings_path, "timings record") if timings_path.exists() else {}
+    except IntegrityError as error:
+        print(f"note: {error}; wall times start again from this call")
+        timings = {}
+    num_rows = {}  # of each demonstration set, read once, where a grid sizes its split by it
+    ran: list[float] = []  # seconds of the grids this call ran
+    for index, (name, grid) in enumerate(grids.items()):
+        path, scale = demos[grid.demos]
+        if grid.unlabelled_fraction != 1 and grid.demos not in num_rows:
+            num_rows[grid.demos] = load_demonstrations(path, action_scale=scale).num_rows
+        config = grid_config(grid, demos[grid.demos], budget, num_rows.get(grid.demos), physics)
+        print(f"\n== grid {index + 1} of {len(grids)}{plan_eta(ran, len(grids) - index)}")
+        seconds = run_grid(grid, out / "grids" / name, config, command)
+        if seconds:
+            ran.append(seconds)
+            timings[name] = timings.get(name, 0.0) + seconds
+            write_json(timings_path, timings)
+    return timings
+
+
+def plan_eta(seconds: list[float], remaining: int) -> str:
+    """', about T left for the plan' from the mean of the grids run so far (grids differ, so a
+    rough guide), or '' before any has run."""
+    from pngail_jax.runner import format_seconds
+
+    if not seconds:
+        return ""
+    return f", about {format_seconds(remaining * sum(seconds) / len(seconds))} left for the plan"

@@ -1,0 +1,302 @@
+"""The results page of a plan: every figure's plot and table beside the paper's numbers,
+``results.json``, and notes on what a budget can say."""
+
+from __future__ import annotations
+
+import math
+import types
+from pathlib import Path
+
+import numpy as np
+
+from pngail_jax import envs
+from pngail_jax.integrity import atomic_write_text, read_json, write_json
+from pngail_jax.methods import display_name
+from pngail_jax.paper.plan import (
+    BUDGETS,
+    PAPER_TABLE1,
+    PAPER_TABLE4,
+    PAPER_TABLE4_OPTIMAL,
+    Figure,
+    Series,
+)  # fmt: skip
+from pngail_jax.report import group_label, late_evaluations, line_style
+
+# -- the results page ------------------------------------------------------------------------
+
+
+def read_curves(directory: Path) -> dict[tuple[str, str], dict[str, np.ndarray]]:
+    """(method, setting) -> {"steps": int[T], "normalized": float[seeds, T]} from a grid's
+    metrics.csv, evaluated iterations only (``report.read_evaluations``)."""
+    from pngail_jax.report import read_evaluations
+
+    evaluations = read_evaluations(
+        directory / "metrics.csv",
+        "normalized_return",
+        evaluated_by="eval_return",
+        group_by=("method", "setting"),
+    )
+    return {
+        key: {"steps": steps, "normalized": values} for key, (steps, values) in evaluations.items()
+    }
+
+
+def series_statistics(series: Series, curves, summary) -> dict:
+    """Final and training-averaged normalised return (mean, std, standard error, 95% bootstrap
+    interval of the mean) of a series, and its classifier error."""
+    from pngail_jax import stats
+
+    matches = [key for key in curves if key[0] == series.method]
+    if series.setting is not None:
+        matches = [key for key in matches if key[1] == series.setting]
+    if len(matches) != 1:
+        raise ValueError(f"{series.grid}: expected one curve of {series}, found {matches}")
+    curve = curves[matches[0]]
+    values = curve["normalized"]
+    result = {"steps": curve["steps"].tolist(), "curve": values.tolist()}
+    late = values[:, values.shape[1] - late_evaluations(values.shape[1]) :]
+    averages = (("average", np.nanmean(values, axis=1)), ("late", np.nanmean(late, axis=1)))
+    for name, per_seed in (("final", values[:, -1]), *averages):
+        summary_of = stats.seed_summary(per_seed)
+        low, high = stats.bootstrap_ci(per_seed, np.mean)
+        result[name] = {
+            "mean": summary_of["mean"],
+            "std": summary_of["std"],
+            "se": summary_of["se"],
+            "ci95": [low, high],
+            "seeds": summary_of["num_seeds"],
+        }
+    settings = list(dict.fromkeys(setting for _, setting in curves))
+    cell = types.SimpleNamespace(method=series.method, setting=matches[0][1])
+    row = summary["methods"].get(group_label(cell, settings), {})  # summary.json's key
+    for name in ("average_return", "late_average_return"):
+        result[name] = [row.get(f"{name}_mean"), row.get(f"{name}_se")]
+    for name in ("mae", "rmse"):
+        result[f"confidence_{name}"] = [
+            row.get(f"confidence_{name}_mean"),
+            row.get(f"confidence_{name}_std"),
+        ]
+    return result
+
+
+def _number(value, digits: int = 2) -> str:
+    return "n/a" if value is None or not math.isfinite(value) else f"{value:.{digits}f}"
+
+
+def _mean_se(entry: dict) -> str:
+    """mean ± standard error over seeds (the one spread convention of every table)."""
+    if entry["seeds"] == 1:
+        return f"{_number(entry['mean'])} (n = 1)"
+    return f"{_number(entry['mean'])} ± {_number(entry['se'])}"
+
+
+def series_name(series: Series) -> str:
+    """A series' name in legends and tables: the paper's name of its method."""
+    return display_name(series.method) if series.label == series.method else series.label
+
+
+def _interval(entry: dict) -> str:
+    low, high = entry["ci95"]
+    return f"[{_number(low)}, {_number(high)}]"
+
+
+def plot_figure(path: Path, figure: Figure, results: dict) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    tasks = list(figure.panels)
+    columns = min(3, len(tasks))
+    rows = math.ceil(len(tasks) / columns)
+    fig, axes = plt.subplots(rows, columns, figsize=(5 * columns, 3.6 * rows), squeeze=False)
+    for axis in axes.flat[len(tasks) :]:
+        axis.set_visible(False)
+    for axis, task in zip(axes.flat, tasks, strict=False):
+        for series in figure.panels[task]:
+            entry = results[task][series.label]
+            steps = np.array(entry["steps"]) / 1e6
+            curve = np.array(entry["curve"], dtype=float)
+            mean = np.nanmean(curve, axis=0)
+            spread = (
+                np.nanstd(curve, axis=0, ddof=1) / math.sqrt(len(curve)) if len(curve) > 1 else 0
+            )
+            (line,) = axis.plot(
+                steps, mean, label=series_name(series), linewidth=1.5, ls=line_style(series.method)
+            )
+            axis.fill_between(
+                steps, mean - spread, mean + spread, alpha=0.12, color=line.get_color(), lw=0
+            )
+        axis.axhline(1.0, color="grey", linestyle=":", linewidth=1)
+        axis.set_title(task)
+        axis.set_xlabel("M environment steps per run")
+        axis.set_ylabel("normalised return")
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    fig.suptitle(f"{figure.title} (mean ± s.e. over seeds)", fontsize=10)
+    fig.tight_layout()
+    fig.legend(handles, labels, loc="upper left", bbox_to_anchor=(1.0, 0.95), fontsize=8)
+    fig.savefig(path, dpi=110, bbox_inches="tight")  # the legend is outside the panels
+    plt.close(fig)
+
+
+def figure_markdown(figure: Figure, results: dict, command: str) -> list[str]:
+    lines = [f"## {figure.title}", "", f"The paper: {figure.paper}.", "", f"    {command}", ""]
+    if figure.name == "table1":
+        lines += [
+            "| task | SC MAE | SC MAE, paper | BSC MAE | BSC MAE, paper | SC RMSE | "
+            "SC RMSE, paper | BSC RMSE | BSC RMSE, paper |",
+            "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+        ]
+        for task in figure.panels:
+            sc, bsc = results[task]["pngail-no-bsc"], results[task]["pngail"]
+            paper = PAPER_TABLE1.get(envs.task_family(task), (None,) * 4)
+            lines.append(
+                f"| {task} | {_number(sc['confidence_mae'][0], 3)} | {_number(paper[0], 3)} | "
+                f"{_number(bsc['confidence_mae'][0], 3)} | {_number(paper[2], 3)} | "
+                f"{_number(sc['confidence_rmse'][0], 3)} | {_number(paper[1], 3)} | "
+                f"{_number(bsc['confidence_rmse'][0], 3)} | {_number(paper[3], 3)} |"
+            )
+        return [*lines, ""]
+    if figure.name == "table4":
+        return [*lines, *table4_markdown(figure, results), ""]
+    lines += [
+        f"![{figure.name}]({figure.name}.png)",
+        "",
+        "| task | series | final: mean ± s.e. | final: 95% CI | average over the last 10%: "
+        "mean ± s.e. | average over all of training: mean ± s.e. | seeds |",
+        "|---|---|---:|---:|---:|---:|---:|",
+    ]
+    for task, series_list in figure.panels.items():
+        for series in series_list:
+            entry = results[task][series.label]
+            lines.append(
+                f"| {task} | {series_name(series)} | {_mean_se(entry['final'])} | "
+                f"{_interval(entry['final'])} | {_mean_se(entry['late'])} | "
+                f"{_mean_se(entry['average'])} | {entry['final']['seeds']} |"
+            )
+    return [*lines, ""]
+
+
+def table4_markdown(figure: Figure, results: dict) -> list[str]:
+    """Raw returns, ours under both averages (the last 10% of training, and all of it)
+    beside the paper's "average reward after training convergence", per method and task."""
+    tasks = list(figure.panels)
+    paper_column = {task: {"Pendulum-v1": 0, "Ant": 1}[envs.task_family(task)] for task in tasks}
+    header = (
+        "| method | "
+        + " | ".join(
+            f"{task}: ours, last 10% | {task}: ours, all of training | {task}: paper (± std)"
+            for task in tasks
+        )
+        + " |"
+    )
+    lines = [header, "|---|" + "---:|---:|---:|" * len(tasks)]
+
+    def cell(pair) -> str:
+        mean, std = pair
+        return f"{_number(mean, 1)} ± {_number(std, 1)}"
+
+    for series in figure.panels[tasks[0]]:
+        row = [series_name(series)]
+        for task in tasks:
+            paper = PAPER_TABLE4.get(series.method)
+            row += [
+                cell(results[task][series.label]["late_average_return"]),
+                cell(results[task][series.label]["average_return"]),
+                cell(paper[paper_column[task]]) if paper else "not in the paper",
+            ]
+        lines.append("| " + " | ".join(row) + " |")
+    optimal = ["optimal policy"]
+    for task in tasks:
+        normalizer = results[task].get("normalizer")
+        ours = _number(normalizer[1], 1) if normalizer else "n/a"
+        optimal += [ours, ours, _number(PAPER_TABLE4_OPTIMAL[paper_column[task]], 2)]
+    lines.append("| " + " | ".join(optimal) + " |")
+    return lines
+
+
+def weak_expert_notes(out: Path, grids) -> list[str]:
+    """One warning line per made demonstration set whose best policy did not beat the random
+    one (tiny budgets): its normalised returns run backwards and its confidences mean
+    little, which the page must say, not only make_demos' terminal."""
+    from pngail_jax.demos import DemonstrationError, load_npz
+
+    notes = []
+    for task in dict.fromkeys(g.task for g in grids.values() if g.demos.ratio is not None):
+        path = out / "demos" / task / "demos.npz"
+        try:
+            metadata = load_npz(path).metadata
+        except (DemonstrationError, FileNotFoundError):
+            continue
+        if not metadata.get("optimal_beats_random", True):
+            notes.append(
+                f"**Warning: {task}'s made expert ({metadata['optimal_return']:.1f}) does not "
+                f"beat the random policy ({metadata['random_return']:.1f}).** Its normalised "
+                "returns run backwards and its confidences mean little: a larger preset trains "
+                "the expert longer."
+            )
+    return notes
+
+
+def write_page(out: Path, options: dict, figures: list[Figure], grids, timings: dict) -> Path:
+    """``README.md``, one plot per figure and ``results.json`` from the grids' outputs."""
+    from pngail_jax.report import json_safe
+
+    loaded = {
+        name: (read_curves(out / "grids" / name), read_json(out / "grids" / name / "summary.json"))
+        for name in grids
+    }
+    results = {}
+    for figure in figures:
+        results[figure.name] = {
+            task: {
+                series.label: series_statistics(series, *loaded[series.grid])
+                for series in series_list
+            }
+            for task, series_list in figure.panels.items()
+        }
+        for task, series_list in figure.panels.items():  # the grid's random / optimal returns
+            config = read_json(out / "grids" / series_list[0].grid / "config.json")
+            results[figure.name][task]["normalizer"] = config["resolved"].get("normalizer")
+    budget = options["budget"]
+    lines = [
+        f"# The paper's figures at the {budget} preset",
+        "",
+        f"Preset `{budget}`: {BUDGETS[budget].iterations:,} iterations, {BUDGETS[budget].seeds} "
+        "seeds per method. Normalised return: (R - R_random) / (R_optimal - R_random), with "
+        "the paper's Table 3 returns for the authors' files and each made set's own measured "
+        "random and optimal returns. 'Final' is the last evaluation, 'average over the last "
+        "10%' the mean of a seed's evaluations in the last tenth of training (our reading of "
+        "the paper's Table 4 'average reward after training convergence'), 'average over all "
+        "of training' the mean of every evaluation; mean ± standard error over seeds and a "
+        "95% percentile-bootstrap interval of the mean (the paper's own Table 4 numbers are "
+        "± its std). "
+        + ("**The check preset checks that everything runs; its numbers are not results.**"
+           if budget in ("check", "test") else ""),
+        "",
+        f"Made with `{options['command']}`.",
+        "",
+        "| grid | task | demonstrations | methods | wall time |",
+        "|---|---|---|---|---:|",
+    ]  # fmt: skip
+    for name, grid in grids.items():
+        seconds = timings.get(name)
+        wall = "n/a" if seconds is None else f"{seconds / 60:.1f} min"
+        lines.append(
+            f"| [{name}](grids/{name}/summary.md) | {grid.task} | {grid.demos.description} | "
+            f"{', '.join(grid.methods)} | {wall} |"
+        )
+    lines += ["", *weak_expert_notes(out, grids), ""]
+    base = f"python -m experiments.paper --preset {budget}"
+    if options.get("released_demos"):
+        base += f" --released-demos {options['released_demos']}"
+    for figure in figures:
+        command = f"{base} --only {figure.name} --envs {','.join(figure.panels)}"
+        lines += figure_markdown(figure, results[figure.name], command)
+        if figure.name not in ("table1", "table4"):
+            plot_figure(out / f"{figure.name}.png", figure, results[figure.name])
+    document = {"options": options, "timings": timings, **results}
+    write_json(out / "results.json", json_safe(document))
+    page = out / "README.md"
+    atomic_write_text(page, "\n".join(lines))
+    return page
