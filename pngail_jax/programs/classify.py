@@ -177,13 +177,55 @@ def check_labelled_mask(demos: Demonstrations, path: Path, num_labelled: int) ->
 
 
 def main(argv=None) -> dict:
+    """Trains the classifiers of the flags (every seed of each in one program), prints their
+    errors (Table 1) and BSC risk variances (Table 5), and returns the summary."""
     args = parse_args(argv)
+    demos = load_checked(args)
+    traj_size, num_labelled = split_sizes(args, demos)
+    config = classifier_config(args, traj_size, num_labelled)
+    specs = [METHODS[m]() if m == "sc" else METHODS[m](args.bsc_eps) for m in args.classifiers]
+    mask_note = (
+        ""
+        if demos.labelled is None
+        else f" (at most, from the {int(demos.labelled.sum())} rows the file's mask allows)"
+    )
+    print(
+        f"{demos.num_rows} rows from {args.demos}; {traj_size} per seed, {num_labelled} "
+        f"labelled{mask_note}; {len(specs)} classifier(s) x {args.seeds} seeds x "
+        f"{args.classifier_steps} steps of {config.labelled_batch_size} + "
+        f"{config.unlabelled_batch_size} rows",
+        flush=True,
+    )
+    start = time.perf_counter()
+    results = train_all(args, demos, config, specs, traj_size)
+    seconds = time.perf_counter() - start
+    summary = error_table(args, results)
+    variance_table(args, results, summary)
+    print(
+        f"\n{len(specs) * args.seeds} classifier runs in {seconds:.1f} s (one program, "
+        "compilation included)"
+    )
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        write_json(args.json, json_safe(summary))
+        print(f"wrote {args.json}")
+    return summary
+
+
+def load_checked(args):
+    """The demonstrations of ``--demos``, with the note on an applied action scale; a bad
+    file ends in one line."""
     try:
         demos = load(args)
     except (DemonstrationError, FileNotFoundError) as error:
         raise SystemExit(f"classify: {error}") from None
     if action_scale_note(demos):
         print(action_scale_note(demos))
+    return demos
+
+
+def split_sizes(args, demos) -> tuple[int, int]:
+    """Rows per seed's split and how many of them are labelled, checked against the file."""
     traj_size = demos.num_rows if args.num_demos is None else args.num_demos
     if not 2 <= traj_size <= demos.num_rows:
         raise SystemExit(f"--num-demos must be in [2, {demos.num_rows}], got {traj_size}")
@@ -197,12 +239,20 @@ def main(argv=None) -> dict:
         check_labelled_mask(demos, args.demos, num_labelled)
     except DemonstrationError as error:
         raise SystemExit(f"classify: {error}") from None
-    # The authors' batch: per labelled row, int(n_u / n_c) unlabelled rows.
+    return traj_size, num_labelled
+
+
+def classifier_config(args, traj_size: int, num_labelled: int) -> ClassifierConfig:
+    """The authors' batch: per labelled row, int(n_u / n_c) unlabelled rows."""
     authors = ClassifierConfig(num_steps=args.classifier_steps, labelled_batch_size=args.batch_size)
-    config = dataclasses.replace(
+    return dataclasses.replace(
         authors, unlabelled_batch_size=authors.unlabelled_rows_per_step(traj_size, num_labelled)
     )
-    specs = [METHODS[m]() if m == "sc" else METHODS[m](args.bsc_eps) for m in args.classifiers]
+
+
+def train_all(args, demos, config: ClassifierConfig, specs, traj_size: int) -> dict:
+    """Every classifier x seed as one ``jit(vmap)``; results with a leading [specs * seeds]
+    axis, classifier-major."""
     stacked = jax.tree.map(lambda *x: jnp.repeat(jnp.stack(x), args.seeds, axis=0), *specs)
     keys = jnp.tile(jax.random.split(jax.random.key(args.seed), args.seeds), len(specs))
 
@@ -219,21 +269,11 @@ def main(argv=None) -> dict:
             allowed=None if demos.labelled is None else jnp.asarray(demos.labelled),
         )
 
-    mask_note = (
-        ""
-        if demos.labelled is None
-        else f" (at most, from the {int(demos.labelled.sum())} rows the file's mask allows)"
-    )
-    print(
-        f"{demos.num_rows} rows from {args.demos}; {traj_size} per seed, {num_labelled} "
-        f"labelled{mask_note}; {len(specs)} classifier(s) x {args.seeds} seeds x "
-        f"{args.classifier_steps} steps of {config.labelled_batch_size} + "
-        f"{config.unlabelled_batch_size} rows",
-        flush=True,
-    )
-    start = time.perf_counter()
-    results = jax.device_get(jax.jit(jax.vmap(run))(stacked, keys))
-    seconds = time.perf_counter() - start
+    return jax.device_get(jax.jit(jax.vmap(run))(stacked, keys))
+
+
+def error_table(args, results) -> dict:
+    """Prints each classifier's MAE and RMSE on D_u over seeds; returns them by classifier."""
     summary = {}
     print("\n| method | MAE | RMSE | BSC clip active |\n|---|---|---|---|")
     for index, method in enumerate(args.classifiers):
@@ -250,6 +290,12 @@ def main(argv=None) -> dict:
             f"| {method.upper()} | {mae.mean():.3f} ± {mae.std():.3f} | "
             f"{rmse.mean():.3f} ± {rmse.std():.3f} | {clip} |"
         )
+    return summary
+
+
+def variance_table(args, results, summary: dict) -> None:
+    """Prints Table 5 (the BSC risk's variance with and without alpha, beta) and adds it to
+    ``summary``."""
     print(
         "\nTable 5, variance of the empirical BSC risk of each trained classifier "
         "(bootstrap over D_c and D_u; mean +- std over seeds):\n"
@@ -265,15 +311,6 @@ def main(argv=None) -> dict:
             f"| {method.upper()} | {origin.mean():.2e} ± {origin.std():.1e} | "
             f"{balanced.mean():.2e} ± {balanced.std():.1e} |"
         )
-    print(
-        f"\n{len(specs) * args.seeds} classifier runs in {seconds:.1f} s (one program, "
-        "compilation included)"
-    )
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        write_json(args.json, json_safe(summary))
-        print(f"wrote {args.json}")
-    return summary
 
 
 if __name__ == "__main__":
