@@ -22,7 +22,7 @@ from pathlib import Path
 import gymnasium as gym
 import jax
 import numpy as np
-from common import write_rows
+from common import context, write_rows
 
 from pngail_jax import envs
 
@@ -93,6 +93,7 @@ def main(argv=None) -> None:
                 "max_obs_error_up_to_step": worst,
                 "return_difference": float(rewards.sum() - expected_rewards.sum()),
                 "gymnasium_return": float(expected_rewards.sum()),
+                **context(),
             }
             rows.append(row)
             cells = " | ".join(f"{worst[c]:.1e}" for c in checkpoints)

@@ -17,8 +17,8 @@ import dataclasses
 import functools
 import math
 import time
-from collections.abc import Sequence
-from typing import Protocol
+from collections.abc import Callable, Sequence
+from typing import Any, Protocol
 
 import jax
 import jax.numpy as jnp
@@ -35,18 +35,15 @@ GRID_AXIS = "grid"
 class Trainer(Protocol):
     """What ``Grid`` needs of a trainer (``AdversarialTrainer`` and ``rl.TRPOTrainer`` have
     it): pure ``init(*cell_inputs, key) -> (state, metrics)`` and ``run_blocks(*cell_inputs,
-    state, num_blocks) -> (state, metrics)``, where a block is ``eval_every`` iterations
+    state, num_blocks=...) -> (state, metrics)``, where a block is ``eval_every`` iterations
     ending in an evaluation, and ``policy_state(state)``, the TRPO state of its policy."""
+
+    init: Callable[..., Any]
+    run_blocks: Callable[..., Any]
+    policy_state: Callable[[Any], Any]
 
     @property
     def eval_every(self) -> int: ...
-
-    def init(self, *inputs): ...
-
-    def run_blocks(self, *inputs, num_blocks: int): ...
-
-    @staticmethod
-    def policy_state(state): ...
 
 
 @dataclasses.dataclass(frozen=True)

@@ -105,8 +105,8 @@ def read_evaluations(
     values of the ``group_by`` columns, e.g. method and setting): the environment steps
     int[I] of the evaluated iterations and the ``value`` column float[seeds, I] (NaN where
     empty). A row counts as evaluated where its ``evaluated_by`` column (default: ``value``)
-    is neither empty nor NaN; seeds of a group evaluated at different iterations are refused
-    (ValueError)."""
+    is neither empty nor NaN; where a seed has no evaluated row at an iteration another seed
+    has (the sweep leaves a diverged seed's returns empty), its value is NaN."""
     evaluated_by = evaluated_by or value
     rows: dict[tuple, dict[int, dict[int, float]]] = {}
     steps: dict[int, int] = {}
@@ -123,12 +123,10 @@ def read_evaluations(
             steps[int(row["iteration"])] = int(float(row["env_steps"]))
     evaluations = {}
     for group, seeds in rows.items():
-        iterations = sorted(next(iter(seeds.values())))
-        if any(sorted(evaluated) != iterations for evaluated in seeds.values()):
-            raise ValueError(f"{path}: the seeds of {group} were evaluated at different iterations")
+        iterations = sorted({i for evaluated in seeds.values() for i in evaluated})
         evaluations[group] = (
             np.array([steps[i] for i in iterations]),
-            np.array([[seeds[s][i] for i in iterations] for s in sorted(seeds)]),
+            np.array([[seeds[s].get(i, math.nan) for i in iterations] for s in sorted(seeds)]),
         )
     return evaluations
 

@@ -768,7 +768,7 @@ class RunResult:
                 {
                     "group": group,
                     **{part: row[f"{metric}_{part}"] for part in ("mean", "se", "iqm", "ci95")},
-                    "seeds": row.get("seeds"),
+                    "seeds": row.get("num_seeds"),
                 }
             )
         return rows
@@ -801,7 +801,9 @@ def run(
     out = Path(out)
     if resume:
         saved = saved or load_saved(out)
-        if config is not None and config.to_dict() != saved.config.to_dict():
+        if config is not None and _comparable(_as_saved(config, saved)) != _comparable(
+            saved.config
+        ):
             raise RunError(
                 f"resume {out}: the config given differs from the run's config.json; pass None "
                 "to continue the run as it began"
@@ -817,6 +819,7 @@ def run(
         raise RunError("run: give a RunConfig (or resume=True to continue the run in out)")
     else:
         config = _absolute_paths(config)
+    _warn_on_devices(config)
     writer = jax.process_index() == 0
     if not writer:  # another host of a multi-host run: process 0 holds the lock
         return _run_locked(config, out, saved, writer, overwrite, allow_changed_inputs,
@@ -827,6 +830,39 @@ def run(
                                command)  # fmt: skip
     except RunLocked as error:
         raise RunError(f"cannot run: {error}") from None
+
+
+def _as_saved(config: RunConfig, saved: SavedRun) -> RunConfig:
+    """``config`` as its run's config.json holds it: absolute paths, and the physics engine
+    that ran when the config left it to the platform."""
+    config = _absolute_paths(config)
+    physics = saved.config.settings.physics
+    if config.settings.physics is None and physics is not None:
+        config = config.replace(settings=config.settings.replace(physics=physics))
+    return config
+
+
+def _comparable(config: RunConfig) -> dict:
+    """``config.to_dict()`` with its file paths normalised (``a/../b`` is ``b``)."""
+    document = config.to_dict()
+    for name in ("demos", "conf"):
+        if document.get(name) and not str(document[name]).startswith(MINARI_PREFIX):
+            document[name] = os.path.normpath(document[name])
+    return document
+
+
+def _warn_on_devices(config: RunConfig) -> None:
+    """``cpu_devices`` only takes effect before JAX starts (``configure_devices``, which the
+    sweep calls): say so when this process has another count than the config asks for."""
+    import jax
+
+    wanted = config.cpu_devices
+    if wanted and jax.devices()[0].platform == "cpu" and wanted != jax.local_device_count():
+        print(
+            f"WARNING: the config asks for {wanted} CPU devices and this process has "
+            f"{jax.local_device_count()}: call pngail_jax.runner.configure_devices({wanted}) "
+            "before anything runs on JAX, or set cpu_devices=None"
+        )
 
 
 def _absolute_paths(config: RunConfig) -> RunConfig:

@@ -4,9 +4,9 @@ A ``RunSettings`` holds what differs between tasks but not between methods: the 
 shape (parallel envs x unroll length, about 5,000 samples per iteration as in the paper),
 the MJX solver caps, the physics engine of gymnasium's MuJoCo tasks, how often and on how
 many episodes the deterministic policy is evaluated, and whether TRPO normalises
-observations. ``experiments.sweep``,
-``experiments.train_rl`` and ``experiments.make_demos`` use ``settings_for(env)`` unless a
-flag overrides a field; ``benchmarks/grid_throughput.py`` measures with them.
+observations. The runner, ``pngail_jax.demos.make`` and the programs (sweep, train_rl,
+make_demos) use ``settings_for(env)`` unless a field is given;
+``benchmarks/grid_throughput.py`` measures with them.
 
 ``REFERENCE_SETTINGS`` is the reference code's setting (25 envs x 200 steps, the task's own
 solver, an evaluation of 32 episodes every 10 iterations, no observation normalisation).

@@ -5,23 +5,27 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
-sys.path.insert(0, str(BENCHMARKS))  # the scripts import their helper module, common.py
 
 pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(autouse=True)
+def scripts_on_path(monkeypatch):
+    """The scripts import their helper module, common.py, from their own folder."""
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
 
 
 def rows_of(module_name: str, argv: list[str], json_path: Path) -> list[dict]:
     module = __import__(module_name)
     module.main([*argv, "--json", str(json_path)])
     rows = json.loads(json_path.read_text())
-    assert rows and all(row["device"] and row["jax_version"] for row in rows if "device" in row)
+    assert rows and all(row["device"] and row["jax_version"] for row in rows)
     return rows
 
 

@@ -198,7 +198,8 @@ def test_seeds_puts_a_methods_seeds_side_by_side_with_their_training(tmp_path, c
 
 def test_read_evaluations_keeps_the_evaluated_rows_per_group(tmp_path):
     """The one metrics.csv reader of the paper page and compare_settings: rows between
-    evaluations (empty or NaN) are skipped; groups by the named columns; seeds in order."""
+    evaluations (empty or NaN) are skipped; groups by the named columns; seeds in order; a
+    seed missing an evaluation (diverged) gets NaN there."""
     path = tmp_path / "metrics.csv"
     path.write_text(
         "method,setting,seed,iteration,env_steps,eval_return,normalized_return\n"
@@ -218,10 +219,11 @@ def test_read_evaluations_keeps_the_evaluated_rows_per_group(tmp_path):
     assert steps.tolist() == [20, 40] and values.tolist() == [[0.25, 0.75], [0.5, 0.8]]
     steps, values = curves[("pngail", "s")]
     assert steps.tolist() == [20] and np.isnan(values).all()  # evaluated, no normaliser
-    with path.open("a") as file:  # seed 0 evaluated at 6, seed 1 not: ragged, refused
+    with path.open("a") as file:  # seed 0 evaluated at 6, seed 1 not (diverged): NaN there
         file.write("gail,s,0,6,60,-1.0,0.9\n")
-    with pytest.raises(ValueError, match="evaluated at different iterations"):
-        report.read_evaluations(path, "eval_return", group_by=("method",))
+    steps, values = report.read_evaluations(path, "eval_return", group_by=("method",))[("gail",)]
+    assert steps.tolist() == [20, 40, 60]
+    np.testing.assert_array_equal(values, [[-7.0, -3.0, -1.0], [-5.0, -2.0, np.nan]])
     path.write_text(
         "seed,iteration,env_steps,eval/return\n0,1,10,nan\n0,2,20,-5\n1,2,20,-6\n1,1,10,nan\n"
     )

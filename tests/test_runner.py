@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 
 import pytest
 from conftest import metrics_numbers, tiny_sweep_args
@@ -41,6 +42,7 @@ def test_run_from_python_equals_the_sweep(finished, demos_path, tmp_path):
         assert row["mean"] == stats["final_return_mean"]
         assert row["se"] == stats["final_return_se"]
         assert row["ci95"] == stats["final_return_ci95"]
+        assert row["seeds"] == 2
     normalised = {row["group"]: row["iqm"] for row in result.table("final_normalized_return")}
     assert normalised == {
         group: stats["final_normalized_return_iqm"]
@@ -64,6 +66,8 @@ def test_run_refuses_in_one_line_and_resumes_a_finished_run_without_work(
     other = config.replace(seeds=3)
     with pytest.raises(RunError, match="differs from the run's config.json"):
         run(other, finished, resume=True)
+    relative = config.replace(demos=os.path.relpath(config.demos))  # as a user would type it
+    assert run(relative, finished, resume=True).summary["complete"]  # the same config: goes on
     before = (finished / "metrics.csv").read_bytes()
     result = run(None, finished, resume=True)
     assert "already complete; nothing to do" in capsys.readouterr().out

@@ -64,7 +64,9 @@ class MakeDemosConfig:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
         self.ratio_parts  # noqa: B018  (checks the ratio)
         if self.iterations % self.settings.eval_every:
-            raise ValueError("iterations must be a multiple of eval_every")
+            raise ValueError(
+                f"iterations must be a multiple of eval_every ({self.settings.eval_every})"
+            )
         if not 0 < self.intermediate_target < 1:
             raise ValueError(
                 f"intermediate_target must be in (0, 1), got {self.intermediate_target}"

@@ -189,3 +189,13 @@ def path_argument(text: str) -> Path:
     """An argparse ``type`` for paths: an empty string is refused (``Path("")`` would mean
     the current directory)."""
     return Path(text_argument(text))
+
+
+def invoked_as(program: str) -> list[str]:
+    """The words that start ``program`` as this process was started: the installed command
+    (``pngail-sweep``) when it runs as one, else ``python -m experiments.<program>`` (a
+    checkout's entry point), so a recorded command line can be run again as it stands."""
+    import sys
+
+    name = Path(sys.argv[0]).name
+    return [name] if name.startswith("pngail-") else ["python", "-m", f"experiments.{program}"]

@@ -11,7 +11,8 @@ the optimal:intermediate ``--ratio`` labelled with their normalised returns in `
 
 ``demos.npz`` is written last and atomically (a temporary sibling renamed onto it), so its
 presence means the run finished; a second run into the same ``--out`` refuses to replace it
-unless ``--overwrite`` is given (``experiments.sweep`` only calls this for a missing cache).
+unless ``--overwrite`` is given (the sweep makes its own cache with the library's
+``make_demonstrations``).
 """
 
 from __future__ import annotations
@@ -89,10 +90,14 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 
 def flag_words(message: str) -> str:
-    """A ``MakeDemosConfig`` error in the command line's words: its field names as flags."""
-    names = [field.name for field in dataclasses.fields(MakeDemosConfig)] + ["eval_every"]
-    pattern = r"\b(" + "|".join(names) + r")\b"
-    return re.sub(pattern, lambda match: "--" + match.group(1).replace("_", "-"), message)
+    """A ``MakeDemosConfig`` error in the command line's words: a message that starts with a
+    field's name starts with its flag instead (``iterations must ...``: ``--iterations must
+    ...``); other messages (the run settings', which name their flags) pass as they are."""
+    names = [field.name for field in dataclasses.fields(MakeDemosConfig)]
+    match = re.match(r"(" + "|".join(names) + r")\b", message)
+    if match is None:
+        return message
+    return "--" + match.group(1).replace("_", "-") + message[match.end() :]
 
 
 def config_of(args: argparse.Namespace) -> MakeDemosConfig:

@@ -9,7 +9,8 @@ Each figure is a set of ``experiments.sweep`` grids, one compiled program per ta
 demonstration set (a task's Fig. 2 and Fig. 3 share one grid of the seven methods). The
 demonstrations come from ``--released-demos DIR`` where it holds the authors' file for a task
 (``Hopper-v2_mixture.npy`` ...; each file's known action scale applied), else from one
-``experiments.make_demos`` run per task, whose trajectories are mixed at each ratio a figure
+demonstration making (``pngail_jax.demos.make``, what ``experiments.make_demos`` runs) per
+task, whose trajectories are mixed at each ratio a figure
 asks for. Writes ``DIR/README.md`` (every figure's plot and table beside the paper's numbers,
 each with the command that makes it alone), ``DIR/<figure>.png``, ``DIR/results.json``,
 ``DIR/demos/`` and one sweep directory per grid in ``DIR/grids/``. An interrupted run continues
@@ -19,6 +20,7 @@ with ``--resume DIR``: finished grids are kept, an unfinished one resumes from i
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -43,6 +45,7 @@ from pngail_jax.programs.cli import (
     HelpFormatter,
     RunLocked,
     claim_output,
+    invoked_as,
     known_names,
     note_deprecated,
     output_refusal,
@@ -207,7 +210,7 @@ def run_paper(args, argv) -> Path:
     )
     physics = options.get("physics")  # absent from runs begun before the flag existed
     demos = demo_paths(grids, out, budget, released, physics)
-    timings = run_grids(grids, demos, out, budget, physics, options["command"].split())
+    timings = run_grids(grids, demos, out, budget, physics, shlex.split(options["command"]))
     page = write_page(out, options, figures, grids, timings)
     print(f"\nwrote {page}")
     return page
@@ -287,7 +290,7 @@ def run_options(args, argv) -> tuple[Path, dict]:
         "envs": args.tasks,
         "released_demos": None if args.released_demos is None else str(args.released_demos),
         "physics": args.physics,
-        "command": " ".join(["python -m experiments.paper", *command_line(argv)]),
+        "command": " ".join([*invoked_as("paper"), *command_line(argv)]),
     }
 
 

@@ -9,7 +9,7 @@
     python -m experiments.sweep --resume runs/20261122-210000
 
 The command line fills in a ``pngail_jax.run_config.RunConfig``. Without ``--demos`` the
-demonstrations are made by ``experiments.make_demos`` (1:4 optimal to intermediate
+demonstrations are made by ``pngail_jax.demos.make`` (1:4 optimal to intermediate
 trajectories) once and reused from ``runs/demos-cache/<env>/``. Writes to ``--out`` (default
 ``runs/<timestamp>``): ``config.json`` (the config, what it resolved to, and provenance),
 ``metrics.csv``, ``curves.png``, ``summary.md``, ``summary.json``, ``policies/<method>/``
@@ -36,6 +36,7 @@ from pngail_jax.programs.cli import (
     check_env,
     claim_output,
     comma_floats,
+    invoked_as,
     known_names,
     output_owner,
     path_argument,
@@ -174,7 +175,7 @@ def _add_demonstration_flags(add) -> None:
         "--demos",
         type=text_argument,
         help="*_mixture.npy (authors' layout), *.npz, or minari:<dataset id> "
-        "(default: made by experiments.make_demos and cached)",
+        "(default: made with pngail_jax.demos.make and cached)",
     )
     add(
         "--conf",
@@ -430,7 +431,7 @@ def main(argv=None, own_interrupt: bool = True) -> Path:
             resume=saved is not None,
             overwrite=invocation.args.overwrite,
             allow_changed_inputs=invocation.args.allow_changed_inputs,
-            command=["python", "-m", "experiments.sweep", *invocation.argv],
+            command=[*invoked_as("sweep"), *invocation.argv],
             saved=saved,
         )
     except runner.RunError as error:
