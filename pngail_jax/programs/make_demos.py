@@ -101,18 +101,9 @@ def flag_words(message: str) -> str:
 
 
 def config_of(args: argparse.Namespace) -> MakeDemosConfig:
-    """The library's config of the checked flags."""
-    return MakeDemosConfig(
-        env=args.env,
-        iterations=args.iterations,
-        seeds=args.seeds,
-        seed=args.seed,
-        ratio=args.ratio,
-        num_trajectories=args.num_trajectories,
-        intermediate_target=args.intermediate_target,
-        measure_episodes=args.measure_episodes,
-        settings=args.settings,
-    )
+    """The library's config of the checked flags (each field is the flag of that name)."""
+    fields = dataclasses.fields(MakeDemosConfig)
+    return MakeDemosConfig(**{field.name: getattr(args, field.name) for field in fields})
 
 
 def main(argv=None) -> Path:
