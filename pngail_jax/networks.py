@@ -43,6 +43,27 @@ class MLP(nn.Module):
         return output(x)
 
 
+def orthogonal_init(gain: float = 1.0):
+    """Flax's orthogonal initialiser, drawn one matrix at a time under ``vmap``.
+
+    Batched, the draw is a batched LAPACK QR; on a CPU, jaxlib spreads a batched QR over the
+    same thread pool that runs the program, and two such QRs running side by side (two layers
+    of a grid's networks initialised at once) can wait on each other forever. Drawing each
+    matrix in its own loop step (``jax.custom_batching.sequential_vmap``) gives the same
+    numbers without the parallel batch.
+    """
+    base = nn.initializers.orthogonal(gain)
+
+    def init(key: jax.Array, shape, dtype=jnp.float32) -> jax.Array:
+        @jax.custom_batching.sequential_vmap
+        def draw(key: jax.Array) -> jax.Array:
+            return base(key, shape, dtype)
+
+        return draw(key)
+
+    return init
+
+
 class ReluMLP(nn.Module):
     """ReLU MLP with the CAIL codebase's initialisation (``build_mlp(init=True)``): every
     layer, the output included, has orthogonal weights of gain 1 and zero biases; the output
@@ -57,7 +78,7 @@ class ReluMLP(nn.Module):
 
     @nn.compact
     def __call__(self, x: jax.Array) -> jax.Array:
-        orthogonal = nn.initializers.orthogonal(1.0)
+        orthogonal = orthogonal_init(1.0)
         for size in self.hidden_sizes:
             x = nn.relu(nn.Dense(size, kernel_init=orthogonal)(x))
         return nn.Dense(self.output_size, kernel_init=orthogonal, use_bias=self.output_bias)(x)

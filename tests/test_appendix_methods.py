@@ -3,7 +3,11 @@ phase compiled only where a method needs it, a reduction (CAIL with its confiden
 1 is GAIL), a grid against its cells run alone, and clear errors. Tiny Pendulum configs."""
 
 import dataclasses
+import pathlib
+import subprocess
+import sys
 
+import flax.linen as nn
 import jax
 import numpy as np
 import pytest
@@ -16,6 +20,7 @@ from pngail_jax.demos import DemonstrationError, Demonstrations
 from pngail_jax.firl import FirlConfig
 from pngail_jax.grid import make_cells, stack_cells
 from pngail_jax.methods import METHOD_NAMES, method_spec, required_phases, stack
+from pngail_jax.networks import orthogonal_init
 from pngail_jax.ranking import DrexConfig, RankingConfig
 from pngail_jax.rl import TRPOConfig
 from pngail_jax.run_config import RunConfig
@@ -194,3 +199,45 @@ def test_ranking_methods_need_trajectories_and_their_phases():
     short = dataclasses.replace(demos(), trajectory_ids=ids, confidence=(1.0 - ids / 4))
     with pytest.raises(DemonstrationError, match="snippets of 10 steps"):
         trainer_for(("trex",), data=short).check_methods(("trex",))
+
+
+def test_orthogonal_init_under_vmap_equals_flax_matrix_by_matrix():
+    keys = jax.random.split(key(3), 6).reshape(2, 3)
+    ours = jax.jit(jax.vmap(jax.vmap(lambda k: orthogonal_init(1.0)(k, (32, 8)))))(keys)
+    flax_init = nn.initializers.orthogonal(1.0)
+    for i, j in np.ndindex(2, 3):
+        np.testing.assert_array_equal(ours[i, j], flax_init(keys[i, j], (32, 8)))
+
+
+# Two cells of D-REX with a cloned policy of two 256-unit layers (and its default reward
+# ensemble of three (256, 256) networks): with flax's batched
+# orthogonal draw, jaxlib 0.10's parallel batched QR deadlocked this init on a 2-core CPU.
+TWO_CELL_DREX_INIT = """
+import dataclasses, jax
+import tests.test_appendix_methods as t
+from pngail_jax.bc import DeterministicBCConfig
+trainer = t.trainer_for(("drex",))
+drex = t.DrexConfig(
+    bc=DeterministicBCConfig(num_steps=5, batch_size=16, hidden_sizes=(256, 256)),
+    noise_levels=(0.0, 0.5), rollouts_per_level=1,
+    ranking=dataclasses.replace(t.DrexConfig().ranking, num_steps=5, snippet_length=10),
+)
+trainer = t.AdversarialTrainer(
+    dataclasses.replace(trainer.config, drex=drex), trainer.env, t.demos())
+inputs = t.stack_cells(t.make_cells(["drex"], 2), t.key(0))
+jax.block_until_ready(jax.jit(jax.vmap(trainer.init))(*inputs))
+print("initialised")
+"""
+
+
+@pytest.mark.slow
+def test_two_cells_of_drex_with_a_wide_cloned_policy_initialise():
+    root = pathlib.Path(__file__).resolve().parents[1]
+    try:
+        done = subprocess.run(
+            [sys.executable, "-c", TWO_CELL_DREX_INIT], cwd=root, capture_output=True,
+            text=True, timeout=150,
+        )  # fmt: skip
+    except subprocess.TimeoutExpired:
+        pytest.fail("a 2-cell D-REX init with (256, 256) cloned policies hung for 150 s")
+    assert done.returncode == 0 and "initialised" in done.stdout, done.stderr[-2000:]
