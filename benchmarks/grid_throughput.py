@@ -120,6 +120,7 @@ from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import Demonstrations, load_demonstrations
 from pngail_jax.grid import Grid, make_cells, nonfinite_cells, stack_cells
 from pngail_jax.methods import METHOD_NAMES
+from pngail_jax.programs import flags
 from pngail_jax.rl.train import TRPO
 from pngail_jax.train import AdversarialConfig, AdversarialTrainer, TrainState
 
@@ -493,7 +494,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--devices-worker", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--compile-worker", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--cache-dir", help=argparse.SUPPRESS)
-    run_settings.add_arguments(parser)
+    flags.add_settings_flags(parser)
     args = parser.parse_args(argv)
     args.argv = list(sys.argv[1:] if argv is None else argv)
     if args.sizes is None:
@@ -515,10 +516,7 @@ def parse_args(argv=None) -> argparse.Namespace:
         parser.error("--devices must be a positive integer")
     if args.demos is None and args.env == "Pendulum-v1" and PENDULUM_DEMOS.exists():
         args.demos = PENDULUM_DEMOS
-    try:
-        args.run_settings = run_settings.from_arguments(args.env, args)
-    except ValueError as error:
-        parser.error(str(error))
+    args.run_settings = flags.settings_from_flags(parser, args, args.env)
     return args
 
 

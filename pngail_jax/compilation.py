@@ -35,30 +35,3 @@ def enable_compilation_cache(directory: str | Path | None = None) -> Path:
     jax.config.update("jax_compilation_cache_dir", str(directory))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
     return directory
-
-
-def add_arguments(parser) -> None:
-    """``--compile-cache DIR`` and ``--no-compile-cache`` for a command-line program."""
-    parser.add_argument(
-        "--compile-cache",
-        type=Path,
-        metavar="DIR",
-        help=f"persistent compilation cache (default ${CACHE_ENVIRONMENT_VARIABLE} or "
-        "~/.cache/pngail-jax/xla): a repeated command does not compile again",
-    )
-    parser.add_argument(
-        "--no-compile-cache",
-        action="store_true",
-        help="compile every program afresh (nothing read from or written to the cache) "
-        "(default: off)",
-    )
-
-
-def from_arguments(args) -> Path | None:
-    """Applies the flags of ``add_arguments``: the cache directory in use, or None."""
-    if args.no_compile_cache:
-        return None
-    try:
-        return enable_compilation_cache(args.compile_cache)
-    except (ValueError, OSError) as error:
-        raise SystemExit(f"--compile-cache: {error}") from None

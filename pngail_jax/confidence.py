@@ -20,6 +20,7 @@ import jax.numpy as jnp
 import optax
 from flax import struct
 
+from pngail_jax import validation
 from pngail_jax.networks import OUTPUT_SCALE, torch_like_init
 
 
@@ -135,9 +136,10 @@ class ClassifierConfig:
             if value is None and name == "unlabelled_batch_size":
                 continue
             if not isinstance(value, int) or value < 1:  # RunConfig also refuses a bool
-                raise ValueError(
-                    f"ClassifierConfig.{name} must be a positive integer, got {value!r}"
-                )
+                validation.fail(
+                    name, f"must be a positive integer, got {value!r}",
+                    name=f"ClassifierConfig.{name}",
+                )  # fmt: skip
 
     @property
     def unlabelled_batch_width(self) -> int:

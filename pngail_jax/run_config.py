@@ -7,23 +7,22 @@ round-trip it, so a saved ``config.json`` starts a new run (``--config FILE``) o
 (``--resume DIR``). ``provenance()`` adds what a saved run should remember of where it ran.
 
 Every field is checked when a config is made, from Python or from a file: a wrong type, a NaN
-or infinite number, a count below 1 or an unknown key raises ValueError naming the field (the
-sweep turns the name into its flag), so a valid config holds exactly its annotated types.
+or infinite number or a count below 1 raises ``pngail_jax.validation.ConfigError`` naming the
+field (the sweep names its flag instead), and an unknown key a ValueError naming the key, so a
+valid config holds exactly its annotated types.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
-import math
-import numbers
 import platform
 import subprocess
 import sys
 from collections.abc import Mapping
 from importlib import metadata
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any
 
 from pngail_jax import envs
 from pngail_jax.confidence import ClassifierConfig
@@ -32,6 +31,15 @@ from pngail_jax.methods import ALL_METHOD_NAMES, METHOD_NAMES, PRESETS, required
 from pngail_jax.settings import RunSettings, settings_for
 from pngail_jax.tracking import BACKENDS as LOG_BACKENDS
 from pngail_jax.train import AdversarialConfig
+from pngail_jax.validation import (
+    ConfigError,
+    fail,
+    float_axis,
+    integer,
+    is_among,
+    layer_sizes,
+    real,
+)
 
 FISHER_FORMS = ("gauss_newton", "hessian")
 # What a saved config.json holds besides the config's fields (pngail_jax.runner writes them);
@@ -118,56 +126,70 @@ class RunConfig:
             value = getattr(self, name)
             set_field(name, tuple(value) if isinstance(value, list | tuple) else (value,))
         if not isinstance(self.env, str) or not self.env:
-            _fail(f"env must be an environment name, got {self.env!r}")
+            fail("env", f"must be an environment name, got {self.env!r}")
         if self.settings is None:  # the environment's row (raises for an unknown environment)
             set_field("settings", _env_settings(self.env))
         elif not isinstance(self.settings, RunSettings):
-            _fail(
-                "settings must be a pngail_jax.settings.RunSettings (None: the environment's "
-                f"row), got {type(self.settings).__name__}"
+            fail(
+                "settings",
+                "must be a pngail_jax.settings.RunSettings (None: the environment's row), "
+                f"got {type(self.settings).__name__}",
             )
         else:
             _env_settings(self.env)  # the name must be known even when settings are given
         for name in ("seeds", "iterations", "chunk_iterations", "fisher_subsample"):
-            set_field(name, _integer(name, getattr(self, name), minimum=1))
-        set_field("seed", _integer("seed", self.seed, minimum=0, below=SEED_LIMIT))
+            set_field(name, integer(name, getattr(self, name), minimum=1))
+        set_field("seed", integer("seed", self.seed, minimum=0, below=SEED_LIMIT))
         if self.num_demos is not None:
-            set_field("num_demos", _integer("num_demos", self.num_demos, minimum=2))
+            set_field("num_demos", integer("num_demos", self.num_demos, minimum=2))
         if self.cpu_devices is not None:
-            set_field("cpu_devices", _integer("cpu_devices", self.cpu_devices, minimum=1))
+            set_field("cpu_devices", integer("cpu_devices", self.cpu_devices, minimum=1))
         set_field(
             "discriminator_hidden_sizes",
-            _layer_sizes("discriminator_hidden_sizes", self.discriminator_hidden_sizes),
+            layer_sizes("discriminator_hidden_sizes", self.discriminator_hidden_sizes),
         )
         set_field(
             "label_ratios",
-            _float_axis("label ratios", self.label_ratios, "lie in (0, 1)", lambda r: 0 < r < 1),
+            float_axis(
+                "label_ratios",
+                self.label_ratios,
+                "lie in (0, 1)",
+                lambda r: 0 < r < 1,
+                name="label ratios",
+            ),  # fmt: skip
         )
         set_field(
             "noise_stds",
-            _float_axis("noise stds", self.noise_stds, "be finite and >= 0", lambda s: s >= 0),
+            float_axis(
+                "noise_stds",
+                self.noise_stds,
+                "be finite and >= 0",
+                lambda s: s >= 0,
+                name="noise stds",
+            ),  # fmt: skip
         )
         if self.action_scale is not None:
-            set_field("action_scale", _real("action_scale", self.action_scale))
+            set_field("action_scale", real("action_scale", self.action_scale))
             if self.action_scale <= 0:
-                _fail(f"action_scale must be finite and positive, got {self.action_scale!r}")
+                fail("action_scale", f"must be finite and positive, got {self.action_scale!r}")
         for name in ("random_return", "optimal_return"):
             if getattr(self, name) is not None:
-                set_field(name, _real(name, getattr(self, name), "be a finite number"))
+                set_field(name, real(name, getattr(self, name), "be a finite number"))
         if self.bsc_eps is not None:
-            set_field("bsc_eps", _real("bsc_eps", self.bsc_eps, "lie in (0, 0.5)"))
+            set_field("bsc_eps", real("bsc_eps", self.bsc_eps, "lie in (0, 0.5)"))
             if not 0 < self.bsc_eps < 0.5:
-                _fail(f"bsc_eps must lie in (0, 0.5), got {self.bsc_eps!r}")
+                fail("bsc_eps", f"must lie in (0, 0.5), got {self.bsc_eps!r}")
         for name in ("demos", "conf", "confidence_field", "preset_name"):
             value = getattr(self, name)
             if value is not None and (not isinstance(value, str) or not value):
-                _fail(f"{name} must be a non-empty string or None, got {value!r}")
+                fail(name, f"must be a non-empty string or None, got {value!r}")
         if self.classifier is None:
             set_field("classifier", task_classifier(self.env))
         if not isinstance(self.classifier, ClassifierConfig):
-            _fail(
-                "classifier must be a pngail_jax.confidence.ClassifierConfig, "
-                f"got {type(self.classifier).__name__}"
+            fail(
+                "classifier",
+                "must be a pngail_jax.confidence.ClassifierConfig, "
+                f"got {type(self.classifier).__name__}",
             )
         set_field("classifier", ClassifierConfig(**_classifier_fields(_fields_of(self.classifier))))
         self._validate()
@@ -175,47 +197,74 @@ class RunConfig:
     def _validate(self) -> None:
         """The checks between fields, and the names each field must be among."""
         if not self.methods:
-            _fail(
-                f"methods must name at least one method; available: {', '.join(ALL_METHOD_NAMES)}"
+            fail(
+                "methods",
+                f"must name at least one method; available: {', '.join(ALL_METHOD_NAMES)}",
             )
-        unknown = [name for name in self.methods if not _is_among(name, PRESETS)]
+        unknown = [name for name in self.methods if not is_among(name, PRESETS)]
         if unknown:
-            _fail(f"unknown method(s) {unknown}; available: {', '.join(ALL_METHOD_NAMES)}")
+            fail(
+                "methods",
+                f": unknown method(s) {unknown}; available: {', '.join(ALL_METHOD_NAMES)}",
+            )
         if len(set(self.methods)) != len(self.methods):
-            _fail(f"methods must not repeat, got {list(self.methods)}")
-        if not _is_among(self.fisher, FISHER_FORMS):
-            _fail(f"fisher must be one of {FISHER_FORMS}, got {self.fisher!r}")
-        bad_backends = [name for name in self.log if not _is_among(name, LOG_BACKENDS)]
+            fail("methods", f"must not repeat, got {list(self.methods)}")
+        if not is_among(self.fisher, FISHER_FORMS):
+            fail("fisher", f"must be one of {FISHER_FORMS}, got {self.fisher!r}")
+        bad_backends = [name for name in self.log if not is_among(name, LOG_BACKENDS)]
         if bad_backends:
-            _fail(f"unknown log backend(s) {bad_backends}; available: {', '.join(LOG_BACKENDS)}")
+            fail(
+                "log",
+                f": unknown log backend(s) {bad_backends}; available: {', '.join(LOG_BACKENDS)}",
+            )
         if len(set(self.log)) != len(self.log):
-            _fail(f"log backends must not repeat, got {list(self.log)}")
+            fail("log", f"backends must not repeat, got {list(self.log)}")
         if self.iterations % self.settings.eval_every:
-            _fail(
-                f"iterations ({self.iterations}) must be a multiple of the evaluation interval "
-                f"({self.settings.eval_every}; set it with --eval-every)"
+            fail(
+                "iterations",
+                f"({self.iterations}) must be a multiple of the evaluation interval "
+                f"({self.settings.eval_every}, settings.eval_every)",
+            )
+        if self.settings.physics is not None and self.env not in envs.GYM_TASKS:
+            fail(
+                "settings.physics",
+                f": only gymnasium's MuJoCo tasks ({', '.join(envs.GYM_TASKS)}) have a choice of "
+                f"engine, not {self.env}",
+                name="RunSettings.physics",
+            )
+        if self.env == "Pendulum-v1" and self.settings.env_options:
+            cap = next(iter(self.settings.env_options))  # the first solver cap set
+            fail(
+                f"settings.{cap}",
+                ": Pendulum-v1 has no MJX solver (its solver caps stay None)",
+                name=f"RunSettings.{cap}",
             )
         self.adversarial_config()  # the trainer's own checks (e.g. samples per iteration)
         if self.random_return is not None and self.optimal_return is None:
-            _fail("random_return needs optimal_return (the normalised return's other end)")
+            fail("random_return", "needs optimal_return (the normalised return's other end)")
         if None not in (self.random_return, self.optimal_return) and not (
             self.optimal_return > self.random_return
         ):
-            _fail(
-                f"optimal_return ({self.optimal_return}) must be above random_return "
-                f"({self.random_return})"
+            fail(
+                "optimal_return",
+                f"({self.optimal_return}) must be above random_return ({self.random_return})",
             )
         if self.conf is not None and self.demos is None:
-            _fail("conf: a confidence file needs demos (made demonstrations carry their own)")
+            fail("conf", ": a confidence file needs demos (made demonstrations carry their own)")
         is_minari = self.demos is not None and self.demos.startswith("minari:")
         if self.confidence_field is not None and not is_minari:
-            _fail("confidence_field reads a Minari dataset's episode metadata: demos minari:<id>")
+            fail(
+                "confidence_field",
+                "reads a Minari dataset's episode metadata: demos minari:<id>",
+            )
         if (
             self.demos is not None
             and self.demos.endswith(".npz")
             and (self.conf is not None or self.action_scale not in (None, 1.0))
         ):
-            _fail("demos: an .npz set carries its confidences and units: no conf or action_scale")
+            fail(
+                "demos", ": an .npz set carries its confidences and units: no conf or action_scale"
+            )
 
     @classmethod
     def preset(cls, name: str, **overrides) -> RunConfig:
@@ -289,12 +338,14 @@ class RunConfig:
         (the reference setting), as in files written before the field existed.
         """
         if not isinstance(data, Mapping):
-            _fail(f"a run config is a JSON object of fields, got {type(data).__name__}")
+            raise ValueError(f"a run config is a JSON object of fields, got {type(data).__name__}")
         data = upgrade_saved_config(data)
         fields = {field.name for field in dataclasses.fields(cls)}
         unknown = sorted((key for key in data if key not in fields | set(RECORD_KEYS)), key=str)
         if unknown:
-            _fail(f"unknown key(s) {unknown}; a run config's keys: {', '.join(sorted(fields))}")
+            raise ValueError(
+                f"unknown key(s) {unknown}; a run config's keys: {', '.join(sorted(fields))}"
+            )
         values = {key: value for key, value in data.items() if key in fields}
         if isinstance(values.get("settings"), Mapping):
             values["settings"] = _nested(RunSettings, "settings", values["settings"])
@@ -338,7 +389,9 @@ def upgrade_saved_config(data: dict[str, Any]) -> dict[str, Any]:
         needed += ["num_envs", "unroll_length", "eval_every"]
     missing = [key for key in needed if key not in data]
     if missing:
-        _fail(f"a config.json of the old layout (classifier_steps) lacks key(s) {missing}")
+        raise ValueError(
+            f"a config.json of the old layout (classifier_steps) lacks key(s) {missing}"
+        )
 
     settings = data.get("settings") or dataclasses.asdict(
         REFERENCE_SETTINGS.replace(
@@ -362,85 +415,18 @@ def upgrade_saved_config(data: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-# -- field checks: each returns the value in its stored type or raises ValueError naming it --
+# -- field checks (pngail_jax.validation): each returns the value in its stored type -------
 
 _TUPLE_FIELDS = ("methods", "label_ratios", "noise_stds", "log", "discriminator_hidden_sizes")
 
 
-def _fail(message: str) -> NoReturn:
-    raise ValueError(message)
-
-
 def _env_settings(env: str) -> RunSettings:
-    """The table's settings of ``env``; ValueError naming it when ``envs.make`` does not
+    """The table's settings of ``env``; ConfigError naming it when ``envs.make`` does not
     know it."""
     try:
         return settings_for(env)
-    except TypeError as error:  # a relative module name (".x:f") reaches importlib
-        _fail(f"env {env!r}: {error}")
-
-
-def _integer(name: str, value, minimum: int, below: int | None = None) -> int:
-    """``value`` as a Python int (a NumPy integer converted) when it is an integer (not a
-    bool) in ``[minimum, below)``."""
-    if (
-        isinstance(value, bool)
-        or not isinstance(value, numbers.Integral)
-        or value < minimum
-        or (below is not None and value >= below)
-    ):
-        if below is not None:
-            power = below.bit_length() - 1
-            limit = f"2**{power}" if below == 2**power else str(below)
-            what = f"an integer in [{minimum}, {limit})"
-        else:
-            what = "a positive integer" if minimum == 1 else f"an integer >= {minimum}"
-        _fail(f"{name} must be {what}, got {value!r}")
-    return int(value)
-
-
-def _real(name: str, value, requirement: str = "be finite and positive") -> float:
-    """``value`` as a Python float when it is a finite real number (not a bool); else
-    ValueError "``name`` must ``requirement``"."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        _fail(f"{name} must {requirement}, got {value!r}")
-    try:
-        number = float(value)
-    except OverflowError:  # an int beyond float's range
-        _fail(f"{name} must {requirement}, got {value!r}")
-    if not math.isfinite(number):
-        _fail(f"{name} must {requirement}, got {value!r}")
-    return number
-
-
-def _float_axis(label: str, values: tuple, requirement: str, valid) -> tuple[float, ...]:
-    """A grid axis (label ratios, noise stds): finite floats meeting ``valid``, not empty,
-    none repeated."""
-    if not values:
-        _fail(f"{label} must not be empty")
-    numbers_ = tuple(_real(label, value, requirement) for value in values)
-    if not all(valid(value) for value in numbers_):
-        _fail(f"{label} must {requirement}, got {list(values)}")
-    if len(set(numbers_)) != len(numbers_):
-        _fail(f"{label} must not repeat, got {list(values)}")
-    return numbers_
-
-
-def _layer_sizes(name: str, values) -> tuple[int, ...]:
-    """Hidden-layer widths: a tuple of positive ints (empty: no hidden layer)."""
-    values = tuple(values) if isinstance(values, list | tuple) else (values,)
-    if not all(
-        isinstance(size, numbers.Integral) and not isinstance(size, bool) and size >= 1
-        for size in values
-    ):
-        _fail(f"{name} must be positive integers (layer widths), got {list(values)}")
-    return tuple(int(size) for size in values)
-
-
-def _is_among(name, known) -> bool:
-    """Whether ``name`` is one of the strings ``known`` (False for a list or dict, which a
-    membership test of a dict would raise TypeError on)."""
-    return isinstance(name, str) and name in known
+    except (TypeError, ValueError) as error:  # a relative module name (".x:f") is a TypeError
+        fail("env", f": {error}")
 
 
 def _fields_of(instance) -> dict[str, Any]:
@@ -451,51 +437,58 @@ def _classifier_fields(values: dict[str, Any]) -> dict[str, Any]:
     """``ClassifierConfig`` keyword arguments checked and in their stored types (its own
     checks let a bool, a float learning rate of NaN or a negative width through)."""
     checked = dict(values)
+
+    def check(name: str, test, *args):
+        checked[name] = test(f"classifier.{name}", checked[name], *args, name=_CLASSIFIER + name)
+
     for name in (
         "num_steps", "labelled_batch_size", "unlabelled_batch_size", "max_unlabelled_batch_size"
     ):  # fmt: skip
         if name == "unlabelled_batch_size" and checked.get(name) is None:
             continue  # the authors' int(n_u / n_c)
         if name in checked:
-            checked[name] = _integer(f"ClassifierConfig.{name}", checked[name], minimum=1)
+            check(name, integer, 1)
     if "learning_rate" in checked:
-        checked["learning_rate"] = _real("ClassifierConfig.learning_rate", checked["learning_rate"])
+        check("learning_rate", real)
         if checked["learning_rate"] <= 0:
-            _fail(
-                "ClassifierConfig.learning_rate must be finite and positive, "
-                f"got {values['learning_rate']!r}"
+            fail(
+                "classifier.learning_rate",
+                f"must be finite and positive, got {values['learning_rate']!r}",
+                name=_CLASSIFIER + "learning_rate",
             )
     if "dropout_rate" in checked:
-        requirement = "lie in [0, 1)"
-        checked["dropout_rate"] = _real(
-            "ClassifierConfig.dropout_rate", checked["dropout_rate"], requirement
-        )
+        check("dropout_rate", real, "lie in [0, 1)")
         if not 0 <= checked["dropout_rate"] < 1:
-            _fail(
-                f"ClassifierConfig.dropout_rate must {requirement}, got {values['dropout_rate']!r}"
+            fail(
+                "classifier.dropout_rate",
+                f"must lie in [0, 1), got {values['dropout_rate']!r}",
+                name=_CLASSIFIER + "dropout_rate",
             )
     if "hidden_sizes" in checked:
-        checked["hidden_sizes"] = _layer_sizes(
-            "ClassifierConfig.hidden_sizes", checked["hidden_sizes"]
-        )
+        check("hidden_sizes", layer_sizes)
     return checked
 
 
+_CLASSIFIER = "ClassifierConfig."
+
+
 def _nested_fields(cls, where: str, data: Mapping) -> dict[str, Any]:
-    """The keys of a nested config's JSON object (``settings``, ``classifier``); ValueError
+    """The keys of a nested config's JSON object (``settings``, ``classifier``); ConfigError
     naming ``where`` and the key on a key that is not one of ``cls``' fields."""
     fields = {field.name for field in dataclasses.fields(cls)}
     unknown = sorted((key for key in data if key not in fields), key=str)
     if unknown:
-        _fail(f"{where}: unknown key(s) {unknown}; known: {', '.join(sorted(fields))}")
+        fail(where, f": unknown key(s) {unknown}; known: {', '.join(sorted(fields))}")
     return dict(data)
 
 
 def _nested(cls, where: str, data: Mapping):
     try:
         return cls(**_nested_fields(cls, where, data))
+    except ConfigError as error:
+        raise error.nested(where) from None
     except TypeError as error:
-        _fail(f"{where}: {error}")
+        fail(where, f": {error}")
 
 
 def provenance(argv: list[str] | None = None, program: str | None = None) -> dict[str, Any]:

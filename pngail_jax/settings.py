@@ -16,20 +16,16 @@ Every departure from it in ``ENV_SETTINGS`` is justified by a learning measureme
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
-import numbers
 
-from pngail_jax import envs
+from pngail_jax import envs, validation
 from pngail_jax.rl.train import TRPOConfig
 
 
 def _positive_int(name: str, value) -> int:
     """``value`` as a Python int (a NumPy integer is converted, so the settings stay JSON);
-    ValueError naming ``RunSettings.<name>`` unless it is an integer >= 1 (a bool is not)."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
-        raise ValueError(f"RunSettings.{name} must be a positive integer, got {value!r}")
-    return int(value)
+    ConfigError naming ``RunSettings.<name>`` unless it is an integer >= 1 (a bool is not)."""
+    return validation.integer(name, value, 1, name=f"RunSettings.{name}")
 
 
 def parse_solver(text: str) -> dict[str, int | None]:
@@ -48,76 +44,6 @@ def parse_solver(text: str) -> dict[str, int | None]:
         f"solver must be 'own', 'fast' or 'I/L' (positive Newton / line-search iteration "
         f"counts, e.g. 4/50), got {text!r}"
     )
-
-
-def add_arguments(parser) -> None:
-    """Adds the run-settings flags to an ``argparse`` parser; ``from_arguments`` reads them."""
-    group = parser.add_argument_group(
-        "run settings (default: the environment's row of pngail_jax.settings.ENV_SETTINGS, "
-        "see docs/performance.md)"
-    )
-    group.add_argument(
-        "--settings",
-        choices=("table", "reference"),
-        help="start from the per-environment table or from the reference code's setting (25 "
-        "envs x 200 steps, the task's own solver, 32 evaluation episodes every 10 iterations); "
-        "the flags below override either (default: the table, or a --config file's settings)",
-    )
-    table = "(default: the table's)"
-    group.add_argument("--num-envs", type=int, help=f"parallel envs per run {table}")
-    group.add_argument("--unroll-length", type=int, help=f"steps per env per iteration {table}")
-    group.add_argument("--eval-every", type=int, help=f"iterations between evaluations {table}")
-    group.add_argument("--num-eval-episodes", type=int, help=f"episodes per evaluation {table}")
-    group.add_argument(
-        "--solver",
-        help=f"MJX solver: 'own' (the task's), 'fast' (1/4) or 'I/L' iterations {table}",
-    )
-    group.add_argument(
-        "--physics",
-        choices=envs.PHYSICS,
-        help="physics engine of gymnasium's MuJoCo tasks (Hopper-v4, ...): MuJoCo's C engine "
-        "(float64, threaded; fastest on a CPU) or MJX (accelerators) (default: c on a CPU, mjx "
-        "on a GPU or TPU)",
-    )
-    group.add_argument(
-        "--normalize-observations",
-        action=argparse.BooleanOptionalAction,
-        default=None,
-        help=f"running mean/std observation normalisation in TRPO {table}",
-    )
-
-
-def from_arguments(env_name: str, args, base: RunSettings | None = None) -> RunSettings:
-    """The ``RunSettings`` that ``add_arguments``' flags select, starting from ``base`` (e.g. a
-    saved run's) unless ``--settings`` names a starting point; ``base`` None: the table's row.
-    Raises ValueError naming the flag on a bad value."""
-    if args.settings == "reference":
-        base = REFERENCE_SETTINGS
-    elif args.settings == "table" or base is None:
-        base = settings_for(env_name)
-    fields = {}
-    for name in ("num_envs", "unroll_length", "eval_every", "num_eval_episodes"):
-        value = getattr(args, name)
-        if value is not None and value < 1:
-            raise ValueError(f"--{name.replace('_', '-')} must be a positive integer, got {value}")
-        fields[name] = value
-    settings = base.replace(**fields, normalize_observations=args.normalize_observations)
-    if args.solver is not None:
-        try:
-            solver = parse_solver(args.solver)
-        except ValueError as error:
-            raise ValueError(f"--solver: {error}") from None
-        if env_name == "Pendulum-v1" and any(value is not None for value in solver.values()):
-            raise ValueError("--solver: Pendulum-v1 has no MJX solver (use 'own' or omit it)")
-        settings = dataclasses.replace(settings, **solver)
-    if args.physics is not None:
-        if env_name not in envs.GYM_TASKS:
-            raise ValueError(
-                f"--physics: only gymnasium's MuJoCo tasks ({', '.join(envs.GYM_TASKS)}) have a "
-                f"choice of engine, not {env_name}"
-            )
-        settings = dataclasses.replace(settings, physics=args.physics)
-    return settings
 
 
 def describe(settings: RunSettings, env: envs.Env | None = None) -> str:
@@ -156,14 +82,16 @@ class RunSettings:
             if getattr(self, name) is not None:
                 object.__setattr__(self, name, _positive_int(name, getattr(self, name)))
         if self.physics is not None and self.physics not in envs.PHYSICS:
-            raise ValueError(
-                f"RunSettings.physics must be one of {', '.join(envs.PHYSICS)} or None, "
-                f"got {self.physics!r}"
+            validation.fail(
+                "physics",
+                f"must be one of {', '.join(envs.PHYSICS)} or None, got {self.physics!r}",
+                name="RunSettings.physics",
             )
         if not isinstance(self.normalize_observations, bool):
-            raise ValueError(
-                "RunSettings.normalize_observations must be True or False, "
-                f"got {self.normalize_observations!r}"
+            validation.fail(
+                "normalize_observations",
+                f"must be True or False, got {self.normalize_observations!r}",
+                name="RunSettings.normalize_observations",
             )
 
     @property

@@ -22,6 +22,7 @@ from pngail_jax.methods import METHOD_NAMES
 from pngail_jax.programs import cli, compare_settings, sweep
 from pngail_jax.run_config import FISHER_FORMS, LOG_BACKENDS, RunConfig
 from pngail_jax.settings import RunSettings
+from pngail_jax.validation import ConfigError
 
 PROPERTY = hypothesis_settings(max_examples=50, deadline=None, database=None)
 
@@ -94,12 +95,14 @@ FIELD_VALUES = {
     "log": tuples_of(st.sampled_from(LOG_BACKENDS) | SCALARS),
     "preset_name": PATHS,
 }
-# What an error about a field may call it besides its name.
+# The fields a field's error may name besides its own: settings' evaluation interval must
+# divide the iterations ("iterations (300) must be a multiple of the evaluation interval").
+ALSO_NAMED = {"settings": ("iterations",)}
+# What a message about a key of a saved file may call it besides its name.
 ALSO_CALLED = {
     "methods": ("method",),
     "label_ratios": ("label ratios",),
     "noise_stds": ("noise stds",),
-    "settings": ("eval-every",),  # "a multiple of the evaluation interval (7; --eval-every)"
     "classifier": ("ClassifierConfig.",),
 }
 
@@ -108,7 +111,13 @@ def test_every_field_has_values_to_try():
     assert set(FIELD_VALUES) == {field.name for field in dataclasses.fields(RunConfig)}
 
 
-def assert_names(error: Exception, *names: str) -> None:
+def assert_names(error: ConfigError, name: str) -> None:
+    """The error names ``name`` (or a field inside it) as its field: the sweep calls that
+    field by its flag."""
+    assert error.field.split(".")[0] in (name, *ALSO_NAMED.get(name, ())), (name, str(error))
+
+
+def assert_says(error: Exception, *names: str) -> None:
     message = str(error)
     assert any(name in message for name in names), (names, message)
 
@@ -153,8 +162,8 @@ def test_any_field_value_gives_a_valid_config_or_an_error_naming_the_field(data)
     value = data.draw(FIELD_VALUES[name], label="value")
     try:
         config = RunConfig(**{name: value})
-    except ValueError as error:  # only ValueError: the sweep turns it into a flag's message
-        assert_names(error, name, *ALSO_CALLED.get(name, ()))
+    except ConfigError as error:  # only ConfigError: the sweep names the field's flag
+        assert_names(error, name)
         return
     assert_round_trips(config)
 
@@ -183,12 +192,12 @@ def test_a_json_file_with_any_value_anywhere_loads_right_or_names_the_key(data):
         known = SETTINGS_KEYS if where == "settings" else CLASSIFIER_KEYS
         key = data.draw(st.sampled_from(known) | st.text(max_size=5), label="key")
         document[where][key] = value
-        names = (key, repr(key), "eval-every")
+        names = (key, repr(key), "settings.eval_every")
     document = json.loads(json.dumps(document))  # what a file holds: lists, NaN allowed
     try:
         config = RunConfig.from_dict(document)
     except ValueError as error:
-        assert_names(error, *names)
+        assert_says(error, *names)
         return
     assert_round_trips(config)
 
@@ -198,8 +207,8 @@ def test_a_json_file_with_any_value_anywhere_loads_right_or_names_the_key(data):
 def test_any_settings_value_is_valid_or_named(name, value):
     try:
         settings = RunSettings(**{name: value})
-    except ValueError as error:
-        assert_names(error, f"RunSettings.{name}")
+    except ConfigError as error:
+        assert error.field == name and str(error).startswith(f"RunSettings.{name} ")
         return
     stored = getattr(settings, name)
     assert stored == value
@@ -309,8 +318,8 @@ def test_check_positive_and_check_finite_give_a_valid_number_or_name_the_flag(te
         (["--action-scale", "inf"], "--action-scale must be finite and positive, got inf"),
         (["--bsc-eps", "nan"], "--bsc-eps must lie in (0, 0.5), got nan"),
         (["--env", ".relative:make"], "--env: "),
-        # These three need experiments.sweep to name the flag (its _flag_message mapping
-        # "seed must" -> "--seed must", and known_names(..., flag="--methods")).
+        # The sweep names the flag of a ConfigError's field (programs/flags.py), and the
+        # comma lists' own errors name theirs.
         (["--seed", "-1"], "--seed must be an integer in [0, 2**63), got -1"),
         (["--methods", "gail,gail"], "--methods: method(s) ['gail'] given more than once"),
         (["--methods", "gail,"], "--methods: empty item in 'gail,'"),
@@ -326,7 +335,7 @@ def test_sweep_conf_without_demos_names_the_flags(tmp_path, capsys):
     conf = tmp_path / "conf.npy"
     conf.write_bytes(b"")
     with pytest.raises(SystemExit):
-        sweep.parse_args(["--conf", str(conf)])  # needs "conf:" -> "--conf:" in _flag_message
+        sweep.parse_args(["--conf", str(conf)])  # a ConfigError of field "conf"
     assert "--conf: a confidence file needs demos" in capsys.readouterr().err
 
 

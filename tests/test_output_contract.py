@@ -180,7 +180,7 @@ def test_a_failing_environment_factory_or_cache_path_is_one_line(tmp_path, monke
     import sys
     import types
 
-    from pngail_jax import compilation, envs
+    from pngail_jax import envs
 
     module = types.ModuleType("user_envs")
 
@@ -197,7 +197,7 @@ def test_a_failing_environment_factory_or_cache_path_is_one_line(tmp_path, monke
     cache_file.write_text("")
     args = argparse.Namespace(no_compile_cache=False, compile_cache=cache_file)
     with pytest.raises(SystemExit, match=f"--compile-cache: compilation cache {cache_file} is a"):
-        compilation.from_arguments(args)
+        cli.use_compile_cache(args)
 
 
 def test_a_config_files_log_backend_is_checked_before_anything_runs(tmp_path, monkeypatch, capsys):

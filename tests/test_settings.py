@@ -1,11 +1,11 @@
-"""The per-environment settings table, its overrides and its command-line flags."""
+"""The per-environment settings table and its overrides (its flags: tests/test_flags.py)."""
 
-import argparse
 import dataclasses
 
 import pytest
 
 from pngail_jax import envs, settings
+from pngail_jax.run_config import RunConfig
 from pngail_jax.settings import (
     ENV_SETTINGS,
     REFERENCE_SETTINGS,
@@ -90,28 +90,6 @@ def test_counts_are_stored_as_python_ints():
         RunSettings(eval_every=np.float64(10))
 
 
-def flags(*argv):
-    parser = argparse.ArgumentParser()
-    settings.add_arguments(parser)
-    return parser.parse_args(argv)
-
-
-def test_flags_override_the_table_or_the_reference():
-    assert settings.from_arguments("Hopper", flags()) == settings_for("Hopper")
-    own = settings.from_arguments("Hopper", flags("--solver", "own", "--num-eval-episodes", "5"))
-    assert own.env_options == {} and own.num_eval_episodes == 5 and own.num_envs == 25
-    reference = settings.from_arguments(
-        "Hopper", flags("--settings", "reference", "--solver", "fast", "--normalize-observations")
-    )
-    assert (reference.num_envs, reference.unroll_length) == (25, 200)
-    assert reference.env_options == envs.FAST_SOLVER and reference.normalize_observations
-    with pytest.raises(ValueError, match="Pendulum-v1 has no MJX solver"):
-        settings.from_arguments("Pendulum-v1", flags("--solver", "fast"))
-    assert settings.from_arguments("Pendulum-v1", flags("--solver", " own")) == REFERENCE_SETTINGS
-    with pytest.raises(ValueError, match="--unroll-length must be a positive integer"):
-        settings.from_arguments("Hopper", flags("--unroll-length", "0"))
-
-
 def test_describe_names_shape_solver_and_evaluation():
     text = settings.describe(dataclasses.replace(settings_for("Hopper"), eval_every=25))
     assert "25 envs x 200 steps" in text and "1 Newton / 4 line-search" in text
@@ -140,14 +118,11 @@ def test_hopper_learns_with_the_table_settings():
 
 
 def test_physics_setting_reaches_gymnasium_tasks_only():
-    parser = argparse.ArgumentParser()
-    settings.add_arguments(parser)
-    chosen = settings.from_arguments("Hopper-v4", parser.parse_args(["--physics", "mjx"]))
-    assert chosen.physics == "mjx" and settings_for("Hopper-v4").physics is None
-    with pytest.raises(ValueError, match="--physics: only gymnasium's MuJoCo tasks"):
-        settings.from_arguments("Hopper", parser.parse_args(["--physics", "c"]))
-    with pytest.raises(SystemExit):  # argparse names the choices
-        parser.parse_args(["--physics", "gpu"])
+    # (the --physics flag: tests/test_flags.py)
+    assert settings_for("Hopper-v4").physics is None
+    assert RunConfig(env="Hopper-v4", settings=RunSettings(physics="mjx")).settings.physics
+    with pytest.raises(ValueError, match="RunSettings.physics: only gymnasium's MuJoCo tasks"):
+        RunConfig(env="Hopper", settings=RunSettings(physics="c"))
     with pytest.raises(ValueError, match="RunSettings.physics must be one of c, mjx"):
         RunSettings(physics="C")
     env = settings.make_env("Swimmer-v4", settings_for("Swimmer-v4"))

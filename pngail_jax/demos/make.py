@@ -32,6 +32,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from pngail_jax import settings as run_settings
+from pngail_jax import validation
 from pngail_jax.demos.npz import save_npz
 from pngail_jax.demos.types import Demonstrations
 
@@ -60,16 +61,16 @@ class MakeDemosConfig:
             object.__setattr__(self, "settings", run_settings.settings_for(self.env, eval_every=10))
         for name in ("iterations", "seeds", "num_trajectories", "measure_episodes"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"{name} must be a positive integer, got {value!r}")
+            validation.integer(name, value, 1)
         self.ratio_parts  # noqa: B018  (checks the ratio)
         if self.iterations % self.settings.eval_every:
-            raise ValueError(
-                f"iterations must be a multiple of eval_every ({self.settings.eval_every})"
+            validation.fail(
+                "iterations",
+                f"must be a multiple of eval_every ({self.settings.eval_every})",
             )
         if not 0 < self.intermediate_target < 1:
-            raise ValueError(
-                f"intermediate_target must be in (0, 1), got {self.intermediate_target}"
+            validation.fail(
+                "intermediate_target", f"must be in (0, 1), got {self.intermediate_target}"
             )
         self.trpo_config  # noqa: B018  (the TRPO config's own checks)
 
@@ -78,11 +79,14 @@ class MakeDemosConfig:
         try:
             optimal, intermediate = (float(x) for x in self.ratio.split(":"))
         except ValueError:
-            raise ValueError(f"ratio must look like 1:4, got {self.ratio!r}") from None
+            optimal = intermediate = None
+        if optimal is None:
+            validation.fail("ratio", f"must look like 1:4, got {self.ratio!r}")
         total = optimal + intermediate
         if not (optimal >= 0 and intermediate >= 0 and 0 < total < math.inf):  # no NaN
-            raise ValueError(
-                f"ratio parts must be finite, non-negative and not both 0, got {self.ratio!r}"
+            validation.fail(
+                "ratio",
+                f"parts must be finite, non-negative and not both 0, got {self.ratio!r}",
             )
         return optimal, intermediate
 

@@ -199,3 +199,34 @@ def invoked_as(program: str) -> list[str]:
 
     name = Path(sys.argv[0]).name
     return [name] if name.startswith("pngail-") else ["python", "-m", f"experiments.{program}"]
+
+
+def add_compile_cache_flags(parser) -> None:
+    """``--compile-cache DIR`` and ``--no-compile-cache``; ``use_compile_cache`` applies them."""
+    from pngail_jax.compilation import CACHE_ENVIRONMENT_VARIABLE
+
+    parser.add_argument(
+        "--compile-cache",
+        type=Path,
+        metavar="DIR",
+        help=f"persistent compilation cache (default ${CACHE_ENVIRONMENT_VARIABLE} or "
+        "~/.cache/pngail-jax/xla): a repeated command does not compile again",
+    )
+    parser.add_argument(
+        "--no-compile-cache",
+        action="store_true",
+        help="compile every program afresh (nothing read from or written to the cache) "
+        "(default: off)",
+    )
+
+
+def use_compile_cache(args) -> Path | None:
+    """Applies the flags of ``add_compile_cache_flags``: the cache directory in use, or None."""
+    from pngail_jax.compilation import enable_compilation_cache
+
+    if args.no_compile_cache:
+        return None
+    try:
+        return enable_compilation_cache(args.compile_cache)
+    except (ValueError, OSError) as error:
+        raise SystemExit(f"--compile-cache: {error}") from None

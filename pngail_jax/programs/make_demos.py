@@ -19,23 +19,24 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import re
 from pathlib import Path
 
-from pngail_jax import compilation
-from pngail_jax import settings as run_settings
 from pngail_jax.demos.make import MakeDemosConfig, make_demonstrations
+from pngail_jax.programs import flags
 from pngail_jax.programs.cli import (
     ENV_HELP,
     ArgumentParser,
     HelpFormatter,
+    add_compile_cache_flags,
     check_env,
     check_finite,
     check_positive,
     claim_output,
     path_argument,
+    use_compile_cache,
 )
 from pngail_jax.runner import RunError
+from pngail_jax.validation import ConfigError
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -71,33 +72,24 @@ def parse_args(argv=None) -> argparse.Namespace:
         default=64,
         help="episodes for the random and optimal returns",
     )
-    run_settings.add_arguments(parser)
+    flags.add_settings_flags(parser)
     # Checkpoints are kept at every evaluation, and the intermediate policy is picked among
     # them: finer than the table's evaluation interval by default.
     parser.set_defaults(eval_every=10)
-    compilation.add_arguments(parser)
+    add_compile_cache_flags(parser)
     args = parser.parse_args(argv)
     claim_output(parser, args.out, "make_demos", args.overwrite)
     check_env(parser, args.env)
     check_positive(parser, args, ("iterations", "seeds", "num_trajectories", "measure_episodes"))
     check_finite(parser, args, ("intermediate_target",))
+    args.settings = flags.settings_from_flags(parser, args, args.env)
     try:
-        args.settings = run_settings.from_arguments(args.env, args)
         args.config = config_of(args)
+    except ConfigError as error:  # every field of MakeDemosConfig is the flag of its name
+        parser.error(error.named("--" + error.field.replace("_", "-")))
     except ValueError as error:
-        parser.error(flag_words(str(error)))
+        parser.error(str(error))
     return args
-
-
-def flag_words(message: str) -> str:
-    """A ``MakeDemosConfig`` error in the command line's words: a message that starts with a
-    field's name starts with its flag instead (``iterations must ...``: ``--iterations must
-    ...``); other messages (the run settings', which name their flags) pass as they are."""
-    names = [field.name for field in dataclasses.fields(MakeDemosConfig)]
-    match = re.match(r"(" + "|".join(names) + r")\b", message)
-    if match is None:
-        return message
-    return "--" + match.group(1).replace("_", "-") + message[match.end() :]
 
 
 def config_of(args: argparse.Namespace) -> MakeDemosConfig:
@@ -108,7 +100,7 @@ def config_of(args: argparse.Namespace) -> MakeDemosConfig:
 
 def main(argv=None) -> Path:
     args = parse_args(argv)
-    compilation.from_arguments(args)
+    use_compile_cache(args)
     try:
         return make_demonstrations(args.config, args.out, overwrite=args.overwrite)
     except RunError as error:

@@ -25,7 +25,7 @@ import sys
 import time
 from pathlib import Path
 
-from pngail_jax import compilation, envs
+from pngail_jax import envs
 from pngail_jax.integrity import read_json, seal, write_json
 from pngail_jax.paper.grids import demo_paths, grid_config, plan_eta, released_files, run_grids
 from pngail_jax.paper.page import weak_expert_notes, write_page
@@ -44,6 +44,7 @@ from pngail_jax.programs.cli import (
     ArgumentParser,
     HelpFormatter,
     RunLocked,
+    add_compile_cache_flags,
     claim_output,
     invoked_as,
     known_names,
@@ -52,6 +53,7 @@ from pngail_jax.programs.cli import (
     path_argument,
     prepare_output,
     run_lock,
+    use_compile_cache,
 )
 from pngail_jax.runner import RunError
 
@@ -109,7 +111,7 @@ def parse_args(argv=None) -> argparse.Namespace:
         help="replace a run of this program already in --out (default: refuse; anything "
         "else there is always refused)",
     )
-    compilation.add_arguments(parser)
+    add_compile_cache_flags(parser)
     args = parser.parse_args(argv)
     note_deprecated(argv, {"--budget": "--preset"})
     if args.resume is not None:
@@ -182,7 +184,7 @@ def main(argv=None) -> Path:
 
 
 def run_paper(args, argv) -> Path:
-    compilation.from_arguments(args)
+    use_compile_cache(args)
     out, options = run_options(args, argv)
     budget = BUDGETS[options["budget"]]
     released_dir = Path(options["released_demos"]) if options["released_demos"] else None

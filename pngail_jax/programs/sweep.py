@@ -27,29 +27,23 @@ import sys
 import time
 from pathlib import Path
 
-from pngail_jax import compilation, runner
-from pngail_jax import settings as run_settings
+from pngail_jax import runner
+from pngail_jax.programs import flags
 from pngail_jax.programs.cli import (
     ENV_HELP,
     ArgumentParser,
     HelpFormatter,
+    add_compile_cache_flags,
     check_env,
     claim_output,
-    comma_floats,
     invoked_as,
-    known_names,
     output_owner,
     path_argument,
-    text_argument,
+    use_compile_cache,
 )
-from pngail_jax.run_config import (
-    FISHER_FORMS,
-    LOG_BACKENDS,
-    PRESETS_BY_NAME,
-    RunConfig,
-    task_classifier,
-)
+from pngail_jax.run_config import PRESETS_BY_NAME, RunConfig, task_classifier
 from pngail_jax.tracking import check_backends
+from pngail_jax.validation import ConfigError
 
 MINARI_PREFIX = runner.MINARI_PREFIX
 SMOKE = RunConfig.preset("smoke")
@@ -79,7 +73,7 @@ class Invocation:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from pngail_jax.methods import ALL_METHOD_NAMES, METHOD_NAMES, PRESETS
+    from pngail_jax.methods import PRESETS
 
     methods_help = "\n".join(
         f"  {name:14s} {preset.description} (r: {preset.confidence_source})"
@@ -98,13 +92,6 @@ def build_parser() -> argparse.ArgumentParser:
         f"Hopper-v2_mixture.npy; else {SMOKE.env})",
     )
     add(
-        "--methods",
-        help=f"comma-separated, from {', '.join(ALL_METHOD_NAMES)} (default: the paper's "
-        f"seven, {', '.join(METHOD_NAMES)})",
-    )
-    add("--seeds", type=int, help=f"seeds per method and setting (default {SMOKE.seeds})")
-    add("--iterations", type=int, help=f"TRPO iterations per run (default {SMOKE.iterations})")
-    add(
         "--preset",
         choices=sorted(PRESETS_BY_NAME),
         help="named scale: "
@@ -117,93 +104,12 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="FILE",
         help="start a new run from a saved config.json (flags given override it) (default: none)",
     )
-    _add_demonstration_flags(add)
-    add(
-        "--num-demos",
-        type=int,
-        help="rows per split, n_c + n_u (default: the task's Table 3 size, capped at the "
-        "demonstrations' rows; every row for a task without one)",
-    )
-    add("--label-ratio", help="comma-separated values: a grid axis (default 0.2)")
-    add("--noise", help="confidence noise std, comma-separated: a grid axis (default 0)")
-    add("--seed", type=int, help="base PRNG seed (default 0)")
-    add(
-        "--chunk-iterations",
-        type=int,
-        help="iterations per compiled chunk: progress, checkpoint, log "
-        f"(default {SMOKE.chunk_iterations})",
-    )
-    add(
-        "--classifier-steps",
-        type=int,
-        help=f"confidence classifier steps (default {SMOKE.classifier.num_steps:,}; "
-        f"{task_classifier('Walker2d').num_steps:,} on Walker2d, the paper's)",
-    )
-    add("--bsc-eps", type=float, help="BSC's clip (default 0.01; 0.05 on Walker2d, the paper's)")
-    add(
-        "--fisher",
-        choices=FISHER_FORMS,
-        help="Fisher-vector product: the same matrix either way (the Hessian of the mean KL at "
-        "the current policy); gauss_newton is 1.7x faster here (default gauss_newton)",
-    )
-    add(
-        "--fisher-subsample",
-        type=int,
-        help="Fisher products on every k-th time step (default 1: all)",
-    )
-    add(
-        "--cpu-devices",
-        type=int,
-        help="on a CPU, split it into this many XLA devices and shard the grid over them "
-        "(default 1: on 2 cores one device already uses both, and 2 measured no faster)",
-    )
-    add(
-        "--log",
-        help=f"comma-separated logging backends, from {', '.join(LOG_BACKENDS)}, fed once per "
-        "chunk (default: none)",
-    )
+    flags.add_flags(parser, flags.RUN_FLAGS, defaults=SMOKE)
     _add_output_flags(add)
-    run_settings.add_arguments(parser)
-    compilation.add_arguments(parser)
+    flags.add_settings_flags(parser)
+    add_compile_cache_flags(parser)
     _add_multihost_flags(parser)
     return parser
-
-
-def _add_demonstration_flags(add) -> None:
-    """The flags that name the demonstrations and how to read them."""
-    add(
-        "--demos",
-        type=text_argument,
-        help="*_mixture.npy (authors' layout), *.npz, or minari:<dataset id> "
-        "(default: made with pngail_jax.demos.make and cached)",
-    )
-    add(
-        "--conf",
-        type=text_argument,
-        help="confidence file (default: the mixture's sibling; per episode for Minari)",
-    )
-    add(
-        "--confidence-field",
-        help="Minari: the per-episode field holding confidences (default: none)",
-    )
-    add(
-        "--action-scale",
-        type=float,
-        help="multiplies stored actions (default: an authors' file's known scale, 2 for "
-        "their Pendulum file, whose torques are stored halved; else 1)",
-    )
-    add(
-        "--optimal-return",
-        type=float,
-        help="the normalised return's 1: the best return the task allows (default: the "
-        "demonstrations' own, Table 3 for an authors' file; none for a file of rows)",
-    )
-    add(
-        "--random-return",
-        type=float,
-        help="the normalised return's 0 (default: the demonstrations' own; with "
-        "--optimal-return alone, measured from uniform random actions)",
-    )
 
 
 def _add_output_flags(add) -> None:
@@ -275,9 +181,8 @@ def parse_args(argv=None) -> Invocation:
 
 
 def config_from_flags(parser, args) -> RunConfig:
-    """The preset or saved config the flags name, with every flag given applied."""
-    from pngail_jax.methods import ALL_METHOD_NAMES
-
+    """The preset or saved config the flags name, with every flag given applied; exits
+    naming the flag of a bad value."""
     if args.config is not None and args.preset is not None:
         parser.error("--config and --preset both set the starting point: give one")
     try:
@@ -287,70 +192,30 @@ def config_from_flags(parser, args) -> RunConfig:
             base = RunConfig.preset(args.preset or "smoke")
     except ValueError as error:
         parser.error(f"--{'config' if args.config else 'preset'}: {error}")
-    demos = args.demos
-    env = check_env(parser, args.env or _task_of(demos) or base.env)
-    if demos is not None and not demos.startswith(MINARI_PREFIX):
-        if not Path(demos).exists():
-            parser.error(f"--demos {demos} does not exist")
-        demos = str(Path(demos).absolute())
-    if args.conf is not None and not Path(args.conf).exists():
-        parser.error(f"--conf {args.conf} does not exist")
-    conf = None if args.conf is None else str(Path(args.conf).absolute())
-    log = None
-    if args.log is not None:
-        log = tuple(known_names(parser, args.log, LOG_BACKENDS, "log backend", flag="--log"))
-        try:
-            check_backends(log)
-        except ImportError as error:
-            parser.error(f"--log: {error}")
-    if demos is not None and demos != base.demos:  # another data set: not the saved one's
+    given = flags.given_values(parser, args, flags.RUN_FLAGS)
+    top = given.get("", {})
+    env = check_env(parser, args.env or _task_of(args.demos) or base.env)
+    if top.get("demos", base.demos) != base.demos:  # another data set: not the saved one's
         base = dataclasses.replace(
-            base,
-            conf=None,
-            confidence_field=None,
-            action_scale=None,
-            random_return=None,
+            base, conf=None, confidence_field=None, action_scale=None, random_return=None,
             optimal_return=None,
-        )
+        )  # fmt: skip
+    same_task = env == base.env
+    settings = flags.settings_from_flags(parser, args, env, base.settings if same_task else None)
+    # Another task: its own classifier, as RunConfig.replace gives.
+    classifier = base.classifier if same_task else task_classifier(env)
+    tables = [flags.RUN_FLAGS, flags.SETTINGS_FLAGS]
     try:
-        settings_base = base.settings if env == base.env else None
-        settings = run_settings.from_arguments(env, args, base=settings_base)
-        # Another task: its own settings row and classifier, as RunConfig.replace gives.
-        classifier = base.classifier if env == base.env else task_classifier(env)
-        if args.classifier_steps is not None:
-            classifier = dataclasses.replace(classifier, num_steps=args.classifier_steps)
-        overrides = dict(
-            env=env,
-            settings=settings,
-            methods=None
-            if args.methods is None
-            else tuple(
-                known_names(parser, args.methods, ALL_METHOD_NAMES, "method", flag="--methods")
-            ),
-            seeds=args.seeds,
-            iterations=args.iterations,
-            label_ratios=comma_floats(parser, "--label-ratio", args.label_ratio),
-            noise_stds=comma_floats(parser, "--noise", args.noise),
-            seed=args.seed,
-            demos=demos,
-            conf=conf,
-            confidence_field=args.confidence_field,
-            action_scale=args.action_scale,
-            random_return=args.random_return,
-            optimal_return=args.optimal_return,
-            num_demos=args.num_demos,
-            chunk_iterations=args.chunk_iterations,
-            classifier=classifier,
-            bsc_eps=args.bsc_eps,
-            fisher=args.fisher,
-            fisher_subsample=args.fisher_subsample,
-            cpu_devices=args.cpu_devices,
-            log=log,
-        )
-        config = base.replace(**{k: v for k, v in overrides.items() if v is not None})
-    except ValueError as error:
-        parser.error(_flag_message(str(error)))
-    try:  # a --config file's log backends too, before any compile or directory
+        classifier = dataclasses.replace(classifier, **given.get("classifier", {}))
+    except ConfigError as error:
+        parser.error(flags.flag_message(error.nested("classifier"), tables))
+    try:
+        config = base.replace(env=env, settings=settings, classifier=classifier, **top)
+    except ConfigError as error:
+        parser.error(flags.flag_message(error, tables))
+    except ValueError as error:  # a check between fields that names no single one
+        parser.error(str(error))
+    try:  # the log backends' packages, before any compile or directory
         check_backends(config.log)
     except ImportError as error:
         parser.error(f"log {list(config.log)}: {error}")
@@ -363,34 +228,6 @@ def _task_of(demos: str | None) -> str | None:
     from pngail_jax.demos import released_task
 
     return None if demos is None else released_task(demos)
-
-
-def _flag_message(message: str) -> str:
-    """A RunConfig error in the command line's words (field names as flags)."""
-    for field, flag in (
-        ("label ratios", "--label-ratio values"),
-        ("noise stds", "--noise values"),
-        ("iterations (", "--iterations ("),
-        ("iterations must", "--iterations must"),
-        ("methods must", "--methods must"),
-        ("seeds must", "--seeds must"),
-        ("chunk_iterations", "--chunk-iterations"),
-        ("fisher_subsample", "--fisher-subsample"),
-        ("cpu_devices", "--cpu-devices"),
-        ("num_demos", "--num-demos"),
-        ("action_scale", "--action-scale"),
-        ("random_return", "--random-return"),
-        ("optimal_return", "--optimal-return"),
-        ("bsc_eps", "--bsc-eps"),
-        ("ClassifierConfig.num_steps", "--classifier-steps"),
-        ("seed must", "--seed must"),
-        ("conf:", "--conf:"),
-        ("confidence_field", "--confidence-field"),
-        ("demos:", "--demos:"),
-    ):
-        if message.startswith(field):
-            return flag + message[len(field) :]
-    return message
 
 
 # -- starting: devices, compilation cache, multi-host; then the runner ----------------------
@@ -409,7 +246,7 @@ def start(invocation: Invocation) -> tuple[RunConfig, runner.SavedRun | None]:
     runner.configure_devices(cpu_devices)
     import jax
 
-    compilation.from_arguments(invocation.args)
+    use_compile_cache(invocation.args)
     if invocation.distributed["coordinator_address"] is not None:
         jax.config.update("jax_cpu_collectives_implementation", "gloo")
         jax.distributed.initialize(**invocation.distributed)

@@ -1,0 +1,89 @@
+"""The mapping from config fields to flags: every flag sets a real field, every field a user
+may set has a flag, and a bad value is refused naming its flag."""
+
+import argparse
+import dataclasses
+
+import pytest
+
+from pngail_jax import envs
+from pngail_jax.programs import flags, sweep
+from pngail_jax.run_config import RunConfig
+from pngail_jax.settings import REFERENCE_SETTINGS, settings_for
+
+# RunConfig fields the sweep sets through its own flags or not at all.
+NOT_FLAGS = {"env", "settings", "classifier", "discriminator_hidden_sizes", "preset_name"}
+
+
+def field_value(config, path):
+    for part in path.split("."):
+        config = getattr(config, part)
+    return config
+
+
+def test_every_flag_sets_a_field_and_every_field_has_a_flag():
+    config = RunConfig()
+    for flag in (*flags.RUN_FLAGS, *flags.SETTINGS_FLAGS):
+        field_value(config, flag.field)  # AttributeError for a field that does not exist
+    top = {flag.field for flag in flags.RUN_FLAGS if "." not in flag.field}
+    fields = {field.name for field in dataclasses.fields(RunConfig)}
+    assert fields - NOT_FLAGS == top
+    settings = {flag.field.split(".")[1] for flag in flags.SETTINGS_FLAGS}
+    settings.add("ls_iterations")  # --solver sets both caps
+    assert settings == {field.name for field in dataclasses.fields(REFERENCE_SETTINGS)}
+    names = [flag.name for flag in (*flags.RUN_FLAGS, *flags.SETTINGS_FLAGS)]
+    assert len(set(names)) == len(names)
+
+
+def settings_of(env, *argv):
+    parser = argparse.ArgumentParser()
+    flags.add_settings_flags(parser)
+    return flags.settings_from_flags(parser, parser.parse_args(argv), env)
+
+
+def test_settings_flags_override_the_table_or_the_reference(capsys):
+    assert settings_of("Hopper") == settings_for("Hopper")
+    own = settings_of("Hopper", "--solver", "own", "--num-eval-episodes", "5")
+    assert own.env_options == {} and own.num_eval_episodes == 5 and own.num_envs == 25
+    reference = settings_of(
+        "Hopper", "--settings", "reference", "--solver", "fast", "--normalize-observations"
+    )
+    assert (reference.num_envs, reference.unroll_length) == (25, 200)
+    assert reference.env_options == envs.FAST_SOLVER and reference.normalize_observations
+    assert settings_of("Pendulum-v1", "--solver", " own") == REFERENCE_SETTINGS
+    for argv, message in [
+        (("Pendulum-v1", "--solver", "fast"), "--solver: Pendulum-v1 has no MJX solver"),
+        (("Hopper", "--unroll-length", "0"), "--unroll-length must be a positive integer, got 0"),
+        (("Hopper", "--solver", "4/x"), "--solver: solver must be 'own', 'fast' or 'I/L'"),
+        (("Pendulum-v1", "--physics", "c"), "--physics: only gymnasium's MuJoCo tasks"),
+    ]:
+        with pytest.raises(SystemExit):
+            settings_of(*argv)
+        assert message in capsys.readouterr().err, argv
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--seeds", "0"], "--seeds must be a positive integer, got 0"),
+        (["--classifier-steps", "0"], "--classifier-steps must be a positive integer, got 0"),
+        (["--bsc-eps", "0.7"], r"--bsc-eps must lie in (0, 0.5), got 0.7"),
+        (["--num-demos", "1"], "--num-demos must be an integer >= 2, got 1"),
+        (["--label-ratio", "0.2,0.2"], "--label-ratio values must not repeat"),
+        (["--random-return", "-5"], "--random-return needs optimal_return"),
+        (["--num-envs", "0"], "--num-envs must be a positive integer, got 0"),
+        (["--iterations", "25"], "--iterations (25) must be a multiple of the evaluation"),
+        (["--conf", __file__], "--conf: a confidence file needs demos"),
+    ],
+)
+def test_a_bad_value_is_refused_naming_its_flag(argv, message, capsys):
+    with pytest.raises(SystemExit):
+        sweep.parse_args(argv)
+    assert message in capsys.readouterr().err
+
+
+def test_help_reads_the_defaults_of_the_config():
+    text = sweep.build_parser().format_help()
+    smoke = RunConfig.preset("smoke")
+    assert f"(default {smoke.seeds})" in text and f"(default {smoke.iterations})" in text
+    assert f"(default {smoke.classifier.num_steps:,};" in text
