@@ -105,10 +105,16 @@ def _tree_digest(directory: Path) -> str:
 
 
 def _files(directory: Path) -> list[Path]:
+    """The files a manifest lists: not itself, temporaries, or a run's lock (there only while
+    a process writes: pngail_jax.outputs.run_lock)."""
+    from pngail_jax.outputs import LOCK
+
     return sorted(
         path
         for path in directory.rglob("*")
-        if path.is_file() and path.name != MANIFEST_NAME and _TEMPORARY_MARK not in path.name
+        if path.is_file()
+        and path.name not in (MANIFEST_NAME, LOCK)
+        and _TEMPORARY_MARK not in path.name
     )
 
 

@@ -946,27 +946,39 @@ def nanmean(values, axis=None):
         return np.nanmean(values, axis=axis)
 
 
-def train_seeds(trainer: TRPOTrainer, hyperparams, keys, on_block=None):
+def train_seeds(
+    trainer: TRPOTrainer, hyperparams, keys, on_block=None, checkpoints: Path | None = None
+):
     """Runs ``trainer`` for stacked seeds, one compiled block of ``eval_every`` iterations at a
     time (``pngail_jax.grid.Grid``), printing progress after each.
 
     Calls ``on_block(iteration, trpo_state, block_metrics)`` if given (e.g. to keep
-    checkpoints). The numbers are those of the whole-scan ``trainer.train``. Returns
-    ``(final TRPOState, metrics)`` with metrics float[seeds, num_iterations].
+    checkpoints). With ``checkpoints`` (a directory), the whole state is saved there after
+    every block (``chunk_NNNN/``, the last two kept), and a run that finds an intact one
+    continues from it to the numbers of an uninterrupted run. The numbers are those of the
+    whole-scan ``trainer.train``. Returns ``(final TRPOState, metrics)`` with metrics
+    float[seeds, num_iterations].
     """
     config = trainer.config
     from pngail_jax.grid import Grid
 
     grid = Grid(trainer, (hyperparams, keys), blocks_per_chunk=1)
     print(f"compiled in {grid.compile_seconds:.1f} s", flush=True)
-    state, _ = grid.init()
-    chunks = []
-    for done_blocks in range(1, config.num_evaluations + 1):
+    state, progress = _seeds_start(grid, checkpoints)
+    for done_blocks in range(progress.chunks_done + 1, config.num_evaluations + 1):
         block_start = time.perf_counter()
         state, metrics = grid.run_chunk(state)
         metrics = grid.fetch(metrics)
-        chunks.append(metrics)
+        progress.metrics = (
+            metrics
+            if progress.metrics is None
+            else {
+                name: np.concatenate([progress.metrics[name], metrics[name]], 1) for name in metrics
+            }
+        )
+        progress.chunks_done = done_blocks
         seconds = time.perf_counter() - block_start
+        progress.timing["seconds"] += seconds
         rate = grid.num_cells * config.eval_every * config.batch_size / seconds
         print(
             f"iter {done_blocks * config.eval_every:5d}  "
@@ -979,5 +991,34 @@ def train_seeds(trainer: TRPOTrainer, hyperparams, keys, on_block=None):
         if on_block is not None:
             host_state = grid.fetch(trainer.policy_state(state))
             on_block(done_blocks * config.eval_every, host_state, metrics)
-    metrics = {name: np.concatenate([c[name] for c in chunks], axis=1) for name in chunks[0]}
-    return grid.fetch(trainer.policy_state(state)), metrics
+        if checkpoints is not None:
+            _save_checkpoint(checkpoints, progress, grid.fetch(state), writer=True)
+    return grid.fetch(trainer.policy_state(state)), progress.metrics
+
+
+def _seeds_start(grid, checkpoints: Path | None):
+    """A seeds run's first state and progress: from the newest intact checkpoint in
+    ``checkpoints`` when there is one, else fresh."""
+    import jax
+
+    from pngail_jax.checkpoint import restore_tree
+    from pngail_jax.integrity import read_json
+
+    state, _ = grid.init()
+    progress = Progress(0, {}, None, {"seconds": 0.0})
+    found = None
+    if checkpoints is not None and checkpoints.exists():
+        found = intact_checkpoint(checkpoints)
+    if found is None:
+        return state, progress
+    template = jax.eval_shape(lambda: grid.unpad(state))
+    try:
+        state = grid.place(restore_tree(found / "state", template))
+    except ValueError as error:  # intact, but of another run
+        raise RunError(f"cannot resume from {found}: {error}") from None
+    with np.load(found / "metrics.npz") as stored:
+        progress.metrics = {name.replace(":", "/"): stored[name] for name in stored.files}
+    done = read_json(found / "progress.json", "progress record")
+    progress.chunks_done, progress.timing = done["chunks_done"], done["timing"]
+    print(f"resumed from {found} (iteration {progress.chunks_done * grid.iterations_per_chunk})")
+    return state, progress

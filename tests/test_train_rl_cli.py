@@ -142,3 +142,34 @@ def test_load_policy_checks_cannot_be_switched_off_and_bad_inputs_are_named(run_
     (copy / "policy.json").write_text(json.dumps({**lacking, "format_version": 1}))
     with pytest.raises(IntegrityError, match=r"lacks \['hidden_sizes'\]"):
         pngail_jax.load_policy(copy, verbose=False)
+
+
+def test_an_interrupted_run_resumes_to_the_same_numbers(run_dir, tmp_path, monkeypatch, capsys):
+    """The fixture's run, stopped after its first block's checkpoint, then --resume DIR:
+    metrics.csv byte-identical to the uninterrupted run's."""
+    from pngail_jax import runner
+
+    out = tmp_path / "stopped"
+    argv = [*json.loads((run_dir / "config.json").read_text())["argv"]]
+    argv[argv.index("--out") + 1] = str(out)
+    save = runner._save_checkpoint
+
+    def save_then_stop(*args, **kwargs):
+        save(*args, **kwargs)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(runner, "_save_checkpoint", save_then_stop)
+    with pytest.raises(SystemExit, match=f"--resume {out} continues"):
+        train_rl.main(argv)
+    assert not (out / "policy.json").exists() and (out / "checkpoints" / "chunk_0001").is_dir()
+    monkeypatch.setattr(runner, "_save_checkpoint", save)
+    with pytest.raises(SystemExit):
+        train_rl.main(["--resume", str(out), "--seeds", "3"])  # its own flags only
+    assert "takes no other flags" in capsys.readouterr().err
+    train_rl.main(["--resume", str(out)])
+    assert "resumed from" in capsys.readouterr().out
+    assert (out / "metrics.csv").read_bytes() == (run_dir / "metrics.csv").read_bytes()
+    assert not (out / "checkpoints").exists()
+    with pytest.raises(SystemExit):
+        train_rl.main(["--resume", str(out)])
+    assert "the run is complete" in capsys.readouterr().err

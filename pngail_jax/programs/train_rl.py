@@ -13,6 +13,9 @@ from __future__ import annotations
 import argparse
 import csv
 import dataclasses
+import json
+import shutil
+import sys
 import time
 from pathlib import Path
 
@@ -20,22 +23,34 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from pngail_jax import compilation, runner
+from pngail_jax import runner
 from pngail_jax import settings as run_settings
 from pngail_jax.checkpoint import save_trpo_policies
-from pngail_jax.integrity import atomic_path, write_json
+from pngail_jax.integrity import (
+    IntegrityError,
+    atomic_path,
+    read_json,
+    write_json,
+    write_manifest,
+)
+from pngail_jax.outputs import RunLocked, run_lock
+from pngail_jax.programs import flags
 from pngail_jax.programs.cli import (
     ENV_HELP,
     ArgumentParser,
     HelpFormatter,
+    add_compile_cache_flags,
     check_env,
     check_positive,
     claim_output,
     note_deprecated,
+    output_owner,
     path_argument,
     prepare_output,
+    use_compile_cache,
 )
 from pngail_jax.rl import TRPOHyperparams, TRPOTrainer
+from pngail_jax.runner import RunError
 
 METRIC_COLUMNS = (
     "env_steps",
@@ -48,68 +63,109 @@ METRIC_COLUMNS = (
 )
 
 
-def parse_args(argv=None) -> argparse.Namespace:
+def build_parser() -> argparse.ArgumentParser:
     parser = ArgumentParser(
         "train_rl", description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
     )
-    parser.add_argument("--env", default="Pendulum-v1", help=ENV_HELP)
-    parser.add_argument("--iterations", type=int, default=100, help="TRPO iterations")
-    parser.add_argument("--seeds", type=int, default=3, help="seeds, trained side by side")
-    parser.add_argument("--seed", type=int, default=0, help="base PRNG seed")
-    parser.add_argument(
+    add = parser.add_argument
+    add("--env", default="Pendulum-v1", help=ENV_HELP)
+    add("--iterations", type=int, default=100, help="TRPO iterations")
+    add("--seeds", type=int, default=3, help="seeds, trained side by side")
+    add("--seed", type=int, default=0, help="base PRNG seed")
+    add(
         "--out",
         type=path_argument,
         default=None,
         help="output directory (default runs/trpo-<env>-<timestamp>)",
     )
-    parser.add_argument(
+    add(
         "--overwrite",
         action="store_true",
         help="replace a trained policy already in --out (default: refuse)",
     )
-    parser.add_argument(
+    add(
+        "--resume",
+        type=path_argument,
+        metavar="DIR",
+        help="continue DIR's interrupted run from its last checkpoint, with its own flags "
+        "(default: a new run)",
+    )
+    add(
         "--fisher",
         choices=("hessian", "gauss_newton"),
         default="gauss_newton",
         help="Fisher-vector product form (the same matrix; hessian is the reference's form)",
     )
-    parser.add_argument(
-        "--fisher-subsample", type=int, default=1, help="Fisher products on every k-th step"
-    )
-    parser.add_argument(
+    add("--fisher-subsample", type=int, default=1, help="Fisher products on every k-th step")
+    add(
         "--truncation-as-terminal",
         action="store_true",
         help="the reference's GAE: no bootstrapping through time limits",
     )
-    parser.add_argument(
-        "--fast-solver", action="store_true", help="deprecated: the same as --solver fast"
-    )
-    run_settings.add_arguments(parser)
-    compilation.add_arguments(parser)
+    add("--fast-solver", action="store_true", help="deprecated: the same as --solver fast")
+    flags.add_settings_flags(parser)
+    add_compile_cache_flags(parser)
+    return parser
+
+
+# What --resume DIR takes besides itself: the run's config.json holds every other flag.
+RESUME_FLAGS = ("--resume", "--compile-cache", "--no-compile-cache")
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    """The checked flags of ``argv``: of a new run (its ``--out`` claimed), or of the run that
+    ``--resume DIR`` continues (its own flags, read from its config.json)."""
+    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
     args = parser.parse_args(argv)
+    if args.resume is not None:
+        return _resumed_args(parser, args, argv)
     note_deprecated(argv, {"--fast-solver": "--solver fast"})
+    _check(parser, args)
+    if args.out is None:
+        args.out = Path("runs") / f"trpo-{args.env}-{time.strftime('%Y%m%d-%H%M%S')}"
+    claim_output(parser, args.out, "train_rl", args.overwrite)
+    args.argv = argv
+    return args
+
+
+def _check(parser, args) -> None:
     check_env(parser, args.env)
     if args.fast_solver:
         if args.solver not in (None, "fast"):
             parser.error("--fast-solver and --solver disagree")
         args.solver = "fast"
     check_positive(parser, args, ("iterations", "seeds", "fisher_subsample"))
-    try:
-        args.settings = run_settings.from_arguments(args.env, args)
-    except ValueError as error:
-        parser.error(str(error))
+    args.settings = flags.settings_from_flags(parser, args, args.env)
     if args.iterations % args.settings.eval_every:
         parser.error(
             f"--iterations ({args.iterations}) must be a multiple of the evaluation interval "
-            f"({args.settings.eval_every}; set it with --eval-every)"
+            f"({args.settings.eval_every}, --eval-every)"
         )
     try:
         args.settings.trpo_config(args.iterations)
     except ValueError as error:
         parser.error(str(error))
-    if args.out is None:
-        args.out = Path("runs") / f"trpo-{args.env}-{time.strftime('%Y%m%d-%H%M%S')}"
-    claim_output(parser, args.out, "train_rl", args.overwrite)
+
+
+def _resumed_args(parser, given: argparse.Namespace, argv: list[str]) -> argparse.Namespace:
+    """The flags of the run in ``--resume DIR`` (its config.json's ``argv``), checked again,
+    with the compilation-cache flags of this command."""
+    directory = given.resume
+    if any(a.split("=")[0] not in RESUME_FLAGS for a in argv if a.startswith("--")):
+        parser.error("--resume DIR takes no other flags: the run's config.json has them")
+    if output_owner(directory) != "train_rl":
+        parser.error(f"--resume {directory} holds no run of experiments.train_rl")
+    if (directory / "policy.json").exists():
+        parser.error(f"--resume {directory}: the run is complete (its policy.json is written)")
+    try:
+        stored = read_json(directory / "config.json", "train_rl run config")["argv"]
+    except (OSError, IntegrityError, KeyError, TypeError) as error:
+        parser.error(f"--resume {directory}: no flags to resume with ({error})")
+    args = parser.parse_args(stored)
+    _check(parser, args)
+    args.out, args.resume, args.argv = directory, directory, stored
+    args.compile_cache, args.no_compile_cache = given.compile_cache, given.no_compile_cache
     return args
 
 
@@ -162,7 +218,7 @@ def plot_learning_curve(path: Path, metrics: dict[str, np.ndarray], title: str) 
 
 def main(argv=None) -> None:
     args = parse_args(argv)
-    compilation.from_arguments(args)
+    use_compile_cache(args)
     settings = args.settings
     try:
         env = run_settings.make_env(args.env, settings)
@@ -177,7 +233,6 @@ def main(argv=None) -> None:
         lambda x: jnp.broadcast_to(x, (args.seeds, *x.shape)), hyperparams
     )
     keys = jax.random.split(jax.random.key(args.seed), args.seeds)
-    prepare_output(args.out, "train_rl", args.overwrite)
     run_config = {
         "env": args.env,
         "env_options": settings.env_options,
@@ -186,16 +241,41 @@ def main(argv=None) -> None:
         "seed": args.seed,
         "trpo": dataclasses.asdict(config),
         "hyperparams": jax.tree.map(lambda x: x.item(), hyperparams).__dict__,
+        "argv": args.argv,
     }
-    write_json(args.out / "config.json", run_config)
+    try:
+        with run_lock(args.out, "train_rl"):
+            _train(args, env, trainer, seeds_hyperparams, keys, run_config)
+    except (RunLocked, RunError) as error:
+        raise SystemExit(str(error)) from None
+    except KeyboardInterrupt:
+        raise SystemExit(
+            f"\ninterrupted: finished blocks are kept; --resume {args.out} continues from the "
+            "last one"
+        ) from None
 
+
+def _train(args, env, trainer, seeds_hyperparams, keys, run_config) -> None:
+    config, settings = trainer.config, args.settings
+    if args.resume is None:
+        prepare_output(args.out, "train_rl", args.overwrite)
+        write_json(args.out / "config.json", run_config)
+    else:
+        stored = read_json(args.out / "config.json", "train_rl run config")
+        if json.loads(json.dumps(run_config)) != stored:  # another version's defaults
+            raise RunError(
+                f"cannot resume {args.out}: its flags give another run in this version "
+                "(config.json differs); start a new run"
+            )
     print(
         f"TRPO on {args.env}: {args.seeds} seeds x {args.iterations} iterations x "
         f"{config.batch_size} steps ({run_settings.describe(settings)}) -> {args.out}",
         flush=True,
     )
     start = time.perf_counter()
-    state, metrics = runner.train_seeds(trainer, seeds_hyperparams, keys)
+    state, metrics = runner.train_seeds(
+        trainer, seeds_hyperparams, keys, checkpoints=args.out / "checkpoints"
+    )
     final_returns = metrics["eval/return"][:, -1]
     write_metrics_csv(args.out / "metrics.csv", metrics)
     plot_learning_curve(
@@ -204,6 +284,9 @@ def main(argv=None) -> None:
     save_trpo_policies(
         args.out, env, config, state, final_returns, {"env_options": settings.env_options}
     )
+    # The run is complete: its checkpoints go, and the digests list what stays.
+    shutil.rmtree(args.out / "checkpoints", ignore_errors=True)
+    write_manifest(args.out)
     print(
         f"done in {time.perf_counter() - start:.0f} s; final deterministic returns "
         f"[{', '.join(f'{r:.1f}' for r in final_returns)}] (mean {final_returns.mean():.1f}); "
