@@ -28,6 +28,9 @@ import chex
 import jax
 import jax.numpy as jnp
 
+from pngail_jax.fitting import gradients_agree, tree_where
+from pngail_jax.losses import policy_reward
+
 # The codebase's smoothing of the hinge where two returns differ by less than this.
 SMOOTHING = 1e-5
 
@@ -112,3 +115,79 @@ def trajectory_returns(reward_of, features: jax.Array, valid: jax.Array) -> jax.
     features float[N, T, F], valid bool[N, T]; ``reward_of`` maps float[..., F] to float[...].
     Returns float[N]."""
     return jnp.sum(jnp.where(valid, reward_of(features), 0.0), axis=1)
+
+
+def iteration_rounds(trainer, spec, state, agent_inputs, key):
+    """CAIL's ``num_rounds`` rounds in an iteration of ``trainer`` (an
+    ``AdversarialTrainer``): per round,
+    the lookahead, the outer step on beta, and one Adam step of the discriminator on a
+    fresh batch. agent_inputs float[N, O + A] is this iteration's rollout. Returns
+    ``((discriminator params, its Adam state, beta float[M]), metrics)``, the metrics
+    averaged over the rounds."""
+    config, trajectories = trainer.config.cail, trainer.trajectories
+    features = jnp.concatenate([trajectories.observations, trajectories.actions], axis=-1)
+    valid = trajectories.valid
+    ranked = state.ranked_trajectories.astype(jnp.float32)
+    num_agent = agent_inputs.shape[0]
+
+    def batch_loss(params, beta, agent_rows, demo_rows):
+        logits_agent = trainer.discriminator.apply(params, agent_inputs[agent_rows])
+        logits_demo = trainer.discriminator.apply(
+            params, trainer._demo_inputs[state.demo_rows[demo_rows]]
+        )
+        return inner_loss(logits_agent, logits_demo, beta[demo_rows])
+
+    def ranking_loss(params, index):
+        returns = trajectory_returns(
+            lambda x: policy_reward(trainer.discriminator.apply(params, x)),
+            features[index],
+            valid[index],
+        )
+        return margin_ranking_loss(returns, trajectories.score[index])
+
+    def round_(carry, round_key):
+        params, optimizer_state, beta = carry
+        index_key, agent_key, demo_key, step_agent_key, step_demo_key = jax.random.split(
+            round_key, 5
+        )
+        index = jax.random.choice(
+            index_key, ranked.shape[0], (config.num_trajectories,), p=ranked / ranked.sum()
+        )
+        rows = lambda k, n: jax.random.randint(k, (config.batch_size,), 0, n)  # noqa: E731
+        agent_rows, demo_rows = rows(agent_key, num_agent), rows(demo_key, trainer.num_demos)
+        beta = renormalize(beta, config.beta_max)
+
+        def outer_loss(beta):
+            grads = jax.grad(batch_loss)(params, beta, agent_rows, demo_rows)
+            lookahead = jax.tree.map(
+                lambda p, g: p - config.lookahead_learning_rate * g, params, grads
+            )
+            return ranking_loss(lookahead, index)
+
+        beta_grads, metrics = jax.grad(outer_loss, has_aux=True)(beta)
+        beta = renormalize(beta - spec.cail_learning_rate * beta_grads, config.beta_max)
+        step_rows = rows(step_agent_key, num_agent), rows(step_demo_key, trainer.num_demos)
+        loss, grads = jax.value_and_grad(batch_loss)(params, beta, *step_rows)
+        new_params, new_optimizer_state = trainer._adam_step(
+            params, optimizer_state, grads, config.discriminator_learning_rate
+        )
+        skipped = jnp.zeros(())
+        if config.pretrain_iterations is not None:  # step only where the gradients agree
+            ranking_grads = jax.grad(lambda p: ranking_loss(p, index)[0])(params)
+            step = gradients_agree(grads, ranking_grads) | (
+                state.iteration < config.pretrain_iterations
+            )
+            new_params = tree_where(step, new_params, params)
+            new_optimizer_state = tree_where(step, new_optimizer_state, optimizer_state)
+            skipped = 1.0 - step.astype(jnp.float32)
+        metrics = {**metrics, "cail/disc_loss": loss, "cail/skipped_steps": skipped}
+        return (new_params, new_optimizer_state, beta), metrics
+
+    carry = (state.discriminator_params, state.discriminator_optimizer_state)
+    carry, metrics = jax.lax.scan(
+        round_, (*carry, state.cail_confidence), jax.random.split(key, config.num_rounds)
+    )
+    metrics = jax.tree.map(jnp.mean, metrics)
+    metrics["cail/skipped_steps"] *= config.num_rounds  # a count per iteration
+    beta = carry[2]
+    return carry, {**metrics, "cail/beta_std": beta.std(), "cail/beta_max": beta.max()}

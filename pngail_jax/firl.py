@@ -226,3 +226,69 @@ def sample_segment_rows(key, source: SegmentSource, num_segments: int, length: i
     first = source.starts[chosen] + offset
     positions = (first[None, :] + jnp.arange(length)[:, None]) % source.rows.shape[0]
     return source.rows[positions]
+
+
+@struct.dataclass
+class FirlState:
+    """f-IRL's reward r(s) and state discriminator, with their Adam states (both kept from
+    one iteration to the next, as its codebase never rebuilds them)."""
+
+    reward_params: dict
+    reward_optimizer_state: optax.OptState
+    discriminator_params: dict
+    discriminator_optimizer_state: optax.OptState
+
+
+def outer_step(trainer, spec, state, agent_obs, key) -> tuple[FirlState, dict]:
+    """f-IRL's outer step in an iteration of ``trainer`` (an ``AdversarialTrainer``; its
+    codebase's ``firl/irl_samples.py``): the state discriminator refitted (warm-started) on the
+    split's states against this rollout's, then one Adam step of the reward on the covariance
+    loss over the rollout's ``num_envs`` segments of ``unroll_length`` steps (agent_obs
+    float[T, E, O], our stand-in for their sampled trajectories) and as many resampled
+    demonstration segments. Returns (FirlState, metrics)."""
+    config, trpo_config = trainer.config.firl, trainer.config.trpo
+    size = trainer.env.observation_size
+    firl_state = state.firl
+    discriminator_key, segment_key = jax.random.split(key)
+    disc_params, disc_optimizer_state, disc_losses = fit_discriminator(
+        trainer.firl_discriminator.apply, trainer.firl_discriminator_optimizer,
+        firl_state.discriminator_params, firl_state.discriminator_optimizer_state,
+        trainer._demo_inputs[state.demo_rows, :size], agent_obs.reshape(-1, size),
+        config.discriminator_iterations, config.discriminator_batch_size, discriminator_key,
+    )  # fmt: skip
+    source = trainer._firl_segments
+    if source is None:  # no trajectory ids: segments of consecutive split rows
+        source = SegmentSource.of_rows(state.demo_rows)
+    expert_rows = sample_segment_rows(
+        segment_key, source, trpo_config.num_envs, trpo_config.unroll_length
+    )
+    expert_obs = trainer._demo_inputs[expert_rows, :size]  # float[T, E, O]
+    segments = jnp.concatenate([agent_obs, expert_obs], axis=1)  # float[T, 2E, O]
+    log_ratio = trainer.firl_discriminator.apply(disc_params, segments)  # log rho_E / rho
+    h = divergence_h(log_ratio, spec.firl_fkl_coef, spec.firl_rkl_coef, spec.firl_js_coef)
+
+    def reward_loss_fn(params):
+        rewards = trainer.firl_reward.apply(params, segments)  # float[T, 2E]
+        loss, metrics = covariance_surrogate(
+            h.sum(axis=0), rewards.sum(axis=0), trpo_config.unroll_length
+        )
+        agent, expert = jnp.split(rewards, 2, axis=1)
+        means = {"firl/reward_agent": agent.mean(), "firl/reward_expert": expert.mean()}
+        return loss, {**metrics, **means}
+
+    grads, reward_metrics = jax.grad(reward_loss_fn, has_aux=True)(firl_state.reward_params)
+    updates, reward_optimizer_state = trainer.firl_reward_optimizer.update(
+        grads, firl_state.reward_optimizer_state, firl_state.reward_params
+    )
+    new_state = FirlState(
+        optax.apply_updates(firl_state.reward_params, updates), reward_optimizer_state,
+        disc_params, disc_optimizer_state,
+    )  # fmt: skip
+    metrics = {
+        "firl/disc_loss": disc_losses[-1],
+        "firl/disc_loss_first": disc_losses[0],
+        "firl/log_ratio_agent": log_ratio[:, : trpo_config.num_envs].mean(),
+        "firl/log_ratio_expert": log_ratio[:, trpo_config.num_envs :].mean(),
+        **reward_metrics,
+    }
+    return new_state, metrics

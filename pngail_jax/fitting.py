@@ -27,3 +27,13 @@ def squared_norm(params) -> jax.Array:
     L2 term the CAIL codebase adds to its losses (``parameters_to_vector(p).norm() ** 2``).
     float[]."""
     return sum(jnp.sum(jnp.square(leaf)) for leaf in jax.tree.leaves(params))
+
+
+def gradients_agree(grads, other_grads) -> jax.Array:
+    """bool[]: the dot product of two gradients (pytrees of one structure) is >= 0."""
+    return sum(jax.tree.leaves(jax.tree.map(jnp.vdot, grads, other_grads))) >= 0
+
+
+def tree_where(condition, on_true, on_false):
+    """``jnp.where`` over two pytrees of one structure."""
+    return jax.tree.map(lambda a, b: jnp.where(condition, a, b), on_true, on_false)

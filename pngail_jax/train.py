@@ -35,6 +35,8 @@ from pngail_jax import cail, envs, firl, ranking
 from pngail_jax.bc import BCConfig, cloned_actions, train_bc, train_deterministic_bc
 from pngail_jax.confidence import ClassifierConfig, confidence_errors, train_classifier
 from pngail_jax.demos import DemonstrationError, Demonstrations, make_split
+from pngail_jax.firl import FirlState
+from pngail_jax.fitting import tree_where
 from pngail_jax.losses import ConfidenceStats, discriminator_loss, policy_reward
 from pngail_jax.methods import PHASES, PRESETS, MethodSpec, required_phases
 from pngail_jax.networks import ClampedStateReward, Discriminator, ResidualDiscriminator
@@ -151,17 +153,6 @@ class DiscriminatorBatch(NamedTuple):
     agent_inputs: jax.Array  # float[B, O + A], actions clipped to the bounds
     rows: jax.Array  # int[B], indices into the split
     demo_inputs: jax.Array  # float[B, O + A]
-
-
-@struct.dataclass
-class FirlState:
-    """f-IRL's reward r(s) and state discriminator, with their Adam states (both kept from
-    one iteration to the next, as its codebase never rebuilds them)."""
-
-    reward_params: dict
-    reward_optimizer_state: optax.OptState
-    discriminator_params: dict
-    discriminator_optimizer_state: optax.OptState
 
 
 class AdversarialTrainer:
@@ -423,9 +414,7 @@ class AdversarialTrainer:
                 bc_key,
             )
             trpo_state = trpo_state.replace(
-                policy_params=_tree_where(
-                    spec.bc_init_coef > 0, bc_params, trpo_state.policy_params
-                )
+                policy_params=tree_where(spec.bc_init_coef > 0, bc_params, trpo_state.policy_params)
             )
         trex_key, drex_key = jax.random.split(reward_key)
         rewards = {}
@@ -511,12 +500,12 @@ class AdversarialTrainer:
             hyperparams.discriminator_learning_rate,
         )
         if "cail" in phases:  # CAIL's cells take the discriminator of its rounds instead
-            (cail_params, cail_optimizer_state, beta), cail_metrics = self._cail_rounds(
-                spec, state, batch.agent_inputs, jax.random.fold_in(batch_key, 1)
+            (cail_params, cail_optimizer_state, beta), cail_metrics = cail.iteration_rounds(
+                self, spec, state, batch.agent_inputs, jax.random.fold_in(batch_key, 1)
             )
             use = spec.cail_coef > 0
-            disc_params = _tree_where(use, cail_params, disc_params)
-            disc_optimizer_state = _tree_where(use, cail_optimizer_state, disc_optimizer_state)
+            disc_params = tree_where(use, cail_params, disc_params)
+            disc_optimizer_state = tree_where(use, cail_optimizer_state, disc_optimizer_state)
             disc_metrics["disc/loss"] = jnp.where(
                 use, cail_metrics["cail/disc_loss"], disc_metrics["disc/loss"]
             )
@@ -599,8 +588,8 @@ class AdversarialTrainer:
                 spec, state.ranking_reward_params, batch.agent_obs
             )
         if "firl" in phases:
-            phase_fields["firl"], phase_metrics = self._firl_update(
-                spec, state, transitions.obs, jax.random.fold_in(key, 2)
+            phase_fields["firl"], phase_metrics = firl.outer_step(
+                self, spec, state, transitions.obs, jax.random.fold_in(key, 2)
             )
             rewards += spec.firl_coef * self.firl_reward.apply(
                 phase_fields["firl"].reward_params, batch.agent_obs
@@ -613,134 +602,6 @@ class AdversarialTrainer:
         updates, optimizer_state = self.optimizer.update(grads, optimizer_state)
         step = jax.tree.map(lambda u: -learning_rate * u, updates)
         return optax.apply_updates(params, step), optimizer_state
-
-    def _firl_update(self, spec, state: TrainState, agent_obs, key):
-        """f-IRL's outer step (``firl/irl_samples.py``): the state discriminator refitted
-        (warm-started) on the split's states against this rollout's, then one Adam step of the
-        reward on the covariance loss over the rollout's ``num_envs`` segments of
-        ``unroll_length`` steps (agent_obs float[T, E, O], our stand-in for their sampled
-        trajectories) and as many resampled demonstration segments. Returns (FirlState,
-        metrics)."""
-        config, trpo_config = self.config.firl, self.config.trpo
-        size = self.env.observation_size
-        firl_state = state.firl
-        discriminator_key, segment_key = jax.random.split(key)
-        disc_params, disc_optimizer_state, disc_losses = firl.fit_discriminator(
-            self.firl_discriminator.apply, self.firl_discriminator_optimizer,
-            firl_state.discriminator_params, firl_state.discriminator_optimizer_state,
-            self._demo_inputs[state.demo_rows, :size], agent_obs.reshape(-1, size),
-            config.discriminator_iterations, config.discriminator_batch_size, discriminator_key,
-        )  # fmt: skip
-        source = self._firl_segments
-        if source is None:  # no trajectory ids: segments of consecutive split rows
-            source = firl.SegmentSource.of_rows(state.demo_rows)
-        expert_rows = firl.sample_segment_rows(
-            segment_key, source, trpo_config.num_envs, trpo_config.unroll_length
-        )
-        expert_obs = self._demo_inputs[expert_rows, :size]  # float[T, E, O]
-        segments = jnp.concatenate([agent_obs, expert_obs], axis=1)  # float[T, 2E, O]
-        log_ratio = self.firl_discriminator.apply(disc_params, segments)  # log rho_E / rho
-        h = firl.divergence_h(log_ratio, spec.firl_fkl_coef, spec.firl_rkl_coef, spec.firl_js_coef)
-
-        def reward_loss_fn(params):
-            rewards = self.firl_reward.apply(params, segments)  # float[T, 2E]
-            loss, metrics = firl.covariance_surrogate(
-                h.sum(axis=0), rewards.sum(axis=0), trpo_config.unroll_length
-            )
-            agent, expert = jnp.split(rewards, 2, axis=1)
-            means = {"firl/reward_agent": agent.mean(), "firl/reward_expert": expert.mean()}
-            return loss, {**metrics, **means}
-
-        grads, reward_metrics = jax.grad(reward_loss_fn, has_aux=True)(firl_state.reward_params)
-        updates, reward_optimizer_state = self.firl_reward_optimizer.update(
-            grads, firl_state.reward_optimizer_state, firl_state.reward_params
-        )
-        new_state = FirlState(
-            optax.apply_updates(firl_state.reward_params, updates), reward_optimizer_state,
-            disc_params, disc_optimizer_state,
-        )  # fmt: skip
-        metrics = {
-            "firl/disc_loss": disc_losses[-1],
-            "firl/disc_loss_first": disc_losses[0],
-            "firl/log_ratio_agent": log_ratio[:, : trpo_config.num_envs].mean(),
-            "firl/log_ratio_expert": log_ratio[:, trpo_config.num_envs :].mean(),
-            **reward_metrics,
-        }
-        return new_state, metrics
-
-    def _cail_rounds(self, spec, state: TrainState, agent_inputs, key):
-        """CAIL's ``num_rounds`` rounds of this iteration (``pngail_jax.cail``): per round,
-        the lookahead, the outer step on beta, and one Adam step of the discriminator on a
-        fresh batch. agent_inputs float[N, O + A] is this iteration's rollout. Returns
-        ``((discriminator params, its Adam state, beta float[M]), metrics)``, the metrics
-        averaged over the rounds."""
-        config, trajectories = self.config.cail, self.trajectories
-        features = jnp.concatenate([trajectories.observations, trajectories.actions], axis=-1)
-        valid = trajectories.valid
-        ranked = state.ranked_trajectories.astype(jnp.float32)
-        num_agent = agent_inputs.shape[0]
-
-        def batch_loss(params, beta, agent_rows, demo_rows):
-            logits_agent = self.discriminator.apply(params, agent_inputs[agent_rows])
-            logits_demo = self.discriminator.apply(
-                params, self._demo_inputs[state.demo_rows[demo_rows]]
-            )
-            return cail.inner_loss(logits_agent, logits_demo, beta[demo_rows])
-
-        def ranking_loss(params, index):
-            returns = cail.trajectory_returns(
-                lambda x: policy_reward(self.discriminator.apply(params, x)),
-                features[index],
-                valid[index],
-            )
-            return cail.margin_ranking_loss(returns, trajectories.score[index])
-
-        def round_(carry, round_key):
-            params, optimizer_state, beta = carry
-            index_key, agent_key, demo_key, step_agent_key, step_demo_key = jax.random.split(
-                round_key, 5
-            )
-            index = jax.random.choice(
-                index_key, ranked.shape[0], (config.num_trajectories,), p=ranked / ranked.sum()
-            )
-            rows = lambda k, n: jax.random.randint(k, (config.batch_size,), 0, n)  # noqa: E731
-            agent_rows, demo_rows = rows(agent_key, num_agent), rows(demo_key, self.num_demos)
-            beta = cail.renormalize(beta, config.beta_max)
-
-            def outer_loss(beta):
-                grads = jax.grad(batch_loss)(params, beta, agent_rows, demo_rows)
-                lookahead = jax.tree.map(
-                    lambda p, g: p - config.lookahead_learning_rate * g, params, grads
-                )
-                return ranking_loss(lookahead, index)
-
-            beta_grads, metrics = jax.grad(outer_loss, has_aux=True)(beta)
-            beta = cail.renormalize(beta - spec.cail_learning_rate * beta_grads, config.beta_max)
-            step_rows = rows(step_agent_key, num_agent), rows(step_demo_key, self.num_demos)
-            loss, grads = jax.value_and_grad(batch_loss)(params, beta, *step_rows)
-            new_params, new_optimizer_state = self._adam_step(
-                params, optimizer_state, grads, config.discriminator_learning_rate
-            )
-            skipped = jnp.zeros(())
-            if config.pretrain_iterations is not None:  # step only where the gradients agree
-                ranking_grads = jax.grad(lambda p: ranking_loss(p, index)[0])(params)
-                step = _gradients_agree(grads, ranking_grads) | (
-                    state.iteration < config.pretrain_iterations
-                )
-                new_params = _tree_where(step, new_params, params)
-                new_optimizer_state = _tree_where(step, new_optimizer_state, optimizer_state)
-                skipped = 1.0 - step.astype(jnp.float32)
-            metrics = {**metrics, "cail/disc_loss": loss, "cail/skipped_steps": skipped}
-            return (new_params, new_optimizer_state, beta), metrics
-
-        carry = (state.discriminator_params, state.discriminator_optimizer_state)
-        carry, metrics = jax.lax.scan(
-            round_, (*carry, state.cail_confidence), jax.random.split(key, config.num_rounds)
-        )
-        metrics = jax.tree.map(jnp.mean, metrics)
-        metrics["cail/skipped_steps"] *= config.num_rounds  # a count per iteration
-        beta = carry[2]
-        return carry, {**metrics, "cail/beta_std": beta.std(), "cail/beta_max": beta.max()}
 
     def cail_trajectory_confidence(self, state: TrainState) -> jax.Array:
         """float[K]: CAIL's mean beta over each demonstration trajectory's rows in the split
@@ -772,11 +633,6 @@ class AdversarialTrainer:
         return state.trpo
 
 
-def _gradients_agree(grads, other_grads) -> jax.Array:
-    """bool[]: the dot product of two gradients (pytrees of one structure) is >= 0."""
-    return sum(jax.tree.leaves(jax.tree.map(jnp.vdot, grads, other_grads))) >= 0
-
-
 def _keep_cloned_policy(spec: MethodSpec, before: TRPOState, updated: TRPOState) -> TRPOState:
     """A cloned policy that no RL moves (BC's cells, ``policy_update_coef`` 0) stays as it
     was: its learner's fields from ``before``, the rest (counters, keys) from ``updated``."""
@@ -784,12 +640,7 @@ def _keep_cloned_policy(spec: MethodSpec, before: TRPOState, updated: TRPOState)
     learner = ("policy_params", "value_params", "value_optimizer_state", "normalizer")
     return updated.replace(
         **{
-            name: _tree_where(frozen, getattr(before, name), getattr(updated, name))
+            name: tree_where(frozen, getattr(before, name), getattr(updated, name))
             for name in learner
         }
     )
-
-
-def _tree_where(condition, on_true, on_false):
-    """``jnp.where`` over two pytrees of one structure."""
-    return jax.tree.map(lambda a, b: jnp.where(condition, a, b), on_true, on_false)

@@ -11,11 +11,12 @@ import pytest
 
 from pngail_jax import envs, firl
 from pngail_jax.demos import Demonstrations
+from pngail_jax.firl import FirlState
 from pngail_jax.methods import method_spec, stack
 from pngail_jax.networks import ClampedStateReward, ResidualDiscriminator
 from pngail_jax.rl import TRPOConfig
 from pngail_jax.run_config import RunConfig
-from pngail_jax.train import AdversarialConfig, AdversarialTrainer, FirlState
+from pngail_jax.train import AdversarialConfig, AdversarialTrainer
 
 RNG = np.random.default_rng(0)
 
@@ -241,7 +242,7 @@ def test_config_is_the_codebases_and_checked():
 
 
 def test_the_trainers_reward_rises_on_the_demonstrations_without_trajectory_ids():
-    """End to end through ``AdversarialTrainer._firl_update`` on rows without trajectory ids
+    """End to end through ``firl.outer_step`` on rows without trajectory ids
     (segments of consecutive split rows): demonstration states around +1, agent states
     around -1; after a few outer steps the reward is higher on the demonstrations', for each
     divergence, and the discriminator's logit is a positive log ratio there."""
@@ -273,7 +274,7 @@ def test_the_trainers_reward_rises_on_the_demonstrations_without_trajectory_ids(
 
         def step(firl_state, key):
             state = types.SimpleNamespace(firl=firl_state, demo_rows=demo_rows)
-            return trainer._firl_update(spec, state, agent_obs, key)
+            return firl.outer_step(trainer, spec, state, agent_obs, key)
 
         return jax.lax.scan(step, firl_state, jax.random.split(key, 15))
 
