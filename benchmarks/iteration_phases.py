@@ -1,7 +1,8 @@
 """Where one adversarial-training iteration spends its time, phase by phase, for a grid of cells.
 
-Builds ``--cells`` cells (PN-GAIL's ``MethodSpec``, ``pngail_jax.train.Hyperparams`` defaults,
-one seed each) with the environment's run settings (``pngail_jax.settings.settings_for``:
+Builds an ``AdversarialTrainer`` on synthetic demonstrations and ``--cells`` cells (PN-GAIL's
+``MethodSpec``, ``pngail_jax.train.Hyperparams`` defaults, one seed each, initialised by the
+trainer) with the environment's run settings (``pngail_jax.settings.settings_for``:
 parallel envs, unroll length, MJX solver, evaluation episodes; flags override the shape),
 initialises their TRPO states and runs a real rollout, so every phase sees realistic inputs.
 Each phase is then its own program, ``jax.jit(jax.vmap(phase))`` over the cells as in the real
@@ -15,9 +16,9 @@ order of ``pngail_jax.train.AdversarialTrainer``'s iteration:
 - ``rollout``: ``trpo.rollout``, the ``unroll_length``-step ``lax.scan`` over the envs.
 - ``importance_weights``: WGAIL's w on every split row (``--demo-rows``). ``train.py`` puts it
   in a ``jnp.where`` with its refresh schedule, so it is computed every iteration.
-- ``discriminator``: one Adam step of the ``Discriminator`` with PN-GAIL's
-  ``discriminator_loss`` on the agent batch and as many demonstration rows drawn with
-  replacement (random rows: the cost does not depend on their values), plus ``policy_reward``.
+- ``discriminator``: the trainer's own steps: its batch (the agent rows and as many
+  demonstration rows drawn with replacement; random rows: the cost does not depend on their
+  values), the gradient of PN-GAIL's loss, the policy's reward and the Adam step.
 - ``values``: observation normalisation and the value network on ``obs`` and ``final_obs``.
 - ``gae/sequential``, ``gae/associative``: ``generalized_advantages`` as ``trpo.update`` calls
   it (both lambdas in one pass), in each form. ``gae/sequential_unrollK`` is a benchmark-only
@@ -29,8 +30,8 @@ order of ``pngail_jax.train.AdversarialTrainer``'s iteration:
   ``--fisher`` (its set-up included: for Gauss-Newton, the policy's linearisation).
 - ``line_search``: ``backtracking_line_search`` over ``num_backtracks`` fractions (evaluated
   side by side, not as a chain) on the natural-gradient step of these inputs.
-- ``update``: the whole ``trpo.update``; ``iteration``: rollout, importance weights,
-  discriminator step and update, as ``AdversarialTrainer._iteration``.
+- ``update``: the whole ``trpo.update``; ``iteration``: ``AdversarialTrainer._iteration``
+  itself (rollout, importance weights, discriminator step and update).
 - ``evaluation``: ``trpo.evaluate`` on ``num_eval_episodes`` episodes; it stops once every
   episode has ended, so with a fresh policy a task that terminates (Ant, Hopper, Walker2d)
   costs little. ``evaluation/no_termination`` times it on the same task built with
@@ -62,14 +63,14 @@ from pathlib import Path
 
 import jax
 import jax.numpy as jnp
-import optax
+import numpy as np
 from common import context, markdown_table, write_rows
 from flax import struct
 
 from pngail_jax import envs
-from pngail_jax.losses import ConfidenceStats, discriminator_loss, policy_reward
+from pngail_jax.confidence import ClassifierConfig
+from pngail_jax.demos import Demonstrations
 from pngail_jax.methods import method_spec, stack
-from pngail_jax.networks import Discriminator
 from pngail_jax.rl.gae import generalized_advantages
 from pngail_jax.rl.train import TRPO
 from pngail_jax.rl.trpo import (
@@ -77,29 +78,14 @@ from pngail_jax.rl.trpo import (
     conjugate_gradient,
 )
 from pngail_jax.settings import describe, make_env, settings_for
-from pngail_jax.train import Hyperparams
+from pngail_jax.train import AdversarialConfig, AdversarialTrainer, Hyperparams
 
 NUM_ROUNDS = 5
 SAMPLE_SECONDS = 0.05  # fast phases: back-to-back calls per sample, each blocked, to last this
 MAX_CALLS_PER_SAMPLE = 100
 UNROLLS = (2, 4, 8)
 TERMINATING_ENVS = ("Ant", "Hopper", "Walker2d", "Ant-v4", "Hopper-v4", "Walker2d-v4")
-LABEL_RATIO = 0.2  # Hyperparams' default: the fraction of split rows in D_c
 CHAIN_PHASES = ("rollout", "gae/sequential", "value_fit", "conjugate_gradient")
-
-
-@struct.dataclass
-class DiscriminatorState:
-    """One cell's discriminator and demonstration split (M rows)."""
-
-    params: dict
-    optimizer_state: optax.OptState
-    demo_inputs: jax.Array  # float[M, obs_size + action_size]
-    confidence: jax.Array  # float[M]
-    labelled: jax.Array  # bool[M]
-    importance_weights: jax.Array  # float[M]
-    stats: ConfidenceStats
-    key: jax.Array
 
 
 @struct.dataclass
@@ -161,81 +147,58 @@ def advantages_and_targets(
 
 
 class Phases:
-    """The phases of one cell's adversarial iteration, each a pure function to vmap over cells."""
+    """The phases of one cell's adversarial iteration, each a pure function to vmap over cells:
+    the real ``AdversarialTrainer``'s named steps (PN-GAIL, ``num_demo_rows`` synthetic
+    demonstration rows) and TRPO's public steps, timed one by one."""
 
     def __init__(self, trpo: TRPO, num_demo_rows: int):
         self.trpo = trpo
         self.config = trpo.config
-        self.num_demo_rows = num_demo_rows
-        self.discriminator = Discriminator()
-        self.optimizer = optax.scale_by_adam()
-        self.action_low = jnp.asarray(trpo.env.action_low)
-        self.action_high = jnp.asarray(trpo.env.action_high)
-
-    def init_discriminator(self, key: jax.Array) -> DiscriminatorState:
-        params_key, inputs_key, confidence_key, labelled_key, carry_key = jax.random.split(key, 5)
-        input_size = self.trpo.env.observation_size + self.trpo.env.action_size
-        demo_inputs = jax.random.normal(inputs_key, (self.num_demo_rows, input_size))
-        confidence = jax.random.uniform(confidence_key, (self.num_demo_rows,))
-        labelled = jax.random.uniform(labelled_key, (self.num_demo_rows,)) < LABEL_RATIO
-        mean_labelled = jnp.where(labelled, confidence, 0.0).sum() / jnp.maximum(labelled.sum(), 1)
-        params = self.discriminator.init(params_key, demo_inputs[0])
-        return DiscriminatorState(
-            params=params,
-            optimizer_state=self.optimizer.init(params),
-            demo_inputs=demo_inputs,
-            confidence=confidence,
-            labelled=labelled,
-            importance_weights=jnp.ones(self.num_demo_rows),
-            stats=ConfidenceStats(
-                mean_confidence=confidence.mean(), mean_labelled_confidence=mean_labelled
+        env = trpo.env
+        rng = np.random.default_rng(0)
+        demos = Demonstrations(
+            observations=rng.normal(size=(num_demo_rows, env.observation_size)).astype("f4"),
+            actions=rng.uniform(
+                env.action_low, env.action_high, (num_demo_rows, env.action_size)
+            ).astype("f4"),
+            confidence=rng.uniform(size=num_demo_rows).astype("f4"),
+        )
+        # The split holds every row; a short classifier phase (only init uses it).
+        self.trainer = AdversarialTrainer(
+            AdversarialConfig(
+                trpo=self.config,
+                classifier=ClassifierConfig(num_steps=10),
+                num_demos=num_demo_rows,
             ),
-            key=carry_key,
+            env,
+            demos,
         )
 
-    def importance_weights(self, state, discriminator: DiscriminatorState) -> jax.Array:
-        """WGAIL's w = [exp(-z) pi(a|s)]^(1/2) on every split row, as ``pngail_jax.train``."""
-        inputs = discriminator.demo_inputs
-        logits = self.discriminator.apply(discriminator.params, inputs)
-        obs_size = self.trpo.env.observation_size
-        log_prob = self.trpo.log_prob(state, inputs[:, :obs_size], inputs[:, obs_size:])
-        return jnp.exp(0.5 * (log_prob - logits))
+    def init(self, hyperparams, spec, key):
+        """A trainer state after ``init`` (split, classifier, TRPO and discriminator)."""
+        return self.trainer.init(hyperparams, spec, key)[0]
 
-    def discriminator_step(self, hyperparams, spec, discriminator: DiscriminatorState, transitions):
-        """One Adam step on the agent batch and as many demo rows; the reward float[T, N] comes
-        from the discriminator before the step, as in ``pngail_jax.train``."""
-        config = self.config
-        actions = jnp.clip(transitions.action, self.action_low, self.action_high)
-        agent_inputs = jnp.concatenate([transitions.obs, actions], axis=-1)
-        agent_inputs = agent_inputs.reshape(config.batch_size, -1)
-        key, rows_key = jax.random.split(discriminator.key)
-        rows = jax.random.randint(rows_key, (config.batch_size,), 0, self.num_demo_rows)
+    def importance_weights(self, state) -> jax.Array:
+        """WGAIL's w on every split row (``AdversarialTrainer._importance_weights``)."""
+        return self.trainer._importance_weights(state)
 
-        def loss_fn(params):
-            logits_agent = self.discriminator.apply(params, agent_inputs)
-            logits_demo = self.discriminator.apply(params, discriminator.demo_inputs[rows])
-            loss, _ = discriminator_loss(
-                spec,
-                logits_agent,
-                logits_demo,
-                discriminator.confidence[rows],
-                discriminator.labelled[rows],
-                discriminator.importance_weights[rows],
-                discriminator.stats,
-            )
-            return loss, logits_agent
-
-        grads, logits_agent = jax.grad(loss_fn, has_aux=True)(discriminator.params)
-        rewards = policy_reward(logits_agent).reshape(config.unroll_length, config.num_envs)
-        updates, optimizer_state = self.optimizer.update(grads, discriminator.optimizer_state)
-        params = optax.apply_updates(
-            discriminator.params,
-            jax.tree.map(lambda u: -hyperparams.discriminator_learning_rate * u, updates),
+    def discriminator_step(self, hyperparams, spec, state, transitions):
+        """The trainer's discriminator batch, gradient and Adam step, and the policy's reward
+        float[T, N] from the discriminator before the step: (params, rewards)."""
+        trainer = self.trainer
+        key = jax.random.fold_in(state.key, 0)
+        batch = trainer._discriminator_batch(state, transitions, key)
+        grads, _, logits_agent = trainer._discriminator_gradient(
+            spec, state, batch, state.importance_weights
         )
-        discriminator = discriminator.replace(
-            params=params, optimizer_state=optimizer_state, key=key
+        rewards, _, _ = trainer._policy_rewards(spec, state, transitions, batch, logits_agent, key)
+        params, _ = trainer._adam_step(
+            state.discriminator_params,
+            state.discriminator_optimizer_state,
+            grads,
+            hyperparams.discriminator_learning_rate,
         )
-        return discriminator, rewards
+        return params, rewards
 
     def values(self, state, transitions):
         """``trpo.update``'s normalisation and value predictions: (normalizer, obs, values,
@@ -305,16 +268,9 @@ class Phases:
     def update(self, hyperparams, state, transitions, rewards):
         return self.trpo.update(hyperparams.trpo, state, transitions, rewards)
 
-    def iteration(self, hyperparams, spec, state, discriminator: DiscriminatorState):
-        """``pngail_jax.train``'s iteration: rollout, importance weights, discriminator, update."""
-        weights = self.importance_weights(state, discriminator)
-        state, transitions = self.trpo.rollout(state)
-        discriminator = discriminator.replace(importance_weights=weights)
-        discriminator, rewards = self.discriminator_step(
-            hyperparams, spec, discriminator, transitions
-        )
-        state, metrics = self.update(hyperparams, state, transitions, rewards)
-        return state, discriminator, metrics
+    def iteration(self, hyperparams, spec, state):
+        """``AdversarialTrainer._iteration`` itself."""
+        return self.trainer._iteration(hyperparams, spec, state)
 
 
 class PhaseTimer:
@@ -384,20 +340,20 @@ def compile_phases(phases: Phases, evaluation_trpo: TRPO | None, cells: int, key
     """Compiles every phase in the iteration's order, each fed the outputs of the phases
     before it (a real rollout's transitions, the discriminator's rewards, ...)."""
     trpo, config = phases.trpo, phases.config
-    init_key, discriminator_key, evaluation_key = jax.random.split(key, 3)
+    init_key, evaluation_key = jax.random.split(key)
     hyperparams = stack([Hyperparams.create()] * cells)
     spec = stack([method_spec("pngail")] * cells)
-    state = jax.jit(jax.vmap(trpo.init))(jax.random.split(init_key, cells))
-    discriminator = jax.jit(jax.vmap(phases.init_discriminator))(
-        jax.random.split(discriminator_key, cells)
+    trainer_state = jax.jit(jax.vmap(phases.init))(
+        hyperparams, spec, jax.random.split(init_key, cells)
     )
+    state = trainer_state.trpo
     evaluation_keys = jax.random.split(evaluation_key, (cells, config.num_eval_episodes))
     timer = PhaseTimer()
 
     after_rollout, transitions = timer.compile("rollout", trpo.rollout, state)
-    timer.compile("importance_weights", phases.importance_weights, state, discriminator)
+    timer.compile("importance_weights", phases.importance_weights, trainer_state)
     _, rewards = timer.compile(
-        "discriminator", phases.discriminator_step, hyperparams, spec, discriminator, transitions
+        "discriminator", phases.discriminator_step, hyperparams, spec, trainer_state, transitions
     )
     _, _, values, next_values = timer.compile("values", phases.values, after_rollout, transitions)
     compile_gae(timer, phases, hyperparams, transitions, rewards, values, next_values)
@@ -425,7 +381,7 @@ def compile_phases(phases: Phases, evaluation_trpo: TRPO | None, cells: int, key
         expected_improvement,
     )
     timer.compile("update", phases.update, hyperparams, after_rollout, transitions, rewards)
-    timer.compile("iteration", phases.iteration, hyperparams, spec, state, discriminator)
+    timer.compile("iteration", phases.iteration, hyperparams, spec, trainer_state)
     timer.compile("evaluation", trpo.evaluate, after_rollout, evaluation_keys)
     if evaluation_trpo is not None:
         timer.compile(
