@@ -119,16 +119,27 @@ class RunConfig:
         # Frozen: fields are normalised through object.__setattr__ (lists from JSON -> tuples,
         # NumPy numbers -> Python ones, ints in float fields -> floats), so a valid config holds
         # exactly the types its annotations name and its JSON reads back equal.
-        def set_field(name: str, value) -> None:
-            object.__setattr__(self, name, value)
-
         for name in _TUPLE_FIELDS:
             value = getattr(self, name)
-            set_field(name, tuple(value) if isinstance(value, list | tuple) else (value,))
+            self._set(name, tuple(value) if isinstance(value, list | tuple) else (value,))
+        self._check_task()
+        self._check_numbers()
+        for name in ("demos", "conf", "confidence_field", "preset_name"):
+            value = getattr(self, name)
+            if value is not None and (not isinstance(value, str) or not value):
+                fail(name, f"must be a non-empty string or None, got {value!r}")
+        self._check_names()
+        self._check_between_fields()
+
+    def _set(self, name: str, value) -> None:
+        object.__setattr__(self, name, value)
+
+    def _check_task(self) -> None:
+        """The environment's name, and its settings and classifier (None: its own)."""
         if not isinstance(self.env, str) or not self.env:
             fail("env", f"must be an environment name, got {self.env!r}")
         if self.settings is None:  # the environment's row (raises for an unknown environment)
-            set_field("settings", _env_settings(self.env))
+            self._set("settings", _env_settings(self.env))
         elif not isinstance(self.settings, RunSettings):
             fail(
                 "settings",
@@ -137,65 +148,50 @@ class RunConfig:
             )
         else:
             _env_settings(self.env)  # the name must be known even when settings are given
-        for name in ("seeds", "iterations", "chunk_iterations", "fisher_subsample"):
-            set_field(name, integer(name, getattr(self, name), minimum=1))
-        set_field("seed", integer("seed", self.seed, minimum=0, below=SEED_LIMIT))
-        if self.num_demos is not None:
-            set_field("num_demos", integer("num_demos", self.num_demos, minimum=2))
-        if self.cpu_devices is not None:
-            set_field("cpu_devices", integer("cpu_devices", self.cpu_devices, minimum=1))
-        set_field(
-            "discriminator_hidden_sizes",
-            layer_sizes("discriminator_hidden_sizes", self.discriminator_hidden_sizes),
-        )
-        set_field(
-            "label_ratios",
-            float_axis(
-                "label_ratios",
-                self.label_ratios,
-                "lie in (0, 1)",
-                lambda r: 0 < r < 1,
-                name="label ratios",
-            ),  # fmt: skip
-        )
-        set_field(
-            "noise_stds",
-            float_axis(
-                "noise_stds",
-                self.noise_stds,
-                "be finite and >= 0",
-                lambda s: s >= 0,
-                name="noise stds",
-            ),  # fmt: skip
-        )
-        if self.action_scale is not None:
-            set_field("action_scale", real("action_scale", self.action_scale))
-            if self.action_scale <= 0:
-                fail("action_scale", f"must be finite and positive, got {self.action_scale!r}")
-        for name in ("random_return", "optimal_return"):
-            if getattr(self, name) is not None:
-                set_field(name, real(name, getattr(self, name), "be a finite number"))
-        if self.bsc_eps is not None:
-            set_field("bsc_eps", real("bsc_eps", self.bsc_eps, "lie in (0, 0.5)"))
-            if not 0 < self.bsc_eps < 0.5:
-                fail("bsc_eps", f"must lie in (0, 0.5), got {self.bsc_eps!r}")
-        for name in ("demos", "conf", "confidence_field", "preset_name"):
-            value = getattr(self, name)
-            if value is not None and (not isinstance(value, str) or not value):
-                fail(name, f"must be a non-empty string or None, got {value!r}")
         if self.classifier is None:
-            set_field("classifier", task_classifier(self.env))
+            self._set("classifier", task_classifier(self.env))
         if not isinstance(self.classifier, ClassifierConfig):
             fail(
                 "classifier",
                 "must be a pngail_jax.confidence.ClassifierConfig, "
                 f"got {type(self.classifier).__name__}",
             )
-        set_field("classifier", ClassifierConfig(**_classifier_fields(_fields_of(self.classifier))))
-        self._validate()
+        self._set("classifier", ClassifierConfig(**_classifier_fields(_fields_of(self.classifier))))
 
-    def _validate(self) -> None:
-        """The checks between fields, and the names each field must be among."""
+    def _check_numbers(self) -> None:
+        """Counts, grid axes and the optional numbers, each in its stored type."""
+        for name in ("seeds", "iterations", "chunk_iterations", "fisher_subsample"):
+            self._set(name, integer(name, getattr(self, name), minimum=1))
+        self._set("seed", integer("seed", self.seed, minimum=0, below=SEED_LIMIT))
+        for name, minimum in (("num_demos", 2), ("cpu_devices", 1)):
+            if getattr(self, name) is not None:
+                self._set(name, integer(name, getattr(self, name), minimum=minimum))
+        sizes = layer_sizes("discriminator_hidden_sizes", self.discriminator_hidden_sizes)
+        self._set("discriminator_hidden_sizes", sizes)
+        ratios = float_axis(
+            "label_ratios", self.label_ratios, "lie in (0, 1)", lambda r: 0 < r < 1,
+            name="label ratios",
+        )  # fmt: skip
+        noise = float_axis(
+            "noise_stds", self.noise_stds, "be finite and >= 0", lambda s: s >= 0,
+            name="noise stds",
+        )  # fmt: skip
+        self._set("label_ratios", ratios)
+        self._set("noise_stds", noise)
+        if self.action_scale is not None:
+            self._set("action_scale", real("action_scale", self.action_scale))
+            if self.action_scale <= 0:
+                fail("action_scale", f"must be finite and positive, got {self.action_scale!r}")
+        for name in ("random_return", "optimal_return"):
+            if getattr(self, name) is not None:
+                self._set(name, real(name, getattr(self, name), "be a finite number"))
+        if self.bsc_eps is not None:
+            self._set("bsc_eps", real("bsc_eps", self.bsc_eps, "lie in (0, 0.5)"))
+            if not 0 < self.bsc_eps < 0.5:
+                fail("bsc_eps", f"must lie in (0, 0.5), got {self.bsc_eps!r}")
+
+    def _check_names(self) -> None:
+        """The names each field must be among: methods, the Fisher form, log backends."""
         if not self.methods:
             fail(
                 "methods",
@@ -219,6 +215,10 @@ class RunConfig:
             )
         if len(set(self.log)) != len(self.log):
             fail("log", f"backends must not repeat, got {list(self.log)}")
+
+    def _check_between_fields(self) -> None:
+        """The checks between fields: the run's length and its task's settings, the
+        normalised return's ends, the demonstrations and their companion fields."""
         if self.iterations % self.settings.eval_every:
             fail(
                 "iterations",
@@ -249,6 +249,9 @@ class RunConfig:
                 "optimal_return",
                 f"({self.optimal_return}) must be above random_return ({self.random_return})",
             )
+        self._check_demonstration_fields()
+
+    def _check_demonstration_fields(self) -> None:
         if self.conf is not None and self.demos is None:
             fail("conf", ": a confidence file needs demos (made demonstrations carry their own)")
         is_minari = self.demos is not None and self.demos.startswith("minari:")

@@ -40,7 +40,7 @@ from pngail_jax.report import json_safe
 METHODS = {"sc": ClassifierSpec.sc, "bsc": ClassifierSpec.bsc}
 
 
-def parse_args(argv=None) -> argparse.Namespace:
+def build_parser() -> argparse.ArgumentParser:
     parser = ArgumentParser(
         "classify", description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
     )
@@ -107,6 +107,11 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument(
         "--overwrite", action="store_true", help="replace an existing --json file (default: refuse)"
     )
+    return parser
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    parser = build_parser()
     args = parser.parse_args(argv)
     note_deprecated(argv, DEPRECATED_FLAGS)
     check_arguments(parser, args)

@@ -67,7 +67,7 @@ __all__ = [
 # -- command line ----------------------------------------------------------------------------
 
 
-def parse_args(argv=None) -> argparse.Namespace:
+def build_parser() -> argparse.ArgumentParser:
     parser = ArgumentParser(
         "paper", description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
     )
@@ -112,6 +112,12 @@ def parse_args(argv=None) -> argparse.Namespace:
         "else there is always refused)",
     )
     add_compile_cache_flags(parser)
+    return parser
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    """The checked flags of ``argv`` (a resumed run's come from its paper.json later)."""
+    parser = build_parser()
     args = parser.parse_args(argv)
     note_deprecated(argv, {"--budget": "--preset"})
     if args.resume is not None:
