@@ -115,6 +115,7 @@ from jax import monitoring
 
 from pngail_jax import envs
 from pngail_jax import settings as run_settings
+from pngail_jax.adversarial import AdversarialConfig, AdversarialTrainer, TrainState
 from pngail_jax.compilation import enable_compilation_cache
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import Demonstrations, load_demonstrations
@@ -122,7 +123,6 @@ from pngail_jax.grid import Grid, make_cells, nonfinite_cells, stack_cells
 from pngail_jax.methods import METHOD_NAMES
 from pngail_jax.programs import flags
 from pngail_jax.rl.train import TRPO
-from pngail_jax.train import AdversarialConfig, AdversarialTrainer, TrainState
 
 DEFAULT_ENV = "Pendulum-v1"
 REPO_ROOT = Path(__file__).resolve().parents[1]

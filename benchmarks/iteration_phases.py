@@ -1,8 +1,8 @@
 """Where one adversarial-training iteration spends its time, phase by phase, for a grid of cells.
 
 Builds an ``AdversarialTrainer`` on synthetic demonstrations and ``--cells`` cells (PN-GAIL's
-``MethodSpec``, ``pngail_jax.train.Hyperparams`` defaults, one seed each, initialised by the
-trainer) with the environment's run settings (``pngail_jax.settings.settings_for``:
+``MethodSpec``, ``AdversarialHyperparams`` defaults, one seed each, initialised by the trainer)
+with the environment's run settings (``pngail_jax.settings.settings_for``:
 parallel envs, unroll length, MJX solver, evaluation episodes; flags override the shape),
 initialises their TRPO states and runs a real rollout, so every phase sees realistic inputs.
 Each phase is then its own program, ``jax.jit(jax.vmap(phase))`` over the cells as in the real
@@ -11,7 +11,7 @@ phases are timed warm in ``--rounds`` (5) interleaved rounds, every phase once p
 that a change of load on a shared machine hits all phases alike; a round's sample of a phase
 is the mean of back-to-back calls (each ended by ``block_until_ready``) lasting at least
 ``SAMPLE_SECONDS``, and a phase's milliseconds are the median over rounds. Phases, in the
-order of ``pngail_jax.train.AdversarialTrainer``'s iteration:
+order of ``pngail_jax.adversarial.AdversarialTrainer``'s iteration:
 
 - ``rollout``: ``trpo.rollout``, the ``unroll_length``-step ``lax.scan`` over the envs.
 - ``importance_weights``: WGAIL's w on every split row (``--demo-rows``). ``train.py`` puts it
@@ -68,6 +68,7 @@ from common import context, markdown_table, write_rows
 from flax import struct
 
 from pngail_jax import envs
+from pngail_jax.adversarial import AdversarialConfig, AdversarialHyperparams, AdversarialTrainer
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import Demonstrations
 from pngail_jax.methods import method_spec, stack
@@ -78,7 +79,6 @@ from pngail_jax.rl.trpo import (
     conjugate_gradient,
 )
 from pngail_jax.settings import describe, make_env, settings_for
-from pngail_jax.train import AdversarialConfig, AdversarialTrainer, Hyperparams
 
 NUM_ROUNDS = 5
 SAMPLE_SECONDS = 0.05  # fast phases: back-to-back calls per sample, each blocked, to last this
@@ -341,7 +341,7 @@ def compile_phases(phases: Phases, evaluation_trpo: TRPO | None, cells: int, key
     before it (a real rollout's transitions, the discriminator's rewards, ...)."""
     trpo, config = phases.trpo, phases.config
     init_key, evaluation_key = jax.random.split(key)
-    hyperparams = stack([Hyperparams.create()] * cells)
+    hyperparams = stack([AdversarialHyperparams.create()] * cells)
     spec = stack([method_spec("pngail")] * cells)
     trainer_state = jax.jit(jax.vmap(phases.init))(
         hyperparams, spec, jax.random.split(init_key, cells)

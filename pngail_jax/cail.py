@@ -17,7 +17,8 @@ discriminator. Each iteration runs ``CAILConfig.num_rounds`` rounds of:
    held fixed (optionally only when that step's gradient agrees with the ranking loss's, see
    ``pretrain_iterations``).
 
-Everything here is pure and jittable; ``pngail_jax.train`` calls it inside the one-program grid.
+Everything here is pure and jittable; ``pngail_jax.adversarial`` calls it inside the
+one-program grid.
 """
 
 from __future__ import annotations

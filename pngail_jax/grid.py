@@ -25,9 +25,9 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import NamedSharding, PartitionSpec
 
+from pngail_jax.adversarial import AdversarialHyperparams
 from pngail_jax.checkpoint import is_key
 from pngail_jax.methods import MethodSpec, method_spec, stack
-from pngail_jax.train import Hyperparams
 
 GRID_AXIS = "grid"
 
@@ -79,11 +79,11 @@ def stack_cells(
     key: jax.Array,
     method_overrides: dict[str, float] | None = None,
     **hyperparams,
-) -> tuple[Hyperparams, MethodSpec, jax.Array]:
+) -> tuple[AdversarialHyperparams, MethodSpec, jax.Array]:
     """Stacked ``(hyperparams, specs, keys)`` with a leading axis of ``len(cells)``.
 
-    ``hyperparams`` are ``Hyperparams.create`` keywords shared by every cell; each cell's key
-    is ``fold_in(key, cell.seed)``.
+    ``hyperparams`` are ``AdversarialHyperparams.create`` keywords shared by every cell; each
+    cell's key is ``fold_in(key, cell.seed)``.
     """
     if not cells:
         raise ValueError("a grid needs at least one cell")
@@ -91,7 +91,7 @@ def stack_cells(
     specs = stack([method_spec(cell.method, **overrides) for cell in cells])
     stacked_hyperparams = stack(
         [
-            Hyperparams.create(
+            AdversarialHyperparams.create(
                 label_ratio=cell.label_ratio, noise_std=cell.noise_std, **hyperparams
             )
             for cell in cells

@@ -286,9 +286,9 @@ def build(config: RunConfig, saved: SavedRun | None) -> BuiltRun:
     run's demonstrations from the path it began with)."""
     import jax
 
+    from pngail_jax.adversarial import AdversarialTrainer
     from pngail_jax.demos import DemonstrationError
     from pngail_jax.grid import Grid, make_cells, stack_cells
-    from pngail_jax.train import AdversarialTrainer
 
     try:
         env = run_settings.make_env(config.env, config.settings)

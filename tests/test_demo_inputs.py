@@ -16,7 +16,7 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from pngail_jax import envs
+from pngail_jax import adversarial, envs
 from pngail_jax.demos import (
     ACTION_BOUND_MULTIPLE,
     DemonstrationError,
@@ -596,11 +596,12 @@ def test_classify_refuses_a_mask_that_allows_too_few_rows(tmp_path):
 
 
 def test_the_trainer_passes_the_mask_to_the_split_and_checks_ratios(tmp_path, monkeypatch):
-    from pngail_jax import train
     from pngail_jax.methods import method_spec
 
     demos = load_npz(_masked_npz(tmp_path / "masked.npz", num_allowed=6))
-    trainer = train.AdversarialTrainer(train.AdversarialConfig(), envs.make("Pendulum-v1"), demos)
+    trainer = adversarial.AdversarialTrainer(
+        adversarial.AdversarialConfig(), envs.make("Pendulum-v1"), demos
+    )
     trainer.check_label_ratios([0.1, 0.15])  # round(0.15 * 40) = 6 rows: allowed
     with pytest.raises(DemonstrationError, match="label ratio 0.2 of 40 rows asks for 8 lab"):
         trainer.check_label_ratios([0.1, 0.2])
@@ -610,9 +611,12 @@ def test_the_trainer_passes_the_mask_to_the_split_and_checks_ratios(tmp_path, mo
         seen.append(np.asarray(args[5]))
         return make_split(*args)
 
-    monkeypatch.setattr(train, "make_split", spy)
+    monkeypatch.setattr(adversarial, "make_split", spy)
     jax.eval_shape(
-        trainer.init, train.Hyperparams.create(), method_spec("pngail"), jax.random.key(0)
+        trainer.init,
+        adversarial.AdversarialHyperparams.create(),
+        method_spec("pngail"),
+        jax.random.key(0),
     )
     np.testing.assert_array_equal(seen[0], demos.labelled)
 

@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 
 from pngail_jax import envs, firl
+from pngail_jax.adversarial import AdversarialConfig, AdversarialTrainer
 from pngail_jax.demos import Demonstrations
 from pngail_jax.firl import FirlState
 from pngail_jax.methods import method_spec, stack
 from pngail_jax.networks import ClampedStateReward, ResidualDiscriminator
 from pngail_jax.rl import TRPOConfig
 from pngail_jax.run_config import RunConfig
-from pngail_jax.train import AdversarialConfig, AdversarialTrainer
 
 RNG = np.random.default_rng(0)
 

@@ -16,13 +16,13 @@ import numpy as np
 import pytest
 
 from pngail_jax import envs
+from pngail_jax.adversarial import AdversarialConfig, AdversarialHyperparams, AdversarialTrainer
 from pngail_jax.checkpoint import restore_tree, save_tree
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import DemonstrationError, Demonstrations
 from pngail_jax.grid import Grid, make_cells, nonfinite_cells, stack_cells
 from pngail_jax.methods import method_spec
 from pngail_jax.rl import TRPOConfig
-from pngail_jax.train import AdversarialConfig, AdversarialTrainer, Hyperparams
 
 COMPARED = ("eval/return", "disc/loss", "disc/acc_agent", "train/reward", "trpo/kl")
 
@@ -197,7 +197,11 @@ def test_wgail_weights_refresh_on_schedule():
         num_iterations=3, eval_every=1, wgail_refresh_every=2, wgail_refresh_until=2
     )
     trainer = AdversarialTrainer(config, env, demos)
-    hyperparams, spec, key = Hyperparams.create(), method_spec("wgail"), jax.random.key(1)
+    hyperparams, spec, key = (
+        AdversarialHyperparams.create(),
+        method_spec("wgail"),
+        jax.random.key(1),
+    )
     state, _ = jax.jit(trainer.init)(hyperparams, spec, key)
     run = jax.jit(functools.partial(trainer.run_blocks, num_blocks=1))
     state, _ = run(hyperparams, spec, state)
@@ -220,7 +224,7 @@ def test_policy_reward_comes_from_the_discriminator_before_its_step():
 
     env, demos, config = small_setup(num_iterations=1)
     trainer = AdversarialTrainer(config, env, demos)
-    hyperparams, spec = Hyperparams.create(), method_spec("pngail")
+    hyperparams, spec = AdversarialHyperparams.create(), method_spec("pngail")
     state, _ = jax.jit(trainer.init)(hyperparams, spec, jax.random.key(2))
     _, transitions = jax.jit(trainer.trpo.rollout)(state.trpo)  # the iteration's own rollout
     clipped = np.clip(transitions.action, env.action_low, env.action_high)
@@ -249,7 +253,7 @@ def train_discriminator_logits(trainer, state, inputs):
 def test_given_confidences_need_no_classifier_and_classifier_fills_unlabelled_rows():
     env, demos, config = small_setup()
     trainer = AdversarialTrainer(config, env, demos)
-    hyperparams, key = Hyperparams.create(label_ratio=0.25), jax.random.key(3)
+    hyperparams, key = AdversarialHyperparams.create(label_ratio=0.25), jax.random.key(3)
     given, _ = jax.jit(trainer.init)(hyperparams, method_spec("icgail"), key)
     classified, errors = jax.jit(trainer.init)(hyperparams, method_spec("pngail"), key)
     labelled = np.asarray(given.labelled)
@@ -275,7 +279,7 @@ def test_methods_that_read_no_confidences_run_without_them():
     env, demos, config = small_setup()
     with_confidence = AdversarialTrainer(config, env, demos)
     without = AdversarialTrainer(config, env, Demonstrations(demos.observations, demos.actions))
-    args = (Hyperparams.create(), method_spec("gail"), jax.random.key(5))
+    args = (AdversarialHyperparams.create(), method_spec("gail"), jax.random.key(5))
     _, expected = jax.jit(with_confidence.train)(*args)
     _, metrics = jax.jit(without.train)(*args)
     for name in COMPARED:
@@ -295,7 +299,7 @@ def test_bad_demonstrations_are_clear_errors():
     with pytest.raises(DemonstrationError, match="observations of size 2"):
         AdversarialTrainer(config, env, wrong_size)
     with pytest.raises(ValueError, match="label_ratio"):
-        Hyperparams.create(label_ratio=1.0)
+        AdversarialHyperparams.create(label_ratio=1.0)
 
 
 def multihost_worker(process_id: int, port: int) -> dict:

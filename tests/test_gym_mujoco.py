@@ -137,10 +137,10 @@ def _hopper_grid_setup():
     """3 methods x 2 seeds on Hopper-v4 (C engine), 4 envs x 20 steps, 50-step episodes."""
     from test_grid import small_grid_inputs
 
+    from pngail_jax.adversarial import AdversarialConfig, AdversarialTrainer
     from pngail_jax.confidence import ClassifierConfig
     from pngail_jax.demos import Demonstrations
     from pngail_jax.rl import TRPOConfig
-    from pngail_jax.train import AdversarialConfig, AdversarialTrainer
 
     env = envs.make("Hopper-v4", physics="c", max_episode_steps=50)
     rng = np.random.default_rng(0)

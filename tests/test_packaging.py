@@ -3,6 +3,8 @@
 import tomllib
 from pathlib import Path
 
+import pytest
+
 import pngail_jax
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -12,3 +14,17 @@ def test_version_matches_pyproject_and_changelog():
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     assert project["version"] == pngail_jax.__version__
     assert f"## [{pngail_jax.__version__}]" in (ROOT / "CHANGELOG.md").read_text()
+
+
+def test_the_old_module_name_still_imports_with_a_warning():
+    import importlib
+    import sys
+
+    sys.modules.pop("pngail_jax.train", None)
+    with pytest.warns(DeprecationWarning, match="pngail_jax.adversarial"):
+        old = importlib.import_module("pngail_jax.train")
+    from pngail_jax.adversarial import AdversarialHyperparams, AdversarialTrainer
+
+    assert (
+        old.Hyperparams is AdversarialHyperparams and old.AdversarialTrainer is AdversarialTrainer
+    )

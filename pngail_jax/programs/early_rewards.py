@@ -26,6 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from pngail_jax.adversarial import AdversarialTrainer
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import load_demonstrations
 from pngail_jax.grid import Cell, Grid, stack_cells
@@ -33,7 +34,6 @@ from pngail_jax.losses import policy_reward
 from pngail_jax.programs.cli import ArgumentParser, HelpFormatter, path_argument
 from pngail_jax.run_config import RunConfig
 from pngail_jax.settings import make_env
-from pngail_jax.train import AdversarialTrainer
 
 VARIANTS = (  # (label, method, label ratio)
     ("gail", "gail", 0.2),

@@ -492,7 +492,7 @@ class TRPOTrainState:
 class TRPOTrainer:
     """TRPO on a fixed reward (the environment's by default), in blocks.
 
-    The trainer interface shared with ``pngail_jax.train.AdversarialTrainer`` (and used by
+    The trainer interface shared with ``pngail_jax.adversarial.AdversarialTrainer`` (and used by
     ``pngail_jax.grid.Grid``): ``init(*cell_inputs, key) -> (state, init_metrics)``,
     ``run_blocks(*cell_inputs, state, num_blocks) -> (state, metrics)`` and
     ``train(*cell_inputs, key)``, their composition. Here the cell inputs are one

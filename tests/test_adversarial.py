@@ -10,6 +10,7 @@ import pytest
 from conftest import authors_data, swing_up_demonstrations
 
 from pngail_jax import envs
+from pngail_jax.adversarial import AdversarialConfig, AdversarialTrainer
 from pngail_jax.bc import BCConfig
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import Demonstrations, load_demonstrations
@@ -17,7 +18,6 @@ from pngail_jax.grid import make_cells, stack_cells
 from pngail_jax.methods import required_phases
 from pngail_jax.ranking import RankingConfig
 from pngail_jax.rl import TRPOConfig
-from pngail_jax.train import AdversarialConfig, AdversarialTrainer
 
 SHARED_PENDULUM = authors_data()
 
