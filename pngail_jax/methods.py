@@ -16,11 +16,13 @@ confidence, which no preset reads). Specs are pytrees of floats, so a grid of me
 from __future__ import annotations
 
 import dataclasses
+import importlib
 
 import jax
 import jax.numpy as jnp
 from flax import struct
 
+from pngail_jax import validation
 from pngail_jax.confidence import ClassifierSpec
 
 
@@ -65,11 +67,19 @@ class MethodSpec:
 PHASES = ("bc", "demo_rankings", "noise_rankings", "firl", "cail")
 
 
+# Where a method's confidences r come from: "none", "given" (D_c only), "sc", "bsc" (a
+# classifier for D_u), or "rankings" (a label_ratio share of the trajectories, ranked by
+# confidence).
+CONFIDENCE_SOURCES = ("none", "given", "sc", "bsc", "rankings")
+
+
 @dataclasses.dataclass(frozen=True)
 class Preset:
+    """A named method: its ``MethodSpec`` coefficients (the others take their defaults), where
+    its confidences come from (``CONFIDENCE_SOURCES``) and the training phases it reads
+    (``PHASES``). ``register`` checks one against itself before a grid runs it."""
+
     description: str
-    # "none", "given" (D_c only), "sc", "bsc", or "rankings" (a label_ratio share of the
-    # trajectories, ranked by confidence)
     confidence_source: str
     coefficients: dict
     phases: tuple[str, ...] = ()
@@ -152,8 +162,8 @@ def display_name(name: str) -> str:
 
 
 def reads_confidences(name: str) -> bool:
-    """Whether a preset's loss reads confidences (GAIL, WGAIL, BC, D-REX and f-IRL do not);
-    True for a name that is not a preset."""
+    """Whether a method's loss reads confidences (GAIL, WGAIL, BC, D-REX and f-IRL do not);
+    True for a name that is not known."""
     return name not in PRESETS or PRESETS[name].confidence_source != "none"
 
 
@@ -164,21 +174,108 @@ _DEFAULTS = {field.name: 0.0 for field in dataclasses.fields(MethodSpec)} | {
 }
 
 
+# The coefficients that read confidences r, and the phase each learned part needs.
+_READS_CONFIDENCE = (
+    "importance_weighted_coef", "pn_coef", "icgail_coef", "bc_weighted_coef", "cail_coef",
+)  # fmt: skip
+_NEEDS_PHASE = {"bc_init_coef": ("bc",), "firl_coef": ("firl",), "cail_coef": ("cail",)}
+
+
+def check_preset(name: str, preset: Preset) -> Preset:
+    """``preset`` with its coefficients as floats, if it is consistent; else ValueError naming
+    ``name`` and the field: an unknown coefficient or phase, a confidence source that does not
+    match its classifier coefficients or that a confidence-reading term lacks, a learned reward
+    without the phase that learns it."""
+    if not isinstance(preset, Preset):
+        raise ValueError(f"method {name!r}: a pngail_jax.methods.Preset, got {type(preset)}")
+    unknown = sorted(set(preset.coefficients) - set(_DEFAULTS), key=str)
+    if unknown:
+        raise ValueError(f"method {name!r}: unknown MethodSpec field(s) {unknown}")
+    coefficients = {}
+    for field, value in preset.coefficients.items():
+        try:
+            coefficients[field] = validation.real(field, value, "be a finite number")
+        except validation.ConfigError as error:
+            raise ValueError(f"method {name!r}: {error}") from None
+    values = _DEFAULTS | coefficients
+    source, phases = preset.confidence_source, tuple(preset.phases)
+
+    def refuse(reason: str):
+        raise ValueError(f"method {name!r}: {reason}")
+
+    if source not in CONFIDENCE_SOURCES:
+        refuse(f"confidence_source must be one of {CONFIDENCE_SOURCES}, got {source!r}")
+    if not set(phases) <= set(PHASES):
+        refuse(f"phases must be among {PHASES}, got {list(phases)}")
+    for field in ("classifier_coef", "bsc_coef"):
+        if values[field] not in (0.0, 1.0):
+            refuse(f"{field} must be 0 or 1, got {values[field]}")
+    classifier = "bsc" if values["bsc_coef"] == 1.0 else "sc"
+    if values["classifier_coef"] == 1.0 and source != classifier:
+        refuse(f"classifier_coef 1 with bsc_coef {values['bsc_coef']} trains {classifier}: "
+               f"confidence_source must be {classifier!r}, got {source!r}")  # fmt: skip
+    if source in ("sc", "bsc") and values["classifier_coef"] != 1.0:
+        refuse(f"confidence_source {source!r} needs classifier_coef 1 (a trained classifier)")
+    readers = [field for field in _READS_CONFIDENCE if values[field] != 0.0]
+    if readers and source == "none":
+        refuse(f"{', '.join(readers)} read confidences: confidence_source cannot be 'none'")
+    needed = {phase for field, need in _NEEDS_PHASE.items() if values[field] for phase in need}
+    if values["ranking_reward_coef"]:
+        needed.add("noise_rankings" if values["noise_rankings_coef"] else "demo_rankings")
+    if not needed <= set(phases):
+        refuse(f"its coefficients need the phase(s) {sorted(needed - set(phases))}: "
+               "add them to phases")  # fmt: skip
+    return dataclasses.replace(preset, coefficients=coefficients, phases=phases)
+
+
+def register(name: str, preset: Preset) -> Preset:
+    """Adds a method a grid can run by ``name`` (``make_cells``, ``RunConfig(methods=...)``),
+    checked by ``check_preset``. Registering the same preset again is a no-op; another one
+    under a name in use is refused (the built-ins cannot be replaced)."""
+    if not isinstance(name, str) or not name.strip() or "," in name:
+        raise ValueError(f"a method name is a non-empty string without commas, got {name!r}")
+    preset = check_preset(name, preset)
+    if name in PRESETS and PRESETS[name] != preset:
+        raise ValueError(f"method {name!r} is already registered as another method")
+    PRESETS[name] = preset
+    return preset
+
+
+def resolve(name: str) -> Preset:
+    """The preset of ``name``: a built-in or registered one, or ``"package.module:attribute"``
+    naming a ``Preset`` (imported and registered under that name, so a saved run's config
+    names it again). ValueError naming what is missing."""
+    if not isinstance(name, str):
+        raise ValueError(f"a method name is a string, got {name!r}")
+    if name in PRESETS:
+        return PRESETS[name]
+    if ":" not in name:
+        raise ValueError(
+            f"unknown method {name!r}; available: {', '.join(PRESETS)}, a name given to "
+            "pngail_jax.methods.register, or package.module:preset"
+        )
+    module_name, _, attribute = name.partition(":")
+    try:
+        preset = getattr(importlib.import_module(module_name), attribute)
+    except (ImportError, AttributeError, TypeError, ValueError) as error:
+        raise ValueError(f"method {name!r}: cannot import it ({error})") from None
+    return register(name, preset)
+
+
 def required_phases(methods) -> tuple[str, ...]:
     """The training phases (``PHASES``, in that order) that ``methods`` need."""
-    needed = {phase for name in methods for phase in PRESETS[name].phases}
+    needed = {phase for name in methods for phase in resolve(name).phases}
     return tuple(phase for phase in PHASES if phase in needed)
 
 
 def method_spec(name: str, **overrides: float) -> MethodSpec:
-    """The preset ``name`` (one of ``ALL_METHOD_NAMES``), with coefficients optionally
-    overridden."""
-    if name not in PRESETS:
-        raise ValueError(f"unknown method {name!r}; available: {', '.join(ALL_METHOD_NAMES)}")
+    """The method ``name`` (a preset, a registered name or ``package.module:preset``;
+    ``resolve``), with coefficients optionally overridden."""
+    preset = resolve(name)
     unknown = set(overrides) - set(_DEFAULTS)
     if unknown:
         raise ValueError(f"unknown MethodSpec field(s) {sorted(unknown)}; known: {list(_DEFAULTS)}")
-    values = _DEFAULTS | PRESETS[name].coefficients | overrides
+    values = _DEFAULTS | preset.coefficients | overrides
     if not values["bsc_eps"] > 0:
         raise ValueError(f"bsc_eps must be positive, got {values['bsc_eps']!r}")
     return MethodSpec(**{k: jnp.asarray(v, jnp.float32) for k, v in values.items()})

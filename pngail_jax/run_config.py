@@ -25,12 +25,18 @@ from pathlib import Path
 from typing import Any
 
 from pngail_jax import envs
+from pngail_jax.adversarial import AdversarialConfig
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.firl import FirlConfig
-from pngail_jax.methods import ALL_METHOD_NAMES, METHOD_NAMES, PRESETS, required_phases
+from pngail_jax.methods import (
+    ALL_METHOD_NAMES,
+    METHOD_NAMES,
+    PRESETS,
+    required_phases,
+    resolve,
+)
 from pngail_jax.settings import RunSettings, settings_for
 from pngail_jax.tracking import BACKENDS as LOG_BACKENDS
-from pngail_jax.train import AdversarialConfig
 from pngail_jax.validation import (
     ConfigError,
     fail,
@@ -197,12 +203,21 @@ class RunConfig:
                 "methods",
                 f"must name at least one method; available: {', '.join(ALL_METHOD_NAMES)}",
             )
-        unknown = [name for name in self.methods if not is_among(name, PRESETS)]
+        unknown = [
+            name for name in self.methods
+            if not isinstance(name, str) or (":" not in name and name not in PRESETS)
+        ]  # fmt: skip
         if unknown:
             fail(
                 "methods",
-                f": unknown method(s) {unknown}; available: {', '.join(ALL_METHOD_NAMES)}",
+                f": unknown method(s) {unknown}; available: {', '.join(PRESETS)}, or "
+                "package.module:preset",
             )
+        for name in self.methods:  # a registered name, or package.module:preset, imported
+            try:
+                resolve(name)
+            except ValueError as error:
+                fail("methods", f": {error}")
         if len(set(self.methods)) != len(self.methods):
             fail("methods", f"must not repeat, got {list(self.methods)}")
         if not is_among(self.fisher, FISHER_FORMS):

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from pngail_jax import envs
+from pngail_jax.adversarial import AdversarialConfig, AdversarialHyperparams, AdversarialTrainer
 from pngail_jax.bc import BCConfig, DeterministicBCConfig
 from pngail_jax.cail import CAILConfig
 from pngail_jax.confidence import ClassifierConfig
@@ -24,7 +25,6 @@ from pngail_jax.networks import orthogonal_init
 from pngail_jax.ranking import DrexConfig, RankingConfig
 from pngail_jax.rl import TRPOConfig
 from pngail_jax.run_config import RunConfig
-from pngail_jax.train import AdversarialConfig, AdversarialTrainer, Hyperparams
 
 METHODS = ("trex", "drex", "cail", "firl-fkl", "firl-rkl", "firl-js", "bc", "bc-weighted")
 # Tolerances between two compiled programs (vmapped vs single), as tests/test_grid.py's.
@@ -70,7 +70,9 @@ def test_the_seven_compile_no_appendix_phase():
     assert RunConfig().adversarial_config().phases == ()
     assert required_phases(METHOD_NAMES) == ()
     assert RunConfig(methods=("gail", "drex")).adversarial_config().phases == ("noise_rankings",)
-    state, _ = trainer_for(("gail",)).init(Hyperparams.create(), method_spec("gail"), key(0))
+    state, _ = trainer_for(("gail",)).init(
+        AdversarialHyperparams.create(), method_spec("gail"), key(0)
+    )
     assert state.ranking_reward_params is None and state.firl is None
 
 
@@ -138,7 +140,7 @@ def test_cail_learns_confidences_that_rank_trajectories_of_known_quality():
     )  # fmt: skip
     hyperparams = jax.tree.map(
         lambda x: np.stack([x] * 5),
-        Hyperparams.create(label_ratio=0.95),  # every one ranked
+        AdversarialHyperparams.create(label_ratio=0.95),  # every one ranked
     )
     keys = jax.numpy.stack([key(0), key(1), key(2), key(0), key(0)])
     state, metrics = jax.jit(jax.vmap(trainer.train))(hyperparams, specs, keys)
@@ -161,7 +163,7 @@ def test_cails_gradient_gate_skips_only_disagreeing_steps_after_pretraining():
     the ranking loss's agree from iteration N on (a count of skipped steps per iteration);
     before N (here: never reached) it skips none."""
     base = trainer_for(("cail",), num_iterations=3)
-    hyperparams, spec = Hyperparams.create(label_ratio=0.95), method_spec("cail")
+    hyperparams, spec = AdversarialHyperparams.create(label_ratio=0.95), method_spec("cail")
     results = {}
     for start in (0, 1000):
         config = dataclasses.replace(base.config, cail=CAILConfig(pretrain_iterations=start))

@@ -113,9 +113,12 @@ def flag_message(error: ConfigError, tables: Sequence[Sequence[FieldFlag]]) -> s
 
 
 def _methods(parser, flag: str, text: str) -> tuple[str, ...]:
-    from pngail_jax.methods import ALL_METHOD_NAMES
+    """Built-in or registered names, and ``package.module:preset`` ones (RunConfig imports
+    and checks those)."""
+    from pngail_jax.methods import PRESETS
 
-    return tuple(known_names(parser, text, ALL_METHOD_NAMES, "method", flag=flag))
+    outside = [item.strip() for item in str(text).split(",") if ":" in item]
+    return tuple(known_names(parser, text, (*PRESETS, *outside), "method", flag=flag))
 
 
 def _log_backends(parser, flag: str, text: str) -> tuple[str, ...]:
@@ -206,7 +209,8 @@ def settings_from_flags(parser, args, env: str, base: RunSettings | None = None)
 RUN_FLAGS = (
     FieldFlag(
         "methods",
-        "comma-separated method names (default: the paper's seven; the list below)",
+        "comma-separated method names, from the list below or package.module:preset for "
+        "your own (docs/methods.md) (default: the paper's seven)",
         convert=_methods,
     ),
     FieldFlag("seeds", "seeds per method and setting (default {default})", type=int),
