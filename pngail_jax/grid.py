@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import itertools
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -46,16 +47,32 @@ class Trainer(Protocol):
     def eval_every(self) -> int: ...
 
 
+# Per-cell values a grid axis may vary besides label ratio and noise (their own axes): the
+# pytree leaves of AdversarialHyperparams (TRPO's included) and of MethodSpec. Everything else
+# (network widths, rollout shape, step counts) fixes the compiled program's shapes or loops,
+# which every cell shares.
+HYPERPARAM_AXES = (
+    "discriminator_learning_rate", "gamma", "lam", "max_kl", "damping", "value_learning_rate",
+)  # fmt: skip
+METHOD_AXES = tuple(field.name for field in dataclasses.fields(MethodSpec))
+GRID_AXES = HYPERPARAM_AXES + METHOD_AXES
+
+
 @dataclasses.dataclass(frozen=True)
 class Cell:
+    """One run of a grid: a method, a seed and a setting (label ratio, noise and the value of
+    every other grid axis, ``axes``: ``((field, value), ...)`` from ``GRID_AXES``)."""
+
     method: str
     seed: int
     label_ratio: float = 0.2
     noise_std: float = 0.0
+    axes: tuple[tuple[str, float], ...] = ()
 
     @property
     def setting(self) -> str:
-        return f"label_ratio={self.label_ratio:g},noise={self.noise_std:g}"
+        extra = "".join(f",{field}={value:g}" for field, value in self.axes)
+        return f"label_ratio={self.label_ratio:g},noise={self.noise_std:g}{extra}"
 
 
 def make_cells(
@@ -63,12 +80,19 @@ def make_cells(
     num_seeds: int,
     label_ratios: Sequence[float] = (0.2,),
     noise_stds: Sequence[float] = (0.0,),
+    axes: Sequence[tuple[str, Sequence[float]]] = (),
 ) -> list[Cell]:
-    """Every combination, ordered setting-major, then method, then seed."""
+    """Every combination, ordered setting-major (label ratio, noise, then each of ``axes``,
+    ``(field, values)`` pairs of ``GRID_AXES``, in order), then method, then seed."""
+    unknown = [field for field, _ in axes if field not in GRID_AXES]
+    if unknown:
+        raise ValueError(f"grid axes must be among {GRID_AXES}, got {unknown}")
+    fields = [field for field, _ in axes]
     return [
-        Cell(method, seed, label_ratio, noise_std)
+        Cell(method, seed, label_ratio, noise_std, tuple(zip(fields, values, strict=True)))
         for label_ratio in label_ratios
         for noise_std in noise_stds
+        for values in itertools.product(*(values for _, values in axes))
         for method in methods
         for seed in range(num_seeds)
     ]
@@ -82,23 +106,26 @@ def stack_cells(
 ) -> tuple[AdversarialHyperparams, MethodSpec, jax.Array]:
     """Stacked ``(hyperparams, specs, keys)`` with a leading axis of ``len(cells)``.
 
-    ``hyperparams`` are ``AdversarialHyperparams.create`` keywords shared by every cell; each
-    cell's key is ``fold_in(key, cell.seed)``.
+    ``hyperparams`` are ``AdversarialHyperparams.create`` keywords shared by every cell, and
+    ``method_overrides`` ``MethodSpec`` fields; a cell's ``axes`` override either. Each cell's
+    key is ``fold_in(key, cell.seed)``.
     """
     if not cells:
         raise ValueError("a grid needs at least one cell")
     overrides = method_overrides or {}
-    specs = stack([method_spec(cell.method, **overrides) for cell in cells])
-    stacked_hyperparams = stack(
-        [
+    specs, cell_hyperparams = [], []
+    for cell in cells:
+        axes = dict(cell.axes)
+        method_values = {f: v for f, v in axes.items() if f in METHOD_AXES}
+        specs.append(method_spec(cell.method, **{**overrides, **method_values}))
+        values = {**hyperparams, **{f: v for f, v in axes.items() if f in HYPERPARAM_AXES}}
+        cell_hyperparams.append(
             AdversarialHyperparams.create(
-                label_ratio=cell.label_ratio, noise_std=cell.noise_std, **hyperparams
+                label_ratio=cell.label_ratio, noise_std=cell.noise_std, **values
             )
-            for cell in cells
-        ]
-    )
+        )
     keys = jnp.stack([jax.random.fold_in(key, cell.seed) for cell in cells])
-    return stacked_hyperparams, specs, keys
+    return stack(cell_hyperparams), stack(specs), keys
 
 
 def _pad(tree, size: int):

@@ -22,7 +22,7 @@ CSV_COLUMNS = (
     "seed",
     "setting",  # both grid axes in one label, e.g. "label_ratio=0.2,noise=0"
     "label_ratio",  # one column per grid axis
-    "noise",
+    "noise",  # then one column per further grid axis (RunConfig.grid_axes), if any
     "iteration",
     "env_steps",
     "wall_seconds",  # training seconds (compile excluded) when the iteration's chunk ended
@@ -77,10 +77,13 @@ def write_metrics_csv(path: Path, cells, metrics, normalizer, chunk_seconds=()) 
     wall = [
         f"{chunk_seconds[i // per_chunk]:.1f}" if per_chunk else "" for i in range(num_iterations)
     ]
+    # A grid's further axes (grid_axes) get a column each, after label_ratio and noise.
+    axes = list(dict.fromkeys(field for cell in cells for field, _ in cell.axes))
     with atomic_path(path) as temporary, temporary.open("w", newline="") as file:
         writer = csv.writer(file)
-        writer.writerow(CSV_COLUMNS)
+        writer.writerow([*CSV_COLUMNS[:5], *axes, *CSV_COLUMNS[5:]])
         for index, cell in enumerate(cells):
+            axis_values = dict(cell.axes)
             for iteration in range(num_iterations):
                 values = {
                     column: _format(metrics[name][index, iteration])
@@ -94,7 +97,9 @@ def write_metrics_csv(path: Path, cells, metrics, normalizer, chunk_seconds=()) 
                 values["noise"] = f"{cell.noise_std:g}"
                 writer.writerow(
                     [cell.method, cell.seed, cell.setting]
-                    + [values[column] for column in CSV_COLUMNS[3:]]
+                    + [values[column] for column in CSV_COLUMNS[3:5]]
+                    + [f"{axis_values[field]:g}" for field in axes]
+                    + [values[column] for column in CSV_COLUMNS[5:]]
                 )
 
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import platform
 import subprocess
 import sys
@@ -25,16 +26,19 @@ from pathlib import Path
 from typing import Any
 
 from pngail_jax import envs
-from pngail_jax.adversarial import AdversarialConfig
+from pngail_jax.adversarial import AdversarialConfig, AdversarialHyperparams
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.firl import FirlConfig
+from pngail_jax.grid import GRID_AXES, METHOD_AXES
 from pngail_jax.methods import (
     ALL_METHOD_NAMES,
     METHOD_NAMES,
     PRESETS,
+    check_preset,
     required_phases,
     resolve,
 )
+from pngail_jax.rl.train import TRPOConfig
 from pngail_jax.settings import RunSettings, settings_for
 from pngail_jax.tracking import BACKENDS as LOG_BACKENDS
 from pngail_jax.validation import (
@@ -93,6 +97,10 @@ class RunConfig:
     iterations: int = 300
     label_ratios: tuple[float, ...] = (0.2,)
     noise_stds: tuple[float, ...] = (0.0,)
+    # More grid axes: ((field, (value, ...)), ...), each field a per-cell value
+    # (pngail_jax.grid.GRID_AXES: discriminator and TRPO hyperparameters, MethodSpec
+    # coefficients); the grid is the product of every axis.
+    grid_axes: tuple[tuple[str, tuple[float, ...]], ...] = ()
     seed: int = 0  # base PRNG seed; cell keys are fold_in(key(seed), cell seed)
     # Demonstrations: a *_mixture.npy (authors' layout), an .npz, or "minari:<dataset id>";
     # None: made with pngail_jax.demos.make and cached (pngail_jax.runner.load_or_make_demos).
@@ -195,6 +203,7 @@ class RunConfig:
             self._set("bsc_eps", real("bsc_eps", self.bsc_eps, "lie in (0, 0.5)"))
             if not 0 < self.bsc_eps < 0.5:
                 fail("bsc_eps", f"must lie in (0, 0.5), got {self.bsc_eps!r}")
+        self._set("grid_axes", _grid_axes(self.grid_axes))
 
     def _check_names(self) -> None:
         """The names each field must be among: methods, the Fisher form, log backends."""
@@ -230,6 +239,25 @@ class RunConfig:
             )
         if len(set(self.log)) != len(self.log):
             fail("log", f"backends must not repeat, got {list(self.log)}")
+        for field, values in self.grid_axes:  # a hyperparameter's range
+            if field in METHOD_AXES:
+                continue
+            for value in values:
+                try:
+                    AdversarialHyperparams.create(**{field: value})
+                except ValueError as error:
+                    fail("grid_axes", f": {field}={value:g}: {error}")
+        for name in self.methods:  # every value of a coefficient axis, on every method
+            for field, values in self.grid_axes:
+                if field not in METHOD_AXES:
+                    continue
+                preset = resolve(name)
+                for value in values:
+                    changed = {**preset.coefficients, field: value}
+                    try:
+                        check_preset(name, dataclasses.replace(preset, coefficients=changed))
+                    except ValueError as error:
+                        fail("grid_axes", f": {field}={value:g} on {error}")
 
     def _check_between_fields(self) -> None:
         """The checks between fields: the run's length and its task's settings, the
@@ -309,7 +337,11 @@ class RunConfig:
 
     @property
     def num_settings(self) -> int:
-        return len(self.label_ratios) * len(self.noise_stds)
+        return (
+            len(self.label_ratios)
+            * len(self.noise_stds)
+            * math.prod(len(values) for _, values in self.grid_axes)
+        )
 
     def task_num_demos(self, num_rows: int) -> int:
         """Rows per split for demonstrations of ``num_rows`` rows: ``num_demos``, or the
@@ -436,6 +468,43 @@ def upgrade_saved_config(data: dict[str, Any]) -> dict[str, Any]:
 # -- field checks (pngail_jax.validation): each returns the value in its stored type -------
 
 _TUPLE_FIELDS = ("methods", "label_ratios", "noise_stds", "log", "discriminator_hidden_sizes")
+# The fields a grid axis cannot vary, with a reason (they shape the compiled program).
+_STATIC_FIELDS = {
+    *(field.name for field in dataclasses.fields(RunSettings)),
+    *(field.name for field in dataclasses.fields(TRPOConfig)),
+    *(field.name for field in dataclasses.fields(ClassifierConfig)),
+    "iterations", "seeds", "num_demos", "discriminator_hidden_sizes", "chunk_iterations",
+}  # fmt: skip
+
+
+def _grid_axes(axes) -> tuple[tuple[str, tuple[float, ...]], ...]:
+    """``((field, (value, ...)), ...)`` checked: per-cell fields (``GRID_AXES``; a static one
+    is refused saying why), each once, with distinct finite values."""
+    if not isinstance(axes, list | tuple) or not all(
+        isinstance(axis, list | tuple) and len(axis) == 2 for axis in axes
+    ):
+        fail("grid_axes", f"must be (field, values) pairs, got {axes!r}")
+    fields = [axis[0] for axis in axes]
+    for field in fields:
+        if field in ("label_ratio", "noise_std"):
+            fail("grid_axes", f": {field} has its own axis ({field}s)")
+        if not isinstance(field, str) or field not in GRID_AXES:
+            static = isinstance(field, str) and field in _STATIC_FIELDS
+            why = (
+                "is static: it fixes the shapes or loop counts of the one compiled program that "
+                "every cell shares; set it with its own option"
+                if static
+                else "is not a per-cell field"
+            )
+            fail("grid_axes", f": {field!r} {why}; axes: {', '.join(GRID_AXES)}")
+    if len(set(fields)) != len(fields):
+        fail("grid_axes", f": an axis is given twice, got {fields}")
+    return tuple(
+        (field, float_axis("grid_axes", tuple(values) if isinstance(values, list | tuple)
+                           else (values,), "be finite numbers", math.isfinite,
+                           name=f"grid axis {field}"))
+        for field, values in axes
+    )  # fmt: skip
 
 
 def _env_settings(env: str) -> RunSettings:

@@ -311,7 +311,9 @@ def build(config: RunConfig, saved: SavedRun | None) -> BuiltRun:
                 f"--label-ratio {ratio} labels {num_labelled} of {trainer.num_demos} rows; "
                 "need at least one labelled and one unlabelled row"
             )
-    cells = make_cells(config.methods, config.seeds, config.label_ratios, config.noise_stds)
+    cells = make_cells(
+        config.methods, config.seeds, config.label_ratios, config.noise_stds, config.grid_axes
+    )
     inputs = stack_cells(cells, jax.random.key(config.seed), {"bsc_eps": config.task_bsc_eps})
     eval_every = config.settings.eval_every
     num_evaluations = config.iterations // eval_every

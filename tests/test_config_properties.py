@@ -94,6 +94,15 @@ FIELD_VALUES = {
     "cpu_devices": COUNTS,
     "log": tuples_of(st.sampled_from(LOG_BACKENDS) | SCALARS),
     "preset_name": PATHS,
+    "grid_axes": st.lists(
+        st.tuples(
+            st.sampled_from(["max_kl", "gamma", "pn_coef", "num_envs", "label_ratio", "x"])
+            | SCALARS,
+            st.lists(FLOATS | SCALARS, max_size=3),
+        ),
+        max_size=2,
+    )
+    | JUNK,
 }
 # The fields a field's error may name besides its own: settings' evaluation interval must
 # divide the iterations ("iterations (300) must be a multiple of the evaluation interval").
@@ -104,6 +113,7 @@ ALSO_CALLED = {
     "label_ratios": ("label ratios",),
     "noise_stds": ("noise stds",),
     "classifier": ("ClassifierConfig.",),
+    "grid_axes": ("grid axis",),
 }
 
 

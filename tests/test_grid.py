@@ -354,3 +354,37 @@ def test_two_processes_match_one():
     for name in COMPARED:
         assert_close_across_programs(results[0][name], single[name], name)
     assert results[0]["env_steps"] == [2 * 200] * 6
+
+
+def test_a_grid_over_further_axes_equals_its_cells_run_alone():
+    """Axes over a TRPO hyperparameter and a loss coefficient (2 x 2 settings, one program):
+    each cell's inputs are its values set by hand, and its metrics those of the cell alone."""
+    from pngail_jax.adversarial import AdversarialHyperparams
+
+    env, demos, config = small_setup()
+    trainer = AdversarialTrainer(config, env, demos)
+    axes = (("max_kl", (0.005, 0.02)), ("importance_weighted_coef", (0.0, 1.0)))
+    cells = make_cells(["pngail"], 1, axes=axes)
+    assert [dict(cell.axes) for cell in cells] == [
+        {"max_kl": kl, "importance_weighted_coef": w} for kl in (0.005, 0.02) for w in (0.0, 1.0)
+    ]
+    assert cells[1].setting == "label_ratio=0.2,noise=0,max_kl=0.005,importance_weighted_coef=1"
+    inputs = stack_cells(cells, jax.random.key(0))
+    _, grid_metrics = jax.jit(jax.vmap(trainer.train))(*inputs)
+    single = jax.jit(trainer.train)
+    for index, cell in enumerate(cells):
+        values = dict(cell.axes)
+        by_hand = (
+            AdversarialHyperparams.create(max_kl=values["max_kl"]),
+            method_spec("pngail", importance_weighted_coef=values["importance_weighted_coef"]),
+            jax.random.fold_in(jax.random.key(0), 0),
+        )
+        picked = jax.tree.map(lambda x, i=index: x[i], inputs)
+        jax.tree.map(np.testing.assert_array_equal, picked[:2], by_hand[:2])
+        _, metrics = single(*by_hand)
+        for name in COMPARED:
+            assert_close_across_programs(grid_metrics[name][index], metrics[name], name)
+    kl = np.asarray(grid_metrics["trpo/kl"])
+    assert np.all(kl[:2] <= 0.005 * 1.01) and kl[2:].max() > 0.005 * 1.01  # the axis acts
+    with pytest.raises(ValueError, match="grid axes must be among"):
+        make_cells(["gail"], 1, axes=(("num_envs", (4, 8)),))

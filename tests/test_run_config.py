@@ -73,6 +73,14 @@ def test_json_round_trip_and_presets(tmp_path):
             "ClassifierConfig.num_steps must be a positive integer, got True",
         ),
         ({"conf": "/x/conf.npy"}, "conf: a confidence file needs demos"),
+        ({"grid_axes": (("num_envs", (4, 8)),)}, "'num_envs' is static: it fixes the shapes"),
+        ({"grid_axes": (("max_kll", (0.1,)),)}, "'max_kll' is not a per-cell field"),
+        ({"grid_axes": (("label_ratio", (0.1,)),)}, r"has its own axis \(label_ratios\)"),
+        ({"grid_axes": (("max_kl", (0.1, 0.1)),)}, "grid axis max_kl must not repeat"),
+        ({"grid_axes": (("max_kl", (0.0,)),)}, "max_kl=0: TRPOHyperparams.max_kl out of range"),
+        ({"grid_axes": (("gamma", ()),)}, "grid axis gamma must not be empty"),
+        ({"grid_axes": (("pn_coef", (1.0,)),)}, "pn_coef=1 on method 'gail': pn_coef read"),
+        ({"grid_axes": "max_kl"}, "grid_axes must be .field, values. pairs"),
     ],
 )
 def test_bad_values_are_named(overrides, message):

@@ -79,3 +79,45 @@ def test_run_refuses_in_one_line_and_resumes_a_finished_run_without_work(
     with pytest.raises(RunError, match="files it did not make"):
         run(config, occupied)
     assert [p.name for p in occupied.iterdir()] == ["notes.txt"]
+
+
+def test_a_grid_axis_keys_the_csv_the_summary_and_the_policies(finished, demos_path, tmp_path):
+    """--grid max_kl=0.005,0.01 on the tiny sweep: one column and one summary row per value;
+    its max_kl=0.01 cells are the tiny sweep's (0.01 is the default), to the float tolerance
+    of two programs (tests/test_grid.py's: 1e-3 relative for returns and KL)."""
+    import csv
+
+    import numpy as np
+
+    argv = [*tiny_sweep_args(demos_path, tmp_path / "axis"), "--grid", "max_kl=0.005,0.01"]
+    sweep.main(argv)
+    out = tmp_path / "axis"
+    with open(out / "metrics.csv") as file:
+        rows = list(csv.DictReader(file))
+    assert {row["max_kl"] for row in rows} == {"0.005", "0.01"}
+    default = [
+        {k: v for k, v in row.items() if k not in ("wall_seconds", "setting", "max_kl")}
+        for row in rows
+        if row["max_kl"] == "0.01"
+    ]
+    alone = [
+        {k: v for k, v in row.items() if k != "setting"}
+        for row in metrics_numbers(finished / "metrics.csv")
+    ]
+    assert len(default) == len(alone)
+    for ours, theirs in zip(default, alone, strict=True):
+        assert ours.keys() == theirs.keys()
+        for key, value in ours.items():
+            if key in ("method", "seed", "iteration", "env_steps") or not value:
+                assert value == theirs[key], key
+            else:
+                atol = 1e-3 if key == "normalized_return" else 0.0  # a value near 0
+                np.testing.assert_allclose(
+                    float(value), float(theirs[key]), rtol=1e-3, atol=atol, err_msg=key
+                )
+    groups = json.loads((out / "summary.json").read_text())["methods"]
+    assert len(groups) == 4 and "pngail [label_ratio=0.2,noise=0,max_kl=0.005]" in groups
+    policies = out / "policies" / "gail" / "label_ratio=0.2,noise=0,max_kl=0.005" / "policy.json"
+    assert policies.exists()
+    config = json.loads((out / "config.json").read_text())
+    assert config["grid_axes"] == [["max_kl", [0.005, 0.01]]]

@@ -43,6 +43,7 @@ class FieldFlag:
     also: tuple[str, ...] = ()  # the other fields ``to_fields`` sets
     choices: Sequence[str] | None = None
     boolean: bool = False
+    append: bool = False  # repeatable: the value is the list of every occurrence's text
     metavar: str | None = None
 
     @property
@@ -70,6 +71,8 @@ class FieldFlag:
         options: dict[str, Any] = {"help": help_text}
         if self.boolean:
             options.update(action=argparse.BooleanOptionalAction, default=None)
+        if self.append:
+            options["action"] = "append"
         for key in ("type", "choices", "metavar"):
             if getattr(self, key) is not None:
                 options[key] = getattr(self, key)
@@ -123,6 +126,18 @@ def _methods(parser, flag: str, text: str) -> tuple[str, ...]:
 
 def _log_backends(parser, flag: str, text: str) -> tuple[str, ...]:
     return tuple(known_names(parser, text, LOG_BACKENDS, "log backend", flag=flag))
+
+
+def _grid_axes(parser, flag: str, texts: list[str]) -> tuple[tuple[str, tuple[float, ...]], ...]:
+    """``FIELD=V1,V2,...`` per occurrence, as ``RunConfig.grid_axes`` (which checks the field
+    and the values)."""
+    axes = []
+    for text in texts:
+        field, equals, values = text.partition("=")
+        if not equals or not field.strip():
+            parser.error(f"{flag} takes FIELD=V1,V2,... (e.g. max_kl=0.005,0.01), got {text!r}")
+        axes.append((field.strip(), comma_floats(parser, f"{flag} {field.strip()}", values)))
+    return tuple(axes)
 
 
 def _absolute_file(parser, flag: str, text: str) -> str:
@@ -268,6 +283,16 @@ RUN_FLAGS = (
         flag="--noise",
         convert=comma_floats,
         subject="--noise values",
+    ),
+    FieldFlag(
+        "grid_axes",
+        "another grid axis, repeatable: a per-cell value (a discriminator or TRPO "
+        "hyperparameter, e.g. max_kl, or a MethodSpec coefficient, e.g. pn_coef) and its "
+        "values; every axis multiplies the grid (default: none)",
+        flag="--grid",
+        convert=_grid_axes,
+        append=True,
+        metavar="FIELD=V1,V2",
     ),
     FieldFlag("seed", "base PRNG seed (default 0)", type=int),
     FieldFlag(
