@@ -180,7 +180,15 @@ def _per_cell(cells, metrics, normalizer, excluded):
     return values
 
 
-def summarize(cells, metrics, normalizer, train_env_steps_per_second, compile_seconds, excluded=()):
+def summarize(
+    cells,
+    metrics,
+    normalizer,
+    train_env_steps_per_second,
+    compile_seconds,
+    excluded=(),
+    baseline: str | None = None,
+):
     """The ``summary.json`` dictionary (NaN where undefined; ``write_summary`` writes null).
 
     Per method (and setting): the final return (the last evaluation) and the average
@@ -192,7 +200,8 @@ def summarize(cells, metrics, normalizer, train_env_steps_per_second, compile_se
     a seed's labels apart). Cells in ``excluded`` (diverged,
     ``pngail_jax.grid.nonfinite_cells``) and non-finite returns are left out of every
     statistic and of ``num_seeds``. With PN-GAIL in the grid: the probability that a PN-GAIL
-    seed's final return beats a baseline seed's, per baseline, with its 95% interval.
+    seed's final return beats a baseline seed's, per baseline, with its 95% interval; with
+    ``baseline`` (a method), the probability that each other method's seed beats its seed.
     """
     excluded = set(excluded)
     values = _per_cell(cells, metrics, normalizer, excluded)
@@ -232,33 +241,37 @@ def summarize(cells, metrics, normalizer, train_env_steps_per_second, compile_se
         "null_means": NULL_MEANS,
         "methods": methods,
         "probability_of_improvement": _improvement_over_baselines(
-            cells, settings, values["final_return"]
+            cells, settings, values["final_return"], baseline
         ),
+        "improvement": {"over": baseline} if baseline else {"of": "pngail"},
         "train_env_steps_per_second": float(train_env_steps_per_second),
         "compile_seconds": float(compile_seconds),
         "normalizer": None if normalizer is None else [float(x) for x in normalizer],
     }
 
 
-def _improvement_over_baselines(cells, settings, final, method="pngail") -> dict:
-    """``{baseline label: {"estimate", "ci95"}}``: P(a ``method`` seed's final return beats a
-    baseline seed's) per setting (rliable's probability of improvement)."""
+def _improvement_over_baselines(cells, settings, final, baseline: str | None = None) -> dict:
+    """``{label: {"estimate", "ci95"}}`` per setting (rliable's probability of improvement):
+    without ``baseline``, P(a PN-GAIL seed's final return beats a seed of the labelled
+    method); with it, P(a seed of the labelled method beats a ``baseline`` seed)."""
     result = {}
+    anchor = baseline or "pngail"
     for setting in settings:
         rows = {}
         for index, cell in enumerate(cells):
             if cell.setting == setting:
                 rows.setdefault(cell.method, []).append(index)
-        if method not in rows:
+        if anchor not in rows:
             continue
-        ours = final[rows[method]]
-        for baseline, indices in rows.items():
-            if baseline == method:
+        fixed = final[rows[anchor]]
+        for other, indices in rows.items():
+            if other == anchor:
                 continue
             label = group_label(cells[indices[0]], settings)
+            ours, theirs = (final[indices], fixed) if baseline else (fixed, final[indices])
             result[label] = {
-                "estimate": stats.probability_of_improvement(ours, final[indices]),
-                "ci95": list(stats.probability_of_improvement_ci(ours, final[indices])),
+                "estimate": stats.probability_of_improvement(ours, theirs),
+                "ci95": list(stats.probability_of_improvement_ci(ours, theirs)),
             }
     return result
 
@@ -326,7 +339,9 @@ def summary_markdown(summary, cells, metrics, title: str, notes: Sequence[str] =
         ]
         lines.append("| " + " | ".join(columns) + " |")
     lines += ["", _table_note(normalised)]
-    lines += _improvement_lines(summary.get("probability_of_improvement", {}))
+    lines += _improvement_lines(
+        summary.get("probability_of_improvement", {}), summary.get("improvement", {}).get("over")
+    )
     lines += _per_seed_lines(summary)
     lines += [
         "",
@@ -359,16 +374,24 @@ def _table_note(normalised: bool) -> str:
     )
 
 
-def _improvement_lines(improvement: dict) -> list[str]:
-    """summary.md's table of PN-GAIL's probability of improvement over each baseline."""
+def _improvement_lines(improvement: dict, baseline: str | None = None) -> list[str]:
+    """summary.md's table of PN-GAIL's probability of improvement over each baseline (or of
+    each method's over ``baseline``)."""
     if not improvement:
         return []
+    from pngail_jax.methods import display_name
+
+    if baseline:
+        sentence = f"P(a seed's final return > a {display_name(baseline)} seed's)"
+        header = f"| method | P(method > {display_name(baseline)}) | 95% CI |"
+    else:
+        sentence = "P(a PN-GAIL seed's final return > a baseline seed's)"
+        header = "| over | P(PN-GAIL > baseline) | 95% CI |"
     lines = [
         "",
-        "Probability of improvement: P(a PN-GAIL seed's final return > a baseline seed's), "
-        "95% bootstrap interval.",
+        f"Probability of improvement: {sentence}, 95% bootstrap interval.",
         "",
-        "| over | P(PN-GAIL > baseline) | 95% CI |",
+        header,
         "|---|---:|---:|",
     ]
     for label, value in improvement.items():

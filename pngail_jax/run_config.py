@@ -101,6 +101,9 @@ class RunConfig:
     # (pngail_jax.grid.GRID_AXES: discriminator and TRPO hyperparameters, MethodSpec
     # coefficients); the grid is the product of every axis.
     grid_axes: tuple[tuple[str, tuple[float, ...]], ...] = ()
+    # The summary's probability of improvement: of each method over this one (None: of
+    # PN-GAIL over each other method).
+    baseline: str | None = None
     seed: int = 0  # base PRNG seed; cell keys are fold_in(key(seed), cell seed)
     # Demonstrations: a *_mixture.npy (authors' layout), an .npz, or "minari:<dataset id>";
     # None: made with pngail_jax.demos.make and cached (pngail_jax.runner.load_or_make_demos).
@@ -177,9 +180,9 @@ class RunConfig:
         for name in ("seeds", "iterations", "chunk_iterations", "fisher_subsample"):
             self._set(name, integer(name, getattr(self, name), minimum=1))
         self._set("seed", integer("seed", self.seed, minimum=0, below=SEED_LIMIT))
-        for name, minimum in (("num_demos", 2), ("cpu_devices", 1)):
-            if getattr(self, name) is not None:
-                self._set(name, integer(name, getattr(self, name), minimum=minimum))
+        for name, minimum, below in (("num_demos", 2, 2**31), ("cpu_devices", 1, None)):
+            if getattr(self, name) is not None:  # num_demos: a row index is an int32
+                self._set(name, integer(name, getattr(self, name), minimum, below=below))
         sizes = layer_sizes("discriminator_hidden_sizes", self.discriminator_hidden_sizes)
         self._set("discriminator_hidden_sizes", sizes)
         ratios = float_axis(
@@ -239,6 +242,9 @@ class RunConfig:
             )
         if len(set(self.log)) != len(self.log):
             fail("log", f"backends must not repeat, got {list(self.log)}")
+        if self.baseline is not None and self.baseline not in self.methods:
+            fail("baseline", f"must be one of the run's methods {list(self.methods)}, got "
+                 f"{self.baseline!r}")  # fmt: skip
         for field, values in self.grid_axes:  # a hyperparameter's range
             if field in METHOD_AXES:
                 continue

@@ -616,6 +616,7 @@ def write_outputs(out: Path, run: BuiltRun, progress: Progress) -> str:
             progress.timing["steps"] / progress.timing["seconds"],
             run.grid.compile_seconds,
             excluded=diverged,
+            baseline=config.baseline,
         ),
     }
     notes = [

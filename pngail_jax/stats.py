@@ -99,7 +99,7 @@ def _apply_rows(statistic: Statistic, samples: np.ndarray) -> np.ndarray:
     return result
 
 
-def _resample_indices(
+def resample_indices(
     rng: np.random.Generator, strata: np.ndarray, num_resamples: int
 ) -> np.ndarray:
     """int[R, n]: bootstrap indices into n values, drawn with replacement within each stratum
@@ -149,11 +149,11 @@ def bootstrap_ci(
     if x.size == 0:
         return math.nan, math.nan
     rng = np.random.default_rng(seed)
-    samples = x[_resample_indices(rng, labels, num_resamples)]
+    samples = x[resample_indices(rng, labels, num_resamples)]
     return _percentile_interval(_apply_rows(statistic, samples), confidence)
 
 
-def _improvement(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+def improvement(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """float[...]: P(X > Y) + P(X = Y) / 2 of float[..., n] against float[..., m], by the
     Mann-Whitney identity U = (rank sum of x in the pooled sample) - n (n + 1) / 2 with
     midranks for ties."""
@@ -194,7 +194,7 @@ def probability_of_improvement_ci(
     rng = np.random.default_rng(seed)
     x_samples = xf[rng.integers(0, xf.size, size=(num_resamples, xf.size))]
     y_samples = yf[rng.integers(0, yf.size, size=(num_resamples, yf.size))]
-    return _percentile_interval(_improvement(x_samples, y_samples), confidence)
+    return _percentile_interval(improvement(x_samples, y_samples), confidence)
 
 
 def seed_summary(values: ArrayLike, *, seed: int = 0) -> dict:

@@ -94,6 +94,7 @@ FIELD_VALUES = {
     "cpu_devices": COUNTS,
     "log": tuples_of(st.sampled_from(LOG_BACKENDS) | SCALARS),
     "preset_name": PATHS,
+    "baseline": st.sampled_from([*METHOD_NAMES, "trex"]) | SCALARS,
     "grid_axes": st.lists(
         st.tuples(
             st.sampled_from(["max_kl", "gamma", "pn_coef", "num_envs", "label_ratio", "x"])

@@ -68,7 +68,7 @@ def test_settings_flags_override_the_table_or_the_reference(capsys):
         (["--seeds", "0"], "--seeds must be a positive integer, got 0"),
         (["--classifier-steps", "0"], "--classifier-steps must be a positive integer, got 0"),
         (["--bsc-eps", "0.7"], r"--bsc-eps must lie in (0, 0.5), got 0.7"),
-        (["--num-demos", "1"], "--num-demos must be an integer >= 2, got 1"),
+        (["--num-demos", "1"], "--num-demos must be an integer in [2, 2**31), got 1"),
         (["--label-ratio", "0.2,0.2"], "--label-ratio values must not repeat"),
         (["--random-return", "-5"], "--random-return needs optimal_return"),
         (["--num-envs", "0"], "--num-envs must be a positive integer, got 0"),

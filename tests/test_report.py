@@ -229,3 +229,23 @@ def test_read_evaluations_keeps_the_evaluated_rows_per_group(tmp_path):
     )
     ((steps, values),) = report.read_evaluations(path, "eval/return").values()
     assert steps.tolist() == [20] and values.tolist() == [[-5.0], [-6.0]]
+
+
+def test_a_baseline_turns_the_improvement_around(tmp_path):
+    """--baseline gail: P(each other method's seed > a GAIL seed's), per setting, and the
+    table says so."""
+    cells = make_cells(["gail", "wgail", "pngail"], 3)
+    metrics = synthetic_metrics(cells)
+    summary = report.summarize(cells, metrics, NORMALIZER, 1000.0, 2.0, baseline="gail")
+    final = metrics["eval/return"][:, -1]
+    improvement = summary["probability_of_improvement"]
+    assert list(improvement) == ["wgail", "pngail"] and summary["improvement"] == {"over": "gail"}
+    assert improvement["wgail"]["estimate"] == stats.probability_of_improvement(
+        final[3:6], final[0:3]
+    )
+    text = report.summary_markdown(summary, cells, metrics, "t")
+    assert "| method | P(method > GAIL) | 95% CI |" in text
+    default = report.summarize(cells, metrics, NORMALIZER, 1000.0, 2.0)
+    assert default["improvement"] == {"of": "pngail"} and list(
+        default["probability_of_improvement"]
+    ) == ["gail", "wgail"]

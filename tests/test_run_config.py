@@ -49,7 +49,8 @@ def test_json_round_trip_and_presets(tmp_path):
         ({"seeds": "3"}, "seeds must be a positive integer, got '3'"),
         ({"iterations": 300.0}, "iterations must be a positive integer, got 300.0"),
         ({"seed": -1}, r"seed must be an integer in \[0, 2\*\*63\)"),
-        ({"num_demos": 1}, "num_demos must be an integer >= 2"),
+        ({"num_demos": 1}, r"num_demos must be an integer in \[2, 2\*\*31\)"),
+        ({"num_demos": 10**400}, r"num_demos must be an integer in \[2, 2\*\*31\)"),
         ({"methods": ()}, "methods must name at least one method"),
         ({"methods": (["gail"],)}, r"unknown method\(s\) \[\['gail'\]\]"),  # no TypeError
         ({"log": ("tensorboard", "tensorboard")}, "log backends must not repeat"),

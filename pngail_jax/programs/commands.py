@@ -7,7 +7,7 @@ import importlib
 
 PROGRAMS = (
     "sweep", "paper", "train_rl", "make_demos", "classify", "compare_settings", "early_rewards",
-    "seeds",
+    "seeds", "compare",
 )  # fmt: skip
 
 
@@ -45,3 +45,7 @@ def early_rewards() -> None:
 
 def seeds() -> None:
     _run("seeds")
+
+
+def compare() -> None:
+    _run("compare")

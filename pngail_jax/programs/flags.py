@@ -294,6 +294,11 @@ RUN_FLAGS = (
         append=True,
         metavar="FIELD=V1,V2",
     ),
+    FieldFlag(
+        "baseline",
+        "the summary's probability of improvement: of every other method over this one "
+        "(default: of PN-GAIL over every other method)",
+    ),
     FieldFlag("seed", "base PRNG seed (default 0)", type=int),
     FieldFlag(
         "chunk_iterations",

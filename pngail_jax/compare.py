@@ -1,0 +1,353 @@
+"""Comparisons across runs and tasks, as rliable defines them (Agarwal et al., 2021).
+
+A score is a seed's final normalised return, (R - random) / (optimal - random), read from a
+sweep run's ``metrics.csv``. ``Scores`` holds them per method (a method label: the method,
+plus its setting when a run has several) and task (the run's environment; runs of one task
+pool their seeds). Over all tasks, for each method:
+
+- **IQM**: the interquartile mean of every seed-task score pooled;
+- **mean** and **median**: of the per-task means of the seeds' scores;
+- **optimality gap**: ``gamma - mean(min(score, gamma))`` over the pooled scores (gamma 1:
+  how far below the optimal return the method stays, a score above 1 counting as 1);
+
+each with a stratified bootstrap interval (seeds resampled within each task). A
+**performance profile** is the fraction of pooled scores above each threshold tau, with the
+same bootstrap band. The **probability of improvement** of X over Y is the mean over their
+common tasks of P(X's score > Y's) + P(equal) / 2 (the Mann-Whitney statistic per task), its
+interval from resampling each method's seeds independently within each task.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from pngail_jax import stats
+from pngail_jax.integrity import IntegrityError, read_json
+
+AGGREGATES = ("iqm", "mean", "median", "optimality_gap")
+NUM_RESAMPLES = 2000
+
+
+class CompareError(Exception):
+    """A run that cannot be compared (the message names it and why)."""
+
+
+@dataclasses.dataclass
+class Scores:
+    """Final normalised returns: ``values[method][task]`` float[seeds]."""
+
+    values: dict[str, dict[str, np.ndarray]]
+
+    @property
+    def methods(self) -> list[str]:
+        return list(self.values)
+
+    @property
+    def tasks(self) -> list[str]:
+        return list(dict.fromkeys(task for by_task in self.values.values() for task in by_task))
+
+    def common(self) -> tuple[Scores, dict[str, list[str]]]:
+        """The scores on the tasks every method has (aggregates over different task sets
+        would not compare), and the tasks left out per method. CompareError if none."""
+        shared = [t for t in self.tasks if all(t in by_task for by_task in self.values.values())]
+        if not shared:
+            raise CompareError(f"no task is common to every method: {self.methods}")
+        left_out = {
+            method: [task for task in by_task if task not in shared]
+            for method, by_task in self.values.items()
+        }
+        kept = {m: {t: by[t] for t in shared} for m, by in self.values.items()}
+        return Scores(kept), {m: tasks for m, tasks in left_out.items() if tasks}
+
+    def pooled(self, method: str) -> tuple[np.ndarray, np.ndarray]:
+        """float[n] scores and int[n] task labels (index into ``tasks``) of ``method``'s
+        finite scores, task by task."""
+        tasks = self.tasks
+        values, labels = [], []
+        for task, scores in self.values[method].items():
+            finite = scores[np.isfinite(scores)]
+            values.append(finite)
+            labels.append(np.full(finite.size, tasks.index(task)))
+        return np.concatenate(values), np.concatenate(labels)
+
+
+def final_scores(run_dir: Path) -> tuple[str, dict[str, np.ndarray]]:
+    """A sweep run's task and each method label's final normalised returns float[seeds]
+    (NaN for a seed that diverged). CompareError when the run has none to read."""
+    from pngail_jax.outputs import output_owner
+    from pngail_jax.report import read_evaluations
+
+    run_dir = Path(run_dir)
+    if output_owner(run_dir) != "sweep":
+        raise CompareError(f"{run_dir} holds no sweep run (experiments.sweep writes one)")
+    try:
+        env = read_json(run_dir / "config.json", "run config")["env"]
+    except (OSError, IntegrityError, KeyError, TypeError) as error:
+        raise CompareError(f"{run_dir}: no readable config.json ({error})") from None
+    path = run_dir / "metrics.csv"
+    if not path.exists():
+        raise CompareError(f"{run_dir}: no metrics.csv yet (the run has not finished a chunk)")
+    groups = read_evaluations(
+        path, "normalized_return", evaluated_by="eval_return", group_by=("method", "setting")
+    )
+    if not groups:
+        raise CompareError(f"{path}: no evaluated iteration")
+    settings = {setting for _, setting in groups}
+    scores = {}
+    for (method, setting), (_, values) in groups.items():
+        if np.isnan(values).all():
+            raise CompareError(
+                f"{path}: {method} has no normalised return (the run knows no random and "
+                "optimal returns: give --optimal-return to the sweep)"
+            )
+        label = method if len(settings) == 1 else f"{method} [{setting}]"
+        scores[label] = values[:, -1]
+    return env, scores
+
+
+def load_scores(run_dirs: Sequence[Path]) -> Scores:
+    """The final scores of every run, pooled per task (two runs of one task: their seeds
+    together). Methods keep the order they first appear in."""
+    values: dict[str, dict[str, np.ndarray]] = {}
+    for run_dir in run_dirs:
+        task, scores = final_scores(run_dir)
+        for method, seeds in scores.items():
+            by_task = values.setdefault(method, {})
+            by_task[task] = np.concatenate([by_task.get(task, np.empty(0)), seeds])
+    return Scores(values)
+
+
+# -- aggregates: statistic(samples float[R, n], labels int[n]) -> float[R] ------------------
+
+
+def _task_means(samples: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """float[R, T]: the mean score of each task present in ``labels``."""
+    return np.stack([samples[:, labels == task].mean(axis=1) for task in np.unique(labels)], axis=1)
+
+
+def _statistic(name: str):
+    def iqm(samples, labels):
+        return stats.iqm(samples, axis=-1)
+
+    def mean(samples, labels):
+        return _task_means(samples, labels).mean(axis=1)
+
+    def median(samples, labels):
+        return np.median(_task_means(samples, labels), axis=1)
+
+    def optimality_gap(samples, labels, gamma=1.0):
+        return gamma - np.minimum(samples, gamma).mean(axis=1)
+
+    return {"iqm": iqm, "mean": mean, "median": median, "optimality_gap": optimality_gap}[name]
+
+
+def _stratified_samples(values, labels, num_resamples, seed):
+    """float[R, n] resamples (seeds redrawn within each task) and their int[n] labels."""
+    order = np.argsort(labels, kind="stable")
+    values, labels = values[order], labels[order]
+    rng = np.random.default_rng(seed)
+    columns = stats.resample_indices(rng, labels, num_resamples)
+    return values[columns], labels
+
+
+def aggregate(
+    scores: Scores, method: str, name: str, *, num_resamples: int = NUM_RESAMPLES, seed: int = 0
+) -> dict:
+    """``{"estimate", "ci95"}`` of aggregate ``name`` (``AGGREGATES``) for ``method``."""
+    values, labels = scores.pooled(method)
+    if values.size == 0:
+        return {"estimate": math.nan, "ci95": [math.nan, math.nan]}
+    statistic = _statistic(name)
+    estimate = float(statistic(values[None, :], labels)[0])
+    samples, sample_labels = _stratified_samples(values, labels, num_resamples, seed)
+    low, high = np.percentile(statistic(samples, sample_labels), [2.5, 97.5])
+    return {"estimate": estimate, "ci95": [float(low), float(high)]}
+
+
+def performance_profile(
+    scores: Scores, method: str, taus: np.ndarray, *, num_resamples=NUM_RESAMPLES, seed=0
+) -> dict:
+    """The fraction of ``method``'s pooled scores above each tau float[K], and its stratified
+    bootstrap band: ``{"fraction": [K], "low": [K], "high": [K]}``."""
+    values, labels = scores.pooled(method)
+    fraction = (values[:, None] > taus[None, :]).mean(axis=0)
+    samples, _ = _stratified_samples(values, labels, num_resamples, seed)
+    resampled = (samples[:, :, None] > taus[None, None, :]).mean(axis=1)
+    low, high = np.percentile(resampled, [2.5, 97.5], axis=0)
+    return {"fraction": fraction.tolist(), "low": low.tolist(), "high": high.tolist()}
+
+
+def probability_of_improvement(
+    scores: Scores, x: str, y: str, *, num_resamples: int = NUM_RESAMPLES, seed: int = 0
+) -> dict:
+    """P(X > Y): the mean over the tasks both have of the per-task probability, with a
+    bootstrap interval resampling X's and Y's seeds independently within each task.
+    ``{"estimate", "ci95", "tasks"}``; NaN without a common task."""
+    tasks = [t for t in scores.values[x] if t in scores.values[y]]
+    pairs = [(_finite(scores.values[x][t]), _finite(scores.values[y][t])) for t in tasks]
+    pairs = [(a, b) for a, b in pairs if a.size and b.size]
+    if not pairs:
+        return {"estimate": math.nan, "ci95": [math.nan, math.nan], "tasks": []}
+    estimate = float(np.mean([stats.probability_of_improvement(a, b) for a, b in pairs]))
+    rng = np.random.default_rng(seed)
+    per_task = []
+    for a, b in pairs:
+        a_samples = a[rng.integers(0, a.size, size=(num_resamples, a.size))]
+        b_samples = b[rng.integers(0, b.size, size=(num_resamples, b.size))]
+        per_task.append(stats.improvement(a_samples, b_samples))
+    low, high = np.percentile(np.mean(per_task, axis=0), [2.5, 97.5])
+    return {"estimate": estimate, "ci95": [float(low), float(high)], "tasks": tasks}
+
+
+def _finite(values: np.ndarray) -> np.ndarray:
+    return values[np.isfinite(values)]
+
+
+def compare(scores: Scores, baseline: str, *, seed: int = 0) -> dict:
+    """Every aggregate of every method, and each method's probability of improvement over
+    ``baseline``: the document ``compare.json`` holds."""
+    if baseline not in scores.values:
+        raise CompareError(f"baseline {baseline!r} is not among the methods: {scores.methods}")
+    scores, left_out = scores.common()
+    taus = np.linspace(-0.25, 1.25, 61)
+    return {
+        "tasks": scores.tasks,
+        "left_out": left_out,
+        "seeds": {
+            m: {t: int(np.isfinite(v).sum()) for t, v in by.items()}
+            for m, by in scores.values.items()
+        },  # fmt: skip
+        "aggregates": {
+            method: {name: aggregate(scores, method, name, seed=seed) for name in AGGREGATES}
+            for method in scores.methods
+        },
+        "baseline": baseline,
+        "probability_of_improvement": {
+            method: probability_of_improvement(scores, method, baseline, seed=seed)
+            for method in scores.methods
+            if method != baseline
+        },
+        "profiles": {
+            "taus": taus.tolist(),
+            **{m: performance_profile(scores, m, taus, seed=seed) for m in scores.methods},
+        },
+    }
+
+
+def markdown(result: dict) -> str:
+    """compare.md: the aggregates and the probabilities of improvement as tables."""
+    tasks = ", ".join(result["tasks"])
+    lines = [
+        f"# Comparison over {len(result['tasks'])} task(s): {tasks}",
+        "",
+        "Final normalised return; 95% stratified bootstrap intervals (seeds resampled within "
+        "each task). Optimality gap: lower is better.",
+        *(
+            [f"Left out (not every method ran them): {result['left_out']}.", ""]
+            if result["left_out"]
+            else []
+        ),
+        "",
+        "| method | seeds | IQM | mean | median | optimality gap |",
+        "|---|---:|---:|---:|---:|---:|",
+    ]
+    for method, values in result["aggregates"].items():
+        seeds = sum(result["seeds"][method].values())
+        cells = [
+            f"{values[n]['estimate']:.2f} [{values[n]['ci95'][0]:.2f}, {values[n]['ci95'][1]:.2f}]"
+            for n in AGGREGATES
+        ]
+        lines.append(f"| {method} | {seeds} | " + " | ".join(cells) + " |")
+    baseline = result["baseline"]
+    lines += ["", f"| method | P(method > {baseline}) | 95% CI | tasks |", "|---|---:|---:|---:|"]
+    for method, value in result["probability_of_improvement"].items():
+        low, high = value["ci95"]
+        lines.append(
+            f"| {method} | {value['estimate']:.2f} | [{low:.2f}, {high:.2f}] | "
+            f"{len(value['tasks'])} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def write_json(path: Path, result: dict) -> None:
+    """``result`` as JSON, an undefined number (NaN) as null."""
+    from pngail_jax.integrity import write_json as write
+
+    def nulls(value):
+        if isinstance(value, dict):
+            return {key: nulls(item) for key, item in value.items()}
+        if isinstance(value, list | tuple):
+            return [nulls(item) for item in value]
+        if isinstance(value, float) and not math.isfinite(value):
+            return None
+        return value
+
+    write(path, nulls(result))
+
+
+def plot(result: dict, directory: Path) -> list[Path]:
+    """aggregates.png (each aggregate's estimate and interval per method), profiles.png
+    (performance profiles with their bands) and improvement.png (P(method > baseline))."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from pngail_jax.integrity import atomic_path
+
+    methods = list(result["aggregates"])
+    colors = {m: plt.cm.tab10(i % 10) for i, m in enumerate(methods)}
+    written = []
+
+    def save(figure, name):
+        figure.tight_layout()
+        with atomic_path(directory / name) as temporary:
+            figure.savefig(temporary, dpi=120)
+        plt.close(figure)
+        written.append(directory / name)
+
+    height = 1.2 + 0.35 * len(methods)
+    figure, axes = plt.subplots(1, len(AGGREGATES), figsize=(3.2 * len(AGGREGATES), height))
+    for axis, name in zip(axes, AGGREGATES, strict=True):
+        for row, method in enumerate(methods):
+            value = result["aggregates"][method][name]
+            low, high = value["ci95"]
+            axis.barh(row, high - low, left=low, height=0.6, color=colors[method], alpha=0.7)
+            axis.plot([value["estimate"]] * 2, [row - 0.3, row + 0.3], color="black", lw=1.5)
+        axis.set(title=name.replace("_", " "), yticks=range(len(methods)))
+        axis.set_yticklabels(methods if axis is axes[0] else [])
+        axis.invert_yaxis()
+        axis.grid(axis="x", alpha=0.3)
+    figure.supxlabel("final normalised return (95% stratified bootstrap interval)")
+    save(figure, "aggregates.png")
+
+    figure, axis = plt.subplots(figsize=(7, 4.5))
+    taus = np.asarray(result["profiles"]["taus"])
+    for method in methods:
+        profile = result["profiles"][method]
+        axis.plot(taus, profile["fraction"], color=colors[method], label=method)
+        axis.fill_between(taus, profile["low"], profile["high"], color=colors[method], alpha=0.2)
+    axis.set(xlabel="normalised return tau", ylabel="fraction of runs with score > tau",
+             title="performance profiles")  # fmt: skip
+    axis.grid(alpha=0.3)
+    axis.legend(fontsize=8)
+    save(figure, "profiles.png")
+
+    improvements = result["probability_of_improvement"]
+    figure, axis = plt.subplots(figsize=(7, 1.2 + 0.35 * max(len(improvements), 1)))
+    for row, (method, value) in enumerate(improvements.items()):
+        low, high = value["ci95"]
+        axis.barh(row, high - low, left=low, height=0.6, color=colors[method], alpha=0.7)
+        axis.plot([value["estimate"]] * 2, [row - 0.3, row + 0.3], color="black", lw=1.5)
+    axis.axvline(0.5, color="gray", ls="--", lw=1)
+    axis.set(xlim=(0, 1), yticks=range(len(improvements)), xlabel=(
+        f"P(method > {result['baseline']}) (95% interval)"))  # fmt: skip
+    axis.set_yticklabels(list(improvements))
+    axis.invert_yaxis()
+    save(figure, "improvement.png")
+    return written

@@ -1,0 +1,78 @@
+"""Compare methods across sweep runs and tasks: IQM, mean, median, optimality gap, performance
+profiles and probabilities of improvement, with stratified bootstrap intervals.
+
+    python -m experiments.compare runs/pendulum runs/hopper runs/halfcheetah
+    python -m experiments.compare runs/a runs/b --baseline gail --out runs/compare-ab
+
+Reads each run's final normalised returns (``metrics.csv``; runs of one task pool their
+seeds), and writes to ``--out``: ``compare.json``, ``compare.md`` (the tables) and
+``aggregates.png``, ``profiles.png``, ``improvement.png``. The definitions:
+``pngail_jax.compare`` (rliable's, Agarwal et al. 2021).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from pngail_jax import compare
+from pngail_jax.integrity import atomic_write_text
+from pngail_jax.programs.cli import (
+    ArgumentParser,
+    HelpFormatter,
+    claim_output,
+    path_argument,
+    prepare_output,
+)
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    parser = ArgumentParser(
+        "compare", description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
+    )
+    parser.add_argument("runs", nargs="+", type=path_argument, metavar="RUN_DIR",
+                        help="sweep run directories (one or more per task)")  # fmt: skip
+    parser.add_argument(
+        "--baseline",
+        help="the method every other is compared with, P(method > baseline) (default: pngail "
+        "if the runs have it, else their first method)",
+    )
+    parser.add_argument("--out", type=path_argument, help="default runs/compare-<timestamp>")
+    parser.add_argument(
+        "--overwrite", action="store_true", help="replace a comparison already in --out"
+    )
+    parser.add_argument("--seed", type=int, default=0, help="the bootstrap's seed")
+    args = parser.parse_args(argv)
+    for run in args.runs:
+        if not run.is_dir():
+            parser.error(f"{run} is not a directory")
+    if args.out is None:
+        args.out = Path("runs") / f"compare-{time.strftime('%Y%m%d-%H%M%S')}"
+    if any(args.out.resolve() == run.resolve() for run in args.runs):
+        parser.error(f"--out {args.out} is one of the runs: give another directory")
+    claim_output(parser, args.out, "compare", args.overwrite)
+    return args
+
+
+def main(argv=None) -> Path:
+    args = parse_args(argv)
+    try:
+        scores = compare.load_scores(args.runs)
+        baseline = args.baseline or ("pngail" if "pngail" in scores.methods else scores.methods[0])
+        result = compare.compare(scores, baseline, seed=args.seed)
+    except compare.CompareError as error:
+        raise SystemExit(str(error)) from None
+    prepare_output(args.out, "compare", args.overwrite)
+    compare.write_json(args.out / "compare.json", {**result, "runs": [str(r) for r in args.runs]})
+    text = compare.markdown(result)
+    atomic_write_text(args.out / "compare.md", text)
+    compare.plot(result, args.out)
+    print(text)
+    print(f"wrote {args.out}/{{compare.json,compare.md,aggregates.png,profiles.png,"
+          "improvement.png}")  # fmt: skip
+    return args.out
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,110 @@
+"""Comparisons across runs and tasks (pngail_jax.compare, experiments.compare) against hand
+computations of rliable's definitions."""
+
+import json
+
+import numpy as np
+import pytest
+
+from pngail_jax import compare
+from pngail_jax.compare import Scores
+from pngail_jax.grid import Cell
+from pngail_jax.outputs import prepare_output
+from pngail_jax.programs import compare as program
+from pngail_jax.report import write_metrics_csv
+
+A = {"t1": np.array([0.1, 0.5, 0.9]), "t2": np.array([0.2, 1.4])}
+B = {"t1": np.array([0.0, 0.3, 0.6]), "t2": np.array([0.5, 0.7])}
+
+
+def scores():
+    return Scores({"a": A, "b": B})
+
+
+def test_aggregates_equal_their_definitions_by_hand():
+    s = scores()
+    pooled = [0.1, 0.5, 0.9, 0.2, 1.4]
+    by_hand = {
+        "iqm": np.mean(sorted(pooled)[1:4]),  # 5 scores: int(1.25) = 1 cut from each end
+        "mean": np.mean([np.mean(A["t1"]), np.mean(A["t2"])]),  # of the per-task means
+        "median": np.median([np.mean(A["t1"]), np.mean(A["t2"])]),
+        "optimality_gap": 1 - np.mean(np.minimum(pooled, 1.0)),  # 1.4 counts as 1
+    }
+    for name, expected in by_hand.items():
+        value = compare.aggregate(s, "a", name, num_resamples=500)
+        assert value["estimate"] == pytest.approx(expected), name
+        low, high = value["ci95"]
+        assert low <= high
+        assert compare.aggregate(s, "a", name, num_resamples=500) == value  # seeded
+
+
+def test_the_bootstrap_resamples_seeds_within_each_task():
+    """Constant within each task: every stratified resample keeps 3 zeros and 2 ones, so the
+    pooled mean (the optimality gap's) never moves; resampling all five would."""
+    s = Scores({"a": {"t1": np.zeros(3), "t2": np.ones(2)}})
+    assert compare.aggregate(s, "a", "optimality_gap")["ci95"] == pytest.approx([0.6, 0.6])
+    assert compare.aggregate(s, "a", "mean")["ci95"] == pytest.approx([0.5, 0.5])
+
+
+def test_probability_of_improvement_is_the_mean_over_tasks_of_pairs_won():
+    value = compare.probability_of_improvement(scores(), "a", "b", num_resamples=500)
+    t1 = (1 + 2 + 3) / 9  # 0.1 > 0; 0.5 > 0, 0.3; 0.9 > all three
+    t2 = 2 / 4  # only 1.4 beats 0.5 and 0.7
+    assert value["estimate"] == pytest.approx((t1 + t2) / 2)
+    assert value["tasks"] == ["t1", "t2"] and value["ci95"][0] <= value["ci95"][1]
+    ties = Scores({"a": {"t": np.array([1.0])}, "b": {"t": np.array([1.0])}})
+    assert compare.probability_of_improvement(ties, "a", "b")["estimate"] == 0.5
+
+
+def test_performance_profile_counts_scores_above_each_threshold():
+    profile = compare.performance_profile(scores(), "a", np.array([0.0, 0.45, 2.0]))
+    assert profile["fraction"] == pytest.approx([1.0, 3 / 5, 0.0])
+    assert all(lo <= f <= hi for lo, f, hi in zip(*(profile[k] for k in ("low", "fraction",
+               "high")), strict=True))  # fmt: skip
+
+
+def test_only_tasks_every_method_ran_are_aggregated():
+    s = Scores({"a": {**A, "t3": np.array([0.9])}, "b": B})
+    result = compare.compare(s, "b", seed=0)
+    assert result["tasks"] == ["t1", "t2"] and result["left_out"] == {"a": ["t3"]}
+    assert result["aggregates"]["a"]["iqm"] == compare.aggregate(scores(), "a", "iqm")
+    with pytest.raises(compare.CompareError, match="baseline 'c' is not among"):
+        compare.compare(s, "c")
+
+
+def fake_run(directory, env, finals):
+    """A sweep run's files: config.json, and metrics.csv with one evaluated iteration per
+    method whose normalised returns are ``finals[method]`` (random -1000, optimal 0)."""
+    prepare_output(directory, "sweep")
+    (directory / "config.json").write_text(json.dumps({"env": env}))
+    cells = [Cell(m, seed) for m, values in finals.items() for seed in range(len(values))]
+    returns = np.array([[v * 1000 - 1000] for values in finals.values() for v in values])
+    metrics = {name: np.zeros_like(returns) for name in ("disc/acc_agent", "disc/acc_demo",
+               "train/reward", "trpo/kl", "train/episode_return")}  # fmt: skip
+    metrics |= {"eval/return": returns, "env_steps": np.full_like(returns, 5000)}
+    write_metrics_csv(directory / "metrics.csv", cells, metrics, (-1000.0, 0.0))
+    return directory
+
+
+def test_the_program_reads_runs_and_writes_its_page(tmp_path, capsys):
+    one = fake_run(tmp_path / "one", "t1", {"a": A["t1"], "b": B["t1"]})
+    two = fake_run(tmp_path / "two", "t2", {"a": A["t2"], "b": B["t2"]})
+    out = program.main([str(one), str(two), "--baseline", "b", "--out", str(tmp_path / "c")])
+    result = json.loads((out / "compare.json").read_text())
+    expected = compare.compare(scores(), "b")
+    assert result["aggregates"]["a"]["iqm"]["estimate"] == pytest.approx(
+        expected["aggregates"]["a"]["iqm"]["estimate"]
+    )
+    assert result["probability_of_improvement"]["a"]["estimate"] == pytest.approx(
+        expected["probability_of_improvement"]["a"]["estimate"]
+    )
+    for name in ("compare.md", "aggregates.png", "profiles.png", "improvement.png"):
+        assert (out / name).stat().st_size > 0, name
+    assert "P(method > b)" in capsys.readouterr().out
+    with pytest.raises(SystemExit, match="holds no sweep run"):
+        program.main([str(out), "--out", str(tmp_path / "d")])
+    with pytest.raises(SystemExit):
+        program.main([str(one), "--out", str(one)])
+    assert "is one of the runs" in capsys.readouterr().err
+    with pytest.raises(SystemExit):  # the comparison is not replaced without --overwrite
+        program.main([str(one), str(two), "--out", str(out)])
