@@ -68,6 +68,28 @@ def demo_weights(
     return agent_coef, u, v
 
 
+def non_negative_pu_risk(prior, labelled_own, labelled_other, unlabelled_other):
+    """Kiryo et al. (2017)'s non-negative PU risk: ``prior labelled_own + max(0,
+    unlabelled_other - prior labelled_other)``, from the mean losses of the labelled rows as
+    their own class (``labelled_own``) and as the other class (``labelled_other``), and of the
+    unlabelled rows as the other class; ``prior`` is the share of the labelled class among the
+    unlabelled rows. The max keeps the other class's estimated risk from going below 0, where
+    a flexible discriminator would overfit."""
+    return prior * labelled_own + jnp.maximum(unlabelled_other - prior * labelled_other, 0.0)
+
+
+def _pu_terms(spec: MethodSpec, agent_term, logits_agent, logits_demo):
+    """PU-GAIL's risk (demonstrations labelled as the expert class, sp(z); the agent's rows
+    unlabelled) and UID's (the agent's rows labelled as the agent class, sp(-z); the
+    demonstrations unlabelled), each times its coefficient."""
+    demo_expert = jnp.mean(jax.nn.softplus(logits_demo))
+    demo_agent = jnp.mean(jax.nn.softplus(-logits_demo))
+    agent_expert = jnp.mean(jax.nn.softplus(logits_agent))
+    pu_gail = non_negative_pu_risk(spec.pu_prior, demo_expert, demo_agent, agent_term)
+    uid = non_negative_pu_risk(spec.pu_agent_prior, agent_term, agent_expert, demo_expert)
+    return spec.pu_coef * pu_gail + spec.pu_agent_coef * uid
+
+
 def discriminator_loss(
     spec: MethodSpec,
     logits_agent: jax.Array,
@@ -89,6 +111,9 @@ def discriminator_loss(
     agent_term = jnp.mean(jax.nn.softplus(-logits_agent))
     demo_term = jnp.mean(u * jax.nn.softplus(logits_demo) + v * jax.nn.softplus(-logits_demo))
     loss = agent_coef * agent_term + demo_term
+    # where, not a product: the other methods' loss stays the same float to the last bit
+    uses_pu = (spec.pu_coef != 0) | (spec.pu_agent_coef != 0)
+    loss = loss + jnp.where(uses_pu, _pu_terms(spec, agent_term, logits_agent, logits_demo), 0.0)
     return loss, {
         "disc/loss": loss,
         "disc/acc_agent": jnp.mean(logits_agent > 0),

@@ -56,6 +56,17 @@ class MethodSpec:
     firl_js_coef: jax.Array  # ... Jensen-Shannon (pngail_jax.firl.divergence_h)
     cail_coef: jax.Array  # 1: r is CAIL's learned per-trajectory confidence ("cail" phase)
     cail_learning_rate: jax.Array  # CAIL's gradient step on beta (0: beta frozen at 1)
+    # Non-negative positive-unlabelled risks (losses.non_negative_pu_risk), the two ways round:
+    # demonstrations labelled and the agent's rows unlabelled, a share pu_prior of them
+    # expert-like (PU-GAIL): loss += pu_coef [eta mean_demo sp(z)
+    #     + max(0, mean_agent sp(-z) - eta mean_demo sp(-z))], eta = pu_prior;
+    # the agent's rows labelled and the demonstrations unlabelled, a share pu_agent_prior of
+    # them agent-like (UID): loss += pu_agent_coef [pi mean_agent sp(-z)
+    #     + max(0, mean_demo sp(z) - pi mean_agent sp(z))], pi = pu_agent_prior.
+    pu_coef: jax.Array
+    pu_prior: jax.Array  # in [0, 1)
+    pu_agent_coef: jax.Array
+    pu_agent_prior: jax.Array  # in [0, 1)
 
     @property
     def classifier(self) -> ClassifierSpec:
@@ -210,6 +221,9 @@ def check_preset(name: str, preset: Preset) -> Preset:
     for field in ("classifier_coef", "bsc_coef"):
         if values[field] not in (0.0, 1.0):
             refuse(f"{field} must be 0 or 1, got {values[field]}")
+    for coef, prior in (("pu_coef", "pu_prior"), ("pu_agent_coef", "pu_agent_prior")):
+        if values[coef] and not 0 <= values[prior] < 1:
+            refuse(f"{prior} must lie in [0, 1) with {coef}, got {values[prior]}")
     classifier = "bsc" if values["bsc_coef"] == 1.0 else "sc"
     if values["classifier_coef"] == 1.0 and source != classifier:
         refuse(f"classifier_coef 1 with bsc_coef {values['bsc_coef']} trains {classifier}: "

@@ -182,3 +182,48 @@ def test_theorem_4_3_optimal_discriminator():
     np.testing.assert_allclose(d_learned, d_star, atol=2e-3)
     # The learned reward -log D stays within -log(1 - r) (REFERENCE.md), up to the tolerance.
     assert np.all(-np.log(d_learned) <= -np.log(1 - r) + 5e-3)
+
+
+def reference_nnpu(prior, labelled_own, labelled_other, unlabelled_other):
+    """Kiryo et al.'s non-negative PU risk, written from its definition."""
+    return prior * labelled_own + max(0.0, unlabelled_other - prior * labelled_other)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+@pytest.mark.parametrize("prior", [0.2, 0.5, 0.9])
+def test_the_pu_risks_match_their_definitions(seed, prior):
+    """PU-GAIL's (demonstrations labelled expert, sp(z); the agent's rows unlabelled) and
+    UID's (the agent's rows labelled agent, sp(-z); the demonstrations unlabelled), each on
+    its own and with another method's terms added."""
+    za, zd, r, labelled, w, mean_r, mean_rc = random_batch(seed)
+    za = za + (seed - 1.5)  # some batches clip the max, some do not
+    stats = ConfidenceStats(jnp.float32(mean_r), jnp.float32(mean_rc))
+    pu_gail = reference_nnpu(prior, sp(zd).mean(), sp(-zd).mean(), sp(-za).mean())
+    uid = reference_nnpu(prior, sp(-za).mean(), sp(za).mean(), sp(zd).mean())
+    loss = jax.jit(discriminator_loss)
+    for overrides, expected in [
+        ({"pu_coef": 1.0, "pu_prior": prior}, pu_gail),
+        ({"pu_agent_coef": 1.0, "pu_agent_prior": prior}, uid),
+        ({"agent_coef": 1.0, "gail_coef": 1.0, "pu_coef": 0.5, "pu_prior": prior},
+         reference_loss("gail", za, zd, r, labelled, w, mean_r, mean_rc) + 0.5 * pu_gail),
+    ]:  # fmt: skip
+        spec = method_spec("gail", **{"agent_coef": 0.0, "gail_coef": 0.0, **overrides})
+        value, _ = loss(spec, za, zd, r, labelled, w, stats)
+        np.testing.assert_allclose(float(value), expected, rtol=1e-5)
+
+
+def test_the_pu_risks_max_stops_the_gradient_of_a_negative_estimate():
+    """Where the unlabelled rows' estimate is below 0, only the labelled term moves z."""
+    spec = method_spec("gail", agent_coef=0.0, gail_coef=0.0, pu_coef=1.0, pu_prior=0.9)
+    # mean_agent sp(-z) - 0.9 mean_demo sp(-z) = sp(-6) - 0.9 sp(6) < 0
+    za, zd = jnp.full(8, 6.0), jnp.full(8, -6.0)
+    ones = jnp.ones(8)
+    stats = ConfidenceStats(jnp.float32(0.5), jnp.float32(0.5))
+
+    def loss(za, zd):
+        return discriminator_loss(spec, za, zd, ones, ones > 0, ones, stats)[0]
+
+    grad_agent, grad_demo = jax.grad(loss, argnums=(0, 1))(za, zd)
+    np.testing.assert_array_equal(grad_agent, 0.0)
+    # d/dz of 0.9 mean sp(z) at z = -6: 0.9 sigmoid(-6) / 8 per row
+    np.testing.assert_allclose(grad_demo, 0.9 * jax.nn.sigmoid(-6.0) / 8, rtol=1e-5)

@@ -3,6 +3,7 @@ checks a preset passes before a grid runs it."""
 
 import sys
 import textwrap
+from pathlib import Path
 
 import jax
 import numpy as np
@@ -113,3 +114,20 @@ def test_an_outside_method_in_a_grid_with_built_ins_equals_its_cells_alone(outsi
     losses = np.asarray(grid_metrics["disc/loss"])[:, -1]
     assert losses[1] != losses[0] and losses[1] != losses[2]
     assert methods.required_phases(names) == ()
+
+
+def test_the_pu_examples_are_presets_from_outside_the_package(monkeypatch):
+    """examples/pu_methods.py (PU-GAIL and UID) through the public route: imported by name,
+    checked, and a grid's config accepts them beside the built-ins."""
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[1]))
+    before = dict(PRESETS)
+    try:
+        names = ("examples.pu_methods:pu_gail", "examples.pu_methods:uid")
+        for name in names:
+            assert resolve(name).confidence_source == "none"
+        spec = method_spec(names[0])
+        assert float(spec.pu_coef) == 1.0 and float(spec.agent_coef) == 0.0
+        assert RunConfig(methods=("gail", "pngail", *names)).methods[2:] == names
+    finally:
+        PRESETS.clear()
+        PRESETS.update(before)

@@ -1,0 +1,2 @@
+"""Methods defined outside the package, through its public route (``pngail_jax.methods``'s
+``Preset``, named ``examples.<module>:<preset>``); not installed with the package."""
