@@ -52,9 +52,13 @@ class Scores:
         return list(dict.fromkeys(task for by_task in self.values.values() for task in by_task))
 
     def common(self) -> tuple[Scores, dict[str, list[str]]]:
-        """The scores on the tasks every method has (aggregates over different task sets
-        would not compare), and the tasks left out per method. CompareError if none."""
-        shared = [t for t in self.tasks if all(t in by_task for by_task in self.values.values())]
+        """The scores on the tasks where every method has a finite score (aggregates over
+        different task sets would not compare), and the tasks left out per method.
+        CompareError if none."""
+        shared = [
+            t for t in self.tasks
+            if all(t in by and np.isfinite(by[t]).any() for by in self.values.values())
+        ]  # fmt: skip
         if not shared:
             raise CompareError(f"no task is common to every method: {self.methods}")
         left_out = {
@@ -175,6 +179,9 @@ def performance_profile(
     """The fraction of ``method``'s pooled scores above each tau float[K], and its stratified
     bootstrap band: ``{"fraction": [K], "low": [K], "high": [K]}``."""
     values, labels = scores.pooled(method)
+    if values.size == 0:
+        nan = [math.nan] * len(taus)
+        return {"fraction": nan, "low": nan, "high": nan}
     fraction = (values[:, None] > taus[None, :]).mean(axis=0)
     samples, _ = _stratified_samples(values, labels, num_resamples, seed)
     resampled = (samples[:, :, None] > taus[None, None, :]).mean(axis=1)

@@ -199,6 +199,8 @@ def check_preset(name: str, preset: Preset) -> Preset:
     without the phase that learns it."""
     if not isinstance(preset, Preset):
         raise ValueError(f"method {name!r}: a pngail_jax.methods.Preset, got {type(preset)}")
+    if not isinstance(preset.coefficients, dict):
+        raise ValueError(f"method {name!r}: coefficients must be a dict of MethodSpec fields")
     unknown = sorted(set(preset.coefficients) - set(_DEFAULTS), key=str)
     if unknown:
         raise ValueError(f"method {name!r}: unknown MethodSpec field(s) {unknown}")
@@ -221,6 +223,15 @@ def check_preset(name: str, preset: Preset) -> Preset:
     for field in ("classifier_coef", "bsc_coef"):
         if values[field] not in (0.0, 1.0):
             refuse(f"{field} must be 0 or 1, got {values[field]}")
+    if not 0 < values["bsc_eps"] < 0.5:
+        refuse(f"bsc_eps must lie in (0, 0.5), got {values['bsc_eps']}")
+    # The trainer reads these two only where a phase needs them (a learned reward replaces
+    # the adversarial one; a cloned policy stays put): elsewhere a value other than 1 would
+    # be silently ignored.
+    if values["adversarial_reward_coef"] != 1.0 and not phases:
+        refuse("adversarial_reward_coef other than 1 needs a phase whose reward replaces it")
+    if values["policy_update_coef"] != 1.0 and "bc" not in phases:
+        refuse("policy_update_coef other than 1 needs the 'bc' phase (a cloned policy)")
     for coef, prior in (("pu_coef", "pu_prior"), ("pu_agent_coef", "pu_agent_prior")):
         if values[coef] and not 0 <= values[prior] < 1:
             refuse(f"{prior} must lie in [0, 1) with {coef}, got {values[prior]}")
@@ -271,8 +282,10 @@ def resolve(name: str) -> Preset:
     module_name, _, attribute = name.partition(":")
     try:
         preset = getattr(importlib.import_module(module_name), attribute)
-    except (ImportError, AttributeError, TypeError, ValueError) as error:
-        raise ValueError(f"method {name!r}: cannot import it ({error})") from None
+    except Exception as error:  # noqa: BLE001  the user's module: any error, in one line
+        raise ValueError(
+            f"method {name!r}: cannot import it ({type(error).__name__}: {error})"
+        ) from None
     return register(name, preset)
 
 
@@ -298,3 +311,14 @@ def method_spec(name: str, **overrides: float) -> MethodSpec:
 def stack(trees):
     """Stacks equal-structure pytrees (specs, hyperparameters) along a new leading axis."""
     return jax.tree.map(lambda *leaves: jnp.stack(leaves), *trees)
+
+
+def preset_record(name: str) -> dict:
+    """What ``name`` resolves to, as a saved run records it (``config.json``'s
+    ``resolved.methods``), so a resume can tell whether it still runs the same method."""
+    preset = resolve(name)
+    return {
+        "confidence_source": preset.confidence_source,
+        "coefficients": dict(sorted(preset.coefficients.items())),
+        "phases": list(preset.phases),
+    }

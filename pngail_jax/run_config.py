@@ -505,12 +505,18 @@ def _grid_axes(axes) -> tuple[tuple[str, tuple[float, ...]], ...]:
             fail("grid_axes", f": {field!r} {why}; axes: {', '.join(GRID_AXES)}")
     if len(set(fields)) != len(fields):
         fail("grid_axes", f": an axis is given twice, got {fields}")
-    return tuple(
-        (field, float_axis("grid_axes", tuple(values) if isinstance(values, list | tuple)
-                           else (values,), "be finite numbers", math.isfinite,
-                           name=f"grid axis {field}"))
-        for field, values in axes
-    )  # fmt: skip
+    checked = []
+    for field, values in axes:
+        values = tuple(values) if isinstance(values, list | tuple) else (values,)
+        try:
+            values = float_axis(field, values, "be finite numbers", math.isfinite)
+        except ConfigError as error:
+            fail("grid_axes", f": {field} values {error.reason}")
+        labels = [f"{value:g}" for value in values]  # a setting's label names its value
+        if len(set(labels)) != len(labels):
+            fail("grid_axes", f": {field} values {list(values)} are not distinct to 6 digits")
+        checked.append((field, values))
+    return tuple(checked)
 
 
 def _env_settings(env: str) -> RunSettings:

@@ -24,6 +24,7 @@ XLA CPU devices (``RunConfig.cpu_devices``, ``configure_devices``), the compilat
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 import shutil
 import time
@@ -38,6 +39,7 @@ from pngail_jax import settings as run_settings
 from pngail_jax.outputs import MARKER, RunLocked, output_refusal, prepare_output, run_lock
 from pngail_jax.run_config import RunConfig, upgrade_saved_config
 from pngail_jax.tracking import ticking
+from pngail_jax.validation import ConfigError
 
 if TYPE_CHECKING:
     from pngail_jax.rl import TRPOTrainer
@@ -116,7 +118,16 @@ def load_saved(directory: Path) -> SavedRun:
         check_seal(directory, raw)
     try:
         data = upgrade_saved_config(raw)
-        config = RunConfig.from_dict(data)
+        try:
+            config = RunConfig.from_dict(data)
+        except ConfigError as error:
+            if error.field != "methods":
+                raise
+            raise RunError(
+                f"--resume {directory}: {error} (a name given to pngail_jax.methods.register "
+                "must be registered again before the run resumes)"
+            ) from None
+        _check_methods_unchanged(directory, data["resolved"].get("methods"))
         # The engine that ran goes on running (a run begun on a CPU resumed on a GPU would
         # otherwise switch to MJX, whose state the checkpoint does not hold).
         physics = data["resolved"].get("physics")
@@ -138,6 +149,20 @@ def load_saved(directory: Path) -> SavedRun:
         raise RunError(
             f"--resume {directory}: {path} is damaged or not a run config ({error!r})"
         ) from None
+
+
+def _check_methods_unchanged(directory: Path, recorded: dict | None) -> None:
+    """Refuses to resume a run whose methods now resolve to other presets than it began
+    with (an edited ``package.module:preset``); runs from before the record pass."""
+    from pngail_jax.methods import preset_record
+
+    for name, record in (recorded or {}).items():
+        now = json.loads(json.dumps(preset_record(name)))
+        if now != record:
+            raise RunError(
+                f"--resume {directory}: method {name!r} is not the preset the run began with "
+                f"(then {record}, now {now}); restore it, or start a new run"
+            )
 
 
 def check_inputs(saved: SavedRun, allow_changed: bool) -> None:
@@ -375,6 +400,7 @@ def write_config(out: Path, run: BuiltRun, command: Sequence[str] | None = None)
     """config.json: the RunConfig, what it resolved to (with the SHA-256 of every input file,
     which ``--resume`` checks), and provenance."""
     from pngail_jax.integrity import seal, write_json
+    from pngail_jax.methods import preset_record
     from pngail_jax.run_config import provenance
 
     document = {
@@ -389,6 +415,8 @@ def write_config(out: Path, run: BuiltRun, command: Sequence[str] | None = None)
             # The engine that ran (RunSettings.physics None: chosen from the platform).
             "physics": getattr(run.env, "physics", None),
             "adversarial": dataclasses.asdict(run.trainer.config),
+            # What each method name resolved to: a resume refuses a changed preset.
+            "methods": {name: preset_record(name) for name in run.config.methods},
             "inputs": input_files(run.config, run.demos_path),
         },
         "provenance": {

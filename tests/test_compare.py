@@ -72,6 +72,15 @@ def test_only_tasks_every_method_ran_are_aggregated():
         compare.compare(s, "c")
 
 
+def test_a_task_where_a_method_has_no_finite_score_is_left_out():
+    s = Scores({"a": A, "b": {"t1": B["t1"], "t2": np.full(2, np.nan)}})
+    result = compare.compare(s, "a")
+    assert result["tasks"] == ["t1"] and result["left_out"] == {"a": ["t2"], "b": ["t2"]}
+    empty = compare.performance_profile(Scores({"c": {"t": np.full(2, np.nan)}}), "c",
+                                        np.array([0.5]))  # fmt: skip
+    assert np.isnan(empty["fraction"][0])
+
+
 def fake_run(directory, env, finals):
     """A sweep run's files: config.json, and metrics.csv with one evaluated iteration per
     method whose normalised returns are ``finals[method]`` (random -1000, optimal 0)."""

@@ -3,6 +3,7 @@ may set has a flag, and a bad value is refused naming its flag."""
 
 import argparse
 import dataclasses
+import json
 
 import pytest
 
@@ -87,3 +88,29 @@ def test_help_reads_the_defaults_of_the_config():
     smoke = RunConfig.preset("smoke")
     assert f"(default {smoke.seeds})" in text and f"(default {smoke.iterations})" in text
     assert f"(default {smoke.classifier.num_steps:,};" in text
+
+
+def test_a_config_files_baseline_and_axes_follow_the_flags(tmp_path):
+    saved = RunConfig(
+        methods=("gail", "pngail"), baseline="gail", grid_axes=(("max_kl", (0.005, 0.01)),)
+    )
+    path = tmp_path / "config.json"
+    path.write_text(json.dumps(saved.to_dict()))
+    out = str(tmp_path / "out")
+    config = sweep.parse_args(["--config", str(path), "--methods", "pngail", "--out", out]).config
+    assert config.baseline is None and config.grid_axes == saved.grid_axes  # gail left out
+    config = sweep.parse_args(
+        ["--config", str(path), "--grid", "none", "--baseline", "none", "--out", out]
+    ).config
+    assert config.grid_axes == () and config.baseline is None
+
+
+def test_a_resume_refuses_a_method_whose_preset_changed(tmp_path):
+    from pngail_jax import runner
+    from pngail_jax.methods import preset_record
+
+    record = json.loads(json.dumps(preset_record("pngail")))
+    runner._check_methods_unchanged(tmp_path, {"pngail": record})  # unchanged: passes
+    record["coefficients"]["pn_coef"] = 0.5
+    with pytest.raises(runner.RunError, match="'pngail' is not the preset the run began with"):
+        runner._check_methods_unchanged(tmp_path, {"pngail": record})

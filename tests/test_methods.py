@@ -62,6 +62,10 @@ def test_every_built_in_passes_its_own_checks():
         (Preset("x", "none", {"ranking_reward_coef": 1.0}), r"\['demo_rankings'\]"),
         (Preset("x", "none", {}, ("dagger",)), "phases must be among"),
         ({"agent_coef": 1.0}, "a pngail_jax.methods.Preset"),
+        (Preset("x", "none", {"gail_coef": 1.0, "bsc_eps": 0.0}), r"bsc_eps must lie in"),
+        (Preset("x", "none", {"adversarial_reward_coef": 0.0}), "needs a phase whose reward"),
+        (Preset("x", "none", {"policy_update_coef": 0.0}), "needs the 'bc' phase"),
+        (Preset("x", "none", [("agent_coef", 1.0)]), "coefficients must be a dict"),
     ],
 )
 def test_a_preset_is_refused_naming_the_field(preset, message):

@@ -131,6 +131,8 @@ def _log_backends(parser, flag: str, text: str) -> tuple[str, ...]:
 def _grid_axes(parser, flag: str, texts: list[str]) -> tuple[tuple[str, tuple[float, ...]], ...]:
     """``FIELD=V1,V2,...`` per occurrence, as ``RunConfig.grid_axes`` (which checks the field
     and the values)."""
+    if texts == ["none"]:  # clears a --config file's axes
+        return ()
     axes = []
     for text in texts:
         field, equals, values = text.partition("=")
@@ -138,6 +140,10 @@ def _grid_axes(parser, flag: str, texts: list[str]) -> tuple[tuple[str, tuple[fl
             parser.error(f"{flag} takes FIELD=V1,V2,... (e.g. max_kl=0.005,0.01), got {text!r}")
         axes.append((field.strip(), comma_floats(parser, f"{flag} {field.strip()}", values)))
     return tuple(axes)
+
+
+def _baseline(parser, flag: str, text: str) -> str | None:
+    return None if text == "none" else text
 
 
 def _absolute_file(parser, flag: str, text: str) -> str:
@@ -288,7 +294,8 @@ RUN_FLAGS = (
         "grid_axes",
         "another grid axis, repeatable: a per-cell value (a discriminator or TRPO "
         "hyperparameter, e.g. max_kl, or a MethodSpec coefficient, e.g. pn_coef) and its "
-        "values; every axis multiplies the grid (default: none)",
+        "values; every axis multiplies the grid; --grid none clears a --config file's "
+        "(default: none)",
         flag="--grid",
         convert=_grid_axes,
         append=True,
@@ -296,8 +303,9 @@ RUN_FLAGS = (
     ),
     FieldFlag(
         "baseline",
-        "the summary's probability of improvement: of every other method over this one "
-        "(default: of PN-GAIL over every other method)",
+        "the summary's probability of improvement: of every other method over this one; "
+        "'none' clears a --config file's (default: of PN-GAIL over every other method)",
+        convert=_baseline,
     ),
     FieldFlag("seed", "base PRNG seed (default 0)", type=int),
     FieldFlag(

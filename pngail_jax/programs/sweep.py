@@ -194,6 +194,8 @@ def config_from_flags(parser, args) -> RunConfig:
         parser.error(f"--{'config' if args.config else 'preset'}: {error}")
     given = flags.given_values(parser, args, flags.RUN_FLAGS)
     top = given.get("", {})
+    if "methods" in top and "baseline" not in top and base.baseline not in top["methods"]:
+        top["baseline"] = None  # a --config file's baseline that --methods leaves out
     env = check_env(parser, args.env or _task_of(args.demos) or base.env)
     if top.get("demos", base.demos) != base.demos:  # another data set: not the saved one's
         base = dataclasses.replace(
