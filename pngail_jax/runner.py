@@ -450,27 +450,12 @@ class Progress:
 def initial_state(run: BuiltRun, checkpoint: Path | None):
     """The grid's state and progress: from ``checkpoint`` (an intact ``chunk_*`` directory,
     ``intact_checkpoint``) when resuming, else fresh."""
-    import jax
-
-    from pngail_jax.checkpoint import restore_tree
-    from pngail_jax.integrity import read_json
-
     grid = run.grid
     start = time.perf_counter()
     state, init_metrics = grid.init()
     progress = Progress(0, grid.fetch(init_metrics), None, {"seconds": 0.0, "steps": 0})
     if checkpoint is not None:
-        template = jax.eval_shape(lambda: grid.unpad(state))
-        try:
-            state = grid.place(restore_tree(checkpoint / "state", template))
-        except ValueError as error:  # intact, but of another grid
-            raise RunError(f"cannot resume from {checkpoint}: {error}") from None
-        with np.load(checkpoint / "metrics.npz") as stored:
-            progress.metrics = {name.replace(":", "/"): stored[name] for name in stored.files}
-        done = read_json(checkpoint / "progress.json", "progress record")
-        progress.chunks_done, progress.timing = done["chunks_done"], done["timing"]
-        print(f"resumed from {checkpoint} (iteration {progress.iterations_done(grid)})")
-        return state, progress
+        return restore_checkpoint(grid, state, checkpoint, progress), progress
     mae = progress.init_metrics["confidence/mae"]
     print(
         f"classifier phase done in {time.perf_counter() - start:.1f} s (confidence MAE on D_u: "
@@ -1030,11 +1015,6 @@ def train_seeds(
 def _seeds_start(grid, checkpoints: Path | None):
     """A seeds run's first state and progress: from the newest intact checkpoint in
     ``checkpoints`` when there is one, else fresh."""
-    import jax
-
-    from pngail_jax.checkpoint import restore_tree
-    from pngail_jax.integrity import read_json
-
     state, _ = grid.init()
     progress = Progress(0, {}, None, {"seconds": 0.0})
     found = None
@@ -1042,14 +1022,25 @@ def _seeds_start(grid, checkpoints: Path | None):
         found = intact_checkpoint(checkpoints)
     if found is None:
         return state, progress
+    return restore_checkpoint(grid, state, found, progress), progress
+
+
+def restore_checkpoint(grid, state, checkpoint: Path, progress: Progress):
+    """The grid's state saved in ``checkpoint`` (an intact ``chunk_*``; ``state`` gives the
+    structure), with ``progress`` set to its metrics, chunks done and timing."""
+    import jax
+
+    from pngail_jax.checkpoint import restore_tree
+    from pngail_jax.integrity import read_json
+
     template = jax.eval_shape(lambda: grid.unpad(state))
     try:
-        state = grid.place(restore_tree(found / "state", template))
-    except ValueError as error:  # intact, but of another run
-        raise RunError(f"cannot resume from {found}: {error}") from None
-    with np.load(found / "metrics.npz") as stored:
+        state = grid.place(restore_tree(checkpoint / "state", template))
+    except ValueError as error:  # intact, but of another grid
+        raise RunError(f"cannot resume from {checkpoint}: {error}") from None
+    with np.load(checkpoint / "metrics.npz") as stored:
         progress.metrics = {name.replace(":", "/"): stored[name] for name in stored.files}
-    done = read_json(found / "progress.json", "progress record")
+    done = read_json(checkpoint / "progress.json", "progress record")
     progress.chunks_done, progress.timing = done["chunks_done"], done["timing"]
-    print(f"resumed from {found} (iteration {progress.chunks_done * grid.iterations_per_chunk})")
-    return state, progress
+    print(f"resumed from {checkpoint} (iteration {progress.iterations_done(grid)})")
+    return state
