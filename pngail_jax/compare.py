@@ -297,6 +297,17 @@ def write_json(path: Path, result: dict) -> None:
     write(path, nulls(result))
 
 
+def _interval_rows(axis, rows, colors) -> None:
+    """Horizontal bars from each row's interval, a tick at its estimate: rows are
+    ``(label, {"estimate", "ci95"})``."""
+    for row, (label, value) in enumerate(rows):
+        low, high = value["ci95"]
+        axis.barh(row, high - low, left=low, height=0.6, color=colors[label], alpha=0.7)
+        axis.plot([value["estimate"]] * 2, [row - 0.3, row + 0.3], color="black", lw=1.5)
+    axis.set(yticks=range(len(rows)))
+    axis.invert_yaxis()
+
+
 def plot(result: dict, directory: Path) -> list[Path]:
     """aggregates.png (each aggregate's estimate and interval per method), profiles.png
     (performance profiles with their bands) and improvement.png (P(method > baseline))."""
@@ -321,14 +332,9 @@ def plot(result: dict, directory: Path) -> list[Path]:
     height = 1.2 + 0.35 * len(methods)
     figure, axes = plt.subplots(1, len(AGGREGATES), figsize=(3.2 * len(AGGREGATES), height))
     for axis, name in zip(axes, AGGREGATES, strict=True):
-        for row, method in enumerate(methods):
-            value = result["aggregates"][method][name]
-            low, high = value["ci95"]
-            axis.barh(row, high - low, left=low, height=0.6, color=colors[method], alpha=0.7)
-            axis.plot([value["estimate"]] * 2, [row - 0.3, row + 0.3], color="black", lw=1.5)
-        axis.set(title=name.replace("_", " "), yticks=range(len(methods)))
+        _interval_rows(axis, [(m, result["aggregates"][m][name]) for m in methods], colors)
+        axis.set_title(name.replace("_", " "))
         axis.set_yticklabels(methods if axis is axes[0] else [])
-        axis.invert_yaxis()
         axis.grid(axis="x", alpha=0.3)
     figure.supxlabel("final normalised return (95% stratified bootstrap interval)")
     save(figure, "aggregates.png")
@@ -347,14 +353,9 @@ def plot(result: dict, directory: Path) -> list[Path]:
 
     improvements = result["probability_of_improvement"]
     figure, axis = plt.subplots(figsize=(7, 1.2 + 0.35 * max(len(improvements), 1)))
-    for row, (method, value) in enumerate(improvements.items()):
-        low, high = value["ci95"]
-        axis.barh(row, high - low, left=low, height=0.6, color=colors[method], alpha=0.7)
-        axis.plot([value["estimate"]] * 2, [row - 0.3, row + 0.3], color="black", lw=1.5)
+    _interval_rows(axis, list(improvements.items()), colors)
     axis.axvline(0.5, color="gray", ls="--", lw=1)
-    axis.set(xlim=(0, 1), yticks=range(len(improvements)), xlabel=(
-        f"P(method > {result['baseline']}) (95% interval)"))  # fmt: skip
+    axis.set(xlim=(0, 1), xlabel=f"P(method > {result['baseline']}) (95% interval)")
     axis.set_yticklabels(list(improvements))
-    axis.invert_yaxis()
     save(figure, "improvement.png")
     return written

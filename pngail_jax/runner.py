@@ -306,6 +306,17 @@ def blocks_per_chunk(num_evaluations: int, target_blocks: int) -> int:
     )
 
 
+def _check_split_sizes(label_ratios, num_demos: int) -> None:
+    """RunError unless every label ratio leaves a labelled and an unlabelled row."""
+    for ratio in label_ratios:
+        num_labelled = round(ratio * num_demos)
+        if not 0 < num_labelled < num_demos:
+            raise RunError(
+                f"--label-ratio {ratio} labels {num_labelled} of {num_demos} rows; "
+                "need at least one labelled and one unlabelled row"
+            )
+
+
 def build(config: RunConfig, saved: SavedRun | None) -> BuiltRun:
     """Environment, demonstrations, trainer and the compiled grid of ``config`` (a resumed
     run's demonstrations from the path it began with)."""
@@ -329,13 +340,7 @@ def build(config: RunConfig, saved: SavedRun | None) -> BuiltRun:
         trainer.check_label_ratios(config.label_ratios)
     except DemonstrationError as error:
         raise RunError(f"{demos_path}: {error}") from None
-    for ratio in config.label_ratios:
-        num_labelled = round(ratio * trainer.num_demos)
-        if not 0 < num_labelled < trainer.num_demos:
-            raise RunError(
-                f"--label-ratio {ratio} labels {num_labelled} of {trainer.num_demos} rows; "
-                "need at least one labelled and one unlabelled row"
-            )
+    _check_split_sizes(config.label_ratios, trainer.num_demos)
     cells = make_cells(
         config.methods, config.seeds, config.label_ratios, config.noise_stds, config.grid_axes
     )
