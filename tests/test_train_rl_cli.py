@@ -173,3 +173,27 @@ def test_an_interrupted_run_resumes_to_the_same_numbers(run_dir, tmp_path, monke
     with pytest.raises(SystemExit):
         train_rl.main(["--resume", str(out)])
     assert "the run is complete" in capsys.readouterr().err
+
+
+def test_resume_checks_again_under_the_lock(run_dir, tmp_path, monkeypatch, capsys):
+    """A run another process finishes between the checks of --resume and taking the lock is
+    refused, not trained again over its policy."""
+    import contextlib
+    import shutil
+
+    copy = tmp_path / "copy"
+    shutil.copytree(run_dir, copy)
+    policy = (copy / "policy.json").read_bytes()
+    (copy / "policy.json").unlink()
+    lock = train_rl.run_lock
+
+    @contextlib.contextmanager
+    def lock_after_another_finished(directory, program):
+        (copy / "policy.json").write_bytes(policy)
+        with lock(directory, program):
+            yield
+
+    monkeypatch.setattr(train_rl, "run_lock", lock_after_another_finished)
+    with pytest.raises(SystemExit, match="the run is complete"):
+        train_rl.main(["--resume", str(copy)])
+    assert (copy / "policy.json").read_bytes() == policy

@@ -260,7 +260,9 @@ def _train(args, env, trainer, seeds_hyperparams, keys, run_config) -> None:
     if args.resume is None:
         prepare_output(args.out, "train_rl", args.overwrite)
         write_json(args.out / "config.json", run_config)
-    else:
+    else:  # checked again under the lock: another resume may have finished it meanwhile
+        if (args.out / "policy.json").exists():
+            raise RunError(f"--resume {args.out}: the run is complete (its policy.json is written)")
         stored = read_json(args.out / "config.json", "train_rl run config")
         if json.loads(json.dumps(run_config)) != stored:  # another version's defaults
             raise RunError(
