@@ -260,10 +260,24 @@ def register(name: str, preset: Preset) -> Preset:
     if not isinstance(name, str) or not name.strip() or "," in name:
         raise ValueError(f"a method name is a non-empty string without commas, got {name!r}")
     preset = check_preset(name, preset)
-    if name in PRESETS and PRESETS[name] != preset:
+    if name in PRESETS and _record(PRESETS[name]) != _record(preset):
         raise ValueError(f"method {name!r} is already registered as another method")
     PRESETS[name] = preset
     return preset
+
+
+def register_recorded(name: str, record: dict) -> Preset:
+    """Registers ``name`` again from a saved run's ``preset_record``, so that a run of a method
+    registered in another process resumes without that process's code."""
+    return register(
+        name,
+        Preset(
+            f"{name}, as a saved run recorded it",
+            record["confidence_source"],
+            dict(record["coefficients"]),
+            tuple(record["phases"]),
+        ),
+    )
 
 
 def resolve(name: str) -> Preset:
@@ -316,7 +330,10 @@ def stack(trees):
 def preset_record(name: str) -> dict:
     """What ``name`` resolves to, as a saved run records it (``config.json``'s
     ``resolved.methods``), so a resume can tell whether it still runs the same method."""
-    preset = resolve(name)
+    return _record(resolve(name))
+
+
+def _record(preset: Preset) -> dict:
     return {
         "confidence_source": preset.confidence_source,
         "coefficients": dict(sorted(preset.coefficients.items())),

@@ -118,6 +118,7 @@ def load_saved(directory: Path) -> SavedRun:
         check_seal(directory, raw)
     try:
         data = upgrade_saved_config(raw)
+        _register_recorded_methods(data)
         try:
             config = RunConfig.from_dict(data)
         except ConfigError as error:
@@ -149,6 +150,20 @@ def load_saved(directory: Path) -> SavedRun:
         raise RunError(
             f"--resume {directory}: {path} is damaged or not a run config ({error!r})"
         ) from None
+
+
+def _register_recorded_methods(data: dict) -> None:
+    """Registers again, from the run's record, each method it names that was given to
+    ``methods.register`` in the process that began it (a ``package.module:preset`` is imported
+    again instead, and checked against its record by ``_check_methods_unchanged``)."""
+    from pngail_jax import methods
+
+    recorded = data["resolved"].get("methods") or {}
+    for name in data.get("methods", ()):
+        if isinstance(name, str) and name not in methods.PRESETS and ":" not in name:
+            if name in recorded:
+                methods.register_recorded(name, recorded[name])
+                print(f"note: method {name!r} registered again from the run's config.json")
 
 
 def _check_methods_unchanged(directory: Path, recorded: dict | None) -> None:

@@ -121,3 +121,27 @@ def test_a_grid_axis_keys_the_csv_the_summary_and_the_policies(finished, demos_p
     assert policies.exists()
     config = json.loads((out / "config.json").read_text())
     assert config["grid_axes"] == [["max_kl", [0.005, 0.01]]]
+
+
+def test_a_registered_method_resumes_from_its_record(demos_path, tmp_path, capsys):
+    """A method given to ``methods.register`` in the process that began a run is registered
+    again from the run's config.json when another process resumes it."""
+    from pngail_jax.methods import PRESETS, Preset, preset_record, register
+
+    mine = Preset("GAIL at half the agent weight", "none", {"agent_coef": 0.5, "gail_coef": 1.0})
+    out = tmp_path / "run"
+    try:
+        register("gail-half", mine)
+        recorded = preset_record("gail-half")
+        run(tiny_config(demos_path).replace(methods=("gail-half",), seeds=1), out)
+    finally:
+        PRESETS.pop("gail-half", None)
+    try:
+        result = run(None, out, resume=True)  # as a new process, which never registered it
+        assert "registered again from the run's config.json" in capsys.readouterr().out
+        assert result.summary["complete"] and preset_record("gail-half") == recorded
+        register("gail-half", mine)  # the same method under its own description: accepted
+        with pytest.raises(ValueError, match="already registered as another method"):
+            register("gail-half", Preset("other", "none", {"agent_coef": 0.25}))
+    finally:
+        PRESETS.pop("gail-half", None)
