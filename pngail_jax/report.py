@@ -206,37 +206,10 @@ def summarize(
     excluded = set(excluded)
     values = _per_cell(cells, metrics, normalizer, excluded)
     settings, groups = group_cells(cells)
-    methods = {}
-    for label, indices in groups.items():
-        row = {}
-        for name, per_cell in values.items():
-            summary = stats.seed_summary(per_cell[indices])
-            row[f"{name}_mean"], row[f"{name}_std"] = summary["mean"], summary["std"]
-            row[f"{name}_se"] = summary["se"]
-            row[f"{name}_iqm"], row[f"{name}_ci95"] = summary["iqm"], summary["ci95"]
-        for name in ("mae", "rmse"):  # the classifier's error on D_u (NaN: no classifier)
-            if f"confidence/{name}" in metrics:
-                error = stats.seed_summary(np.asarray(metrics[f"confidence/{name}"])[indices])
-                row[f"confidence_{name}_mean"] = error["mean"]
-                row[f"confidence_{name}_std"] = error["std"]
-        row["num_seeds"] = int(np.isfinite(values["final_return"][indices]).sum())
-        row["diverged_seeds"] = [cells[i].seed for i in indices if i in excluded]
-        if row["num_seeds"] == 0:
-            row["note"] = "no seed has a finite return (diverged, NaN/inf): statistics are null"
-        errors = {
-            f"confidence_{name}": np.asarray(metrics[f"confidence/{name}"])
-            for name in ("mae", "rmse")
-            if f"confidence/{name}" in metrics
-        }
-        row["per_seed"] = [
-            {
-                "seed": cells[i].seed,
-                **{name: float(v[i]) for name, v in values.items()},
-                **{name: float(v[i]) for name, v in errors.items()},
-            }
-            for i in indices
-        ]
-        methods[label] = row
+    methods = {
+        label: _method_row(cells, indices, values, metrics, excluded)
+        for label, indices in groups.items()
+    }
     return {
         "null_means": NULL_MEANS,
         "methods": methods,
@@ -248,6 +221,38 @@ def summarize(
         "compile_seconds": float(compile_seconds),
         "normalizer": None if normalizer is None else [float(x) for x in normalizer],
     }
+
+
+def _method_row(cells, indices, values, metrics, excluded) -> dict:
+    """One method's (and setting's) row of ``summarize``: each value's statistics over the
+    seeds ``indices``, the classifier's errors, and the per-seed table."""
+    row = {}
+    for name, per_cell in values.items():
+        summary = stats.seed_summary(per_cell[indices])
+        row[f"{name}_mean"], row[f"{name}_std"] = summary["mean"], summary["std"]
+        row[f"{name}_se"] = summary["se"]
+        row[f"{name}_iqm"], row[f"{name}_ci95"] = summary["iqm"], summary["ci95"]
+    errors = {  # the classifier's error on D_u (absent: no classifier)
+        f"confidence_{name}": np.asarray(metrics[f"confidence/{name}"])
+        for name in ("mae", "rmse")
+        if f"confidence/{name}" in metrics
+    }
+    for name, per_cell in errors.items():
+        error = stats.seed_summary(per_cell[indices])
+        row[f"{name}_mean"], row[f"{name}_std"] = error["mean"], error["std"]
+    row["num_seeds"] = int(np.isfinite(values["final_return"][indices]).sum())
+    row["diverged_seeds"] = [cells[i].seed for i in indices if i in excluded]
+    if row["num_seeds"] == 0:
+        row["note"] = "no seed has a finite return (diverged, NaN/inf): statistics are null"
+    row["per_seed"] = [
+        {
+            "seed": cells[i].seed,
+            **{name: float(v[i]) for name, v in values.items()},
+            **{name: float(v[i]) for name, v in errors.items()},
+        }
+        for i in indices
+    ]
+    return row
 
 
 def _improvement_over_baselines(cells, settings, final, baseline: str | None = None) -> dict:

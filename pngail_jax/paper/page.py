@@ -238,10 +238,9 @@ def weak_expert_notes(out: Path, grids) -> list[str]:
     return notes
 
 
-def write_page(out: Path, options: dict, figures: list[Figure], grids, timings: dict) -> Path:
-    """``README.md``, one plot per figure and ``results.json`` from the grids' outputs."""
-    from pngail_jax.report import json_safe
-
+def figure_results(out: Path, figures: list[Figure], grids) -> dict:
+    """``{figure: {task: {series label: statistics, "normalizer": [random, optimal]}}}`` from
+    the grids' curves and summaries under ``out/grids``."""
     loaded = {
         name: (read_curves(out / "grids" / name), read_json(out / "grids" / name / "summary.json"))
         for name in grids
@@ -258,6 +257,14 @@ def write_page(out: Path, options: dict, figures: list[Figure], grids, timings: 
         for task, series_list in figure.panels.items():  # the grid's random / optimal returns
             config = read_json(out / "grids" / series_list[0].grid / "config.json")
             results[figure.name][task]["normalizer"] = config["resolved"].get("normalizer")
+    return results
+
+
+def write_page(out: Path, options: dict, figures: list[Figure], grids, timings: dict) -> Path:
+    """``README.md``, one plot per figure and ``results.json`` from the grids' outputs."""
+    from pngail_jax.report import json_safe
+
+    results = figure_results(out, figures, grids)
     budget = options["budget"]
     lines = [
         f"# The paper's figures at the {budget} preset",

@@ -203,12 +203,43 @@ def plot(path: Path, curves: dict, title: str) -> None:
 
 def main(argv=None) -> dict:
     args = parse_args(argv)
+    prepare_output(args.out, "compare_settings")  # never emptied: its arms are reused
+    directories = {arm: run_arm(args, arm) for arm in args.arms}
+    results, curves = evaluate_arms(args, directories)
+    trained_on = {
+        arm: "fast" if result["env_options"] or args.env == "Ant" else "own"
+        for arm, result in results.items()
+    }
+    baseline_mean, baseline_se = results[args.baseline]["final_return_mean_se"][
+        trained_on[args.baseline]
+    ]
+    for arm, result in results.items():
+        mean, _ = result["final_return_mean_se"][trained_on[arm]]
+        result["trained_on"] = trained_on[arm]
+        result["not_worse_than_baseline"] = bool(mean >= baseline_mean - baseline_se)
+    summary = {
+        "env": args.env,
+        "seeds": args.seeds,
+        "iterations": args.iterations,
+        "baseline": args.baseline,
+        "eval_episodes": args.num_eval_episodes,
+        "arms": results,
+    }
+    markdown = comparison_markdown(summary)
+    atomic_write_text(args.out / "comparison.md", markdown + "\n")
+    plot(args.out / "comparison.png", curves, f"TRPO on {args.env}, true reward")
+    write_json(args.out / COMPARISON_FILE, json_safe(summary))  # null, never a bare NaN
+    print(f"\n{markdown}\n\nwrote {args.out}/comparison.{{json,md,png}}")
+    return summary
+
+
+def evaluate_arms(args, directories: dict) -> tuple[dict, dict]:
+    """Each arm's saved policies evaluated on the task's own physics (and MJX's fast solver
+    beside it on the MuJoCo tasks), with its TRPO settings and learning curves."""
     import jax
 
     from pngail_jax import envs
 
-    prepare_output(args.out, "compare_settings")  # never emptied: its arms are reused
-    directories = {arm: run_arm(args, arm) for arm in args.arms}
     key = jax.random.key(args.seed + 10_000)  # evaluation keys unused by any training run
     physics = {"own": {}}
     if args.env != "Pendulum-v1":
@@ -240,31 +271,7 @@ def main(argv=None) -> dict:
             },
             "average_eval_return_mean_se": mean_and_standard_error(curves[arm][1].mean(axis=1)),
         }
-    trained_on = {
-        arm: "fast" if result["env_options"] or args.env == "Ant" else "own"
-        for arm, result in results.items()
-    }
-    baseline_mean, baseline_se = results[args.baseline]["final_return_mean_se"][
-        trained_on[args.baseline]
-    ]
-    for arm, result in results.items():
-        mean, _ = result["final_return_mean_se"][trained_on[arm]]
-        result["trained_on"] = trained_on[arm]
-        result["not_worse_than_baseline"] = bool(mean >= baseline_mean - baseline_se)
-    summary = {
-        "env": args.env,
-        "seeds": args.seeds,
-        "iterations": args.iterations,
-        "baseline": args.baseline,
-        "eval_episodes": args.num_eval_episodes,
-        "arms": results,
-    }
-    markdown = comparison_markdown(summary)
-    atomic_write_text(args.out / "comparison.md", markdown + "\n")
-    plot(args.out / "comparison.png", curves, f"TRPO on {args.env}, true reward")
-    write_json(args.out / COMPARISON_FILE, json_safe(summary))  # null, never a bare NaN
-    print(f"\n{markdown}\n\nwrote {args.out}/comparison.{{json,md,png}}")
-    return summary
+    return results, curves
 
 
 def comparison_markdown(summary: dict) -> str:
