@@ -325,30 +325,7 @@ class AdversarialTrainer:
             hyperparams.noise_std, self._allowed,
         )  # fmt: skip
         inputs = self._demo_inputs[split.indices]
-        num_labelled = split.labelled.sum()
-        mean_labelled = jnp.where(split.labelled, split.confidence, 0.0).sum() / jnp.maximum(
-            num_labelled, 1
-        )
-        without_classifier = jnp.where(split.labelled, split.confidence, mean_labelled)
-
-        def classify():
-            predicted, _, _ = train_classifier(
-                self.config.classifier,
-                spec.classifier,
-                self._classifier_inputs[split.indices],
-                split.confidence,
-                split.labelled,
-                classifier_key,
-            )
-            return predicted
-
-        # Under vmap a cond with a batched predicate runs both branches; alone, only one.
-        predicted = jax.lax.cond(spec.classifier_coef > 0, classify, lambda: without_classifier)
-        confidence = jnp.where(
-            split.labelled,
-            split.confidence,
-            spec.classifier_coef * predicted + (1 - spec.classifier_coef) * without_classifier,
-        )
+        confidence, mean_labelled = self._split_confidences(spec, split, classifier_key)
         disc_params = self.discriminator.init(disc_key, inputs[0])
         trpo_state = self.trpo.init(trpo_key)
         # Keys of the appendix phases come from fold_in, so the split above (and every number
@@ -378,6 +355,36 @@ class AdversarialTrainer:
         if not self.has_confidence:
             errors = jax.tree.map(lambda e: jnp.full_like(e, jnp.nan), errors)
         return state, {f"confidence/{name}": value for name, value in errors.items()}
+
+    def _split_confidences(self, spec: MethodSpec, split, key: jax.Array):
+        """(float[N] the confidence every split row trains with, the labelled rows' mean):
+        the given one on D_c's rows; on the rest the classifier's prediction, or D_c's mean
+        for a method without a classifier (``spec.classifier_coef`` 0)."""
+        num_labelled = split.labelled.sum()
+        mean_labelled = jnp.where(split.labelled, split.confidence, 0.0).sum() / jnp.maximum(
+            num_labelled, 1
+        )
+        without_classifier = jnp.where(split.labelled, split.confidence, mean_labelled)
+
+        def classify():
+            predicted, _, _ = train_classifier(
+                self.config.classifier,
+                spec.classifier,
+                self._classifier_inputs[split.indices],
+                split.confidence,
+                split.labelled,
+                key,
+            )
+            return predicted
+
+        # Under vmap a cond with a batched predicate runs both branches; alone, only one.
+        predicted = jax.lax.cond(spec.classifier_coef > 0, classify, lambda: without_classifier)
+        confidence = jnp.where(
+            split.labelled,
+            split.confidence,
+            spec.classifier_coef * predicted + (1 - spec.classifier_coef) * without_classifier,
+        )
+        return confidence, mean_labelled
 
     def _ranked_trajectories(self, label_ratio, key):
         """bool[K]: a share ``label_ratio`` of the demonstration trajectories (rounded, at
