@@ -141,19 +141,7 @@ def load_released(
     confidence = None if conf_path is None else _load_numpy(conf_path, "confidence file")
     if confidence is not None:
         confidence = _released_confidence(confidence, conf_path, mixture_path, len(rows))
-    metadata = {
-        **({"env": env_name} if named else {}),
-        "action_scale": float(action_scale),
-        "action_scale_source": source,
-        "source": f"{'released layout' if named else 'rows'}: {mixture_path.name}",
-    }
-    if env_name in PAPER_NORMALIZERS:
-        random_return, optimal_return = PAPER_NORMALIZERS[env_name]
-        metadata |= {
-            "random_return": random_return,
-            "optimal_return": optimal_return,
-            "normalizer_source": "paper Table 3",
-        }
+    metadata = _metadata(mixture_path, env_name, action_scale, source)
     trajectory_ids, trajectory_length = _trajectories(
         env_name, trajectory_length, confidence, len(rows), where
     )
@@ -171,6 +159,25 @@ def load_released(
         )
     except DemonstrationError as error:
         raise DemonstrationError(f"{where}: {error}") from None
+
+
+def _metadata(mixture_path: Path, env_name: str | None, action_scale: float, source: str):
+    """A loaded file's ``Demonstrations.metadata``: its environment and the paper's Table 3
+    returns for an authors' file, the action scale applied and where it came from."""
+    metadata = {
+        **({"env": env_name} if env_name is not None else {}),
+        "action_scale": float(action_scale),
+        "action_scale_source": source,
+        "source": f"{'released layout' if env_name is not None else 'rows'}: {mixture_path.name}",
+    }
+    if env_name in PAPER_NORMALIZERS:
+        random_return, optimal_return = PAPER_NORMALIZERS[env_name]
+        metadata |= {
+            "random_return": random_return,
+            "optimal_return": optimal_return,
+            "normalizer_source": "paper Table 3",
+        }
+    return metadata
 
 
 def _action_scale(env_name: str | None, action_scale: float | None) -> tuple[float, str]:
