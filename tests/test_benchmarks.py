@@ -106,3 +106,15 @@ def test_solver_accuracy(tmp_path):
     assert {row["env"] for row in rows} == {"Hopper"} and all(
         positive(row["steps_per_s"]) for row in rows
     )
+
+
+def test_method_cost(tmp_path):
+    rng = np.random.default_rng(0)  # a file in the authors' layout: rows [obs, action / 2]
+    mixture = tmp_path / "Pendulum-v1_mixture.npy"
+    np.save(mixture, rng.normal(size=(100, 4)).astype(np.float32))
+    np.save(tmp_path / "Pendulum-v1_mixture_conf.npy", rng.uniform(size=(100, 1)))
+    argv = ["--demos", str(mixture), "--methods", "gail", "--quick", "--num-envs", "4",
+            "--unroll-length", "50"]  # fmt: skip
+    (row,) = rows_of("method_cost", argv, tmp_path / "rows.json")
+    assert row["method"] == "gail" and row["ratio_to_first"] == 1.0
+    assert positive(row["iteration_seconds"]) and positive(row["init_seconds"])
