@@ -43,6 +43,25 @@ def median_seconds(program, *args, repeats: int = NUM_REPEATS) -> float:
     return statistics.median(timings)
 
 
+def time_grid_chunks(grid, repeats: int = NUM_REPEATS):
+    """``(state, metrics, init seconds, median chunk seconds)`` of a compiled
+    ``pngail_jax.grid.Grid``: its init, one warm-up chunk, then ``repeats`` timed chunks
+    (run_chunk donates its state: each call keeps the new one)."""
+    start = time.perf_counter()
+    state, _ = grid.init()
+    jax.block_until_ready(state)
+    init_seconds = time.perf_counter() - start
+    state, metrics = grid.run_chunk(state)
+    jax.block_until_ready((state, metrics))
+    timings = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        state, metrics = grid.run_chunk(state)
+        jax.block_until_ready((state, metrics))
+        timings.append(time.perf_counter() - start)
+    return state, metrics, init_seconds, statistics.median(timings)
+
+
 def compile_and_run(function, *args):
     """``(result, compile seconds, run seconds)`` of one call of ``jit(function)``."""
     start = time.perf_counter()

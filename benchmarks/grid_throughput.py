@@ -91,11 +91,9 @@ import contextlib
 import dataclasses
 import json
 import os
-import statistics
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import jax
@@ -109,6 +107,7 @@ from common import (
     median_seconds,
     peak_memory_bytes,
     scan_length,
+    time_grid_chunks,
     write_rows,
 )  # fmt: skip
 from jax import monitoring
@@ -198,21 +197,10 @@ def evaluation_seconds(trpo: TRPO, state: TrainState) -> float:
 def time_chunks(grid: Grid) -> tuple[TrainState, dict]:
     """Runs init and a warm-up chunk, then times NUM_REPEATS chunks (median); returns the
     final state and the timings."""
-    start = time.perf_counter()
-    state, _ = grid.init()
-    jax.block_until_ready(state)
-    init_seconds = time.perf_counter() - start
-    state, metrics = grid.run_chunk(state)  # run_chunk donates state: keep the new one
-    jax.block_until_ready((state, metrics))
-    timings = []
-    for _ in range(NUM_REPEATS):
-        start = time.perf_counter()
-        state, metrics = grid.run_chunk(state)
-        jax.block_until_ready((state, metrics))
-        timings.append(time.perf_counter() - start)
+    state, metrics, init_seconds, chunk_seconds = time_grid_chunks(grid)
     bad = nonfinite_cells(grid.fetch(metrics), grid.iterations_per_chunk)
     return state, {
-        "chunk_seconds": statistics.median(timings),
+        "chunk_seconds": chunk_seconds,
         "init_seconds": init_seconds,
         "nonfinite_cells": len(bad),
     }

@@ -29,13 +29,10 @@ ratio_to_first, compile_seconds, device, jax_version}``.
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
-import time
 from pathlib import Path
 
-import jax
-from common import context, markdown_table, write_rows
+from common import context, markdown_table, time_grid_chunks, write_rows
 
 from pngail_jax import RunConfig
 from pngail_jax.runner import RunError, build
@@ -46,23 +43,11 @@ RELEASED_PENDULUM = Path("data/released/Pendulum-v1_mixture.npy")
 
 def measure(config: RunConfig, repeats: int) -> dict:
     """Compiles ``config``'s grid and times its init and one chunk (see the module doc)."""
-    built = build(config, None)
-    grid = built.grid
-    start = time.perf_counter()
-    state, _ = grid.init()
-    jax.block_until_ready(state)
-    init_seconds = time.perf_counter() - start
-    state, _ = grid.run_chunk(state)  # warm-up: the first call pays its own set-up
-    jax.block_until_ready(state)
-    samples = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        state, metrics = grid.run_chunk(state)
-        jax.block_until_ready((state, metrics))
-        samples.append(time.perf_counter() - start)
+    grid = build(config, None).grid
+    _, _, init_seconds, chunk_seconds = time_grid_chunks(grid, repeats)
     return {
         "init_seconds": init_seconds,
-        "iteration_seconds": statistics.median(samples) / config.iterations,
+        "iteration_seconds": chunk_seconds / config.iterations,
         "compile_seconds": grid.compile_seconds,
     }
 

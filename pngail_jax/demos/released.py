@@ -125,12 +125,7 @@ def load_released(
     (``RELEASED_ACTION_SIZES``); any other file needs it.
     Errors name the rows or confidence file they are about.
     """
-    mixture_path = Path(mixture_path)
-    if mixture_path.suffix != ".npy":
-        raise DemonstrationError(
-            f"{mixture_path}: expected a .npy file of rows [observation, action], an .npz set "
-            "or minari:<dataset id>"
-        )
+    mixture_path = _npy_path(mixture_path)
     named = mixture_path.name.endswith("_mixture.npy")
     env_name = mixture_path.name.removesuffix("_mixture.npy") if named else None
     action_scale, source = _action_scale(env_name, action_scale)
@@ -138,13 +133,14 @@ def load_released(
         conf_path = released_confidence_path(mixture_path)
     where = f"{'mixture' if named else 'rows'} file {mixture_path}"
     rows, observation_size = _rows(mixture_path, where, env_name, observation_size, action_size)
-    confidence = None if conf_path is None else _load_numpy(conf_path, "confidence file")
-    if confidence is not None:
+    confidence = None
+    if conf_path is not None:
+        confidence = _load_numpy(conf_path, "confidence file")
         confidence = _released_confidence(confidence, conf_path, mixture_path, len(rows))
-    metadata = _metadata(mixture_path, env_name, action_scale, source)
     trajectory_ids, trajectory_length = _trajectories(
         env_name, trajectory_length, confidence, len(rows), where
     )
+    metadata = _metadata(mixture_path, env_name, action_scale, source)
     if trajectory_ids is not None:
         metadata["trajectory_length"] = trajectory_length
     with np.errstate(over="ignore"):  # an overflow to inf is refused below, naming the file
@@ -159,6 +155,17 @@ def load_released(
         )
     except DemonstrationError as error:
         raise DemonstrationError(f"{where}: {error}") from None
+
+
+def _npy_path(path: str | Path) -> Path:
+    """``path`` as a Path, refused unless it names a ``.npy`` file."""
+    path = Path(path)
+    if path.suffix != ".npy":
+        raise DemonstrationError(
+            f"{path}: expected a .npy file of rows [observation, action], an .npz set "
+            "or minari:<dataset id>"
+        )
+    return path
 
 
 def _metadata(mixture_path: Path, env_name: str | None, action_scale: float, source: str):
