@@ -498,6 +498,9 @@ def run_chunks(run: BuiltRun, out: Path, state, progress: Progress, writer: bool
     reported_bad: set[int] = set()
     host_state = None
     for chunk in range(progress.chunks_done, num_chunks):
+        notice = _long_chunk_notice(progress, chunk, num_chunks, grid.iterations_per_chunk)
+        if notice:
+            print(notice, flush=True)
         chunk_start = time.perf_counter()
         state, chunk_metrics = grid.run_chunk(state)
         chunk_metrics = grid.fetch(chunk_metrics)
@@ -540,6 +543,27 @@ def run_chunks(run: BuiltRun, out: Path, state, progress: Progress, writer: bool
         if writer and progress.chunks_done < num_chunks:  # partial results; the last below
             write_outputs(out, run, progress)
     return grid.fetch(state) if host_state is None else host_state
+
+
+# A chunk expected to run this long gets a line when it starts (its progress line comes only
+# when it ends): f-IRL's chunk of 100 iterations runs an hour on a 2-core CPU.
+LONG_CHUNK_SECONDS = 120.0
+
+
+def _long_chunk_notice(progress: Progress, chunk: int, num_chunks: int, per_chunk: int):
+    """A line saying when a long chunk should end, at the pace of the chunks before it (None
+    for a short chunk, or for the first, whose pace is not known yet)."""
+    if chunk == 0 or progress.timing["seconds"] <= 0:
+        return None
+    expected = progress.timing["seconds"] / chunk
+    if expected < LONG_CHUNK_SECONDS:
+        return None
+    first, last = chunk * per_chunk + 1, (chunk + 1) * per_chunk
+    end = time.strftime("%H:%M", time.localtime(time.time() + expected))
+    return (
+        f"  chunk {chunk + 1}/{num_chunks} (iterations {first}-{last}) started; at the pace "
+        f"so far ({format_seconds(expected)} a chunk) it ends about {end}"
+    )
 
 
 def format_seconds(seconds: float) -> str:
