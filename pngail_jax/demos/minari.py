@@ -48,15 +48,7 @@ def load_minari(
         dataset = minari.load_dataset(dataset_id, download=False)
     except FileNotFoundError as error:
         raise DemonstrationError(f"no local Minari dataset {dataset_id!r}: {error}") from None
-    observations, actions, ids = [], [], []
-    for index, episode in enumerate(dataset.iterate_episodes()):
-        if not isinstance(episode.observations, np.ndarray):
-            raise DemonstrationError(f"{dataset_id}: only flat Box observations are supported")
-        steps = len(episode.actions)
-        observations.append(np.asarray(episode.observations[:steps], np.float32))
-        actions.append(np.asarray(episode.actions, np.float32).reshape(steps, -1))
-        ids.append(np.full(steps, index, np.int32))
-    ids = np.concatenate(ids)
+    observations, actions, ids, num_episodes = _episode_rows(dataset, dataset_id)
     if isinstance(confidence, str | Path):
         source = str(confidence)
         confidence = _read_numbers(confidence)
@@ -66,16 +58,32 @@ def load_minari(
     else:
         source = "confidence (one value or one per episode)"
         if confidence is not None and np.ndim(confidence) == 0:
-            confidence = np.full(len(observations), confidence)
+            confidence = np.full(num_episodes, confidence)
     if confidence is not None:
-        confidence = _per_episode(source, confidence, len(observations), dataset_id)[ids]
+        confidence = _per_episode(source, confidence, num_episodes, dataset_id)[ids]
     return Demonstrations(
-        observations=np.concatenate(observations),
-        actions=np.concatenate(actions) * action_scale,
+        observations=observations,
+        actions=actions * action_scale,
         confidence=confidence,
         trajectory_ids=ids,
         metadata={"source": f"minari: {dataset_id}", "action_scale": float(action_scale)},
     )
+
+
+def _episode_rows(dataset, dataset_id: str):
+    """Each episode's (s_t, a_t) rows, concatenated: observations float32[N, O] (an
+    episode's last observation dropped), actions float32[N, A], episode ids int32[N], and
+    the number of episodes."""
+    observations, actions, ids = [], [], []
+    for index, episode in enumerate(dataset.iterate_episodes()):
+        if not isinstance(episode.observations, np.ndarray):
+            raise DemonstrationError(f"{dataset_id}: only flat Box observations are supported")
+        steps = len(episode.actions)
+        observations.append(np.asarray(episode.observations[:steps], np.float32))
+        actions.append(np.asarray(episode.actions, np.float32).reshape(steps, -1))
+        ids.append(np.full(steps, index, np.int32))
+    rows = np.concatenate(observations), np.concatenate(actions), np.concatenate(ids)
+    return (*rows, len(ids))
 
 
 def _metadata_field(dataset, dataset_id: str, field: str) -> list:
