@@ -17,6 +17,7 @@ from hypothesis import given
 from hypothesis import settings as hypothesis_settings
 from hypothesis import strategies as st
 
+from pngail_jax import envs
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.methods import METHOD_NAMES
 from pngail_jax.programs import cli, compare_settings, sweep
@@ -214,7 +215,10 @@ def test_a_json_file_with_any_value_anywhere_loads_right_or_names_the_key(data):
 
 
 @PROPERTY
-@given(name=st.sampled_from(SETTINGS_KEYS), value=COUNTS | st.booleans())
+@given(
+    name=st.sampled_from(SETTINGS_KEYS),
+    value=COUNTS | st.booleans() | st.sampled_from([*envs.PHYSICS, "mjx2"]),
+)
 def test_any_settings_value_is_valid_or_named(name, value):
     try:
         settings = RunSettings(**{name: value})
@@ -225,6 +229,8 @@ def test_any_settings_value_is_valid_or_named(name, value):
     assert stored == value
     if name == "normalize_observations":
         assert type(stored) is bool
+    elif name == "physics":  # an engine's name, or None: the platform's
+        assert stored is None or stored in envs.PHYSICS
     else:  # a count; the solver caps may be None (the task's own)
         solver_cap = name in ("solver_iterations", "ls_iterations")
         assert (type(stored) is int and stored >= 1) or (stored is None and solver_cap)
