@@ -498,7 +498,7 @@ def run_chunks(run: BuiltRun, out: Path, state, progress: Progress, writer: bool
     reported_bad: set[int] = set()
     host_state = None
     for chunk in range(progress.chunks_done, num_chunks):
-        notice = _long_chunk_notice(progress, chunk, num_chunks, grid.iterations_per_chunk)
+        notice = _long_chunk_notice(progress, num_chunks, grid.iterations_per_chunk)
         if notice:
             print(notice, flush=True)
         chunk_start = time.perf_counter()
@@ -550,9 +550,11 @@ def run_chunks(run: BuiltRun, out: Path, state, progress: Progress, writer: bool
 LONG_CHUNK_SECONDS = 120.0
 
 
-def _long_chunk_notice(progress: Progress, chunk: int, num_chunks: int, per_chunk: int):
-    """A line saying when a long chunk should end, at the pace of the chunks before it (None
-    for a short chunk, or for the first, whose pace is not known yet)."""
+def _long_chunk_notice(progress: Progress, num_chunks: int, per_chunk: int):
+    """A line saying when the next chunk (after ``progress.chunks_done``) should end, at the
+    pace of the chunks before it (None for a short chunk, or for the first, whose pace is not
+    known yet)."""
+    chunk = progress.chunks_done
     if chunk == 0 or progress.timing["seconds"] <= 0:
         return None
     expected = progress.timing["seconds"] / chunk
