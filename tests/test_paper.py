@@ -168,6 +168,26 @@ def test_the_page_warns_of_a_made_expert_worse_than_random_and_the_plan_has_an_e
     assert paper.plan_eta([60.0, 120.0], 2) == ", about 3m00s left for the plan"
 
 
+def test_an_interrupted_grid_keeps_its_wall_time_on_the_plan_record(tmp_path, monkeypatch):
+    """The page's wall time sums every call on a grid: a call stopped with Ctrl-C (the way a
+    many-hour grid is run a chunk at a time) adds its time before the interrupt goes on."""
+    import time
+
+    from pngail_jax.paper import grids as plan
+
+    def interrupted(*args):
+        time.sleep(0.05)
+        raise KeyboardInterrupt
+
+    grid = paper.main_grid("Pendulum-v1", released=True)
+    (tmp_path / "timings.json").write_text(json.dumps({"g": 60.0}))  # an earlier call's
+    monkeypatch.setattr(plan, "grid_config", lambda *args: None)
+    monkeypatch.setattr(plan, "run_grid", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        plan.run_grids({"g": grid}, {grid.demos: (None, 1.0)}, tmp_path, None, None, [])
+    assert 60.05 <= json.loads((tmp_path / "timings.json").read_text())["g"] < 70.0
+
+
 def test_a_resume_checks_the_authors_files_and_its_own_options(tmp_path):
     mixture = tmp_path / "released" / "Pendulum-v1_mixture.npy"
     mixture.parent.mkdir()

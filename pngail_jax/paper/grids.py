@@ -173,7 +173,8 @@ def run_grid(grid: GridSpec, directory: Path, config, command: list[str]) -> flo
 
 def run_grids(grids, demos, out: Path, budget: Budget, physics, command: list[str]) -> dict:
     """Runs (or resumes, or keeps) every grid; each grid's wall-clock seconds over all calls,
-    kept in ``out/timings.json``. ``command``: the plan's, recorded in each grid's config."""
+    interrupted ones included, kept in ``out/timings.json``. ``command``: the plan's,
+    recorded in each grid's config."""
     from pngail_jax.demos import load_demonstrations
     from pngail_jax.integrity import IntegrityError
 
@@ -191,12 +192,22 @@ def run_grids(grids, demos, out: Path, budget: Budget, physics, command: list[st
             num_rows[grid.demos] = load_demonstrations(path, action_scale=scale).num_rows
         config = grid_config(grid, demos[grid.demos], budget, num_rows.get(grid.demos), physics)
         print(f"\n== grid {index + 1} of {len(grids)}{plan_eta(ran, len(grids) - index)}")
-        seconds = run_grid(grid, out / "grids" / name, config, command)
+        start = time.perf_counter()
+        try:
+            seconds = run_grid(grid, out / "grids" / name, config, command)
+        except BaseException:  # an interrupted call (Ctrl-C) counts its time too
+            add_seconds(timings_path, timings, name, time.perf_counter() - start)
+            raise
         if seconds:
             ran.append(seconds)
-            timings[name] = timings.get(name, 0.0) + seconds
-            write_json(timings_path, timings)
+            add_seconds(timings_path, timings, name, seconds)
     return timings
+
+
+def add_seconds(path: Path, timings: dict, name: str, seconds: float) -> None:
+    """Adds ``seconds`` to grid ``name``'s wall time and saves the record at ``path``."""
+    timings[name] = timings.get(name, 0.0) + seconds
+    write_json(path, timings)
 
 
 def plan_eta(seconds: list[float], remaining: int) -> str:
