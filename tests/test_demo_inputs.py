@@ -182,6 +182,14 @@ def test_released_rows_must_hold_the_known_environments_action_columns(tmp_path)
     assert load_released(mixture, observation_size=3).actions.shape == (2, 2)
 
 
+def test_a_mixture_file_without_rows_is_named_before_its_confidence_is_read(tmp_path):
+    """Hypothesis found it: empty rows and confidences raised numpy's 'zero-size array to
+    reduction operation minimum' from the confidence check."""
+    mixture = write_released(tmp_path, np.zeros((0, 4), np.float16), np.zeros(0, np.float16))
+    with pytest.raises(DemonstrationError, match=rf"^mixture file {mixture}: has no rows \(shape"):
+        load_released(mixture)
+
+
 @pytest.mark.parametrize(
     ("conf", "problem"),
     [

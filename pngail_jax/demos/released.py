@@ -226,6 +226,8 @@ def _rows(path: Path, where: str, env_name, observation_size, action_size):
             f"{where}: rows of shape {rows.shape} cannot be split "
             f"into {observation_size} observation columns and actions"
         )
+    if len(rows) == 0:  # before the confidence file is read against it
+        raise DemonstrationError(f"{where}: has no rows (shape {rows.shape})")
     return rows, observation_size
 
 
