@@ -23,6 +23,7 @@ XLA CPU devices (``RunConfig.cpu_devices``, ``configure_devices``), the compilat
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import os
@@ -491,58 +492,97 @@ def initial_state(run: BuiltRun, checkpoint: Path | None):
 
 def run_chunks(run: BuiltRun, out: Path, state, progress: Progress, writer: bool, logger=None):
     """Runs the remaining chunks: progress lines, a checkpoint and partial outputs after each."""
+    num_chunks = run.config.iterations // run.grid.iterations_per_chunk
+    reported_bad: set[int] = set()
+    host_state = None
+    while progress.chunks_done < num_chunks:
+        notice = _long_chunk_notice(progress, num_chunks, run.grid.iterations_per_chunk)
+        if notice:
+            print(notice, flush=True)
+        with finishing_chunk():  # a stop asked for meanwhile waits for its checkpoint
+            state, host_state = _run_chunk(run, out, state, progress, writer, logger, reported_bad)
+    return run.grid.fetch(state) if host_state is None else host_state
+
+
+def _run_chunk(run: BuiltRun, out: Path, state, progress: Progress, writer, logger, reported_bad):
+    """The next chunk, its progress line, checkpoint and partial outputs; ``reported_bad``
+    (the cells already reported diverged) grows. Returns the device and the host state."""
     from pngail_jax.grid import nonfinite_cells
 
     grid, config = run.grid, run.config
-    num_chunks = config.iterations // grid.iterations_per_chunk
-    reported_bad: set[int] = set()
-    host_state = None
-    for chunk in range(progress.chunks_done, num_chunks):
-        notice = _long_chunk_notice(progress, num_chunks, grid.iterations_per_chunk)
-        if notice:
-            print(notice, flush=True)
-        chunk_start = time.perf_counter()
-        state, chunk_metrics = grid.run_chunk(state)
-        chunk_metrics = grid.fetch(chunk_metrics)
-        progress.timing["seconds"] += time.perf_counter() - chunk_start
-        # The cumulative seconds at each chunk's end (metrics.csv's wall clock); a run begun
-        # by an older version has none for its first chunks, and gets none.
-        chunk_ends = progress.timing.setdefault("chunk_seconds", [None] * chunk)
-        chunk_ends.append(progress.timing["seconds"])
-        progress.timing["steps"] += (
-            len(run.cells) * grid.iterations_per_chunk * config.settings.samples_per_iteration
-        )
-        if progress.metrics is None:
-            progress.metrics = chunk_metrics
-        else:
-            progress.metrics = {
-                name: np.concatenate([progress.metrics[name], chunk_metrics[name]], axis=1)
-                for name in chunk_metrics
-            }
-        progress.chunks_done = chunk + 1
-        iteration = progress.iterations_done(grid)
-        bad = set(nonfinite_cells(progress.metrics, config.settings.eval_every).tolist())
-        for index in sorted(bad - reported_bad):
-            cell = run.cells[index]
-            print(f"  ! cell {cell.method} seed {cell.seed} ({cell.setting}) diverged (NaN/inf)")
-        reported_bad |= bad
-        rate = progress.timing["steps"] / progress.timing["seconds"]
-        remaining = (num_chunks - chunk - 1) * progress.timing["seconds"] / (chunk + 1)
-        print(
-            f"iter {iteration:5d}/{config.iterations}  env steps "
-            f"{iteration * config.settings.samples_per_iteration:,}/run  {rate:,.0f} steps/s  "
-            f"ETA {format_seconds(remaining)}  "
-            f"best {_best_cell(run.cells, chunk_metrics, run.normalizer)}",
-            flush=True,
-        )
-        if logger is not None:
-            logger.log_chunk(run.cells, chunk_metrics, iteration - grid.iterations_per_chunk + 1)
-        # Every process takes part in the gather and in orbax's save (it synchronises them).
-        host_state = grid.fetch(state)
-        _save_checkpoint(out / "checkpoints", progress, host_state, writer)
-        if writer and progress.chunks_done < num_chunks:  # partial results; the last below
-            write_outputs(out, run, progress)
-    return grid.fetch(state) if host_state is None else host_state
+    num_chunks, chunk = config.iterations // grid.iterations_per_chunk, progress.chunks_done
+    chunk_start = time.perf_counter()
+    state, chunk_metrics = grid.run_chunk(state)
+    chunk_metrics = grid.fetch(chunk_metrics)
+    progress.timing["seconds"] += time.perf_counter() - chunk_start
+    # The cumulative seconds at each chunk's end (metrics.csv's wall clock); a run begun
+    # by an older version has none for its first chunks, and gets none.
+    chunk_ends = progress.timing.setdefault("chunk_seconds", [None] * chunk)
+    chunk_ends.append(progress.timing["seconds"])
+    progress.timing["steps"] += (
+        len(run.cells) * grid.iterations_per_chunk * config.settings.samples_per_iteration
+    )
+    if progress.metrics is None:
+        progress.metrics = chunk_metrics
+    else:
+        progress.metrics = {
+            name: np.concatenate([progress.metrics[name], chunk_metrics[name]], axis=1)
+            for name in chunk_metrics
+        }
+    progress.chunks_done = chunk + 1
+    iteration = progress.iterations_done(grid)
+    bad = set(nonfinite_cells(progress.metrics, config.settings.eval_every).tolist())
+    for index in sorted(bad - reported_bad):
+        cell = run.cells[index]
+        print(f"  ! cell {cell.method} seed {cell.seed} ({cell.setting}) diverged (NaN/inf)")
+    reported_bad |= bad
+    rate = progress.timing["steps"] / progress.timing["seconds"]
+    remaining = (num_chunks - chunk - 1) * progress.timing["seconds"] / (chunk + 1)
+    print(
+        f"iter {iteration:5d}/{config.iterations}  env steps "
+        f"{iteration * config.settings.samples_per_iteration:,}/run  {rate:,.0f} steps/s  "
+        f"ETA {format_seconds(remaining)}  "
+        f"best {_best_cell(run.cells, chunk_metrics, run.normalizer)}",
+        flush=True,
+    )
+    if logger is not None:
+        logger.log_chunk(run.cells, chunk_metrics, iteration - grid.iterations_per_chunk + 1)
+    # Every process takes part in the gather and in orbax's save (it synchronises them).
+    host_state = grid.fetch(state)
+    _save_checkpoint(out / "checkpoints", progress, host_state, writer)
+    if writer and progress.chunks_done < num_chunks:  # partial results; the last below
+        write_outputs(out, run, progress)
+    return state, host_state
+
+
+# -- stopping at a checkpoint: a program's signal handler (Ctrl-C, SIGTERM) asks, and a chunk
+# that has begun ends, is saved, and then stops the run (a signal reaches Python only once the
+# compiled chunk returns, so raising at once would discard a finished chunk).
+_STOP = {"inside": False, "requested": False}
+
+
+def stop_after_this_chunk() -> bool:
+    """For a signal handler: inside a chunk (``finishing_chunk``) records the request and
+    returns True, and the run stops once the chunk's checkpoint is written; otherwise, or on
+    a second request, False: the handler stops the program at once."""
+    if not _STOP["inside"] or _STOP["requested"]:
+        return False
+    _STOP["requested"] = True
+    return True
+
+
+@contextlib.contextmanager
+def finishing_chunk():
+    """A chunk, its checkpoint and its partial outputs; a stop asked for within raises
+    ``KeyboardInterrupt`` when they are done."""
+    _STOP.update(inside=True, requested=False)
+    try:
+        yield
+    finally:
+        requested = _STOP["requested"]
+        _STOP.update(inside=False, requested=False)
+    if requested:
+        raise KeyboardInterrupt("stopped at a checkpoint")
 
 
 # A chunk expected to run this long gets a line when it starts (its progress line comes only

@@ -83,6 +83,17 @@ def demos_path(tmp_path_factory):
     return path
 
 
+def sigterm_to_self(*args, **kwargs):
+    """Stands in for a program's work: this process gets the SIGTERM a batch scheduler sends
+    at a job's time limit (the program's handler raises within the sleep, at once)."""
+    import os
+    import signal
+    import time
+
+    os.kill(os.getpid(), signal.SIGTERM)
+    time.sleep(30)
+
+
 def tiny_sweep_args(demos_path, out):
     return [
         "--demos", str(demos_path), "--methods", "gail,pngail", "--seeds", "2",

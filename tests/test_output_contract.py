@@ -176,6 +176,27 @@ def test_the_run_lock_refuses_a_live_holder_and_takes_over_a_dead_ones(tmp_path,
     assert not (tmp_path / LOCK).exists()
 
 
+@pytest.mark.parametrize("name", ["SIGTERM", "SIGINT"])
+def test_a_signal_outside_a_chunk_stops_at_once_and_the_lock_goes_with_it(tmp_path, name):
+    """SIGTERM is a batch scheduler's at a job's time limit: without the handler the process
+    died with its lock left (a resume on another host is then refused)."""
+    import os
+    import signal
+    import time
+
+    from pngail_jax.programs.cli import LOCK, run_lock, signals_stop_at_a_checkpoint
+
+    number = signal.Signals[name]
+    before = {n: signal.getsignal(n) for n in (signal.SIGINT, signal.SIGTERM)}
+    with pytest.raises(KeyboardInterrupt, match=name):
+        with signals_stop_at_a_checkpoint(), run_lock(tmp_path / "run", "sweep"):
+            assert (tmp_path / "run" / LOCK).exists()
+            os.kill(os.getpid(), number)
+            time.sleep(30)  # the handler raises here, at once
+    assert not (tmp_path / "run" / LOCK).exists()
+    assert {n: signal.getsignal(n) for n in before} == before  # restored on leaving
+
+
 def test_a_failing_environment_factory_or_cache_path_is_one_line(tmp_path, monkeypatch):
     import sys
     import types

@@ -5,6 +5,7 @@ import json
 
 import numpy as np
 import pytest
+from conftest import sigterm_to_self
 
 from pngail_jax.demos import Demonstrations
 from pngail_jax.methods import display_name
@@ -186,6 +187,16 @@ def test_an_interrupted_grid_keeps_its_wall_time_on_the_plan_record(tmp_path, mo
     with pytest.raises(KeyboardInterrupt):
         plan.run_grids({"g": grid}, {grid.demos: (None, 1.0)}, tmp_path, None, None, [])
     assert 60.05 <= json.loads((tmp_path / "timings.json").read_text())["g"] < 70.0
+
+
+def test_a_sigterm_ends_the_plan_as_ctrl_c_does(tmp_path, monkeypatch):
+    from pngail_jax.programs.cli import LOCK
+
+    monkeypatch.setattr(paper, "run_paper", sigterm_to_self)
+    out = tmp_path / "paper"
+    with pytest.raises(SystemExit, match=f"interrupted: finished grids are kept; --resume {out}"):
+        paper.main(["--preset", "test", "--envs", "Pendulum-v1", "--out", str(out)])
+    assert not (out / LOCK).exists()
 
 
 def test_a_resume_checks_the_authors_files_and_its_own_options(tmp_path):

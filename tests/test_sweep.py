@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import metrics_numbers, tiny_sweep_args
+from conftest import metrics_numbers, sigterm_to_self, tiny_sweep_args
 
 from pngail_jax import runner
 from pngail_jax.demos import save_npz
@@ -392,3 +392,36 @@ def test_a_full_disk_while_checkpointing_is_one_line_and_leaves_no_half_checkpoi
     ):
         runner._save_checkpoint(tmp_path / "checkpoints", progress, {}, writer=True)
     assert not any((tmp_path / "checkpoints").iterdir())  # no chunk_0003, no orbax temporary
+
+
+def test_a_sigterm_ends_the_sweep_in_one_line(demos_path, tmp_path, monkeypatch):
+    monkeypatch.setattr(runner, "run", sigterm_to_self)
+    with pytest.raises(SystemExit, match="interrupted before the run began: nothing was written"):
+        sweep.main(tiny_sweep_args(demos_path, tmp_path / "run"))
+
+
+def test_a_signal_during_a_chunk_stops_the_sweep_once_that_chunk_is_saved(
+    finished, demos_path, tmp_path, monkeypatch, capsys
+):
+    """A signal reaches Python only when the compiled chunk returns: the chunk is kept (its
+    checkpoint and partial outputs written) before the sweep stops, and --resume ends with
+    the uninterrupted run's numbers."""
+    from pngail_jax.grid import Grid
+
+    run_chunk = Grid.run_chunk
+
+    def signalled(self, state):
+        result = run_chunk(self, state)
+        sigterm_to_self()  # arrives as the chunk returns
+        return result
+
+    out = tmp_path / "run"
+    monkeypatch.setattr(Grid, "run_chunk", signalled)
+    with pytest.raises(SystemExit, match=f"interrupted: finished chunks are kept; --resume {out}"):
+        sweep.main(tiny_sweep_args(demos_path, out))
+    assert "SIGTERM: the run stops once this chunk is saved" in capsys.readouterr().err
+    assert sorted(p.name for p in (out / "checkpoints").iterdir()) == ["chunk_0001"]
+    assert len(read_csv(out / "metrics.csv")) == 2 * 2 * 2  # methods x seeds x 2 iterations
+    monkeypatch.setattr(Grid, "run_chunk", run_chunk)
+    sweep.main(["--resume", str(out)])
+    assert metrics_numbers(out / "metrics.csv") == metrics_numbers(finished / "metrics.csv")

@@ -5,6 +5,7 @@ import json
 import jax
 import numpy as np
 import pytest
+from conftest import sigterm_to_self
 
 import pngail_jax
 from pngail_jax.networks import GaussianPolicy
@@ -197,3 +198,17 @@ def test_resume_checks_again_under_the_lock(run_dir, tmp_path, monkeypatch, caps
     with pytest.raises(SystemExit, match="the run is complete"):
         train_rl.main(["--resume", str(copy)])
     assert (copy / "policy.json").read_bytes() == policy
+
+
+def test_a_sigterm_releases_the_lock_and_says_how_to_resume(tmp_path, monkeypatch):
+    from pngail_jax.programs.cli import LOCK
+
+    def terminated(*args):
+        assert (tmp_path / "run" / LOCK).exists()
+        sigterm_to_self()
+
+    monkeypatch.setattr(train_rl, "_train", terminated)
+    argv = ["--env", "Pendulum-v1", "--iterations", "10", "--out", str(tmp_path / "run")]
+    with pytest.raises(SystemExit, match="interrupted: finished blocks are kept; --resume"):
+        train_rl.main(argv)
+    assert not (tmp_path / "run" / LOCK).exists()

@@ -7,8 +7,10 @@ message that names the flag, so a bad value never reaches the program as a trace
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import numbers
+import signal
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -189,6 +191,44 @@ def path_argument(text: str) -> Path:
     """An argparse ``type`` for paths: an empty string is refused (``Path("")`` would mean
     the current directory)."""
     return Path(text_argument(text))
+
+
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)  # Ctrl-C, and kill's or a scheduler's
+
+
+@contextlib.contextmanager
+def signals_stop_at_a_checkpoint():
+    """Within it, SIGTERM (``kill``'s default, and what a batch scheduler sends at a job's
+    time limit) stops the program as Ctrl-C does, and both let a chunk that has begun end
+    and be saved first (``runner.stop_after_this_chunk``; a second signal stops at once).
+    Stopped, the run lock is released, a plan's time is recorded and the program says how to
+    ``--resume``; without it SIGTERM killed the process with its lock left behind (another
+    host then refuses to take it over), and either signal, which reaches Python only when a
+    compiled chunk returns, discarded that finished chunk. The previous handlers are restored
+    on leaving; outside the main thread (where Python cannot set one) it does nothing."""
+    import sys
+    import threading
+
+    from pngail_jax.runner import stop_after_this_chunk
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum, frame):
+        if stop_after_this_chunk():
+            name = signal.Signals(signum).name
+            print(f"\n{name}: the run stops once this chunk is saved ({name} again: at once)",
+                  file=sys.stderr, flush=True)  # fmt: skip
+            return
+        raise KeyboardInterrupt(signal.Signals(signum).name)
+
+    previous = {number: signal.signal(number, interrupt) for number in STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
 
 
 def invoked_as(program: str) -> list[str]:

@@ -53,6 +53,7 @@ from pngail_jax.programs.cli import (
     path_argument,
     prepare_output,
     run_lock,
+    signals_stop_at_a_checkpoint,
     use_compile_cache,
 )
 from pngail_jax.runner import RunError
@@ -173,7 +174,7 @@ def main(argv=None) -> Path:
     args = parse_args(argv)
     out = args.resume if args.resume is not None else args.out
     try:
-        with run_lock(out, "paper"):
+        with signals_stop_at_a_checkpoint(), run_lock(out, "paper"):
             if args.resume is None:  # the claim again, now that this process holds the lock
                 refusal = output_refusal(out, "paper", args.overwrite)
                 if refusal:

@@ -39,6 +39,7 @@ from pngail_jax.programs.cli import (
     invoked_as,
     output_owner,
     path_argument,
+    signals_stop_at_a_checkpoint,
     use_compile_cache,
 )
 from pngail_jax.run_config import PRESETS_BY_NAME, RunConfig, task_classifier
@@ -264,15 +265,16 @@ def main(argv=None, own_interrupt: bool = True) -> Path:
     invocation = parse_args(argv)
     try:
         config, saved = start(invocation)
-        runner.run(
-            None if saved else config,
-            invocation.out,
-            resume=saved is not None,
-            overwrite=invocation.args.overwrite,
-            allow_changed_inputs=invocation.args.allow_changed_inputs,
-            command=[*invoked_as("sweep"), *invocation.argv],
-            saved=saved,
-        )
+        with signals_stop_at_a_checkpoint():  # a scheduler's SIGTERM stops it as Ctrl-C does
+            runner.run(
+                None if saved else config,
+                invocation.out,
+                resume=saved is not None,
+                overwrite=invocation.args.overwrite,
+                allow_changed_inputs=invocation.args.allow_changed_inputs,
+                command=[*invoked_as("sweep"), *invocation.argv],
+                saved=saved,
+            )
     except runner.RunError as error:
         raise SystemExit(str(error)) from None
     except KeyboardInterrupt:
@@ -280,10 +282,10 @@ def main(argv=None, own_interrupt: bool = True) -> Path:
             raise
         out = invocation.out
         if (out / "config.json").exists():
-            message = f"finished chunks are kept; --resume {out} continues from the last one"
+            message = f": finished chunks are kept; --resume {out} continues from the last one"
         else:
-            message = "before the run began: nothing was written"
-        raise SystemExit(f"\ninterrupted {message}") from None
+            message = " before the run began: nothing was written"
+        raise SystemExit(f"\ninterrupted{message}") from None
     return invocation.out
 
 

@@ -47,6 +47,7 @@ from pngail_jax.programs.cli import (
     output_owner,
     path_argument,
     prepare_output,
+    signals_stop_at_a_checkpoint,
     use_compile_cache,
 )
 from pngail_jax.rl import TRPOHyperparams, TRPOTrainer
@@ -244,7 +245,7 @@ def main(argv=None) -> None:
         "argv": args.argv,
     }
     try:
-        with run_lock(args.out, "train_rl"):
+        with signals_stop_at_a_checkpoint(), run_lock(args.out, "train_rl"):
             _train(args, env, trainer, seeds_hyperparams, keys, run_config)
     except (RunLocked, RunError) as error:
         raise SystemExit(str(error)) from None
