@@ -83,15 +83,16 @@ def demos_path(tmp_path_factory):
     return path
 
 
-def sigterm_to_self(*args, **kwargs):
+def sigterm_to_self(*args, wait: float = 30.0, **kwargs):
     """Stands in for a program's work: this process gets the SIGTERM a batch scheduler sends
-    at a job's time limit (the program's handler raises within the sleep, at once)."""
+    at a job's time limit, then sleeps ``wait`` seconds (a handler that stops at once raises
+    within the sleep; one that defers the stop returns, and the sleep goes on)."""
     import os
     import signal
     import time
 
     os.kill(os.getpid(), signal.SIGTERM)
-    time.sleep(30)
+    time.sleep(wait)
 
 
 def tiny_sweep_args(demos_path, out):

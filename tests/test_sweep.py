@@ -412,7 +412,7 @@ def test_a_signal_during_a_chunk_stops_the_sweep_once_that_chunk_is_saved(
 
     def signalled(self, state):
         result = run_chunk(self, state)
-        sigterm_to_self()  # arrives as the chunk returns
+        sigterm_to_self(wait=0.1)  # arrives as the chunk returns
         return result
 
     out = tmp_path / "run"
