@@ -153,22 +153,21 @@ def grid_complete(directory: Path) -> bool:
         return False
 
 
-def run_grid(grid: GridSpec, directory: Path, config, command: list[str]) -> float:
-    """Runs (or resumes, or keeps) one grid with ``pngail_jax.runner.run``; its wall-clock
-    seconds in this call. A refusal raises ``RunError``."""
+def run_grid(grid: GridSpec, directory: Path, config, command: list[str]) -> bool:
+    """Runs (or resumes) one grid with ``pngail_jax.runner.run``, or keeps a complete one
+    (returns True then). A refusal raises ``RunError``."""
     from pngail_jax import runner
 
     if grid_complete(directory):
         print(f"\n== {grid.name}: done, kept ({directory})", flush=True)
-        return 0.0
-    start = time.perf_counter()
+        return True
     resume = (directory / "config.json").exists()
     if resume:
         print(f"\n== {grid.name}: resuming {directory}", flush=True)
     else:
         print(f"\n== {grid.name}: {grid.demos.description}", flush=True)
     runner.run(None if resume else config, directory, resume=resume, command=command)
-    return time.perf_counter() - start
+    return False
 
 
 def run_grids(grids, demos, out: Path, budget: Budget, physics, command: list[str]) -> dict:
@@ -192,22 +191,15 @@ def run_grids(grids, demos, out: Path, budget: Budget, physics, command: list[st
             num_rows[grid.demos] = load_demonstrations(path, action_scale=scale).num_rows
         config = grid_config(grid, demos[grid.demos], budget, num_rows.get(grid.demos), physics)
         print(f"\n== grid {index + 1} of {len(grids)}{plan_eta(ran, len(grids) - index)}")
-        start = time.perf_counter()
+        start, kept = time.perf_counter(), False
         try:
-            seconds = run_grid(grid, out / "grids" / name, config, command)
-        except BaseException:  # an interrupted call (Ctrl-C) counts its time too
-            add_seconds(timings_path, timings, name, time.perf_counter() - start)
-            raise
-        if seconds:
-            ran.append(seconds)
-            add_seconds(timings_path, timings, name, seconds)
+            kept = run_grid(grid, out / "grids" / name, config, command)
+        finally:  # an interrupted call (Ctrl-C, SIGTERM) counts its time too
+            if not kept:
+                ran.append(time.perf_counter() - start)
+                timings[name] = timings.get(name, 0.0) + ran[-1]
+                write_json(timings_path, timings)
     return timings
-
-
-def add_seconds(path: Path, timings: dict, name: str, seconds: float) -> None:
-    """Adds ``seconds`` to grid ``name``'s wall time and saves the record at ``path``."""
-    timings[name] = timings.get(name, 0.0) + seconds
-    write_json(path, timings)
 
 
 def plan_eta(seconds: list[float], remaining: int) -> str:

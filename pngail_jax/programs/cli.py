@@ -216,12 +216,11 @@ def signals_stop_at_a_checkpoint():
         return
 
     def interrupt(signum, frame):
-        if stop_after_this_chunk():
-            name = signal.Signals(signum).name
-            print(f"\n{name}: the run stops once this chunk is saved ({name} again: at once)",
-                  file=sys.stderr, flush=True)  # fmt: skip
-            return
-        raise KeyboardInterrupt(signal.Signals(signum).name)
+        name = signal.Signals(signum).name
+        if not stop_after_this_chunk():
+            raise KeyboardInterrupt(name)
+        print(f"\n{name}: the run stops once this chunk is saved ({name} again: at once)",
+              file=sys.stderr, flush=True)  # fmt: skip
 
     previous = {number: signal.signal(number, interrupt) for number in STOP_SIGNALS}
     try:
