@@ -228,6 +228,15 @@ def restore_tree(directory: str | Path, template):
     """The pytree ``save_tree`` wrote, as host arrays shaped like ``template``'s leaves."""
     arrays = ocp.StandardCheckpointer().restore(Path(directory).absolute())
     leaves, treedef = jax.tree.flatten(template)
+    expected = sum(math.prod(like.shape) > 0 for like in leaves)
+    if len(arrays) != expected:
+        # A state of another shape: most often a checkpoint of another version whose
+        # training state had other fields, which no leaf-by-leaf message would say.
+        raise ValueError(
+            f"{directory}: holds {len(arrays)} arrays where this version's state has "
+            f"{expected}: a checkpoint of another pngail-jax version or another state, which "
+            "this version cannot resume (CHANGELOG.md lists the changes to the training state)"
+        )
     restored = []
     for i, like in enumerate(leaves):
         name = f"leaf_{i:05d}"
@@ -245,6 +254,4 @@ def restore_tree(directory: str | Path, template):
                 f"{like.dtype}{like.shape}"
             )
         restored.append(value)
-    if len(arrays) > len(leaves):
-        raise ValueError(f"{directory}: more arrays than the template has leaves")
     return jax.tree.unflatten(treedef, restored)

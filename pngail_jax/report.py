@@ -33,6 +33,8 @@ CSV_COLUMNS = (
     "mean_reward",
     "kl",
     "train_return",
+    "mean_abs_action",  # the policy's sampled actions: mean |a| over every entry
+    "beyond_bounds",  # ... and the share of them with some entry outside the action bounds
 )
 _METRIC_OF_COLUMN = {
     "env_steps": "env_steps",
@@ -42,6 +44,8 @@ _METRIC_OF_COLUMN = {
     "mean_reward": "train/reward",
     "kl": "trpo/kl",
     "train_return": "train/episode_return",
+    "mean_abs_action": "rollout/mean_abs_action",
+    "beyond_bounds": "rollout/beyond_bounds",
 }
 
 
@@ -70,7 +74,9 @@ def write_metrics_csv(path: Path, cells, metrics, normalizer, chunk_seconds=()) 
 
     ``chunk_seconds``: the cumulative training seconds at the end of each chunk (all cells run
     a chunk's iterations in one program, so that is the finest wall clock there is); an
-    iteration gets its chunk's, empty where unknown (a run resumed from an older version)."""
+    iteration gets its chunk's, empty where unknown (a run resumed from an older version).
+    A metric the run did not record (an appendix-only trainer, a checkpoint of an older
+    version) leaves its column empty."""
     normalized = normalize(metrics["eval/return"], normalizer)
     num_iterations = metrics["env_steps"].shape[1]
     per_chunk = num_iterations // len(chunk_seconds) if chunk_seconds else 0
@@ -86,7 +92,7 @@ def write_metrics_csv(path: Path, cells, metrics, normalizer, chunk_seconds=()) 
             axis_values = dict(cell.axes)
             for iteration in range(num_iterations):
                 values = {
-                    column: _format(metrics[name][index, iteration])
+                    column: _format(metrics[name][index, iteration]) if name in metrics else ""
                     for column, name in _METRIC_OF_COLUMN.items()
                 }
                 values["env_steps"] = str(int(metrics["env_steps"][index, iteration]))
@@ -501,6 +507,96 @@ def plot_curves(path: Path, cells, metrics, normalizer, title: str, excluded=())
     with atomic_path(path) as temporary:
         figure.savefig(temporary, dpi=120, bbox_inches="tight")  # the legend is outside
     plt.close(figure)
+
+
+# diagnostics.png's panels: (metric, title), read from the metrics every trainer records.
+DIAGNOSTICS = (
+    ("disc/acc_agent", "discriminator accuracy on agent rows"),
+    ("disc/acc_demo", "discriminator accuracy on demonstration rows"),
+    ("train/reward", "mean policy reward (the update's)"),
+    ("rollout/mean_abs_action", "policy's mean |action|"),
+    ("rollout/beyond_bounds", "share of actions beyond the bounds"),
+)
+
+
+def plot_diagnostics(path: Path, cells, metrics, title: str, excluded=()) -> bool:
+    """What the discriminator and the policy do, per iteration, against environment steps:
+    one panel per ``DIAGNOSTICS`` metric the run recorded, the mean over seeds of each
+    method (and setting) smoothed over a fiftieth of the run. A discriminator that
+    saturates (accuracy on agent rows near 1, reward near 0) or a policy drifting past its
+    action bounds shows here without reading ``metrics.csv``. Returns False, writing
+    nothing, when the run recorded none of them."""
+    panels = [(name, label) for name, label in DIAGNOSTICS if name in metrics]
+    if not panels:
+        return False
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from pngail_jax.methods import display_name
+
+    settings = list(dict.fromkeys(cell.setting for cell in cells))
+    groups = list(dict.fromkeys((cell.method, cell.setting) for cell in cells))
+    colors = dict(zip(groups, plt.get_cmap("tab10").colors * 4, strict=False))
+    steps = np.asarray(metrics["env_steps"], np.float64)[0] / 1e6
+    window = max(1, steps.size // 50)
+    columns = min(len(panels), 3)
+    rows_of_panels = -(-(len(panels) + 1) // columns)  # and a slot for the legend
+    figure, axes = plt.subplots(
+        rows_of_panels, columns, figsize=(4.6 * columns, 3.4 * rows_of_panels), squeeze=False
+    )
+    axes = axes.ravel()
+    for axis, (name, label) in zip(axes, panels, strict=False):
+        values = np.asarray(metrics[name], np.float64)
+        for method, setting in groups:
+            rows = [
+                i
+                for i, c in enumerate(cells)
+                if (c.method, c.setting) == (method, setting) and i not in set(excluded)
+            ]
+            if not rows:
+                continue
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                curve = _moving_average(np.nanmean(values[rows], axis=0), window)
+            name_shown = display_name(method) + (f" ({setting})" if len(settings) > 1 else "")
+            axis.plot(
+                steps,
+                curve,
+                color=colors[(method, setting)],
+                lw=1.4,
+                ls=line_style(method),
+                label=name_shown,
+            )
+        axis.set(xlabel="M environment steps per run", title=label)
+        axis.title.set_fontsize(9)
+        axis.grid(alpha=0.3)
+    handles, labels = axes[0].get_legend_handles_labels()
+    for axis in axes[len(panels) :]:
+        axis.axis("off")
+    axes[len(panels)].legend(handles, labels, loc="center", fontsize=9)
+    smoothing = f"; moving average over {window} iterations" if window > 1 else ""
+    figure.suptitle(f"{title}: diagnostics\nmean over seeds{smoothing}")
+    figure.tight_layout()
+    with atomic_path(path) as temporary:
+        figure.savefig(temporary, dpi=110, bbox_inches="tight")
+    plt.close(figure)
+    return True
+
+
+def _moving_average(values: np.ndarray, window: int) -> np.ndarray:
+    """The trailing mean of the last ``window`` values at each index (fewer at the start);
+    NaN entries are skipped."""
+    if window == 1:
+        return values
+    finite = np.isfinite(values)
+    sums = np.cumsum(np.where(finite, values, 0.0))
+    counts = np.cumsum(finite)
+    sums[window:] = sums[window:] - sums[:-window].copy()
+    counts[window:] = counts[window:] - counts[:-window].copy()
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(counts > 0, sums / np.maximum(counts, 1), np.nan)
 
 
 def line_style(method: str) -> str:

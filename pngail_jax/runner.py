@@ -689,7 +689,8 @@ def _title(config: RunConfig, num_cells: int) -> str:
 
 
 def write_outputs(out: Path, run: BuiltRun, progress: Progress) -> str:
-    """metrics.csv, curves.png, summary.json and summary.md of the iterations done so far
+    """metrics.csv, curves.png, diagnostics.png, summary.json and summary.md of the iterations
+    done so far
     (summary.json's ``complete`` is false and ``iterations_done`` says how far until the run
     ends); returns summary.md's text."""
     from pngail_jax import report
@@ -703,6 +704,7 @@ def write_outputs(out: Path, run: BuiltRun, progress: Progress) -> str:
     title = _title(config, len(cells))
     diverged = nonfinite_cells(progress.metrics, config.settings.eval_every)
     report.plot_curves(out / "curves.png", cells, metrics, run.normalizer, title, diverged)
+    report.plot_diagnostics(out / "diagnostics.png", cells, metrics, title, diverged)
     done = progress.iterations_done(run.grid)
     summary = {
         "complete": done == config.iterations,
@@ -792,7 +794,14 @@ def already_complete(out: Path) -> bool:
     )
 
 
-STALE_OUTPUTS = ("summary.json", "summary.md", "metrics.csv", "curves.png", "policies")
+STALE_OUTPUTS = (
+    "summary.json",
+    "summary.md",
+    "metrics.csv",
+    "curves.png",
+    "diagnostics.png",
+    "policies",
+)
 
 
 def drop_stale_outputs(out: Path, iterations_done: int) -> None:
@@ -836,6 +845,7 @@ OUTPUT_FILES = {
     "config": "config.json",
     "metrics": "metrics.csv",
     "curves": "curves.png",
+    "diagnostics": "diagnostics.png",
     "summary_md": "summary.md",
     "summary": "summary.json",
     "policies": "policies",
@@ -1011,8 +1021,8 @@ def _run_locked(
     print(markdown.split("\n\nFinal return")[0])
     print(
         f"\ndone in {format_seconds(time.perf_counter() - start_time)} (+ compile); wrote "
-        f"{out}/{{config.json,metrics.csv,curves.png,summary.md,summary.json,policies/,"
-        "checkpoints/}"
+        f"{out}/{{config.json,metrics.csv,curves.png,diagnostics.png,summary.md,summary.json,"
+        "policies/,checkpoints/}"
     )
     return _result(out)
 

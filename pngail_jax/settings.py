@@ -55,6 +55,7 @@ def describe(settings: RunSettings, env: envs.Env | None = None) -> str:
         f"{settings.solver_description}, evaluation: {settings.num_eval_episodes} episodes every "
         f"{settings.eval_every} iterations"
         + (", normalised observations" if settings.normalize_observations else "")
+        + (", staggered starts" if settings.stagger_starts else "")
     )
 
 
@@ -70,6 +71,9 @@ class RunSettings:
     eval_every: int = 10
     num_eval_episodes: int = 32
     normalize_observations: bool = False
+    # Each env's first episode cut at a random length, so that the parallel envs of a task
+    # that never terminates are not in step (TRPOConfig.stagger_starts).
+    stagger_starts: bool = False
     # Engine of gymnasium's MuJoCo tasks (envs.PHYSICS); None: from the platform when the
     # environment is made (envs.default_physics), and the run's config.json records which ran.
     physics: str | None = None
@@ -87,12 +91,13 @@ class RunSettings:
                 f"must be one of {', '.join(envs.PHYSICS)} or None, got {self.physics!r}",
                 name="RunSettings.physics",
             )
-        if not isinstance(self.normalize_observations, bool):
-            validation.fail(
-                "normalize_observations",
-                f"must be True or False, got {self.normalize_observations!r}",
-                name="RunSettings.normalize_observations",
-            )
+        for name in ("normalize_observations", "stagger_starts"):
+            if not isinstance(getattr(self, name), bool):
+                validation.fail(
+                    name,
+                    f"must be True or False, got {getattr(self, name)!r}",
+                    name=f"RunSettings.{name}",
+                )
 
     @property
     def samples_per_iteration(self) -> int:
@@ -120,6 +125,7 @@ class RunSettings:
             eval_every=self.eval_every,
             num_eval_episodes=self.num_eval_episodes,
             normalize_observations=self.normalize_observations,
+            stagger_starts=self.stagger_starts,
             **options,
         )
 

@@ -36,5 +36,8 @@ def test_a_template_of_another_state_is_a_clear_error(tmp_path):
     save_tree(tmp_path / "state", {"a": jnp.ones(3), "b": jnp.ones(2)})
     with pytest.raises(ValueError, match=r"leaf 0 is float32\(3,\), expected float32\(4,\)"):
         restore_tree(tmp_path / "state", {"a": jnp.ones(4), "b": jnp.ones(2)})
-    with pytest.raises(ValueError, match="more arrays than the template"):
+    # A state with a field more or less (another version's): named as such.
+    with pytest.raises(ValueError, match="holds 2 arrays where this version's state has 1"):
         restore_tree(tmp_path / "state", {"a": jnp.ones(3)})
+    with pytest.raises(ValueError, match="holds 2 arrays where this version's state has 3"):
+        restore_tree(tmp_path / "state", {"a": jnp.ones(3), "b": jnp.ones(2), "c": jnp.ones(1)})

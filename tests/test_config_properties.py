@@ -227,7 +227,7 @@ def test_any_settings_value_is_valid_or_named(name, value):
         return
     stored = getattr(settings, name)
     assert stored == value
-    if name == "normalize_observations":
+    if name in ("normalize_observations", "stagger_starts"):
         assert type(stored) is bool
     elif name == "physics":  # an engine's name, or None: the platform's
         assert stored is None or stored in envs.PHYSICS

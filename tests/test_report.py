@@ -249,3 +249,27 @@ def test_a_baseline_turns_the_improvement_around(tmp_path):
     assert default["improvement"] == {"of": "pngail"} and list(
         default["probability_of_improvement"]
     ) == ["gail", "wgail"]
+
+
+def test_moving_average_against_numpy():
+    """The trailing mean of the last w values (fewer at the start), NaN entries skipped."""
+    values = np.random.default_rng(1).normal(size=23)
+    values[[4, 5, 17]] = np.nan
+    for window in (1, 3, 7):
+        expected = [np.nanmean(values[max(0, i - window + 1) : i + 1]) for i in range(23)]
+        expected = np.where(np.isnan(values) & (window == 1), np.nan, expected)
+        np.testing.assert_allclose(report._moving_average(values, window), expected, 1e-12)
+    np.testing.assert_array_equal(report._moving_average(np.full(4, np.nan), 2), np.nan)
+
+
+def test_diagnostics_plot_needs_the_metrics_it_draws(tmp_path):
+    from pngail_jax.grid import make_cells
+
+    cells = make_cells(["gail", "pngail"], num_seeds=2)
+    metrics = {"env_steps": np.tile(np.arange(1, 61) * 5000, (4, 1))}
+    assert not report.plot_diagnostics(tmp_path / "d.png", cells, metrics, "test")
+    assert not (tmp_path / "d.png").exists()
+    rng = np.random.default_rng(0)
+    metrics.update({name: rng.uniform(size=(4, 60)) for name, _ in report.DIAGNOSTICS[:3]})
+    assert report.plot_diagnostics(tmp_path / "d.png", cells, metrics, "test", excluded=[1])
+    assert (tmp_path / "d.png").stat().st_size > 10_000

@@ -172,3 +172,23 @@ def test_rewards_of_the_wrong_shape_are_rejected(pendulum):
     state, transitions = trpo.rollout(state)
     with pytest.raises(AssertionError, match="shape"):
         trpo.update(TRPOHyperparams.create(), state, transitions, transitions.reward[:, :2])
+
+
+def test_staggered_starts_draw_each_envs_first_time_limit(pendulum):
+    """With ``stagger_starts`` the envs' first time limits spread over 1..200 (the networks
+    are initialised as without it); without it every limit is the task's 200."""
+    from pngail_jax.rl.train import TRPO
+
+    config = dataclasses.replace(SMALL, num_envs=32)
+    key = jax.random.key(5)
+    plain = TRPO(config, pendulum).init(key)
+    staggered = TRPO(dataclasses.replace(config, stagger_starts=True), pendulum).init(key)
+    np.testing.assert_array_equal(plain.env_state.time_limit, pendulum.max_episode_steps)
+    limits = np.asarray(staggered.env_state.time_limit)
+    assert 1 <= limits.min() and limits.max() <= pendulum.max_episode_steps
+    assert len(set(limits.tolist())) > 16
+    leaves = zip(*(jax.tree.leaves(s.policy_params) for s in (plain, staggered)), strict=True)
+    for a, b in leaves:
+        np.testing.assert_array_equal(a, b)
+    with pytest.raises(ValueError, match="stagger_starts"):
+        dataclasses.replace(config, stagger_starts="yes")

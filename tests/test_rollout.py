@@ -107,7 +107,7 @@ def test_nan_actions_are_counted_and_their_cell_reported():
 
     def run(state):
         _, transitions = collect(env, policy, params, lambda obs: obs, state, 5, jax.random.key(2))
-        return transitions, rollout_metrics(transitions)
+        return transitions, rollout_metrics(transitions, env)
 
     transitions, metrics = jax.jit(run)(state)
     finite_action = np.isfinite(transitions.action).all(axis=-1)  # [T, N]
@@ -129,3 +129,87 @@ def test_nan_actions_are_counted_and_their_cell_reported():
     assert nonfinite_cells(grid_metrics, eval_every=1).tolist() == [1]
     del grid_metrics["rollout/nonfinite_actions"]
     assert nonfinite_cells(grid_metrics, eval_every=1).tolist() == []
+
+
+def _staggered_rollout(num_envs: int, max_episode_steps: int, unroll_length: int, key):
+    """Countdown envs that never terminate, started by ``staggered_reset``, rolled out."""
+    from pngail_jax.rl.rollout import collect
+
+    env = envs.AutoReset(Countdown(5, max_episode_steps, never_terminates=True))
+    policy = GaussianPolicy(1, (4,))
+    params = policy.init(jax.random.key(0), jnp.zeros(1))
+    reset_key, limit_key, rollout_key = jax.random.split(key, 3)
+    state = jax.vmap(env.staggered_reset)(
+        jax.random.split(reset_key, num_envs), jax.random.split(limit_key, num_envs)
+    )
+    limits = np.asarray(state.time_limit)
+    _, transitions = jax.jit(
+        lambda s: collect(env, policy, params, lambda obs: obs, s, unroll_length, rollout_key)
+    )(state)
+    return limits, transitions
+
+
+def test_staggered_starts_cut_the_first_episode_and_keep_envs_out_of_step():
+    """Each env's first episode ends after its drawn limit (uniform on 1..max), every later
+    one after max steps; so env n's episodes end at steps limit_n + k * max, and envs with
+    different limits never reset together. Only the first cut is ``ended_early``."""
+    max_steps, unroll = 10, 45
+    limits, transitions = _staggered_rollout(64, max_steps, unroll, jax.random.key(3))
+    assert limits.min() >= 1 and limits.max() <= max_steps
+    assert len(set(limits.tolist())) >= 8  # 64 draws from 10 values: nearly all appear
+    truncated = np.asarray(transitions.truncated)  # [T, N]
+    ended_early = np.asarray(transitions.ended_early)
+    assert not np.asarray(transitions.done).any()
+    for n, limit in enumerate(limits):
+        ends = np.flatnonzero(truncated[:, n]) + 1  # episode ends, as step counts
+        np.testing.assert_array_equal(ends, np.arange(limit, unroll + 1, max_steps))
+        # the first episode's return is its own length (reward 1 per step), not max's
+        assert transitions.episode_return[ends[0] - 1, n] == limit
+        np.testing.assert_array_equal(
+            np.flatnonzero(ended_early[:, n]) + 1, [limit] if limit < max_steps else []
+        )
+    # The envs' episodes are out of step: at any step, envs with different limits are at
+    # different points of their episodes, so no single step truncates them all.
+    assert truncated.sum(axis=1).max() < 64 / 4
+
+
+def test_training_returns_count_whole_episodes_only():
+    """A staggered first episode cut short is left out of ``train/episode_return``; a whole
+    one (here: every later episode, max steps of reward 1) is counted."""
+    from pngail_jax.rl.train import episode_metrics
+
+    max_steps = 10
+    limits, transitions = _staggered_rollout(8, max_steps, 8, jax.random.key(4))
+    # 8 steps: only first episodes can end, and all of them end early (or not at all)
+    metrics = episode_metrics(transitions, transitions.reward)
+    assert (limits <= 8).any()
+    assert np.isnan(metrics["train/episode_return"])
+    limits, transitions = _staggered_rollout(8, max_steps, 25, jax.random.key(4))
+    metrics = episode_metrics(transitions, transitions.reward)
+    assert float(metrics["train/episode_return"]) == max_steps
+
+
+def test_rollout_metrics_of_the_actions_against_numpy():
+    """Mean |a| over every entry and the share of actions with some entry outside the
+    bounds, on hand-made actions of a 2-D action space with bounds [-1, 1] and [-2, 0.5]."""
+    from pngail_jax.rl.rollout import Transitions, rollout_metrics
+
+    class Bounds:
+        action_low = np.array([-1.0, -2.0], np.float32)
+        action_high = np.array([1.0, 0.5], np.float32)
+
+    actions = np.random.default_rng(0).normal(0, 1.5, (7, 3, 2)).astype(np.float32)
+    actions[0, 0] = [1.0, 0.5]  # on the bounds: inside
+    zeros = np.zeros((7, 3), np.float32)
+    transitions = Transitions(
+        obs=zeros[..., None], action=actions, log_prob=zeros, reward=zeros, done=zeros > 0,
+        truncated=zeros > 0, final_obs=zeros[..., None], episode_return=zeros,
+        ended_early=zeros > 0,
+    )  # fmt: skip
+    metrics = rollout_metrics(transitions, Bounds())
+    beyond = ((actions < Bounds.action_low) | (actions > Bounds.action_high)).any(axis=-1)
+    assert not beyond[0, 0]
+    np.testing.assert_allclose(metrics["rollout/mean_abs_action"], np.abs(actions).mean(), 1e-6)
+    np.testing.assert_allclose(metrics["rollout/beyond_bounds"], beyond.mean(), 1e-6)
+    assert 0 < beyond.mean() < 1
+    assert int(metrics["rollout/nonfinite_actions"]) == 0

@@ -53,6 +53,7 @@ def test_trpo_config_carries_the_settings():
     assert (config.num_envs, config.unroll_length, config.batch_size) == (250, 20, 5000)
     assert (config.eval_every, config.num_eval_episodes) == (50, 10)
     assert (config.num_iterations, config.fisher) == (100, "gauss_newton")
+    assert settings_for("Hopper", stagger_starts=True).trpo_config(100).stagger_starts
 
 
 def test_overrides_and_their_errors():
@@ -67,6 +68,8 @@ def test_overrides_and_their_errors():
             RunSettings(num_envs=bad)
     with pytest.raises(ValueError, match="normalize_observations"):
         RunSettings(normalize_observations="yes")
+    with pytest.raises(ValueError, match="stagger_starts"):
+        RunSettings(stagger_starts=1)
 
 
 def test_parse_solver():

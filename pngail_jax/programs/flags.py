@@ -182,6 +182,12 @@ SETTINGS_FLAGS = (
         f"running mean/std observation normalisation in TRPO {TABLE}",
         boolean=True,
     ),
+    FieldFlag(
+        "settings.stagger_starts",
+        f"cut each env's first episode at a random length, so that envs of a task that never "
+        f"terminates are not in step {TABLE}",
+        boolean=True,
+    ),
 )
 
 

@@ -17,7 +17,9 @@ class Transitions:
     """One iteration's experience, time-major: leaves are [T, N, ...].
 
     obs and final_obs are raw (unnormalised) observations: obs is where the action was taken,
-    final_obs where the step really arrived (before any auto-reset).
+    final_obs where the step really arrived (before any auto-reset). ``ended_early`` marks the
+    steps that cut a staggered first episode short (``envs.AutoReset.staggered_reset``):
+    they are truncations, but their ``episode_return`` is not a whole episode's.
     """
 
     obs: jax.Array
@@ -28,6 +30,7 @@ class Transitions:
     truncated: jax.Array
     final_obs: jax.Array
     episode_return: jax.Array
+    ended_early: jax.Array
 
 
 def collect(
@@ -61,13 +64,14 @@ def collect(
             truncated=next_state.truncated,
             final_obs=next_state.final_obs,
             episode_return=next_state.episode_return,
+            ended_early=env.ended_early(next_state),
         )
         return next_state, transition
 
     return jax.lax.scan(body, env_state, jax.random.split(key, unroll_length))
 
 
-def rollout_metrics(transitions: Transitions) -> dict[str, jax.Array]:
+def rollout_metrics(transitions: Transitions, env: envs.Env) -> dict[str, jax.Array]:
     """Health of one iteration's rollout, added to the training metrics of every trainer.
 
     ``rollout/nonfinite_actions``: int32[], how many of the T * N steps applied an action
@@ -75,9 +79,21 @@ def rollout_metrics(transitions: Transitions) -> dict[str, jax.Array]:
     turns non-finite for the rest of the episode (``Env.step``); the count names that cause
     in the run's own metrics, whatever the learner makes of the NaN rewards that follow, and
     ``pngail_jax.grid.nonfinite_cells`` reports every run with a nonzero count.
+
+    ``rollout/mean_abs_action``: float[], the mean |a| over every entry of the sampled
+    actions; ``rollout/beyond_bounds``: float[], the share of the T * N actions with some
+    entry outside ``[env.action_low, env.action_high]`` (the environment clips them, the
+    discriminator sees them clipped). A policy whose Gaussian drifts far past its bounds
+    shows here long before its return says why.
     """
-    finite = jnp.isfinite(transitions.action).all(axis=-1)
-    return {"rollout/nonfinite_actions": jnp.sum(~finite, dtype=jnp.int32)}
+    action = transitions.action
+    finite = jnp.isfinite(action).all(axis=-1)
+    beyond = (action < env.action_low) | (action > env.action_high)
+    return {
+        "rollout/nonfinite_actions": jnp.sum(~finite, dtype=jnp.int32),
+        "rollout/mean_abs_action": jnp.mean(jnp.abs(action)),
+        "rollout/beyond_bounds": jnp.mean(beyond.any(axis=-1)),
+    }
 
 
 def evaluate(

@@ -63,6 +63,9 @@ class TRPOConfig:
     # GAE as a T-step scan ("sequential") or a log-depth tree ("associative"): the same
     # numbers up to float rounding (tests/test_gae.py); which is faster depends on the device.
     gae_form: GAEForm = "sequential"
+    # Each env's first episode truncated at a random length (envs.AutoReset.staggered_reset),
+    # so that the envs of a task that never terminates do not stay in step.
+    stagger_starts: bool = False
 
     def __post_init__(self):
         for name in (
@@ -83,6 +86,10 @@ class TRPOConfig:
             raise ValueError(
                 f"TRPOConfig.num_iterations ({self.num_iterations}) must be a "
                 f"multiple of eval_every ({self.eval_every})"
+            )
+        if not isinstance(self.stagger_starts, bool):
+            raise ValueError(
+                f"TRPOConfig.stagger_starts must be True or False, got {self.stagger_starts!r}"
             )
         if self.fisher not in ("hessian", "gauss_newton"):
             raise ValueError(
@@ -202,9 +209,10 @@ class LearningTargets(NamedTuple):
 
 
 def episode_metrics(transitions: Transitions, rewards: jax.Array) -> dict[str, jax.Array]:
-    """The mean return of the episodes that ended in the rollout (NaN when none did) and the
-    mean reward the update learnt from."""
-    finished = transitions.done | transitions.truncated
+    """The mean return of the whole episodes that ended in the rollout (NaN when none did;
+    a staggered first episode cut short does not count) and the mean reward the update
+    learnt from."""
+    finished = (transitions.done | transitions.truncated) & ~transitions.ended_early
     num_finished = finished.sum()
     return {
         "train/episode_return": jnp.where(
@@ -247,7 +255,7 @@ class TRPO:
         policy_key, value_key, env_key, carry_key = jax.random.split(key, 4)
         dummy_obs = jnp.zeros((self.env.observation_size,))
         value_params = self.value.init(value_key, dummy_obs)
-        env_state = jax.vmap(self.auto_env.reset)(jax.random.split(env_key, self.config.num_envs))
+        env_state = self.reset_envs(env_key)
         return TRPOState(
             policy_params=self.policy.init(policy_key, dummy_obs),
             value_params=value_params,
@@ -256,6 +264,17 @@ class TRPO:
             env_state=env_state,
             env_steps=jnp.zeros((), jnp.int32),
             key=carry_key,
+        )
+
+    def reset_envs(self, key: jax.Array) -> envs.AutoResetState:
+        """The ``num_envs`` parallel envs' first states (leaves [N, ...]); with
+        ``stagger_starts``, each first episode cut at its own random length."""
+        num_envs = self.config.num_envs
+        if not self.config.stagger_starts:
+            return jax.vmap(self.auto_env.reset)(jax.random.split(key, num_envs))
+        reset_key, limit_key = jax.random.split(key)
+        return jax.vmap(self.auto_env.staggered_reset)(
+            jax.random.split(reset_key, num_envs), jax.random.split(limit_key, num_envs)
         )
 
     def rollout(self, state: TRPOState) -> tuple[TRPOState, Transitions]:
@@ -306,7 +325,7 @@ class TRPO:
             **episode_metrics(transitions, rewards),
             "value/loss": value_loss,
             **policy_metrics,
-            **rollout_metrics(transitions),
+            **rollout_metrics(transitions, self.env),
         }
         state = state.replace(
             policy_params=policy_params,
