@@ -70,6 +70,9 @@ class AdversarialConfig:
     bc: BCConfig = BCConfig()
     cail: cail.CAILConfig = cail.CAILConfig()
     firl: firl.FirlConfig = firl.FirlConfig()
+    # Compile the discriminator's gradient penalty (MethodSpec.gradient_penalty_coef): only
+    # grids with a cell that uses it pay for its second pass through the discriminator.
+    gradient_penalty: bool = False
 
     def __post_init__(self):
         unknown = [phase for phase in self.phases if phase not in PHASES]
@@ -287,6 +290,14 @@ class AdversarialTrainer:
             raise ValueError(
                 f"methods {list(methods)} need the training phase(s) {missing}, which this "
                 "trainer does not compile: AdversarialConfig(phases=required_phases(methods))"
+            )
+        penalised = [
+            name for name in methods if resolve(name).coefficients.get("gradient_penalty_coef")
+        ]
+        if penalised and not self.config.gradient_penalty:
+            raise ValueError(
+                f"{', '.join(penalised)} use a gradient penalty, which this trainer does not "
+                "compile: AdversarialConfig(gradient_penalty=True)"
             )
         rankers = [name for name in methods if resolve(name).confidence_source == "rankings"]
         if rankers and self.trajectories is None:
@@ -573,6 +584,16 @@ class AdversarialTrainer:
                 weights[batch.rows],
                 stats,
             )
+            if self.config.gradient_penalty:
+                penalty = self._gradient_penalty(params, batch, state.key)
+                metrics["disc/gradient_penalty"] = penalty
+                # where, not a product: the other cells' loss keeps every bit
+                loss = jnp.where(
+                    spec.gradient_penalty_coef != 0,
+                    loss + spec.gradient_penalty_coef * penalty,
+                    loss,
+                )
+                metrics["disc/loss"] = loss
             return loss, (metrics, logits_agent)
 
         grads, (metrics, logits_agent) = jax.grad(loss_fn, has_aux=True)(
@@ -580,13 +601,26 @@ class AdversarialTrainer:
         )
         return grads, metrics, logits_agent
 
+    def _gradient_penalty(self, params, batch, key) -> jax.Array:
+        """mean ||grad_x z(x)||^2 at x = e a + (1 - e) d between each agent row a and a
+        demonstration row d of the batch, e ~ U(0, 1) per pair (a zero-centred penalty, as
+        for GAN discriminators): float[]."""
+        mix = jax.random.uniform(jax.random.fold_in(key, 3), (batch.agent_inputs.shape[0], 1))
+        points = mix * batch.agent_inputs + (1 - mix) * batch.demo_inputs
+
+        def logit(x):
+            return self.discriminator.apply(params, x)
+
+        gradients = jax.vmap(jax.grad(logit))(points)
+        return jnp.mean(jnp.sum(gradients**2, axis=-1))
+
     def _policy_rewards(self, spec, state: TrainState, transitions, batch, logits_agent, key):
         """The reward float[T, N] TRPO learns from: the adversarial one from the discriminator
         before this iteration's step, plus the learned rewards of the method's phases (f-IRL's
         after its own update on this rollout, in its order). Returns the reward, the phase's
         new state fields and its metrics."""
         trpo_config, phases = self.config.trpo, self.config.phases
-        rewards = policy_reward(logits_agent)
+        rewards = policy_reward(logits_agent, spec.logit_reward_coef)
         if phases:  # every method whose reward is not (only) adversarial has a phase
             rewards = spec.adversarial_reward_coef * rewards
         phase_fields, phase_metrics = {}, {}

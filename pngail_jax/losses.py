@@ -16,9 +16,15 @@ from pngail_jax.methods import MethodSpec
 _TINY = 1e-8
 
 
-def policy_reward(logits: jax.Array) -> jax.Array:
-    """-log sigmoid(z) = sp(-z): large where the discriminator thinks a pair is a demo's."""
-    return jax.nn.softplus(-logits)
+def policy_reward(logits: jax.Array, logit_coef: jax.Array | float = 0.0) -> jax.Array:
+    """-log sigmoid(z) = sp(-z): large where the discriminator thinks a pair is a demo's.
+
+    With ``logit_coef`` c, ``sp(-z) - c sp(z)`` = -log D_agent + c log D_demo: c = 1 gives
+    the logit -z (AIRL's log D - log(1 - D)), which keeps telling pairs apart when the
+    discriminator saturates and sp(-z) -> 0 on every agent pair."""
+    reward = jax.nn.softplus(-logits)
+    # where, not a product: a method without the term keeps every bit of its reward
+    return jnp.where(logit_coef != 0, reward - logit_coef * jax.nn.softplus(logits), reward)
 
 
 @struct.dataclass
@@ -53,19 +59,33 @@ def demo_weights(
     labelled_negative_coef = jnp.where(
         mean_rc < 1, (1 - class_prior) / jnp.maximum(1 - mean_rc, _TINY), 0.0
     )
+    positive_scale, negative_scale = _pn_balance(spec, stats.mean_confidence)
     u = (
         spec.gail_coef
         + spec.importance_weighted_coef * confidence / jnp.maximum(stats.mean_confidence, _TINY)
-        + spec.pn_coef * confidence
+        + spec.pn_coef * positive_scale * confidence
         # where, not a product: 0 * inf (an overflowing w) would be NaN in other methods
         + jnp.where(spec.wgail_coef != 0, spec.wgail_coef * importance_weight, 0.0)
         + spec.icgail_coef * unlabelled_share
     )
-    v = spec.pn_coef * (1 - confidence) + spec.icgail_coef * labelled_negative_coef * (
-        labelled_share * (1 - confidence)
-    )
-    agent_coef = spec.agent_coef + spec.icgail_coef * class_prior
+    v = spec.pn_coef * spec.pn_negative_coef * negative_scale * (
+        1 - confidence
+    ) + spec.icgail_coef * labelled_negative_coef * (labelled_share * (1 - confidence))
+    agent_coef = spec.agent_coef * negative_scale + spec.icgail_coef * class_prior
     return agent_coef, u, v
+
+
+def _pn_balance(spec: MethodSpec, mean_confidence: jax.Array):
+    """The factors of the PN risk's positive side (r sp(z)) and negative side (the agent term
+    and (1 - r) sp(-z)) that ``pn_balanced_coef`` b blends in: 1 at b = 0 (eq. 11 as it is);
+    at b = 1, 1 / mean r and 1 / (1 + pn_negative_coef (1 - mean r)), so that each side's
+    total weight over the split is 1. Both are exactly 1.0 where b = 0, so the other methods'
+    losses keep every bit."""
+    balanced = spec.pn_balanced_coef
+    negative_total = 1 + spec.pn_negative_coef * (1 - mean_confidence)
+    positive = 1 - balanced + balanced / jnp.maximum(mean_confidence, _TINY)
+    negative = 1 - balanced + balanced / negative_total
+    return positive, negative
 
 
 def non_negative_pu_risk(prior, labelled_own, labelled_other, unlabelled_other):

@@ -67,6 +67,18 @@ class MethodSpec:
     pu_prior: jax.Array  # in [0, 1)
     pu_agent_coef: jax.Array
     pu_agent_prior: jax.Array  # in [0, 1)
+    # Remedies for a saturating PN discriminator (docs/results.md; none is a paper method):
+    pn_negative_coef: jax.Array  # v's PN part times this (default 1; 0 drops the negative term)
+    # 1: the PN risk's two classes weigh the same: the positive side (r sp(z)) divided by the
+    # split's mean r, the negative side (the agent term and (1 - r) sp(-z)) by its own total
+    # weight 1 + pn_negative_coef (1 - mean r); 0: as eq. 11.
+    pn_balanced_coef: jax.Array
+    # policy reward sp(-z) - logit_reward_coef sp(z): 0 is GAIL's -log D_agent, 1 the logit -z
+    # (log D_demo - log D_agent, AIRL's form), which does not vanish when D saturates.
+    logit_reward_coef: jax.Array
+    # + coef mean ||grad_x z||^2 at points between agent and demonstration rows (a zero-centred
+    # gradient penalty, which keeps the discriminator smooth where the two meet).
+    gradient_penalty_coef: jax.Array
 
     @property
     def classifier(self) -> ClassifierSpec:
@@ -182,6 +194,7 @@ _DEFAULTS = {field.name: 0.0 for field in dataclasses.fields(MethodSpec)} | {
     "bsc_eps": 0.01,
     "adversarial_reward_coef": 1.0,
     "policy_update_coef": 1.0,
+    "pn_negative_coef": 1.0,
 }
 
 
@@ -232,6 +245,11 @@ def check_preset(name: str, preset: Preset) -> Preset:
         refuse("adversarial_reward_coef other than 1 needs a phase whose reward replaces it")
     if values["policy_update_coef"] != 1.0 and "bc" not in phases:
         refuse("policy_update_coef other than 1 needs the 'bc' phase (a cloned policy)")
+    for field in ("pn_negative_coef", "logit_reward_coef", "gradient_penalty_coef"):
+        if values[field] < 0:
+            refuse(f"{field} must be >= 0, got {values[field]}")
+    if not 0 <= values["pn_balanced_coef"] <= 1:
+        refuse(f"pn_balanced_coef must lie in [0, 1], got {values['pn_balanced_coef']}")
     for coef, prior in (("pu_coef", "pu_prior"), ("pu_agent_coef", "pu_agent_prior")):
         if values[coef] and not 0 <= values[prior] < 1:
             refuse(f"{prior} must lie in [0, 1) with {coef}, got {values[prior]}")

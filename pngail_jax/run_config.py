@@ -377,7 +377,23 @@ class RunConfig:
             discriminator_hidden_sizes=self.discriminator_hidden_sizes,
             phases=required_phases(self.methods),
             firl=FirlConfig.for_env(self.env),
+            gradient_penalty=self.uses_gradient_penalty,
         )
+
+    @property
+    def uses_gradient_penalty(self) -> bool:
+        """Whether a method or a grid axis gives some cell a gradient penalty, which only then
+        is compiled (it costs a second pass through the discriminator)."""
+        by_method = any(
+            resolve(name).coefficients.get("gradient_penalty_coef", 0.0) for name in self.methods
+        )
+        by_axis = any(
+            value
+            for field, values in self.grid_axes
+            if field == "gradient_penalty_coef"
+            for value in values
+        )
+        return bool(by_method or by_axis)
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

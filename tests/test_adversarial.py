@@ -15,7 +15,7 @@ from pngail_jax.bc import BCConfig
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import Demonstrations, load_demonstrations
 from pngail_jax.grid import make_cells, stack_cells
-from pngail_jax.methods import required_phases
+from pngail_jax.methods import PRESETS, required_phases
 from pngail_jax.ranking import RankingConfig
 from pngail_jax.rl import TRPOConfig
 
@@ -113,3 +113,80 @@ def test_demonstration_actions_reach_every_learned_comparison_clipped_as_the_age
         np.testing.assert_array_equal(metrics_beyond[name], metrics_inside[name], err_msg=name)
     chex.assert_trees_all_equal(state_beyond, state_inside)
     assert np.all(np.asarray(state_beyond.importance_weights) != 1.0)  # WGAIL's w refreshed
+
+
+def _small_trainer(demos, **config):
+    trpo = TRPOConfig(
+        num_envs=4, unroll_length=25, num_iterations=2, eval_every=1, num_eval_episodes=1,
+        num_value_minibatches=5,
+    )  # fmt: skip
+    config = AdversarialConfig(trpo=trpo, classifier=ClassifierConfig(num_steps=20), **config)
+    return AdversarialTrainer(config, envs.make("Pendulum-v1"), demos)
+
+
+def _random_demos(num_rows=200):
+    rng = np.random.default_rng(1)
+    return Demonstrations(
+        observations=rng.normal(size=(num_rows, 3)).astype(np.float32),
+        actions=rng.uniform(-2, 2, size=(num_rows, 1)).astype(np.float32),
+        confidence=rng.uniform(size=num_rows).astype(np.float32),
+        trajectory_ids=np.repeat(np.arange(4), num_rows // 4),
+    )
+
+
+def test_gradient_penalty_against_finite_differences():
+    """mean ||grad_x z||^2 at the points between each agent row and its demonstration row,
+    against central differences of the discriminator (float64 throughout)."""
+    from pngail_jax.adversarial import DiscriminatorBatch
+
+    trainer = _small_trainer(_random_demos(), gradient_penalty=True)
+    rng = np.random.default_rng(2)
+    agent, demo = (rng.normal(size=(6, 4)) for _ in range(2))
+    params = trainer.discriminator.init(jax.random.key(0), np.zeros(4, np.float32))
+    params = jax.tree.map(lambda x: np.asarray(x, np.float64), params)
+    key = jax.random.key(3)
+    with jax.enable_x64(True):
+        batch = DiscriminatorBatch(None, agent, None, demo)
+        penalty = float(trainer._gradient_penalty(params, batch, key))
+        mix = np.asarray(jax.random.uniform(jax.random.fold_in(key, 3), (6, 1)))
+        points = mix * agent + (1 - mix) * demo
+
+        def z(x):
+            return np.asarray(trainer.discriminator.apply(params, x))
+
+        step = 1e-5
+        gradient = np.stack(
+            [(z(points + step * e) - z(points - step * e)) / (2 * step) for e in np.eye(4)],
+            axis=-1,
+        )
+    np.testing.assert_allclose(penalty, np.mean(np.sum(gradient**2, axis=-1)), rtol=1e-6)
+    assert penalty > 0
+
+
+def test_gradient_penalty_is_compiled_only_when_asked_and_refused_otherwise():
+    """A grid of PN-GAIL with the penalty at 0 and at 10: the cell at 0 trains as a trainer
+    without the penalty compiled (same floats up to the programs' rounding), the cell at 10
+    differently; a method that needs the penalty is refused by a trainer without it."""
+    from pngail_jax.methods import Preset, register
+
+    demos = _random_demos()
+    cells = make_cells(["pngail"], 1, axes=[("gradient_penalty_coef", (0.0, 10.0))])
+    inputs = stack_cells(cells, jax.random.key(0))
+    _, with_penalty = jax.jit(jax.vmap(_small_trainer(demos, gradient_penalty=True).train))(*inputs)
+    plain_inputs = stack_cells(make_cells(["pngail"], 1), jax.random.key(0))
+    _, plain = jax.jit(jax.vmap(_small_trainer(demos).train))(*plain_inputs)
+    np.testing.assert_allclose(with_penalty["disc/loss"][0], plain["disc/loss"][0], rtol=1e-5)
+    np.testing.assert_allclose(with_penalty["eval/return"][0], plain["eval/return"][0], 1e-4)
+    assert "disc/gradient_penalty" in with_penalty and "disc/gradient_penalty" not in plain
+    assert not np.allclose(with_penalty["disc/loss"][1], with_penalty["disc/loss"][0])
+    register(
+        "pngail-gp-test",
+        Preset("PN-GAIL, penalised", "bsc", {**PRESETS["pngail"].coefficients,
+                                              "gradient_penalty_coef": 1.0}),
+    )  # fmt: skip
+    try:
+        with pytest.raises(ValueError, match="pngail-gp-test use a gradient penalty"):
+            _small_trainer(demos).check_methods(["pngail-gp-test"])
+        _small_trainer(demos, gradient_penalty=True).check_methods(["pngail-gp-test"])
+    finally:
+        PRESETS.pop("pngail-gp-test")  # other tests list the registered methods

@@ -227,3 +227,78 @@ def test_the_pu_risks_max_stops_the_gradient_of_a_negative_estimate():
     np.testing.assert_array_equal(grad_agent, 0.0)
     # d/dz of 0.9 mean sp(z) at z = -6: 0.9 sigmoid(-6) / 8 per row
     np.testing.assert_allclose(grad_demo, 0.9 * jax.nn.sigmoid(-6.0) / 8, rtol=1e-5)
+
+
+# -- remedies for a saturating PN discriminator (MethodSpec fields beyond the paper) ----------
+
+
+@pytest.mark.parametrize("negative", [0.0, 0.4, 1.0])
+@pytest.mark.parametrize("balanced", [0.0, 1.0, 0.5])
+def test_pn_negative_weight_and_class_balance_against_numpy(negative, balanced):
+    """PN-GAIL with the negative term weighted by lambda and the classes balanced (b = 1):
+    the positive side r sp(z) over the split's mean r m, the negative side (agent term and
+    lambda (1 - r) sp(-z)) over its total 1 + lambda (1 - m); b blends the factors in."""
+    za, zd, r, labelled, w, mean_r, mean_rc = random_batch(13)
+    stats = ConfidenceStats(jnp.float32(mean_r), jnp.float32(mean_rc))
+    spec = method_spec("pngail", pn_negative_coef=negative, pn_balanced_coef=balanced)
+    loss, _ = jax.jit(discriminator_loss)(spec, za, zd, r, labelled, w, stats)
+    positive = (1 - balanced) + balanced / mean_r
+    negative_side = (1 - balanced) + balanced / (1 + negative * (1 - mean_r))
+    expected = (
+        negative_side * sp(-za).mean()
+        + (positive * r * sp(zd) + negative_side * negative * (1 - r) * sp(-zd)).mean()
+    )
+    np.testing.assert_allclose(float(loss), expected, rtol=1e-5)
+    if balanced == 1.0:  # each side's weight over the split is 1: positive m / m, negative
+        np.testing.assert_allclose(positive * mean_r, 1.0, rtol=1e-6)
+        np.testing.assert_allclose(negative_side * (1 + negative * (1 - mean_r)), 1.0, rtol=1e-6)
+
+
+def test_pn_without_its_negative_term_is_2iwils_loss_up_to_the_demo_terms_scale():
+    """lambda = 0 leaves agent sp(-z) + mean r sp(z); balanced, r sp(z) / m: 2IWIL's loss."""
+    batch = random_batch(17)
+    za, zd, r, labelled, w, mean_r, mean_rc = batch
+    stats = ConfidenceStats(jnp.float32(mean_r), jnp.float32(mean_rc))
+    spec = method_spec("pngail", pn_negative_coef=0.0, pn_balanced_coef=1.0)
+    loss, _ = discriminator_loss(spec, za, zd, r, labelled, w, stats)
+    np.testing.assert_allclose(float(loss), reference_loss("2iwil", *batch), rtol=1e-5)
+
+
+def test_remedy_defaults_keep_every_preset_bit_for_bit():
+    """The defaults (lambda = 1, b = 0, no logit reward) leave every preset's loss its
+    NumPy formula and the reward sp(-z) to the bit. (That the seven's runs are the same
+    floats as before these fields existed was checked on whole sweeps, docs/results.md.)"""
+    za, zd, r, labelled, w, mean_r, mean_rc = random_batch(19)
+    stats = ConfidenceStats(jnp.float32(mean_r), jnp.float32(mean_rc))
+    for name in METHOD_NAMES:
+        plain = method_spec(name)
+        assert float(plain.pn_negative_coef) == 1.0 and float(plain.pn_balanced_coef) == 0.0
+        loss, _ = discriminator_loss(plain, za, zd, r, labelled, w, stats)
+        eq11 = reference_loss(name, za, zd, r, labelled, w, mean_r, mean_rc)
+        np.testing.assert_allclose(float(loss), eq11, rtol=1e-5)
+    z = np.linspace(-8, 8, 33, dtype=np.float32)
+    np.testing.assert_array_equal(policy_reward(z, 0.0), jax.nn.softplus(-z))
+
+
+def test_logit_reward_against_numpy():
+    """sp(-z) - c sp(z): c = 1 is the logit -z, which keeps ranking pairs where sp(-z) has
+    vanished (z = 8 and z = 12 differ by 4 in -z, by 3e-4 in sp(-z))."""
+    z = np.linspace(-12, 12, 49, dtype=np.float32)
+    for c in (0.0, 0.5, 1.0):
+        np.testing.assert_allclose(
+            policy_reward(z, c), sp(-z.astype(np.float64)) - c * sp(z.astype(np.float64)),
+            rtol=1e-5, atol=1e-5,
+        )  # fmt: skip
+    np.testing.assert_allclose(policy_reward(z, 1.0), -z, atol=1e-5)
+
+
+def test_remedy_coefficients_are_checked():
+    from pngail_jax.methods import Preset, check_preset
+
+    base = dict(PRESETS["pngail"].coefficients)
+    for field, bad in (
+        ("pn_negative_coef", -0.1), ("logit_reward_coef", -1.0),
+        ("gradient_penalty_coef", -2.0), ("pn_balanced_coef", 1.5),
+    ):  # fmt: skip
+        with pytest.raises(ValueError, match=field):
+            check_preset("bad", Preset("bad", "bsc", {**base, field: bad}))

@@ -196,3 +196,10 @@ def test_an_old_config_json_missing_keys_is_named():
         ValueError, match=r"old layout \(classifier_steps\) lacks key\(s\) \['demos'"
     ):
         RunConfig.from_dict({"classifier_steps": 5, "num_envs": 4})
+
+
+def test_the_gradient_penalty_is_compiled_when_a_cell_uses_it():
+    assert not RunConfig().adversarial_config().gradient_penalty
+    assert not RunConfig(grid_axes=(("gradient_penalty_coef", (0.0,)),)).uses_gradient_penalty
+    by_axis = RunConfig(methods=("pngail",), grid_axes=(("gradient_penalty_coef", (0.0, 1.0)),))
+    assert by_axis.adversarial_config().gradient_penalty
