@@ -123,6 +123,41 @@ def swing_up_action(observation) -> float:
     return min(max(torque, -2.0), 2.0)
 
 
+def swing_up_mixture(num_random: int = 4, seed: int = 0):
+    """A 1:``num_random`` mixture with known confidences and no file: one episode of
+    ``swing_up_action`` (confidence 1, return -123) and ``num_random`` episodes of uniform
+    random torques (confidence 0, returns -1,130 to -1,580), 200 rows each, on gymnasium's
+    Pendulum-v1 (seeds ``seed``, ``seed + 10``, ...). GAIL imitates the whole mixture, so
+    mostly the random rows; a method that reads the confidences should not."""
+    import gymnasium as gym
+
+    from pngail_jax.demos import Demonstrations
+
+    env = gym.make("Pendulum-v1")
+    rng = np.random.default_rng(seed)
+    observations, actions, ids, returns = [], [], [], []
+    for episode in range(1 + num_random):
+        observation, _ = env.reset(seed=seed + 10 * episode)
+        total, done = 0.0, False
+        while not done:
+            torque = swing_up_action(observation) if episode == 0 else rng.uniform(-2, 2)
+            action = np.array([torque], np.float32)
+            observations.append(observation)
+            actions.append(action)
+            ids.append(episode)
+            observation, reward, terminated, truncated, _ = env.step(action)
+            total, done = total + float(reward), terminated or truncated
+        returns.append(total)
+    ids = np.asarray(ids)
+    demos = Demonstrations(
+        observations=np.asarray(observations, np.float32),
+        actions=np.asarray(actions, np.float32),
+        confidence=(ids == 0).astype(np.float32),
+        trajectory_ids=ids,
+    )
+    return demos, returns
+
+
 def swing_up_demonstrations(num_episodes: int = 1, seed: int = 0):
     """``num_episodes`` episodes of ``swing_up_action`` on gymnasium's Pendulum-v1 (seeds
     ``seed``, ``seed + 1``, ...) as ``Demonstrations`` of confidence 1, one trajectory each,
