@@ -76,16 +76,17 @@ def test_gail_learns_pendulum_from_a_controllers_trajectory():
 def test_methods_that_read_confidences_learn_from_a_mixture_gail_cannot():
     """PN-GAIL and 2IWIL on a 1:4 mixture of a swing-up controller's episode (confidence 1)
     and random torques (confidence 0), label ratio 0.2, BSC / SC confidences from 2,000
-    classifier steps: 3 seeds x 150 iterations of 10 envs x 200 steps, with GAIL beside
-    them in one program. GAIL imitates mostly the random rows. Measured here (key 0):
-    GAIL -1522, -1356, -1470; 2IWIL -388, -191, -196; PN-GAIL -469, -923, -666 (random
-    policy about -1,200 to -1,500 in this evaluation). The bars are on medians, with
-    room for float rounding to act as another seed: 2IWIL above -700, PN-GAIL above -1,000
-    and at least 200 above GAIL."""
+    classifier steps: 3 seeds x 250 iterations of 10 envs x 200 steps, with GAIL beside
+    them in one program. GAIL imitates mostly the random rows. Measured here, key 0:
+    GAIL -1022, -842, -1224; 2IWIL -249, -503, -389; PN-GAIL -151, -262, -513; key 1:
+    GAIL about -1120, 2IWIL -418 and PN-GAIL -224 (medians). PN-GAIL starts late (its
+    median stays below -700 until about iteration 170; 150 iterations were too few for a
+    stable bar). The bars are on medians, with room for float rounding to act as another
+    seed: 2IWIL and PN-GAIL above -700, PN-GAIL at least 300 above GAIL."""
     demos, returns = swing_up_mixture()
     assert returns[0] > -200 and max(returns[1:]) < -1000
     config = AdversarialConfig(
-        trpo=TRPOConfig(num_envs=10, num_iterations=150, eval_every=10, num_eval_episodes=8),
+        trpo=TRPOConfig(num_envs=10, num_iterations=250, eval_every=10, num_eval_episodes=8),
         classifier=ClassifierConfig(num_steps=2000),
     )
     trainer = AdversarialTrainer(config, envs.make("Pendulum-v1"), demos)
@@ -95,8 +96,8 @@ def test_methods_that_read_confidences_learn_from_a_mixture_gail_cannot():
     final = dict(zip(methods, np.asarray(metrics["eval/return"])[:, -1].reshape(3, 3), strict=True))
     median = {name: float(np.median(values)) for name, values in final.items()}
     assert median["2iwil"] > -700, final
-    assert median["pngail"] > -1000, final
-    assert median["pngail"] > median["gail"] + 200, final
+    assert median["pngail"] > -700, final
+    assert median["pngail"] > median["gail"] + 300, final
 
 
 @pytest.mark.slow
