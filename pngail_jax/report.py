@@ -34,7 +34,7 @@ CSV_COLUMNS = (
     "kl",
     "train_return",
     "mean_abs_action",  # the policy's sampled actions: mean |a| over every entry
-    "beyond_bounds",  # ... and the share of them with some entry outside the action bounds
+    "beyond_bounds",  # ... and the share of those entries outside the action bounds
 )
 _METRIC_OF_COLUMN = {
     "env_steps": "env_steps",
@@ -515,7 +515,7 @@ DIAGNOSTICS = (
     ("disc/acc_demo", "discriminator accuracy on demonstration rows"),
     ("train/reward", "mean policy reward (the update's)"),
     ("rollout/mean_abs_action", "policy's mean |action|"),
-    ("rollout/beyond_bounds", "share of actions beyond the bounds"),
+    ("rollout/beyond_bounds", "share of action entries beyond the bounds"),
 )
 
 
