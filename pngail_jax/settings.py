@@ -72,7 +72,8 @@ class RunSettings:
     num_eval_episodes: int = 32
     normalize_observations: bool = False
     # Each env's first episode cut at a random length, so that the parallel envs of a task
-    # that never terminates are not in step (TRPOConfig.stagger_starts).
+    # that never terminates are not in step (TRPOConfig.stagger_starts). Off in every row:
+    # on HalfCheetah it learned no better than the lockstep (docs/performance.md).
     stagger_starts: bool = False
     # Engine of gymnasium's MuJoCo tasks (envs.PHYSICS); None: from the platform when the
     # environment is made (envs.default_physics), and the run's config.json records which ran.
