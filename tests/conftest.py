@@ -123,25 +123,21 @@ def swing_up_action(observation) -> float:
     return min(max(torque, -2.0), 2.0)
 
 
-def swing_up_mixture(num_random: int = 4, seed: int = 0):
-    """A 1:``num_random`` mixture with known confidences and no file: one episode of
-    ``swing_up_action`` (confidence 1, return -123) and ``num_random`` episodes of uniform
-    random torques (confidence 0, returns -1,130 to -1,580), 200 rows each, on gymnasium's
-    Pendulum-v1 (seeds ``seed``, ``seed + 10``, ...). GAIL imitates the whole mixture, so
-    mostly the random rows; a method that reads the confidences should not."""
+def _pendulum_demonstrations(episodes, confidences):
+    """One episode of gymnasium's Pendulum-v1 per ``(torque_of, seed)`` pair in ``episodes``
+    (``torque_of(observation) -> float``), as ``Demonstrations`` whose rows of episode k have
+    confidence ``confidences[k]``, one trajectory each, and the episodes' returns."""
     import gymnasium as gym
 
     from pngail_jax.demos import Demonstrations
 
     env = gym.make("Pendulum-v1")
-    rng = np.random.default_rng(seed)
     observations, actions, ids, returns = [], [], [], []
-    for episode in range(1 + num_random):
-        observation, _ = env.reset(seed=seed + 10 * episode)
+    for episode, (torque_of, seed) in enumerate(episodes):
+        observation, _ = env.reset(seed=seed)
         total, done = 0.0, False
         while not done:
-            torque = swing_up_action(observation) if episode == 0 else rng.uniform(-2, 2)
-            action = np.array([torque], np.float32)
+            action = np.array([torque_of(observation)], np.float32)
             observations.append(observation)
             actions.append(action)
             ids.append(episode)
@@ -152,37 +148,32 @@ def swing_up_mixture(num_random: int = 4, seed: int = 0):
     demos = Demonstrations(
         observations=np.asarray(observations, np.float32),
         actions=np.asarray(actions, np.float32),
-        confidence=(ids == 0).astype(np.float32),
+        confidence=np.asarray(confidences, np.float32)[ids],
         trajectory_ids=ids,
     )
     return demos, returns
+
+
+def swing_up_mixture(num_random: int = 4, seed: int = 0):
+    """A 1:``num_random`` mixture with known confidences and no file: one episode of
+    ``swing_up_action`` (confidence 1, return -123) and ``num_random`` episodes of uniform
+    random torques (confidence 0, returns -1,130 to -1,580), 200 rows each, on gymnasium's
+    Pendulum-v1 (seeds ``seed``, ``seed + 10``, ...). GAIL imitates the whole mixture, so
+    mostly the random rows; a method that reads the confidences should not."""
+    rng = np.random.default_rng(seed)
+
+    def random_torque(observation):
+        return rng.uniform(-2, 2)
+
+    episodes = [(swing_up_action, seed)] + [
+        (random_torque, seed + 10 * k) for k in range(1, 1 + num_random)
+    ]
+    return _pendulum_demonstrations(episodes, [1.0] + [0.0] * num_random)
 
 
 def swing_up_demonstrations(num_episodes: int = 1, seed: int = 0):
     """``num_episodes`` episodes of ``swing_up_action`` on gymnasium's Pendulum-v1 (seeds
     ``seed``, ``seed + 1``, ...) as ``Demonstrations`` of confidence 1, one trajectory each,
     and their returns."""
-    import gymnasium as gym
-
-    from pngail_jax.demos import Demonstrations
-
-    env = gym.make("Pendulum-v1")
-    observations, actions, ids, returns = [], [], [], []
-    for episode in range(num_episodes):
-        observation, _ = env.reset(seed=seed + episode)
-        total, done = 0.0, False
-        while not done:
-            action = np.array([swing_up_action(observation)], np.float32)
-            observations.append(observation)
-            actions.append(action)
-            ids.append(episode)
-            observation, reward, terminated, truncated, _ = env.step(action)
-            total, done = total + float(reward), terminated or truncated
-        returns.append(total)
-    demos = Demonstrations(
-        observations=np.asarray(observations, np.float32),
-        actions=np.asarray(actions, np.float32),
-        confidence=np.ones(len(ids), np.float32),
-        trajectory_ids=np.asarray(ids),
-    )
-    return demos, returns
+    episodes = [(swing_up_action, seed + k) for k in range(num_episodes)]
+    return _pendulum_demonstrations(episodes, [1.0] * num_episodes)
