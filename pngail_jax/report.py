@@ -570,6 +570,10 @@ def plot_diagnostics(path: Path, cells, metrics, title: str, excluded=()) -> boo
                 label=name_shown,
             )
         axis.set(xlabel="M environment steps per run", title=label)
+        if name == "train/reward" and np.nanmin(values, initial=0.0) < -1:
+            # A logit reward (-z, down to about -7) beside rewards in [0, 1]: a scale that is
+            # linear within +-1 and logarithmic beyond keeps both readable.
+            axis.set_yscale("symlog", linthresh=1.0)
         axis.title.set_fontsize(9)
         axis.grid(alpha=0.3)
     handles, labels = axes[0].get_legend_handles_labels()
