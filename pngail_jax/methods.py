@@ -245,11 +245,7 @@ def check_preset(name: str, preset: Preset) -> Preset:
         refuse("adversarial_reward_coef other than 1 needs a phase whose reward replaces it")
     if values["policy_update_coef"] != 1.0 and "bc" not in phases:
         refuse("policy_update_coef other than 1 needs the 'bc' phase (a cloned policy)")
-    for field in ("pn_negative_coef", "logit_reward_coef", "gradient_penalty_coef"):
-        if values[field] < 0:
-            refuse(f"{field} must be >= 0, got {values[field]}")
-    if not 0 <= values["pn_balanced_coef"] <= 1:
-        refuse(f"pn_balanced_coef must lie in [0, 1], got {values['pn_balanced_coef']}")
+    _check_remedies(values, refuse)
     for coef, prior in (("pu_coef", "pu_prior"), ("pu_agent_coef", "pu_agent_prior")):
         if values[coef] and not 0 <= values[prior] < 1:
             refuse(f"{prior} must lie in [0, 1) with {coef}, got {values[prior]}")
@@ -269,6 +265,15 @@ def check_preset(name: str, preset: Preset) -> Preset:
         refuse(f"its coefficients need the phase(s) {sorted(needed - set(phases))}: "
                "add them to phases")  # fmt: skip
     return dataclasses.replace(preset, coefficients=coefficients, phases=phases)
+
+
+def _check_remedies(values: dict, refuse) -> None:
+    """The remedies' ranges: weights >= 0, the class balance a blend in [0, 1]."""
+    for field in ("pn_negative_coef", "logit_reward_coef", "gradient_penalty_coef"):
+        if values[field] < 0:
+            refuse(f"{field} must be >= 0, got {values[field]}")
+    if not 0 <= values["pn_balanced_coef"] <= 1:
+        refuse(f"pn_balanced_coef must lie in [0, 1], got {values['pn_balanced_coef']}")
 
 
 def register(name: str, preset: Preset) -> Preset:

@@ -534,9 +534,6 @@ def plot_diagnostics(path: Path, cells, metrics, title: str, excluded=()) -> boo
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from pngail_jax.methods import display_name
-
-    settings = list(dict.fromkeys(cell.setting for cell in cells))
     groups = list(dict.fromkeys((cell.method, cell.setting) for cell in cells))
     colors = dict(zip(groups, plt.get_cmap("tab10").colors * 4, strict=False))
     steps = np.asarray(metrics["env_steps"], np.float64)[0] / 1e6
@@ -548,34 +545,7 @@ def plot_diagnostics(path: Path, cells, metrics, title: str, excluded=()) -> boo
     )
     axes = axes.ravel()
     for axis, (name, label) in zip(axes, panels, strict=False):
-        values = np.asarray(metrics[name], np.float64)
-        for method, setting in groups:
-            rows = [
-                i
-                for i, c in enumerate(cells)
-                if (c.method, c.setting) == (method, setting) and i not in set(excluded)
-            ]
-            if not rows:
-                continue
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)
-                curve = _moving_average(np.nanmean(values[rows], axis=0), window)
-            name_shown = display_name(method) + (f" ({setting})" if len(settings) > 1 else "")
-            axis.plot(
-                steps,
-                curve,
-                color=colors[(method, setting)],
-                lw=1.4,
-                ls=line_style(method),
-                label=name_shown,
-            )
-        axis.set(xlabel="M environment steps per run", title=label)
-        if name == "train/reward" and np.nanmin(values, initial=0.0) < -1:
-            # A logit reward (-z, down to about -7) beside rewards in [0, 1]: a scale that is
-            # linear within +-1 and logarithmic beyond keeps both readable.
-            axis.set_yscale("symlog", linthresh=1.0)
-        axis.title.set_fontsize(9)
-        axis.grid(alpha=0.3)
+        _diagnostic_panel(axis, name, label, cells, metrics, steps, window, colors, excluded)
     handles, labels = axes[0].get_legend_handles_labels()
     for axis in axes[len(panels) :]:
         axis.axis("off")
@@ -587,6 +557,38 @@ def plot_diagnostics(path: Path, cells, metrics, title: str, excluded=()) -> boo
         figure.savefig(temporary, dpi=110, bbox_inches="tight")
     plt.close(figure)
     return True
+
+
+def _diagnostic_panel(axis, name, label, cells, metrics, steps, window, colors, excluded):
+    """One panel of ``plot_diagnostics``: metric ``name``, each method's (and setting's) mean
+    over its seeds, smoothed over ``window`` iterations."""
+    from pngail_jax.methods import display_name
+
+    values = np.asarray(metrics[name], np.float64)
+    several_settings = len({cell.setting for cell in cells}) > 1
+    for method, setting in colors:
+        rows = [
+            i
+            for i, c in enumerate(cells)
+            if (c.method, c.setting) == (method, setting) and i not in set(excluded)
+        ]
+        if not rows:
+            continue
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            curve = _moving_average(np.nanmean(values[rows], axis=0), window)
+        shown = display_name(method) + (f" ({setting})" if several_settings else "")
+        axis.plot(
+            steps, curve, color=colors[(method, setting)], lw=1.4, ls=line_style(method),
+            label=shown,
+        )  # fmt: skip
+    axis.set(xlabel="M environment steps per run", title=label)
+    if name == "train/reward" and np.nanmin(values, initial=0.0) < -1:
+        # A logit reward (-z, down to about -7) beside rewards in [0, 1]: a scale that is
+        # linear within +-1 and logarithmic beyond keeps both readable.
+        axis.set_yscale("symlog", linthresh=1.0)
+    axis.title.set_fontsize(9)
+    axis.grid(alpha=0.3)
 
 
 def _moving_average(values: np.ndarray, window: int) -> np.ndarray:
