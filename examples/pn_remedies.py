@@ -23,11 +23,16 @@ confidences) with one change, through a ``MethodSpec`` coefficient:
 - ``gradient_penalty``: a zero-centred gradient penalty 10 mean ||grad_x z||^2 at points
   between agent and demonstration rows (``gradient_penalty_coef`` 10, the weight of
   Kostrikov et al.'s DAC), which keeps the discriminator from a sharp boundary.
+
+One control, not a remedy: ``iwil_gradient_penalty`` is 2IWIL with the same penalty, so a
+grid with both says whether the penalty mends PN-GAIL's risk or is a better discriminator
+for every method.
 """
 
 from pngail_jax.methods import PRESETS, Preset
 
 _PNGAIL = PRESETS["pngail"].coefficients
+_IWIL = PRESETS["2iwil"]
 
 negative_half = Preset(
     "PN-GAIL with its negative term at half weight", "bsc", {**_PNGAIL, "pn_negative_coef": 0.5}
@@ -38,4 +43,9 @@ logit_reward = Preset(
 )
 gradient_penalty = Preset(
     "PN-GAIL with a gradient penalty (10)", "bsc", {**_PNGAIL, "gradient_penalty_coef": 10.0}
+)
+iwil_gradient_penalty = Preset(
+    "2IWIL with a gradient penalty (10)",
+    _IWIL.confidence_source,
+    {**_IWIL.coefficients, "gradient_penalty_coef": 10.0},
 )
