@@ -3,7 +3,7 @@ iteration, side by side on one machine and one task, at the settings a run uses.
 
 For each method of ``--methods`` the script builds the run the sweep would build
 (``RunConfig(methods=(method,), seeds=--seeds)``, the task's run settings, the appendix
-phases at their codebases' settings: ``pngail_jax.runner.build``), then times, warm:
+phases at their codebases' settings: ``pngail_jax.jobs.build.build``), then times, warm:
 
 - ``init_seconds``: the grid's ``init`` (the split, the SC/BSC classifier, and the method's
   training phases: T-REX's and D-REX's reward fits, D-REX's cloning and noisy rollouts, BC),
@@ -35,7 +35,8 @@ from pathlib import Path
 from common import context, markdown_table, time_grid_chunks, write_rows
 
 from pngail_jax import RunConfig
-from pngail_jax.runner import RunError, build
+from pngail_jax.jobs.build import build
+from pngail_jax.jobs.errors import RunError
 
 DEFAULT_METHODS = ("pngail", "gail", "cail", "trex", "firl-fkl")
 RELEASED_PENDULUM = Path("data/released/Pendulum-v1_mixture.npy")

@@ -2,7 +2,7 @@
 
 The user's path, importable from here (each loaded on first use, so ``import pngail_jax``
 stays fast): ``run`` / ``RunConfig`` / ``RunResult`` / ``RunError`` (a whole run with its
-outputs, ``pngail_jax.runner``), ``load_demonstrations``, the trainers (``AdversarialTrainer``,
+outputs, ``pngail_jax.jobs``), ``load_demonstrations``, the trainers (``AdversarialTrainer``,
 ``AdversarialConfig``), grids (``make_cells``, ``stack_cells``, ``Grid``) and ``load_policy``.
 """
 
@@ -12,9 +12,9 @@ __version__ = "0.1.0"
 
 # name -> the module that defines it
 _EXPORTS = {
-    "run": "pngail_jax.runner",
-    "RunResult": "pngail_jax.runner",
-    "RunError": "pngail_jax.runner",
+    "run": "pngail_jax.jobs.sweep",
+    "RunResult": "pngail_jax.jobs.results",
+    "RunError": "pngail_jax.jobs.errors",
     "RunConfig": "pngail_jax.run_config",
     "load_demonstrations": "pngail_jax.demos",
     "AdversarialTrainer": "pngail_jax.adversarial",

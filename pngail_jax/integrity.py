@@ -23,6 +23,9 @@ from pathlib import Path
 
 MANIFEST_NAME = "digests.json"
 _TEMPORARY_MARK = ".tmp-"
+# A run directory's lock file, there only while a process writes the run (held by
+# pngail_jax.outputs.run_lock); here, beside the atomic writes, because manifests leave it out.
+LOCK = ".pngail-run.lock"
 
 
 class IntegrityError(ValueError):
@@ -107,8 +110,6 @@ def _tree_digest(directory: Path) -> str:
 def _files(directory: Path) -> list[Path]:
     """The files a manifest lists: not itself, temporaries, or a run's lock (there only while
     a process writes: pngail_jax.outputs.run_lock)."""
-    from pngail_jax.outputs import LOCK
-
     return sorted(
         path
         for path in directory.rglob("*")

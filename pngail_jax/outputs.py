@@ -3,17 +3,22 @@ there, and the lock a writing process holds.
 
 An output directory is new, or empty, or a run of the same program (marked so when it was
 created) that the user asked to resume or to replace with ``overwrite``. Anything else is
-refused before any computation, naming what is in the way. ``pngail_jax.runner`` and every
-command-line program go through these functions.
+refused before any computation, naming what is in the way. Every job and program claims its
+directory the same way, with ``claimed``: refuse, lock, check again (another process may have
+written meanwhile), and prepare (mark, and empty an old run) when the caller is ready to
+write. A program's flag parser may call ``output_refusal`` earlier, to refuse in one line
+before anything is built.
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 from pathlib import Path
 
+from pngail_jax.integrity import LOCK, atomic_write_text
+
 MARKER = ".pngail-run.json"
-LOCK = ".pngail-run.lock"  # held while a process writes the run (run_lock)
 # Runs made before the marker existed are known by files of their program's own (the most
 # specific first: train_rl writes a config.json too, without the sweep's "resolved").
 LEGACY_MARKS = {
@@ -98,8 +103,6 @@ def prepare_output(directory: Path, program: str, overwrite: bool = False) -> No
     import json
     import shutil
 
-    from pngail_jax.integrity import atomic_write_text
-
     directory = Path(directory)
     if overwrite and directory.exists() and output_owner(directory) == program:
         for path in directory.iterdir():
@@ -111,8 +114,58 @@ def prepare_output(directory: Path, program: str, overwrite: bool = False) -> No
         atomic_write_text(directory / MARKER, json.dumps({"program": program}) + "\n")
 
 
-class RunLocked(Exception):
+class OutputRefused(Exception):
+    """A directory a program may not write to; the one-line message names what is in the
+    way."""
+
+
+class RunLocked(OutputRefused):
     """Another live process holds the run's lock (the message names it)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Claim:
+    """A held claim on an output directory (``claimed``)."""
+
+    directory: Path
+    program: str
+    overwrite: bool
+    resume: bool
+
+    def prepare(self) -> None:
+        """Marks the directory as the program's run (emptying an old one with ``overwrite``);
+        nothing for a resumed run, which keeps its directory as it is. Called once the job
+        is ready to write, so that an old run stays until a new one can replace it."""
+        if not self.resume:
+            prepare_output(self.directory, self.program, overwrite=self.overwrite)
+
+
+@contextlib.contextmanager
+def claimed(
+    directory: Path,
+    program: str,
+    *,
+    overwrite: bool = False,
+    resume: bool = False,
+    wait: bool = False,
+):
+    """The one way a job takes an output directory: refuse (``output_refusal``), lock
+    (``run_lock``), check again under the lock, and yield a ``Claim`` whose ``prepare`` marks
+    it. ``resume``: the directory holds the program's run, which the caller continues (the
+    caller has checked it; it is locked, not checked for emptiness). ``wait``: a lock held by
+    another live process is waited for (one line says whose) instead of refused. Raises
+    ``OutputRefused`` (``RunLocked`` for a held lock) with one line."""
+    directory = Path(directory)
+
+    def refuse_unless_free():
+        refusal = None if resume else output_refusal(directory, program, overwrite)
+        if refusal:
+            raise OutputRefused(refusal)
+
+    refuse_unless_free()
+    with run_lock(directory, program, wait=wait):
+        refuse_unless_free()
+        yield Claim(directory, program, overwrite, resume)
 
 
 def _alive(pid: int) -> bool:
@@ -127,24 +180,54 @@ def _alive(pid: int) -> bool:
     return True
 
 
+WAIT_SECONDS = 2.0  # how often a waiting process looks at a held lock again
+
+
 @contextlib.contextmanager
-def run_lock(directory: Path, program: str):
+def run_lock(directory: Path, program: str, wait: bool = False):
     """Holds ``directory``'s run lock while a program writes there: a second process on the
-    same run is refused (``RunLocked``, naming the holder's PID and host); a lock left by a
-    process that is gone (same host) is taken over with a note. Released on exit, also after
-    an error or Ctrl-C; a directory it created and nothing was written to is removed."""
-    import json
+    same run is refused (``RunLocked``, naming the holder's PID and host), or with ``wait``
+    waits for it (saying so in one line); a lock left by a process that is gone (same host) is
+    taken over with a note. Released on exit, also after an error or Ctrl-C; a directory it
+    created and nothing was written to is removed."""
     import os
     import socket
-    import sys
     import time
 
     directory = Path(directory)
     created = not directory.exists()
     directory.mkdir(parents=True, exist_ok=True)
     path = directory / LOCK
+    wait_announced = False
     me = {"pid": os.getpid(), "host": socket.gethostname(), "program": program}
     me["started"] = time.strftime("%Y-%m-%d %H:%M:%S")
+    while True:
+        try:
+            _take_lock(directory, path, me)
+            break
+        except RunLocked as error:
+            if not wait:
+                raise
+            if not wait_announced:
+                print(f"waiting: {error}", flush=True)
+                wait_announced = True
+            time.sleep(WAIT_SECONDS)
+    try:
+        yield
+    finally:
+        path.unlink(missing_ok=True)
+        if created and not any(directory.iterdir()):  # refused before writing: leave no trace
+            directory.rmdir()
+
+
+def _take_lock(directory: Path, path: Path, me: dict) -> None:
+    """Creates the lock file ``path`` holding ``me``, taking over one whose process is gone;
+    ``RunLocked`` when a live process holds it."""
+    import json
+    import os
+    import sys
+    import time
+
     for _ in range(2):
         try:
             descriptor = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
@@ -174,12 +257,6 @@ def run_lock(directory: Path, program: str):
             continue
         with os.fdopen(descriptor, "w") as file:
             json.dump(me, file)
-        break
-    else:  # another process took the lock between our two tries
-        raise RunLocked(f"{directory} was locked by another process as this one started")
-    try:
-        yield
-    finally:
-        path.unlink(missing_ok=True)
-        if created and not any(directory.iterdir()):  # refused before writing: leave no trace
-            directory.rmdir()
+        return
+    # another process took the lock between our two tries
+    raise RunLocked(f"{directory} was locked by another process as this one started")

@@ -16,6 +16,7 @@ import numpy as np
 
 from pngail_jax import stats
 from pngail_jax.integrity import atomic_path, atomic_write_text, write_json
+from pngail_jax.methods import METHOD_NAMES, display_name, reads_confidences
 
 CSV_COLUMNS = (
     "method",
@@ -283,6 +284,7 @@ def _improvement_over_baselines(cells, settings, final, baseline: str | None = N
             result[label] = {
                 "estimate": stats.probability_of_improvement(ours, theirs),
                 "ci95": list(stats.probability_of_improvement_ci(ours, theirs)),
+                "seeds": [len(ours), len(theirs)],
             }
     return result
 
@@ -313,8 +315,6 @@ def summary_markdown(summary, cells, metrics, title: str, notes: Sequence[str] =
     improvement over each baseline. Normalised columns only when the run has a normaliser;
     no interval for a single seed; a classifier error only for methods that read
     confidences (``methods.reads_confidences``)."""
-    from pngail_jax.methods import reads_confidences
-
     _, groups = group_cells(cells)
     if "normalizer" in summary:  # what the run normalised by (finite values or not)
         normalised = summary["normalizer"] is not None
@@ -339,7 +339,7 @@ def summary_markdown(summary, cells, metrics, title: str, notes: Sequence[str] =
         if not reads_confidences(cells[groups[label][0]].method):
             mae_text = "reads none"
         columns = [
-            label,
+            display_label(label),
             str(row["num_seeds"]),
             _mean_se(row, "final_return", 1),
             _interval(row, f"final{suffix}", digits),
@@ -390,8 +390,6 @@ def _improvement_lines(improvement: dict, baseline: str | None = None) -> list[s
     each method's over ``baseline``)."""
     if not improvement:
         return []
-    from pngail_jax.methods import display_name
-
     if baseline:
         sentence = f"P(a seed's final return > a {display_name(baseline)} seed's)"
         header = f"| method | P(method > {display_name(baseline)}) | 95% CI |"
@@ -407,8 +405,19 @@ def _improvement_lines(improvement: dict, baseline: str | None = None) -> list[s
     ]
     for label, value in improvement.items():
         low, high = value["ci95"]
-        lines.append(f"| {label} | {value['estimate']:.2f} | [{low:.2f}, {high:.2f}] |")
+        if min(value.get("seeds", (2, 2))) == 1:  # one seed a side: a single comparison
+            interval, estimate = "no interval", f"{value['estimate']:.2f} (n = 1)"
+        else:
+            interval, estimate = f"[{low:.2f}, {high:.2f}]", f"{value['estimate']:.2f}"
+        lines.append(f"| {display_label(label)} | {estimate} | {interval} |")
     return lines
+
+
+def display_label(label: str) -> str:
+    """A group label (``group_label``) with the method's paper name (``PN-GAIL\\BSC``, not
+    ``pngail-no-bsc``), for the tables people read; summary.json keeps the ids."""
+    method, bracket, setting = label.partition(" [")
+    return display_name(method) + bracket + setting
 
 
 def _per_seed_lines(summary: dict) -> list[str]:
@@ -429,7 +438,7 @@ def _per_seed_lines(summary: dict) -> list[str]:
                 for scale in ("_return", "_normalized_return")
             )
             cells_text = " | ".join("n/a" if not np.isfinite(v) else f"{v:.2f}" for v in numbers)
-            lines.append(f"| {label} | {seed['seed']} | {cells_text} |")
+            lines.append(f"| {display_label(label)} | {seed['seed']} | {cells_text} |")
     return lines
 
 
@@ -459,8 +468,6 @@ def plot_curves(path: Path, cells, metrics, normalizer, title: str, excluded=())
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from pngail_jax.methods import display_name
 
     returns = np.asarray(metrics["eval/return"], np.float64)
     values = normalize(returns, normalizer) if normalizer is not None else returns
@@ -562,8 +569,6 @@ def plot_diagnostics(path: Path, cells, metrics, title: str, excluded=()) -> boo
 def _diagnostic_panel(axis, name, label, cells, metrics, steps, window, colors, excluded):
     """One panel of ``plot_diagnostics``: metric ``name``, each method's (and setting's) mean
     over its seeds, smoothed over ``window`` iterations."""
-    from pngail_jax.methods import display_name
-
     values = np.asarray(metrics[name], np.float64)
     several_settings = len({cell.setting for cell in cells}) > 1
     for method, setting in colors:
@@ -608,8 +613,6 @@ def _moving_average(values: np.ndarray, window: int) -> np.ndarray:
 def line_style(method: str) -> str:
     """Dashed for PN-GAIL's ablations, dotted for methods beyond the paper's seven, so that
     curves stay apart where their colours and bands overlap."""
-    from pngail_jax.methods import METHOD_NAMES
-
     if method.startswith("pngail-no-"):
         return "--"
     return "-" if method in METHOD_NAMES else ":"

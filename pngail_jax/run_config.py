@@ -52,7 +52,7 @@ from pngail_jax.validation import (
 )
 
 FISHER_FORMS = ("gauss_newton", "hessian")
-# What a saved config.json holds besides the config's fields (pngail_jax.runner writes them);
+# What a saved config.json holds besides the config's fields (pngail_jax.jobs.record writes them);
 # RunConfig.from_dict ignores these and refuses any other key that is not a field.
 RECORD_KEYS = ("resolved", "provenance")
 # jax.random.key takes a seed below 2**63.
@@ -106,7 +106,7 @@ class RunConfig:
     baseline: str | None = None
     seed: int = 0  # base PRNG seed; cell keys are fold_in(key(seed), cell seed)
     # Demonstrations: a *_mixture.npy (authors' layout), an .npz, or "minari:<dataset id>";
-    # None: made with pngail_jax.demos.make and cached (pngail_jax.runner.load_or_make_demos).
+    # None: made with pngail_jax.jobs.make_demos and cached (jobs.build.load_or_make_demos).
     demos: str | None = None
     conf: str | None = None  # confidence file (default: the mixture's sibling)
     confidence_field: str | None = None  # Minari: the per-episode field holding confidences

@@ -4,7 +4,7 @@ A ``RunSettings`` holds what differs between tasks but not between methods: the 
 shape (parallel envs x unroll length, about 5,000 samples per iteration as in the paper),
 the MJX solver caps, the physics engine of gymnasium's MuJoCo tasks, how often and on how
 many episodes the deterministic policy is evaluated, and whether TRPO normalises
-observations. The runner, ``pngail_jax.demos.make`` and the programs (sweep, train_rl,
+observations. The jobs (``pngail_jax.jobs``) and the programs (sweep, train_rl,
 make_demos) use ``settings_for(env)`` unless a field is given;
 ``benchmarks/grid_throughput.py`` measures with them.
 

@@ -18,9 +18,9 @@ def no_model_loading(monkeypatch):
         raise AssertionError("a MuJoCo model was loaded before the options were checked")
 
     monkeypatch.setattr(mjx_tasks, "_brax_task", load)
-    monkeypatch.setattr(mjx_tasks, "_import_mjx", load)
-    monkeypatch.setattr(gym_mujoco, "_gymnasium_asset", load)
-    monkeypatch.setattr(gym_mujoco, "_import_mjx", load)
+    monkeypatch.setattr(mjx_tasks, "import_mjx", load)
+    monkeypatch.setattr(gym_mujoco, "gymnasium_asset", load)
+    monkeypatch.setattr(gym_mujoco, "import_mjx", load)
 
 
 BAD_OPTIONS = [

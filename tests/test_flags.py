@@ -106,11 +106,11 @@ def test_a_config_files_baseline_and_axes_follow_the_flags(tmp_path):
 
 
 def test_a_resume_refuses_a_method_whose_preset_changed(tmp_path):
-    from pngail_jax import runner
+    from pngail_jax.jobs import record as record_job
     from pngail_jax.methods import preset_record
 
     record = json.loads(json.dumps(preset_record("pngail")))
-    runner._check_methods_unchanged(tmp_path, {"pngail": record})  # unchanged: passes
+    record_job.check_methods_unchanged(tmp_path, {"pngail": record})  # unchanged: passes
     record["coefficients"]["pn_coef"] = 0.5
-    with pytest.raises(runner.RunError, match="'pngail' is not the preset the run began with"):
-        runner._check_methods_unchanged(tmp_path, {"pngail": record})
+    with pytest.raises(record_job.RunError, match="'pngail' is not the preset the run began with"):
+        record_job.check_methods_unchanged(tmp_path, {"pngail": record})

@@ -10,8 +10,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from pngail_jax import outputs
+from pngail_jax.outputs import MARKER, output_owner, prepare_output
 from pngail_jax.programs import cli, paper, sweep, train_rl
-from pngail_jax.programs.cli import MARKER, claim_output, output_owner, prepare_output
+from pngail_jax.programs.cli import claim_output
 
 PROGRAMS = ["sweep", "paper", "train_rl", "make_demos", "compare_settings"]
 
@@ -39,7 +41,7 @@ def listing(directory):
     names=st.lists(
         st.sampled_from(
             ["README.md", "results.json", "metrics.csv", "notes", "config.json"]
-            + [name for names in cli.LEGACY_MARKS.values() for name in names]
+            + [name for names in outputs.LEGACY_MARKS.values() for name in names]
         ),
         max_size=3,
         unique=True,
@@ -155,7 +157,7 @@ def test_the_run_lock_refuses_a_live_holder_and_takes_over_a_dead_ones(tmp_path,
     import subprocess
     import sys
 
-    from pngail_jax.programs.cli import LOCK, RunLocked, run_lock
+    from pngail_jax.outputs import LOCK, RunLocked, run_lock
 
     with run_lock(tmp_path, "sweep"):
         holder = json.loads((tmp_path / LOCK).read_text())
@@ -184,7 +186,8 @@ def test_a_signal_outside_a_chunk_stops_at_once_and_the_lock_goes_with_it(tmp_pa
     import signal
     import time
 
-    from pngail_jax.programs.cli import LOCK, run_lock, signals_stop_at_a_checkpoint
+    from pngail_jax.outputs import LOCK, run_lock
+    from pngail_jax.programs.cli import signals_stop_at_a_checkpoint
 
     number = signal.Signals[name]
     before = {n: signal.getsignal(n) for n in (signal.SIGINT, signal.SIGTERM)}
@@ -242,7 +245,7 @@ def test_an_unwritable_output_is_refused_before_any_computation(tmp_path, monkey
 
     real = os.access
     monkeypatch.setattr(os, "access", lambda p, mode: p != tmp_path and real(p, mode))
-    reason = cli.output_refusal(tmp_path / "run", "sweep")  # as root, chmod would not tell
+    reason = outputs.output_refusal(tmp_path / "run", "sweep")  # as root, chmod would not tell
     assert (
         reason
         == f"--out {tmp_path / 'run'}: {tmp_path} is not writable (read-only disk or permissions)"
@@ -263,5 +266,5 @@ def test_runs_made_before_the_marker_are_known_by_their_own_files(tmp_path):
     assert output_owner(folder("cut", {"config.json": '{"trpo": {}}'})) == "train_rl"
     assert output_owner(folder("demos", {"normalizer.json": "{}"})) == "make_demos"
     assert output_owner(folder("mine", {"config.json": '{"lr": 3}'})) is None  # not ours
-    reason = cli.output_refusal(tmp_path / "mine", "sweep", overwrite=True)
+    reason = outputs.output_refusal(tmp_path / "mine", "sweep", overwrite=True)
     assert "files it did not make (config.json)" in reason  # --overwrite cannot empty it

@@ -79,7 +79,7 @@ def made_set(lengths, num_optimal):
 
 def test_a_mixture_takes_the_first_trajectories_of_each_kind_and_renumbers_them():
     source = made_set([3, 2, 4, 1, 5], num_optimal=2)  # optimal: 0, 1; intermediate: 2, 3, 4
-    from pngail_jax.demos.make import cut_mixture
+    from pngail_jax.demos import cut_mixture
 
     mixed = cut_mixture(source, 1, 2, "made-1to2")
     np.testing.assert_array_equal(mixed.trajectory_ids, [0, 0, 0, 1, 1, 1, 1, 2])
@@ -190,7 +190,7 @@ def test_an_interrupted_grid_keeps_its_wall_time_on_the_plan_record(tmp_path, mo
 
 
 def test_a_sigterm_ends_the_plan_as_ctrl_c_does(tmp_path, monkeypatch):
-    from pngail_jax.programs.cli import LOCK
+    from pngail_jax.outputs import LOCK
 
     monkeypatch.setattr(paper, "run_paper", sigterm_to_self)
     out = tmp_path / "paper"

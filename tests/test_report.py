@@ -96,7 +96,7 @@ def test_summary_groups_by_method_and_setting_and_drops_diverged_cells(tmp_path)
     markdown = report.summary_markdown(summary, cells, metrics, "test")
     # per method and setting, PN-GAIL's improvement over each baseline, and per seed
     assert markdown.count("\n| ") == (1 + 4) + (1 + 2) + (1 + 12)
-    assert "| gail [label_ratio=0.1,noise=0] | 3 |" in markdown
+    assert "| GAIL [label_ratio=0.1,noise=0] | 3 |" in markdown
     assert markdown.count("| reads none |") == 2  # GAIL reads no confidences
     assert "mean ± standard error (s.e." in markdown
 
@@ -273,3 +273,33 @@ def test_diagnostics_plot_needs_the_metrics_it_draws(tmp_path):
     metrics.update({name: rng.uniform(size=(4, 60)) for name, _ in report.DIAGNOSTICS[:3]})
     assert report.plot_diagnostics(tmp_path / "d.png", cells, metrics, "test", excluded=[1])
     assert (tmp_path / "d.png").stat().st_size > 10_000
+
+
+def test_one_seed_a_method_gives_a_single_comparison_not_an_interval():
+    """P(PN-GAIL > GAIL) from one seed each is 0 or 1 with a degenerate interval: the table
+    says n = 1, as its other columns do."""
+    cells = make_cells(["gail", "pngail"], 1)
+    metrics = synthetic_metrics(cells)
+    summary = report.summarize(cells, metrics, NORMALIZER, 1000.0, 2.0)
+    assert summary["probability_of_improvement"]["gail"]["seeds"] == [1, 1]
+    row = next(
+        line
+        for line in report.summary_markdown(summary, cells, metrics, "t").splitlines()
+        if line.startswith("| GAIL |") and "no interval" in line
+    )
+    estimate = summary["probability_of_improvement"]["gail"]["estimate"]
+    assert row == f"| GAIL | {estimate:.2f} (n = 1) | no interval |"
+
+
+def test_summary_tables_name_methods_as_the_paper_does():
+    cells = make_cells(["pngail-no-bsc", "2iwil"], 2, label_ratios=(0.1, 0.2))
+    metrics = synthetic_metrics(cells)
+    summary = report.summarize(cells, metrics, NORMALIZER, 1000.0, 2.0)
+    text = report.summary_markdown(summary, cells, metrics, "t")
+    assert "pngail-no-bsc" in next(iter(summary["methods"]))  # the JSON keeps the ids
+    rows = {line.split(" | ")[0] for line in text.splitlines() if line.startswith("| ")}
+    assert rows == {
+        "| method",
+        *(f"| {name} [label_ratio={ratio},noise=0]" for name in ("PN-GAIL\\BSC", "2IWIL")
+          for ratio in (0.1, 0.2)),
+    }  # fmt: skip

@@ -148,13 +148,13 @@ def test_a_registered_method_resumes_from_its_record(demos_path, tmp_path, capsy
 
 
 def test_a_long_chunk_says_when_it_should_end_at_the_pace_so_far():
-    from pngail_jax.runner import LONG_CHUNK_SECONDS, Progress, _long_chunk_notice
+    from pngail_jax.jobs.chunks import LONG_CHUNK_SECONDS, Progress, long_chunk_notice
 
     def progress(seconds, chunks_done=2):
         return Progress(chunks_done, {}, None, {"seconds": seconds, "steps": 0})
 
     # The first chunk has no pace to go by, and a short chunk gets its progress line soon.
-    assert _long_chunk_notice(progress(0.0, chunks_done=0), 5, 100) is None
-    assert _long_chunk_notice(progress(2 * LONG_CHUNK_SECONDS - 2), 5, 100) is None
-    line = _long_chunk_notice(progress(2 * 3720.0), 5, 100)
+    assert long_chunk_notice(progress(0.0, chunks_done=0), 5, 100) is None
+    assert long_chunk_notice(progress(2 * LONG_CHUNK_SECONDS - 2), 5, 100) is None
+    line = long_chunk_notice(progress(2 * 3720.0), 5, 100)
     assert "chunk 3/5 (iterations 201-300)" in line and "62m00s a chunk" in line

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 from conftest import metrics_numbers, sigterm_to_self, tiny_sweep_args
 
-from pngail_jax import runner
 from pngail_jax.demos import save_npz
+from pngail_jax.jobs import build as build_job
+from pngail_jax.jobs import chunks, record
 from pngail_jax.programs import sweep
 
 SUMMARY_KEYS = {  # the fields of every earlier summary.json, and the new interval ones
@@ -92,14 +93,14 @@ class Killed(BaseException):
 
 def test_a_killed_run_says_partial_and_resumes_exactly(finished, demos_path, tmp_path, monkeypatch):
     out = tmp_path / "run"
-    save = runner._save_checkpoint
+    save = chunks.save_checkpoint
 
     def killed_at_the_second_checkpoint(directory, progress, host_state, writer):
         if progress.chunks_done == 2:
             raise Killed
         save(directory, progress, host_state, writer)
 
-    monkeypatch.setattr(runner, "_save_checkpoint", killed_at_the_second_checkpoint)
+    monkeypatch.setattr(chunks, "save_checkpoint", killed_at_the_second_checkpoint)
     with pytest.raises(Killed):
         sweep.main(tiny_sweep_args(demos_path, out))
     monkeypatch.undo()
@@ -148,10 +149,10 @@ def test_checkpoint_damage_of_every_kind_falls_back(finished, tmp_path, capsys, 
     else:
         target = newest / file
         flip_a_bit(target, position=2)
-    assert runner.intact_checkpoint(checkpoints) == checkpoints / "chunk_0001"
+    assert chunks.intact_checkpoint(checkpoints) == checkpoints / "chunk_0001"
     assert f"chunk_0002 is damaged or incomplete: {newest}" in capsys.readouterr().out
     flip_a_bit(largest_file(checkpoints / "chunk_0001" / "state"))
-    assert runner.intact_checkpoint(checkpoints) is None
+    assert chunks.intact_checkpoint(checkpoints) is None
     assert "no older checkpoint to fall back on" in capsys.readouterr().out
 
 
@@ -166,7 +167,7 @@ def test_resume_refuses_changed_inputs_and_damaged_configs(finished, tmp_path, c
     config["resolved"]["demos_path"] = str(demos)
     config["resolved"]["inputs"]["demonstrations"] = file_record(demos)
     (out / "config.json").write_text(json.dumps(config))
-    seal(out / runner.SEAL, runner.sealed_part(config))  # as if the run had begun with it
+    seal(out / record.SEAL, record.sealed_part(config))  # as if the run had begun with it
     original = load_npz(demos)
     actions = original.actions.copy()
     actions[0] += 0.5
@@ -267,31 +268,31 @@ def test_every_flag_has_help_and_its_default():
 def test_presets_and_chunking():
     config = sweep.parse_args(["--preset", "paper", "--seeds", "2"]).config
     assert (config.iterations, config.seeds) == (5000, 2)  # explicit flags beat the preset
-    assert runner.blocks_per_chunk(30, 5) == 5
-    assert runner.blocks_per_chunk(30, 4) == 3
-    assert runner.blocks_per_chunk(7, 5) == 1
+    assert chunks.blocks_per_chunk(30, 5) == 5
+    assert chunks.blocks_per_chunk(30, 4) == 3
+    assert chunks.blocks_per_chunk(7, 5) == 1
 
 
 def test_a_damaged_demonstration_cache_is_made_again(demos_path, tmp_path, monkeypatch, capsys):
-    from pngail_jax.demos import make
+    from pngail_jax.jobs.make_demos import MakeDemosConfig
     from pngail_jax.run_config import RunConfig
 
-    monkeypatch.setattr(runner, "DEMO_CACHE", tmp_path)
+    monkeypatch.setattr(build_job, "DEMO_CACHE", tmp_path)
     cached = tmp_path / "Pendulum-v1" / "demos.npz"
     cached.parent.mkdir()
     cached.write_bytes(demos_path.read_bytes()[:300])  # a truncated copy
     calls = []
 
-    def fake_make(config, out, overwrite=False):  # stands in for minutes of TRPO
-        calls.append((config, out, overwrite))
+    def fake_make(config, claim):  # stands in for minutes of TRPO
+        calls.append((config, claim.directory, claim.overwrite))
         shutil.copy(demos_path, cached)
 
-    monkeypatch.setattr(make, "make_demonstrations", fake_make)
-    demos, path = runner.load_or_make_demos(RunConfig(env="Pendulum-v1"))
+    monkeypatch.setattr(build_job, "make_claimed", fake_make)
+    demos, path = build_job.load_or_make_demos(RunConfig(env="Pendulum-v1"))
     printed = capsys.readouterr().out
     assert "the cached demonstrations are damaged" in printed and str(cached) in printed
     # The making's defaults (the command line's), over the runner's own damaged cache.
-    assert calls == [(make.MakeDemosConfig(env="Pendulum-v1"), tmp_path / "Pendulum-v1", True)]
+    assert calls == [(MakeDemosConfig(env="Pendulum-v1"), tmp_path / "Pendulum-v1", True)]
     assert demos.num_rows == 100 and path == str(cached.absolute())
 
 
@@ -309,7 +310,7 @@ def test_a_finished_run_resumes_to_already_complete_and_a_held_run_is_refused(
 ):
     import os
 
-    from pngail_jax.programs.cli import LOCK
+    from pngail_jax.outputs import LOCK
 
     out = copy_run(finished, tmp_path)
     before = {p: p.stat().st_mtime_ns for p in out.rglob("*") if p.is_file()}
@@ -359,12 +360,12 @@ def test_a_hand_edited_config_is_refused_naming_the_field(finished, tmp_path, fi
     assert named in str(error.value)
     original = json.loads((finished / "config.json").read_text())
     original["provenance"]["git_commit"] = "edited"  # where it ran is not sealed
-    runner.check_seal(out, original)  # no refusal
+    record.check_seal(out, original)  # no refusal
 
 
 def test_a_damaged_seal_is_refused(finished, tmp_path):
     out = copy_run(finished, tmp_path)
-    seal = out / runner.SEAL
+    seal = out / record.SEAL
     seal.write_text(seal.read_text().replace("0.2", "0.3"))
     with pytest.raises(SystemExit, match=r"\.config\.sealed\.json: damaged"):
         sweep.main(["--resume", str(out)])
@@ -378,24 +379,75 @@ def test_a_full_disk_while_checkpointing_is_one_line_and_leaves_no_half_checkpoi
 ):
     import errno
 
-    from pngail_jax import checkpoint
-
     def full(directory, tree):
         Path(directory).mkdir(parents=True)  # orbax got as far as its folder
         (Path(directory).parent.parent / "x.orbax-checkpoint-tmp-1").mkdir()
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(checkpoint, "save_tree", full)
-    progress = runner.Progress(3, {}, {"eval/return": np.zeros((1, 2))}, {"seconds": 1.0})
+    monkeypatch.setattr(chunks, "save_tree", full)
+    progress = chunks.Progress(3, {}, {"eval/return": np.zeros((1, 2))}, {"seconds": 1.0})
     with pytest.raises(
-        runner.RunError, match=r"cannot write checkpoint .*chunk_0003: No space left"
+        chunks.RunError, match=r"cannot write checkpoint .*chunk_0003: No space left"
     ):
-        runner._save_checkpoint(tmp_path / "checkpoints", progress, {}, writer=True)
+        chunks.save_checkpoint(tmp_path / "checkpoints", progress, {}, writer=True)
     assert not any((tmp_path / "checkpoints").iterdir())  # no chunk_0003, no orbax temporary
 
 
+HOLD_THE_CACHE = """
+import shutil, sys, time
+from pathlib import Path
+from pngail_jax.outputs import claimed
+
+cache, made = Path(sys.argv[1]), sys.argv[2]
+with claimed(cache, "make_demos", overwrite=True) as claim:
+    claim.prepare()
+    print("holding", flush=True)
+    time.sleep(2)
+    shutil.copy(made, cache / "demos.npz")
+"""
+
+
+def test_a_second_sweep_waits_for_the_demonstrations_another_process_makes(
+    demos_path, tmp_path, monkeypatch, capsys
+):
+    """Two real processes on one demonstrations cache: the second waits (one line naming the
+    first), then reuses what the first made instead of making them again."""
+    import subprocess
+    import sys
+
+    from pngail_jax import outputs
+    from pngail_jax.run_config import RunConfig
+
+    monkeypatch.setattr(build_job, "DEMO_CACHE", tmp_path)
+    monkeypatch.setattr(outputs, "WAIT_SECONDS", 0.1)
+
+    def made_twice(config, claim):
+        raise AssertionError("the demonstrations were made a second time")
+
+    monkeypatch.setattr(build_job, "make_claimed", made_twice)
+    cache = tmp_path / "Pendulum-v1"
+    holder = subprocess.Popen(
+        [sys.executable, "-c", HOLD_THE_CACHE, str(cache), str(demos_path)],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert holder.stdout.readline().strip() == "holding"
+        demos, path = build_job.load_or_make_demos(RunConfig(env="Pendulum-v1"))
+    finally:
+        holder.wait(timeout=60)
+    printed = capsys.readouterr().out
+    waiting = [line for line in printed.splitlines() if line.startswith("waiting:")]
+    assert len(waiting) == 1, printed
+    assert f"in use by experiments.make_demos, process {holder.pid}" in waiting[0]
+    assert "reusing demonstrations" in printed
+    assert demos.num_rows == 100 and path == str((cache / "demos.npz").absolute())
+
+
 def test_a_sigterm_ends_the_sweep_in_one_line(demos_path, tmp_path, monkeypatch):
-    monkeypatch.setattr(runner, "run", sigterm_to_self)
+    from pngail_jax.jobs import sweep as sweep_job
+
+    monkeypatch.setattr(sweep_job, "run", sigterm_to_self)
     with pytest.raises(SystemExit, match="interrupted before the run began: nothing was written"):
         sweep.main(tiny_sweep_args(demos_path, tmp_path / "run"))
 

@@ -148,22 +148,22 @@ def test_load_policy_checks_cannot_be_switched_off_and_bad_inputs_are_named(run_
 def test_an_interrupted_run_resumes_to_the_same_numbers(run_dir, tmp_path, monkeypatch, capsys):
     """The fixture's run, stopped after its first block's checkpoint, then --resume DIR:
     metrics.csv byte-identical to the uninterrupted run's."""
-    from pngail_jax import runner
+    from pngail_jax.jobs import chunks
 
     out = tmp_path / "stopped"
     argv = [*json.loads((run_dir / "config.json").read_text())["argv"]]
     argv[argv.index("--out") + 1] = str(out)
-    save = runner._save_checkpoint
+    save = chunks.save_checkpoint
 
     def save_then_stop(*args, **kwargs):
         save(*args, **kwargs)
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(runner, "_save_checkpoint", save_then_stop)
+    monkeypatch.setattr(chunks, "save_checkpoint", save_then_stop)
     with pytest.raises(SystemExit, match=f"--resume {out} continues"):
         train_rl.main(argv)
     assert not (out / "policy.json").exists() and (out / "checkpoints" / "chunk_0001").is_dir()
-    monkeypatch.setattr(runner, "_save_checkpoint", save)
+    monkeypatch.setattr(chunks, "save_checkpoint", save)
     with pytest.raises(SystemExit):
         train_rl.main(["--resume", str(out), "--seeds", "3"])  # its own flags only
     assert "takes no other flags" in capsys.readouterr().err
@@ -186,28 +186,32 @@ def test_resume_checks_again_under_the_lock(run_dir, tmp_path, monkeypatch, caps
     shutil.copytree(run_dir, copy)
     policy = (copy / "policy.json").read_bytes()
     (copy / "policy.json").unlink()
-    lock = train_rl.run_lock
+    from pngail_jax import outputs
+
+    lock = outputs.run_lock
 
     @contextlib.contextmanager
-    def lock_after_another_finished(directory, program):
+    def lock_after_another_finished(directory, program, wait=False):
         (copy / "policy.json").write_bytes(policy)
-        with lock(directory, program):
+        with lock(directory, program, wait):
             yield
 
-    monkeypatch.setattr(train_rl, "run_lock", lock_after_another_finished)
+    monkeypatch.setattr(outputs, "run_lock", lock_after_another_finished)
     with pytest.raises(SystemExit, match="the run is complete"):
         train_rl.main(["--resume", str(copy)])
     assert (copy / "policy.json").read_bytes() == policy
 
 
 def test_a_sigterm_releases_the_lock_and_says_how_to_resume(tmp_path, monkeypatch):
-    from pngail_jax.programs.cli import LOCK
+    from pngail_jax.outputs import LOCK
 
     def terminated(*args):
         assert (tmp_path / "run" / LOCK).exists()
         sigterm_to_self()
 
-    monkeypatch.setattr(train_rl, "_train", terminated)
+    from pngail_jax.jobs import train_rl as train_rl_job
+
+    monkeypatch.setattr(train_rl_job, "_train", terminated)
     argv = ["--env", "Pendulum-v1", "--iterations", "10", "--out", str(tmp_path / "run")]
     with pytest.raises(SystemExit, match="interrupted: finished blocks are kept; --resume"):
         train_rl.main(argv)

@@ -2,8 +2,9 @@
 
 By job: ``types`` (``Demonstrations``, ``DemonstrationError``), ``files`` (safe .npy/.npz
 parsing), ``released`` (the authors' files), ``npz`` (our schema), ``minari``, ``splits``,
-``data`` (``load_demonstrations``, any source by name), ``generate`` (rollouts, returns) and
-``make`` (demonstrations made from scratch).
+``data`` (``load_demonstrations``, any source by name), ``tables`` (the authors' files as
+data) and ``generate`` (rollouts, returns). Making demonstrations from scratch is a job:
+``pngail_jax.jobs.make_demos``.
 """
 
 from pngail_jax.demos.data import load_demonstrations
@@ -17,7 +18,7 @@ from pngail_jax.demos.released import (
     released_confidence_path,
     released_task,
 )
-from pngail_jax.demos.splits import Split, make_split
+from pngail_jax.demos.splits import Split, cut_mixture, make_split
 from pngail_jax.demos.types import ACTION_BOUND_MULTIPLE, DemonstrationError, Demonstrations
 
 __all__ = [
@@ -28,6 +29,7 @@ __all__ = [
     "DemonstrationError",
     "Demonstrations",
     "Split",
+    "cut_mixture",
     "load_demonstrations",
     "load_minari",
     "load_npz",

@@ -1,4 +1,4 @@
-"""Safe reading of ``.npy`` and ``.npz`` files: every file goes through ``_load_numpy`` with
+"""Safe reading of ``.npy`` and ``.npz`` files: every file goes through ``load_numpy`` with
 ``allow_pickle=False``; an empty, truncated or corrupt file, pickled objects, strings or a
 missing array end in a ``DemonstrationError`` that names the file, its role and the problem."""
 
@@ -19,7 +19,7 @@ NPY_MAGIC = b"\x93NUMPY"
 ZIP_MAGICS = (b"PK\x03\x04", b"PK\x05\x06")
 
 
-def _load_numpy(path: str | Path, role: str, *, archive: bool = False):
+def load_numpy(path: str | Path, role: str, *, archive: bool = False):
     """The array of a ``.npy`` file (``archive=False``) or the arrays of a ``.npz`` archive (a
     dict by name), read with ``allow_pickle=False``.
 
@@ -76,7 +76,7 @@ def _wrong_container(start: bytes, archive: bool) -> str:
 def _read_npy(path: Path, where: str) -> np.ndarray:
     array = np.load(path, allow_pickle=False)
     if array.dtype.kind not in "biuf":
-        raise DemonstrationError(f"{where}: {_not_numbers(array)}")
+        raise DemonstrationError(f"{where}: {not_numbers(array)}")
     return array
 
 
@@ -130,17 +130,17 @@ def _npy_problem(stream, num_bytes: int) -> str | None:
     return None
 
 
-def _not_numbers(array: np.ndarray) -> str:
+def not_numbers(array: np.ndarray) -> str:
     kinds = {"U": "strings", "S": "bytes", "c": "complex numbers", "M": "dates", "m": "times"}
     what = kinds.get(array.dtype.kind, "values")
     return f"holds {what} (dtype {array.dtype}), expected real numbers"
 
 
-def _read_numbers(path: str | Path) -> np.ndarray:
+def read_numbers(path: str | Path) -> np.ndarray:
     """The numbers of a ``.npy`` file, or of a text file with one number per line."""
     path = Path(path)
     if path.suffix == ".npy":
-        return _load_numpy(path, "confidence file")
+        return load_numpy(path, "confidence file")
     try:
         return np.loadtxt(path, ndmin=1)
     except ValueError as error:

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pngail_jax.demos.files import _read_numbers
+from pngail_jax.demos.files import read_numbers
 from pngail_jax.demos.types import DemonstrationError, Demonstrations
 
 # ``load_demonstrations("minari:<dataset_id>")`` loads a local Minari dataset.
@@ -51,7 +51,7 @@ def load_minari(
     observations, actions, ids, num_episodes = _episode_rows(dataset, dataset_id)
     if isinstance(confidence, str | Path):
         source = str(confidence)
-        confidence = _read_numbers(confidence)
+        confidence = read_numbers(confidence)
     elif confidence_field is not None:
         source = f"{dataset_id}: episode metadata field {confidence_field!r}"
         confidence = _metadata_field(dataset, dataset_id, confidence_field)

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from pngail_jax.demos.files import _load_numpy, _not_numbers
+from pngail_jax.demos.files import load_numpy, not_numbers
 from pngail_jax.demos.types import DemonstrationError, Demonstrations
 
 NPZ_FORMAT_VERSION = 1
@@ -34,7 +34,7 @@ def save_npz(path: str | Path, demos: Demonstrations) -> None:
 def load_npz(path: str | Path) -> Demonstrations:
     """Loads our ``.npz`` schema (module docstring); errors name the file."""
     where = f"demonstrations .npz {path}"
-    arrays = _load_numpy(path, "demonstrations .npz", archive=True)
+    arrays = load_numpy(path, "demonstrations .npz", archive=True)
     if "format_version" not in arrays:
         raise DemonstrationError(
             f"{where}: has no array 'format_version' (not written by save_npz? this version "
@@ -64,7 +64,7 @@ def load_npz(path: str | Path) -> Demonstrations:
     }
     for name, array in fields.items():
         if array.dtype.kind not in "biuf":
-            raise DemonstrationError(f"{where}: array {name!r} {_not_numbers(array)}")
+            raise DemonstrationError(f"{where}: array {name!r} {not_numbers(array)}")
     metadata = _npz_metadata(arrays.get("metadata_json"), where)
     try:
         return Demonstrations(metadata=metadata, **fields)

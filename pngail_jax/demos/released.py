@@ -12,48 +12,16 @@ from pathlib import Path
 
 import numpy as np
 
-from pngail_jax.demos.files import _load_numpy
-from pngail_jax.demos.types import DemonstrationError, Demonstrations, _confidence_vector
-
-# Observation sizes of the paper's released files (gym -v2 MuJoCo tasks), to split [s, a].
-RELEASED_OBSERVATION_SIZES = {
-    "Pendulum-v1": 3,
-    "Ant-v2": 111,
-    "HalfCheetah-v2": 17,
-    "Hopper-v2": 11,
-    "Swimmer-v2": 8,
-    "Walker2d-v2": 17,
-}
-
-# Action sizes of the same files: a row holds observation + action columns.
-RELEASED_ACTION_SIZES = {
-    "Pendulum-v1": 1,
-    "Ant-v2": 8,
-    "HalfCheetah-v2": 6,
-    "Hopper-v2": 3,
-    "Swimmer-v2": 2,
-    "Walker2d-v2": 6,
-}
-
-# Our task of each released file's environment: gymnasium's -v4 tasks, which have gym -v2's
-# model files and observation layouts. The authors' Ant-v2 file has none: gym v2's Ant
-# observations (111: positions, velocities and contact forces) are not Ant-v4's (27).
-RELEASED_TASKS = {
-    "Pendulum-v1": "Pendulum-v1",
-    "HalfCheetah-v2": "HalfCheetah-v4",
-    "Hopper-v2": "Hopper-v4",
-    "Swimmer-v2": "Swimmer-v4",
-    "Walker2d-v2": "Walker2d-v4",
-}
-
-# The documented layout of the released files whose rows are whole trajectories stored one
-# after another: the Pendulum file is five 200-step episodes. The MuJoCo files are not
-# trajectories (the paper says so): they get no trajectory ids.
-RELEASED_TRAJECTORY_LENGTHS = {"Pendulum-v1": 200}
-
-# What the stored actions of a released file must be multiplied by to be in the environment's
-# units (the authors' Pendulum file stores torque / 2); 1 for the others.
-RELEASED_ACTION_SCALES = {"Pendulum-v1": 2.0}
+from pngail_jax.demos.files import load_numpy
+from pngail_jax.demos.tables import (  # noqa: F401  (the tables, importable from here too)
+    PAPER_NORMALIZERS,
+    RELEASED_ACTION_SCALES,
+    RELEASED_ACTION_SIZES,
+    RELEASED_OBSERVATION_SIZES,
+    RELEASED_TASKS,
+    RELEASED_TRAJECTORY_LENGTHS,
+)
+from pngail_jax.demos.types import DemonstrationError, Demonstrations, confidence_vector
 
 
 def action_scale_note(demos) -> str | None:
@@ -77,17 +45,6 @@ def released_task(path: str | Path) -> str | None:
         if name.endswith("_mixture.npy")
         else None
     )
-
-
-# The paper's Table 3: (random policy, optimal policy) returns, the normaliser of its figures.
-PAPER_NORMALIZERS = {
-    "Pendulum-v1": (-1200.96, -116.81),
-    "Ant-v2": (-72.30, 4143.10),
-    "HalfCheetah-v2": (-288.44, 3467.32),
-    "Hopper-v2": (18.04, 3250.67),
-    "Swimmer-v2": (2.31, 348.99),
-    "Walker2d-v2": (1.91, 3694.13),
-}
 
 
 def released_confidence_path(mixture_path: str | Path) -> Path:
@@ -135,7 +92,7 @@ def load_released(
     rows, observation_size = _rows(mixture_path, where, env_name, observation_size, action_size)
     confidence = None
     if conf_path is not None:
-        confidence = _load_numpy(conf_path, "confidence file")
+        confidence = load_numpy(conf_path, "confidence file")
         confidence = _released_confidence(confidence, conf_path, mixture_path, len(rows))
     trajectory_ids, trajectory_length = _trajectories(
         env_name, trajectory_length, confidence, len(rows), where
@@ -214,7 +171,7 @@ def _rows(path: Path, where: str, env_name, observation_size, action_size):
             f"to split its rows [observation, action] (authors' files: "
             f"{', '.join(RELEASED_OBSERVATION_SIZES)})"
         )
-    rows = _load_numpy(path, where.removesuffix(f" {path}"))
+    rows = load_numpy(path, where.removesuffix(f" {path}"))
     if rows.ndim == 2 and action_size is not None:
         if rows.shape[1] != observation_size + action_size:
             raise DemonstrationError(
@@ -283,6 +240,6 @@ def _released_confidence(
             f"{where}: has {len(confidence)} rows, but mixture file {mixture_path} has {num_rows}"
         )
     try:
-        return _confidence_vector(confidence, num_rows)
+        return confidence_vector(confidence, num_rows)
     except DemonstrationError as error:
         raise DemonstrationError(f"{where}: {error}") from None

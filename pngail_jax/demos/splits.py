@@ -1,12 +1,16 @@
 """The vmappable split of a grid cell: labelled rows (D_c) and unlabelled rows (D_u) drawn
-from a key, with their confidences (noised when the cell asks), as traced arrays."""
+from a key, with their confidences (noised when the cell asks), as traced
+arrays; and ``cut_mixture``, a smaller mixture cut from a made set."""
 
 from __future__ import annotations
 
 import chex
 import jax
 import jax.numpy as jnp
+import numpy as np
 from flax import struct
+
+from pngail_jax.demos.types import Demonstrations
 
 
 @struct.dataclass
@@ -55,4 +59,38 @@ def make_split(
         confidence=jnp.clip(true_confidence + noise, 0.0, 1.0),
         true_confidence=true_confidence,
         labelled=jnp.arange(traj_size) < num_labelled,
+    )
+
+
+def cut_mixture(
+    source: Demonstrations, num_optimal: int, num_intermediate: int, name: str = "the mixture"
+) -> Demonstrations:
+    """The first ``num_optimal`` optimal and ``num_intermediate`` intermediate trajectories
+    of a made set (optimal ones first, as ``make_demonstrations`` writes them), ids
+    renumbered: a smaller mixture at another ratio without making again. ``name`` is for the
+    error when the made set is too small."""
+    made_optimal = source.metadata["num_optimal_trajectories"]
+    made_total = len(source.metadata["trajectory_returns"])
+    if num_optimal > made_optimal or num_intermediate > made_total - made_optimal:
+        raise ValueError(
+            f"{name}: needs {num_optimal} optimal + {num_intermediate} intermediate "
+            f"trajectories, the made set has {made_optimal} + {made_total - made_optimal}"
+        )
+    kept = [*range(num_optimal), *range(made_optimal, made_optimal + num_intermediate)]
+    rows = np.isin(source.trajectory_ids, kept)
+    renumber = np.zeros(made_total, np.int64)
+    renumber[kept] = np.arange(len(kept))
+    returns = source.metadata["trajectory_returns"]
+    return Demonstrations(
+        observations=source.observations[rows],
+        actions=source.actions[rows],
+        confidence=source.confidence[rows],
+        trajectory_ids=renumber[source.trajectory_ids[rows]],
+        metadata={
+            **source.metadata,
+            "ratio": f"{num_optimal}:{num_intermediate}",
+            "num_optimal_trajectories": num_optimal,
+            "trajectory_returns": [returns[i] for i in kept],
+            "source": f"{name}, cut from the made set",
+        },
     )

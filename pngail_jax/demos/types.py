@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from pngail_jax.demos.tables import RELEASED_TASKS
 from pngail_jax.envs import ENV_NAMES, task_family
 
 # ``check_env`` refuses actions beyond this multiple of the bound's magnitude: a unit or file
@@ -56,7 +57,7 @@ class Demonstrations:
         object.__setattr__(self, "observations", obs)
         object.__setattr__(self, "actions", actions)
         if self.confidence is not None:
-            object.__setattr__(self, "confidence", _confidence_vector(self.confidence, len(obs)))
+            object.__setattr__(self, "confidence", confidence_vector(self.confidence, len(obs)))
         if self.labelled is not None:
             labelled = np.asarray(self.labelled)
             _check_rows("labelled", labelled, len(obs), ndim=1)
@@ -101,8 +102,6 @@ class Demonstrations:
         released MuJoCo sets store unclipped policy actions. A released file of another task
         than ``env`` (``RELEASED_TASKS``; any variant of the same task, ``envs.task_family``,
         fits), or the unusable Ant-v2 file, is named as such."""
-        from pngail_jax.demos.released import RELEASED_TASKS
-
         made_for = self.metadata.get("env")
         if made_for == "Ant-v2":
             raise DemonstrationError(
@@ -162,7 +161,7 @@ def _check_rows(name: str, values: np.ndarray, num_rows: int, ndim: int) -> None
         raise DemonstrationError(f"{name} must have shape ({num_rows},), got {values.shape}")
 
 
-def _confidence_vector(values, num_rows: int) -> np.ndarray:
+def confidence_vector(values, num_rows: int) -> np.ndarray:
     """float32[num_rows] confidences in [0, 1] from float[num_rows] or float[num_rows, 1]."""
     confidence = np.asarray(values)
     if confidence.ndim == 2 and confidence.shape[1] == 1:

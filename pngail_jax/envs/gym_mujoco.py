@@ -41,7 +41,7 @@ import numpy as np
 from flax import struct
 
 from pngail_jax.envs.base import Env, float_dtype
-from pngail_jax.envs.mjx_tasks import _check_options, _gymnasium_asset, _import_mjx
+from pngail_jax.envs.mjx_tasks import check_options, gymnasium_asset, import_mjx
 
 PHYSICS = ("c", "mjx")
 
@@ -211,7 +211,7 @@ class GymMujocoTask(Env):
         num_threads: int | None = None,
         terminate_when_unhealthy: bool = True,
     ):
-        max_episode_steps, solver = _check_options(
+        max_episode_steps, solver = check_options(
             name, max_episode_steps, solver_iterations, ls_iterations
         )
         self.physics = check_physics(name, physics)
@@ -220,7 +220,7 @@ class GymMujocoTask(Env):
         import mujoco
 
         self.spec = TASKS[name]
-        model = mujoco.MjModel.from_xml_path(_gymnasium_asset(self.spec.xml))
+        model = mujoco.MjModel.from_xml_path(gymnasium_asset(self.spec.xml))
         for field, value in solver.items():
             setattr(model.opt, field, value)
         self.name = name
@@ -247,7 +247,7 @@ class GymMujocoTask(Env):
         if self.physics == "c":
             self._engine = _CEngine(model, self, num_threads)
         else:
-            mjx = _import_mjx()
+            mjx = import_mjx()
             self._mjx = mjx
             self._mjx_model = mjx.put_model(model)
 

@@ -39,7 +39,7 @@ BRAX_TASKS = {
 }
 
 
-def _import_mjx():
+def import_mjx():
     """Imports ``mujoco.mjx``, hiding its unconditional "Failed to import warp" prints.
 
     MJX prints those lines whenever the optional NVIDIA Warp backend is absent, which is
@@ -50,7 +50,7 @@ def _import_mjx():
     return mjx
 
 
-def _check_options(
+def check_options(
     name: str, max_episode_steps: Any, solver_iterations: Any, ls_iterations: Any
 ) -> tuple[int, dict[str, int]]:
     """The checked time limit and the MJX solver overrides (``mujoco.MjOption`` field names
@@ -93,7 +93,7 @@ class BraxTask(Env):
         brax_env: Any = None,
         **brax_options: Any,
     ):
-        max_episode_steps, solver = _check_options(
+        max_episode_steps, solver = check_options(
             name, max_episode_steps, solver_iterations, ls_iterations
         )
         if brax_env is None:
@@ -149,7 +149,7 @@ class BraxTask(Env):
 
 def _brax_task(name: str, brax_options: dict[str, Any]):
     """Brax's environment of the task ``name`` on the ``mjx`` backend."""
-    _import_mjx()
+    import_mjx()
     from brax import envs as brax_envs
 
     try:
@@ -172,7 +172,7 @@ def from_brax(brax_env: Any, name: str | None = None, max_episode_steps: int = 1
     )
 
 
-def _gymnasium_asset(file_name: str) -> str:
+def gymnasium_asset(file_name: str) -> str:
     import gymnasium.envs.mujoco
 
     return os.path.join(os.path.dirname(gymnasium.envs.mujoco.__file__), "assets", file_name)
@@ -200,13 +200,13 @@ class Swimmer(Env):
         solver_iterations: int | None = None,
         ls_iterations: int | None = None,
     ):
-        max_episode_steps, solver = _check_options(
+        max_episode_steps, solver = check_options(
             "Swimmer", max_episode_steps, solver_iterations, ls_iterations
         )
         import mujoco
 
-        mjx = _import_mjx()
-        mj_model = mujoco.MjModel.from_xml_path(_gymnasium_asset("swimmer.xml"))
+        mjx = import_mjx()
+        mj_model = mujoco.MjModel.from_xml_path(gymnasium_asset("swimmer.xml"))
         for field, value in solver.items():
             setattr(mj_model.opt, field, value)
         self._mjx = mjx

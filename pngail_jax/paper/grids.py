@@ -1,6 +1,6 @@
 """Running a plan: each grid's demonstrations (the authors' file, or made once per task and
 cut at each ratio a figure asks for), its ``RunConfig`` (``grid_config``) and one
-``pngail_jax.runner.run`` call per grid, resumed or kept as it stands."""
+``pngail_jax.jobs.sweep.run`` call per grid, resumed or kept as it stands."""
 
 from __future__ import annotations
 
@@ -10,8 +10,20 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from pngail_jax import envs
-from pngail_jax.integrity import read_json, write_json
+from pngail_jax.demos import (
+    RELEASED_ACTION_SCALES,
+    cut_mixture,
+    load_demonstrations,
+    load_npz,
+    save_npz,
+)
+from pngail_jax.integrity import IntegrityError, atomic_path, read_json, write_json
+from pngail_jax.jobs import make_demos
+from pngail_jax.jobs.chunks import format_seconds
+from pngail_jax.jobs.make_demos import MakeDemosConfig
+from pngail_jax.jobs.sweep import run
 from pngail_jax.paper.plan import Budget, GridSpec, task_kind
+from pngail_jax.run_config import TASK_NUM_DEMOS
 
 # -- demonstrations --------------------------------------------------------------------------
 
@@ -36,11 +48,6 @@ def released_files(directory: Path | None, tasks: Sequence[str]) -> dict[str, Pa
 def demo_paths(grids, out: Path, budget: Budget, released: dict[str, Path], physics=None):
     """The demonstrations file of every grid's set (made, mixed and saved when missing);
     made ones on ``physics`` (``Budget.run_settings``)."""
-    from pngail_jax.demos import RELEASED_ACTION_SCALES, load_npz, save_npz
-    from pngail_jax.demos.make import cut_mixture
-    from pngail_jax.integrity import atomic_path
-    from pngail_jax.run_config import TASK_NUM_DEMOS
-
     sets = list(dict.fromkeys(grid.demos for grid in grids.values()))
     paths = {}
     for demo_set in sets:
@@ -78,8 +85,6 @@ def demo_paths(grids, out: Path, budget: Budget, released: dict[str, Path], phys
 def demo_config(task: str, budget: Budget, counts: dict, physics: str | None):
     """The making of ``task``'s demonstrations: enough optimal and intermediate trajectories
     for every set of ``counts`` (``{DemoSet: (optimal, intermediate)}``) at ``budget``."""
-    from pngail_jax.demos.make import MakeDemosConfig
-
     num_optimal = max(c[0] for c in counts.values())
     num_intermediate = max(c[1] for c in counts.values())
     return MakeDemosConfig(
@@ -94,11 +99,9 @@ def demo_config(task: str, budget: Budget, counts: dict, physics: str | None):
 
 
 def make_demonstrations(config, directory: Path) -> None:
-    """``pngail_jax.demos.make.make_demonstrations`` into the plan's own ``directory`` (a
+    """``pngail_jax.jobs.make_demos.make_demonstrations`` into the plan's own ``directory`` (a
     making cut short there is replaced)."""
-    from pngail_jax.demos import make
-
-    make.make_demonstrations(config, directory, overwrite=True)
+    make_demos.make_demonstrations(config, directory, overwrite=True)
 
 
 # -- grids -----------------------------------------------------------------------------------
@@ -154,10 +157,8 @@ def grid_complete(directory: Path) -> bool:
 
 
 def run_grid(grid: GridSpec, directory: Path, config, command: list[str]) -> bool:
-    """Runs (or resumes) one grid with ``pngail_jax.runner.run``, or keeps a complete one
+    """Runs (or resumes) one grid with ``pngail_jax.jobs.sweep.run``, or keeps a complete one
     (returns True then). A refusal raises ``RunError``."""
-    from pngail_jax import runner
-
     if grid_complete(directory):
         print(f"\n== {grid.name}: done, kept ({directory})", flush=True)
         return True
@@ -166,7 +167,7 @@ def run_grid(grid: GridSpec, directory: Path, config, command: list[str]) -> boo
         print(f"\n== {grid.name}: resuming {directory}", flush=True)
     else:
         print(f"\n== {grid.name}: {grid.demos.description}", flush=True)
-    runner.run(None if resume else config, directory, resume=resume, command=command)
+    run(None if resume else config, directory, resume=resume, command=command)
     return False
 
 
@@ -174,9 +175,6 @@ def run_grids(grids, demos, out: Path, budget: Budget, physics, command: list[st
     """Runs (or resumes, or keeps) every grid; each grid's wall-clock seconds over all calls,
     interrupted ones included, kept in ``out/timings.json``. ``command``: the plan's,
     recorded in each grid's config."""
-    from pngail_jax.demos import load_demonstrations
-    from pngail_jax.integrity import IntegrityError
-
     timings_path = out / "timings.json"
     try:
         timings = read_json(timings_path, "timings record") if timings_path.exists() else {}
@@ -205,8 +203,6 @@ def run_grids(grids, demos, out: Path, budget: Budget, physics, command: list[st
 def plan_eta(seconds: list[float], remaining: int) -> str:
     """', about T left for the plan' from the mean of the grids run so far (grids differ, so a
     rough guide), or '' before any has run."""
-    from pngail_jax.runner import format_seconds
-
     if not seconds:
         return ""
     return f", about {format_seconds(remaining * sum(seconds) / len(seconds))} left for the plan"

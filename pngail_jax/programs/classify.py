@@ -316,7 +316,3 @@ def variance_table(args, results, summary: dict) -> None:
             f"| {method.upper()} | {origin.mean():.2e} ± {origin.std():.1e} | "
             f"{balanced.mean():.2e} ± {balanced.std():.1e} |"
         )
-
-
-if __name__ == "__main__":
-    main()

@@ -14,18 +14,7 @@ import signal
 from collections.abc import Sequence
 from pathlib import Path
 
-# The output contract lives in the library (the runner uses it); programs import it from here.
-from pngail_jax.outputs import (  # noqa: F401
-    LEGACY_MARKS,
-    LOCK,
-    MARKER,
-    RESUMABLE,
-    RunLocked,
-    output_owner,
-    output_refusal,
-    prepare_output,
-    run_lock,
-)
+from pngail_jax.outputs import output_refusal
 
 
 class HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
@@ -65,6 +54,16 @@ def note_deprecated(argv: Sequence[str] | None, renamed: dict[str, str]) -> None
     for old, new in renamed.items():
         if any(item == old or item.startswith(f"{old}=") for item in given):
             print(f"note: {old} is deprecated; it is now {new}", file=sys.stderr)
+
+
+def current_spellings(argv: Sequence[str], renamed: dict[str, str]) -> list[str]:
+    """``argv`` with each deprecated flag (``{old flag: new flag}``) spelled as it is now, so
+    a recorded command line teaches the names to use."""
+    spelled = []
+    for item in argv:
+        flag, equals, value = item.partition("=")
+        spelled.append(renamed.get(flag, flag) + equals + value if flag in renamed else item)
+    return spelled
 
 
 def _items(parser: argparse.ArgumentParser, prefix: str, text: str, what: str) -> list[str]:
@@ -200,7 +199,7 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)  # Ctrl-C, and kill's or a schedu
 def signals_stop_at_a_checkpoint():
     """Within it, SIGTERM (``kill``'s default, and what a batch scheduler sends at a job's
     time limit) stops the program as Ctrl-C does, and both let a chunk that has begun end
-    and be saved first (``runner.stop_after_this_chunk``; a second signal stops at once).
+    and be saved first (``jobs.chunks.stop_after_this_chunk``; a second signal stops at once).
     Stopped, the run lock is released, a plan's time is recorded and the program says how to
     ``--resume``; without it SIGTERM killed the process with its lock left behind (another
     host then refuses to take it over), and either signal, which reaches Python only when a
@@ -209,7 +208,7 @@ def signals_stop_at_a_checkpoint():
     import sys
     import threading
 
-    from pngail_jax.runner import stop_after_this_chunk
+    from pngail_jax.jobs.chunks import stop_after_this_chunk
 
     if threading.current_thread() is not threading.main_thread():
         yield

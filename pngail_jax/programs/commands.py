@@ -3,49 +3,61 @@
 
 from __future__ import annotations
 
-import importlib
-
 PROGRAMS = (
     "sweep", "paper", "train_rl", "make_demos", "classify", "compare_settings", "early_rewards",
     "seeds", "compare",
 )  # fmt: skip
 
 
-def _run(program: str) -> None:
-    importlib.import_module(f"pngail_jax.programs.{program}").main()
-
-
 def sweep() -> None:
-    _run("sweep")
+    from pngail_jax.programs import sweep as program
+
+    program.main()
 
 
 def paper() -> None:
-    _run("paper")
+    from pngail_jax.programs import paper as program
+
+    program.main()
 
 
 def train_rl() -> None:
-    _run("train_rl")
+    from pngail_jax.programs import train_rl as program
+
+    program.main()
 
 
 def make_demos() -> None:
-    _run("make_demos")
+    from pngail_jax.programs import make_demos as program
+
+    program.main()
 
 
 def classify() -> None:
-    _run("classify")
+    from pngail_jax.programs import classify as program
+
+    program.main()
 
 
 def compare_settings() -> None:
-    _run("compare_settings")
+    from pngail_jax.programs import compare_settings as program
+
+    program.main()
 
 
 def early_rewards() -> None:
-    _run("early_rewards")
+    from pngail_jax.programs import early_rewards as program
+
+    program.main()
 
 
 def seeds() -> None:
-    _run("seeds")
+    from pngail_jax.programs import seeds as program
+
+    program.main()
 
 
 def compare() -> None:
-    _run("compare")
+    from pngail_jax.programs import compare as program
+
+    program.main()

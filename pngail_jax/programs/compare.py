@@ -18,12 +18,13 @@ from pathlib import Path
 
 from pngail_jax import compare
 from pngail_jax.integrity import atomic_write_text
+from pngail_jax.jobs.errors import RunError, refusals
+from pngail_jax.outputs import claimed
 from pngail_jax.programs.cli import (
     ArgumentParser,
     HelpFormatter,
     claim_output,
     path_argument,
-    prepare_output,
 )
 
 
@@ -58,12 +59,19 @@ def parse_args(argv=None) -> argparse.Namespace:
 def main(argv=None) -> Path:
     args = parse_args(argv)
     try:
-        scores = compare.load_scores(args.runs)
-        baseline = args.baseline or ("pngail" if "pngail" in scores.methods else scores.methods[0])
-        result = compare.compare(scores, baseline, seed=args.seed)
-    except compare.CompareError as error:
+        with refusals(), claimed(args.out, "compare", overwrite=args.overwrite) as claim:
+            write_comparison(args, claim)
+    except (compare.CompareError, RunError) as error:
         raise SystemExit(str(error)) from None
-    prepare_output(args.out, "compare", args.overwrite)
+    return args.out
+
+
+def write_comparison(args, claim) -> None:
+    """The comparison of ``args.runs`` into the claimed ``args.out``."""
+    scores = compare.load_scores(args.runs)
+    baseline = args.baseline or ("pngail" if "pngail" in scores.methods else scores.methods[0])
+    result = compare.compare(scores, baseline, seed=args.seed)
+    claim.prepare()
     compare.write_json(args.out / "compare.json", {**result, "runs": [str(r) for r in args.runs]})
     text = compare.markdown(result)
     atomic_write_text(args.out / "compare.md", text)
@@ -71,8 +79,3 @@ def main(argv=None) -> Path:
     print(text)
     print(f"wrote {args.out}/{{compare.json,compare.md,aggregates.png,profiles.png,"
           "improvement.png}")  # fmt: skip
-    return args.out
-
-
-if __name__ == "__main__":
-    main()

@@ -137,7 +137,3 @@ def main(argv=None) -> dict:
     args.out.write_text(json.dumps(result, indent=1))
     print(f"-> {args.out}")
     return result
-
-
-if __name__ == "__main__":
-    main()

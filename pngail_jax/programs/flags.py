@@ -245,7 +245,7 @@ RUN_FLAGS = (
     FieldFlag(
         "demos",
         "*_mixture.npy (authors' layout), *.npz, or minari:<dataset id> "
-        "(default: made with pngail_jax.demos.make and cached)",
+        "(default: made with pngail_jax.jobs.make_demos and cached)",
         type=text_argument,
         convert=_absolute_file,
     ),

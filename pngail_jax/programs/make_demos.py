@@ -2,7 +2,7 @@
 
     python -m experiments.make_demos --env Pendulum-v1 --out demos/pendulum
 
-The flags of ``pngail_jax.demos.make.MakeDemosConfig`` and one call of
+The flags of ``pngail_jax.jobs.make_demos.MakeDemosConfig`` and one call of
 ``make_demonstrations``, which says what is made and how: a TRPO run on the true reward whose
 evaluated checkpoints are kept (``checkpoints/iter_XXXX/``), the best one as the optimal
 policy and an earlier one near ``--intermediate-target`` as the intermediate one, the random
@@ -21,7 +21,8 @@ import argparse
 import dataclasses
 from pathlib import Path
 
-from pngail_jax.demos.make import MakeDemosConfig, make_demonstrations
+from pngail_jax.jobs.errors import RunError
+from pngail_jax.jobs.make_demos import MakeDemosConfig, make_demonstrations
 from pngail_jax.programs import flags
 from pngail_jax.programs.cli import (
     ENV_HELP,
@@ -35,7 +36,6 @@ from pngail_jax.programs.cli import (
     path_argument,
     use_compile_cache,
 )
-from pngail_jax.runner import RunError
 from pngail_jax.validation import ConfigError
 
 
@@ -105,7 +105,3 @@ def main(argv=None) -> Path:
         return make_demonstrations(args.config, args.out, overwrite=args.overwrite)
     except RunError as error:
         raise SystemExit(str(error)) from None
-
-
-if __name__ == "__main__":
-    main()

@@ -9,7 +9,7 @@ Each figure is a set of ``experiments.sweep`` grids, one compiled program per ta
 demonstration set (a task's Fig. 2 and Fig. 3 share one grid of the seven methods). The
 demonstrations come from ``--released-demos DIR`` where it holds the authors' file for a task
 (``Hopper-v2_mixture.npy`` ...; each file's known action scale applied), else from one
-demonstration making (``pngail_jax.demos.make``, what ``experiments.make_demos`` runs) per
+demonstration making (``pngail_jax.jobs.make_demos``, what ``experiments.make_demos`` runs) per
 task, whose trajectories are mixed at each ratio a figure
 asks for. Writes ``DIR/README.md`` (every figure's plot and table beside the paper's numbers,
 each with the command that makes it alone), ``DIR/<figure>.png``, ``DIR/results.json``,
@@ -27,6 +27,8 @@ from pathlib import Path
 
 from pngail_jax import envs
 from pngail_jax.integrity import read_json, seal, write_json
+from pngail_jax.jobs.errors import RunError, refusals
+from pngail_jax.outputs import claimed
 from pngail_jax.paper.grids import demo_paths, grid_config, plan_eta, released_files, run_grids
 from pngail_jax.paper.page import weak_expert_notes, write_page
 from pngail_jax.paper.plan import (
@@ -43,20 +45,16 @@ from pngail_jax.paper.plan import (
 from pngail_jax.programs.cli import (
     ArgumentParser,
     HelpFormatter,
-    RunLocked,
     add_compile_cache_flags,
     claim_output,
+    current_spellings,
     invoked_as,
     known_names,
     note_deprecated,
-    output_refusal,
     path_argument,
-    prepare_output,
-    run_lock,
     signals_stop_at_a_checkpoint,
     use_compile_cache,
 )
-from pngail_jax.runner import RunError
 
 # Names of the library's paper modules that this program's users (and tests) read from it.
 __all__ = [
@@ -120,7 +118,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     """The checked flags of ``argv`` (a resumed run's come from its paper.json later)."""
     parser = build_parser()
     args = parser.parse_args(argv)
-    note_deprecated(argv, {"--budget": "--preset"})
+    note_deprecated(argv, DEPRECATED_FLAGS)
     if args.resume is not None:
         _check_resume(parser, args)
         return args
@@ -164,24 +162,31 @@ def _check_resume(parser: argparse.ArgumentParser, args) -> None:
         parser.error(f"--resume {args.resume}: no paper.json there (not a run of this)")
 
 
+DEPRECATED_FLAGS = {"--budget": "--preset"}
+
+
 def command_line(argv) -> list[str]:
+    """The command's words, quoted for a shell, deprecated flags in their current spelling."""
     import shlex
 
-    return [shlex.quote(word) for word in (sys.argv[1:] if argv is None else argv)]
+    words = current_spellings(sys.argv[1:] if argv is None else argv, DEPRECATED_FLAGS)
+    for index, word in enumerate(words):  # a renamed preset by its name now
+        flag, equals, value = word.partition("=")
+        if equals and flag == "--preset" and value in RENAMED_BUDGETS:
+            words[index] = f"--preset={RENAMED_BUDGETS[value]}"
+        elif index and words[index - 1] == "--preset" and word in RENAMED_BUDGETS:
+            words[index] = RENAMED_BUDGETS[word]
+    return [shlex.quote(word) for word in words]
 
 
 def main(argv=None) -> Path:
     args = parse_args(argv)
     out = args.resume if args.resume is not None else args.out
+    resume = args.resume is not None
     try:
-        with signals_stop_at_a_checkpoint(), run_lock(out, "paper"):
-            if args.resume is None:  # the claim again, now that this process holds the lock
-                refusal = output_refusal(out, "paper", args.overwrite)
-                if refusal:
-                    raise SystemExit(refusal)
-            return run_paper(args, argv)
-    except RunLocked as error:
-        raise SystemExit(f"cannot run: {error}") from None
+        with signals_stop_at_a_checkpoint(), refusals():
+            with claimed(out, "paper", overwrite=args.overwrite, resume=resume) as claim:
+                return run_paper(args, argv, claim)
     except RunError as error:  # a grid's or a demonstration making's refusal, one line
         raise SystemExit(str(error)) from None
     except KeyboardInterrupt:
@@ -190,7 +195,7 @@ def main(argv=None) -> Path:
         ) from None
 
 
-def run_paper(args, argv) -> Path:
+def run_paper(args, argv, claim) -> Path:
     use_compile_cache(args)
     out, options = run_options(args, argv)
     budget = BUDGETS[options["budget"]]
@@ -208,7 +213,7 @@ def run_paper(args, argv) -> Path:
             "7: Pendulum-v1; Fig. 8 and 10: Ant; Fig. 9: Ant, Pendulum-v1)"
         )
     if args.resume is None:
-        prepare_output(out, "paper", args.overwrite)
+        claim.prepare()
         write_json(out / "paper.json", options)
         seal(out / PAPER_SEAL, options)
     print(
@@ -301,7 +306,3 @@ def run_options(args, argv) -> tuple[Path, dict]:
         "physics": args.physics,
         "command": " ".join([*invoked_as("paper"), *command_line(argv)]),
     }
-
-
-if __name__ == "__main__":
-    main()

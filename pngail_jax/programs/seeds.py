@@ -144,7 +144,3 @@ def main(argv=None) -> list[dict]:
     if args.json is not None:
         write_json(args.json, json.loads(json.dumps(table).replace("NaN", "null")))
     return table
-
-
-if __name__ == "__main__":
-    main()

@@ -9,7 +9,7 @@
     python -m experiments.sweep --resume runs/20261122-210000
 
 The command line fills in a ``pngail_jax.run_config.RunConfig``. Without ``--demos`` the
-demonstrations are made by ``pngail_jax.demos.make`` (1:4 optimal to intermediate
+demonstrations are made by ``pngail_jax.jobs.make_demos`` (1:4 optimal to intermediate
 trajectories) once and reused from ``runs/demos-cache/<env>/``. Writes to ``--out`` (default
 ``runs/<timestamp>``): ``config.json`` (the config, what it resolved to, and provenance),
 ``metrics.csv``, ``curves.png``, ``summary.md``, ``summary.json``, ``policies/<method>/``
@@ -27,7 +27,10 @@ import sys
 import time
 from pathlib import Path
 
-from pngail_jax import runner
+from pngail_jax.jobs import record
+from pngail_jax.jobs import sweep as sweep_job
+from pngail_jax.jobs.errors import RunError
+from pngail_jax.outputs import output_owner
 from pngail_jax.programs import flags
 from pngail_jax.programs.cli import (
     ENV_HELP,
@@ -37,7 +40,6 @@ from pngail_jax.programs.cli import (
     check_env,
     claim_output,
     invoked_as,
-    output_owner,
     path_argument,
     signals_stop_at_a_checkpoint,
     use_compile_cache,
@@ -46,7 +48,6 @@ from pngail_jax.run_config import PRESETS_BY_NAME, RunConfig, task_classifier
 from pngail_jax.tracking import check_backends
 from pngail_jax.validation import ConfigError
 
-MINARI_PREFIX = runner.MINARI_PREFIX
 SMOKE = RunConfig.preset("smoke")
 # Flags that --resume DIR accepts: the run's config.json has every other value.
 RESUME_FLAGS = (
@@ -236,17 +237,17 @@ def _task_of(demos: str | None) -> str | None:
 # -- starting: devices, compilation cache, multi-host; then the runner ----------------------
 
 
-def start(invocation: Invocation) -> tuple[RunConfig, runner.SavedRun | None]:
+def start(invocation: Invocation) -> tuple[RunConfig, record.SavedRun | None]:
     """Reads a resumed run's config, sets up devices, compilation cache and multi-host.
 
     Returns the config and the saved run (None for a new one).
     """
-    saved = runner.load_saved(invocation.out) if invocation.resume else None
+    saved = record.load_saved(invocation.out) if invocation.resume else None
     config = saved.config if saved else invocation.config
     cpu_devices = config.cpu_devices
     if saved and cpu_devices is None and saved.platform == "cpu":
         cpu_devices = saved.local_device_count  # the same sharding as before
-    runner.configure_devices(cpu_devices)
+    sweep_job.configure_devices(cpu_devices)
     import jax
 
     use_compile_cache(invocation.args)
@@ -259,14 +260,14 @@ def start(invocation: Invocation) -> tuple[RunConfig, runner.SavedRun | None]:
 
 
 def main(argv=None, own_interrupt: bool = True) -> Path:
-    """Runs the sweep of ``argv`` (``pngail_jax.runner.run``). ``own_interrupt``: Ctrl-C ends
+    """Runs the sweep of ``argv`` (``pngail_jax.jobs.sweep.run``). ``own_interrupt``: Ctrl-C ends
     in one line saying how to continue (a caller that runs several sweeps, as
     experiments.paper, passes False and says it in its own words)."""
     invocation = parse_args(argv)
     try:
         config, saved = start(invocation)
         with signals_stop_at_a_checkpoint():  # a scheduler's SIGTERM stops it as Ctrl-C does
-            runner.run(
+            sweep_job.run(
                 None if saved else config,
                 invocation.out,
                 resume=saved is not None,
@@ -275,7 +276,7 @@ def main(argv=None, own_interrupt: bool = True) -> Path:
                 command=[*invoked_as("sweep"), *invocation.argv],
                 saved=saved,
             )
-    except runner.RunError as error:
+    except RunError as error:
         raise SystemExit(str(error)) from None
     except KeyboardInterrupt:
         if not own_interrupt:
@@ -287,7 +288,3 @@ def main(argv=None, own_interrupt: bool = True) -> Path:
             message = " before the run began: nothing was written"
         raise SystemExit(f"\ninterrupted{message}") from None
     return invocation.out
-
-
-if __name__ == "__main__":
-    main()

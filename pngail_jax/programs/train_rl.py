@@ -5,35 +5,21 @@
 Shows progress every ``--eval-every`` iterations (iteration, evaluation and training returns,
 steps/s), then writes to ``--out``: ``config.json``, ``metrics.csv`` (one row per seed and
 iteration), ``learning_curve.png`` and the policies (``policy.json`` + ``policy_params/``),
-which ``pngail_jax.load_policy(out)`` loads without this code.
+which ``pngail_jax.load_policy(out)`` loads without this code. The flags become a
+``TrainRLConfig`` for the job, ``pngail_jax.jobs.train_rl.train_rl``.
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
-import dataclasses
-import json
-import shutil
 import sys
 import time
 from pathlib import Path
 
-import jax
-import jax.numpy as jnp
-import numpy as np
-
-from pngail_jax import runner
-from pngail_jax import settings as run_settings
-from pngail_jax.checkpoint import save_trpo_policies
-from pngail_jax.integrity import (
-    IntegrityError,
-    atomic_path,
-    read_json,
-    write_json,
-    write_manifest,
-)
-from pngail_jax.outputs import RunLocked, run_lock
+from pngail_jax.integrity import IntegrityError, read_json
+from pngail_jax.jobs.errors import RunError
+from pngail_jax.jobs.train_rl import TrainRLConfig, train_rl
+from pngail_jax.outputs import output_owner
 from pngail_jax.programs import flags
 from pngail_jax.programs.cli import (
     ENV_HELP,
@@ -44,23 +30,9 @@ from pngail_jax.programs.cli import (
     check_positive,
     claim_output,
     note_deprecated,
-    output_owner,
     path_argument,
-    prepare_output,
     signals_stop_at_a_checkpoint,
     use_compile_cache,
-)
-from pngail_jax.rl import TRPOHyperparams, TRPOTrainer
-from pngail_jax.runner import RunError
-
-METRIC_COLUMNS = (
-    "env_steps",
-    "eval/return",
-    "train/episode_return",
-    "trpo/kl",
-    "trpo/entropy",
-    "trpo/accepted",
-    "value/loss",
 )
 
 
@@ -170,132 +142,36 @@ def _resumed_args(parser, given: argparse.Namespace, argv: list[str]) -> argpars
     return args
 
 
-def write_metrics_csv(path: Path, metrics: dict[str, np.ndarray]) -> None:
-    num_seeds, num_iterations = metrics["env_steps"].shape
-    with atomic_path(path) as temporary, temporary.open("w", newline="") as file:
-        writer = csv.writer(file)
-        writer.writerow(["seed", "iteration", *METRIC_COLUMNS])
-        for seed in range(num_seeds):
-            for iteration in range(num_iterations):
-                values = [metrics[name][seed, iteration] for name in METRIC_COLUMNS]
-                writer.writerow([seed, iteration + 1, *(f"{v:.6g}" for v in values)])
-
-
-def plot_learning_curve(path: Path, metrics: dict[str, np.ndarray], title: str) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    figure, axis = plt.subplots(figsize=(7, 4.5))
-    steps = metrics["env_steps"][0]
-    evaluated = ~np.isnan(metrics["eval/return"][0])
-    for seed, returns in enumerate(metrics["eval/return"]):
-        axis.plot(
-            steps[evaluated],
-            returns[evaluated],
-            color="tab:blue",
-            alpha=0.35,
-            lw=1,
-            label="seeds (deterministic eval)" if seed == 0 else None,
-        )
-    mean = metrics["eval/return"][:, evaluated].mean(axis=0)
-    axis.plot(steps[evaluated], mean, color="black", lw=2, marker="o", ms=3, label="mean")
-    train_mean = runner.nanmean(metrics["train/episode_return"], axis=0)
-    # Iterations where no episode ended are NaN (a 1000-step episode ends every fifth
-    # 200-step iteration): joined over them, or matplotlib draws isolated, invisible points.
-    ended = np.isfinite(train_mean)
-    axis.plot(
-        steps[ended], train_mean[ended], color="tab:orange", lw=1, label="training episodes (mean)"
+def config_of(args) -> TrainRLConfig:
+    """The job's config of checked flags."""
+    return TrainRLConfig(
+        env=args.env,
+        iterations=args.iterations,
+        seeds=args.seeds,
+        seed=args.seed,
+        fisher=args.fisher,
+        fisher_subsample=args.fisher_subsample,
+        truncation_as_terminal=args.truncation_as_terminal,
+        settings=args.settings,
     )
-    axis.set(xlabel="environment steps", ylabel="episode return", title=title)
-    axis.grid(alpha=0.3)
-    axis.legend()
-    figure.tight_layout()
-    with atomic_path(path) as temporary:
-        figure.savefig(temporary, dpi=120)
-    plt.close(figure)
 
 
 def main(argv=None) -> None:
     args = parse_args(argv)
     use_compile_cache(args)
-    settings = args.settings
     try:
-        env = run_settings.make_env(args.env, settings)
-    except ValueError as error:  # e.g. a custom factory that raised or returned no Env
-        raise SystemExit(f"environment: {error}") from None
-    config = settings.trpo_config(
-        args.iterations, fisher=args.fisher, fisher_subsample=args.fisher_subsample
-    )
-    hyperparams = TRPOHyperparams.create(bootstrap_truncation=not args.truncation_as_terminal)
-    trainer = TRPOTrainer(config, env)
-    seeds_hyperparams = jax.tree.map(
-        lambda x: jnp.broadcast_to(x, (args.seeds, *x.shape)), hyperparams
-    )
-    keys = jax.random.split(jax.random.key(args.seed), args.seeds)
-    run_config = {
-        "env": args.env,
-        "env_options": settings.env_options,
-        "settings": dataclasses.asdict(settings),
-        "seeds": args.seeds,
-        "seed": args.seed,
-        "trpo": dataclasses.asdict(config),
-        "hyperparams": jax.tree.map(lambda x: x.item(), hyperparams).__dict__,
-        "argv": args.argv,
-    }
-    try:
-        with signals_stop_at_a_checkpoint(), run_lock(args.out, "train_rl"):
-            _train(args, env, trainer, seeds_hyperparams, keys, run_config)
-    except (RunLocked, RunError) as error:
+        with signals_stop_at_a_checkpoint():
+            train_rl(
+                config_of(args),
+                args.out,
+                overwrite=args.overwrite,
+                resume=args.resume is not None,
+                command=args.argv,
+            )
+    except RunError as error:
         raise SystemExit(str(error)) from None
     except KeyboardInterrupt:
         raise SystemExit(
             f"\ninterrupted: finished blocks are kept; --resume {args.out} continues from the "
             "last one"
         ) from None
-
-
-def _train(args, env, trainer, seeds_hyperparams, keys, run_config) -> None:
-    config, settings = trainer.config, args.settings
-    if args.resume is None:
-        prepare_output(args.out, "train_rl", args.overwrite)
-        write_json(args.out / "config.json", run_config)
-    else:  # checked again under the lock: another resume may have finished it meanwhile
-        if (args.out / "policy.json").exists():
-            raise RunError(f"--resume {args.out}: the run is complete (its policy.json is written)")
-        stored = read_json(args.out / "config.json", "train_rl run config")
-        if json.loads(json.dumps(run_config)) != stored:  # another version's defaults
-            raise RunError(
-                f"cannot resume {args.out}: its flags give another run in this version "
-                "(config.json differs); start a new run"
-            )
-    print(
-        f"TRPO on {args.env}: {args.seeds} seeds x {args.iterations} iterations x "
-        f"{config.batch_size} steps ({run_settings.describe(settings)}) -> {args.out}",
-        flush=True,
-    )
-    start = time.perf_counter()
-    state, metrics = runner.train_seeds(
-        trainer, seeds_hyperparams, keys, checkpoints=args.out / "checkpoints"
-    )
-    final_returns = metrics["eval/return"][:, -1]
-    write_metrics_csv(args.out / "metrics.csv", metrics)
-    plot_learning_curve(
-        args.out / "learning_curve.png", metrics, f"TRPO on {args.env} ({args.seeds} seeds)"
-    )
-    save_trpo_policies(
-        args.out, env, config, state, final_returns, {"env_options": settings.env_options}
-    )
-    # The run is complete: its checkpoints go, and the digests list what stays.
-    shutil.rmtree(args.out / "checkpoints", ignore_errors=True)
-    write_manifest(args.out)
-    print(
-        f"done in {time.perf_counter() - start:.0f} s; final deterministic returns "
-        f"[{', '.join(f'{r:.1f}' for r in final_returns)}] (mean {final_returns.mean():.1f}); "
-        f"wrote {args.out}/{{config.json,metrics.csv,learning_curve.png,policy.json}}"
-    )
-
-
-if __name__ == "__main__":
-    main()

@@ -1,6 +1,6 @@
 """Imperfect demonstrations made from scratch: an optimal and an intermediate TRPO policy, mixed.
 
-    from pngail_jax.demos.make import MakeDemosConfig, make_demonstrations
+    from pngail_jax.jobs.make_demos import MakeDemosConfig, make_demonstrations
 
     path = make_demonstrations(MakeDemosConfig(env="Pendulum-v1"), "demos/pendulum")
 
@@ -29,12 +29,21 @@ import time
 from pathlib import Path
 from typing import Any, NamedTuple
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from pngail_jax import settings as run_settings
 from pngail_jax import validation
+from pngail_jax.checkpoint import save_trpo_policies
+from pngail_jax.demos.generate import normalized_return, random_policy_return, rollout_episodes
 from pngail_jax.demos.npz import save_npz
 from pngail_jax.demos.types import Demonstrations
+from pngail_jax.integrity import atomic_path, atomic_write_text
+from pngail_jax.jobs.errors import RunError, refusals
+from pngail_jax.jobs.seeds import train_seeds
+from pngail_jax.outputs import Claim, claimed
+from pngail_jax.rl import TRPOHyperparams, TRPOTrainer
 
 DEMOS_FILE = "demos.npz"  # written last: its presence marks a finished run
 PROGRAM = "make_demos"  # the owner its directories are marked with (pngail_jax.outputs)
@@ -121,23 +130,26 @@ class Picked:
     intermediate_return: float
 
 
-def make_demonstrations(config: MakeDemosConfig, out, *, overwrite: bool = False) -> Path:
+def make_demonstrations(
+    config: MakeDemosConfig, out, *, overwrite: bool = False, wait: bool = False
+) -> Path:
     """Makes ``config``'s demonstrations into ``out`` (``demos.npz``, ``normalizer.json``,
     ``checkpoints/``) and returns the path of ``demos.npz``. ``out`` must be new, empty or,
     with ``overwrite``, an earlier making's (``pngail_jax.outputs``); refusals raise
-    ``pngail_jax.runner.RunError`` with one line."""
-    from pngail_jax.outputs import output_refusal, prepare_output
-    from pngail_jax.runner import RunError
+    ``RunError`` with one line; a second process on the same ``out`` is refused, or with
+    ``wait`` waits for the first to end."""
+    with refusals(), claimed(Path(out), PROGRAM, overwrite=overwrite, wait=wait) as claim:
+        return make_claimed(config, claim)
 
-    out = Path(out)
-    refusal = output_refusal(out, PROGRAM, overwrite)
-    if refusal:
-        raise RunError(refusal)
+
+def make_claimed(config: MakeDemosConfig, claim: Claim) -> Path:
+    """``make_demonstrations`` into a directory already claimed (``claim``)."""
+    out = claim.directory
     try:
         env = run_settings.make_env(config.env, config.settings)
     except ValueError as error:  # e.g. a custom factory that raised or returned no Env
         raise RunError(f"environment: {error}") from None
-    prepare_output(out, PROGRAM, overwrite)  # an old run kept until here
+    claim.prepare()  # an old run kept until here
     start = time.perf_counter()
     snapshots = train_candidates(config, env, out)
     print("2/3 measuring random and optimal returns", flush=True)
@@ -159,13 +171,6 @@ def make_demonstrations(config: MakeDemosConfig, out, *, overwrite: bool = False
 def train_candidates(config: MakeDemosConfig, env, out: Path) -> list[Checkpoint]:
     """TRPO on the true reward, every evaluated checkpoint of every seed kept (in memory and
     under ``out/checkpoints/iter_XXXX/``)."""
-    import jax
-    import jax.numpy as jnp
-
-    from pngail_jax.checkpoint import save_trpo_policies
-    from pngail_jax.rl import TRPOHyperparams, TRPOTrainer
-    from pngail_jax.runner import train_seeds
-
     trpo_config = config.trpo_config
     trainer = TRPOTrainer(trpo_config, env)
     hyperparams = jax.tree.map(
@@ -194,8 +199,6 @@ def train_candidates(config: MakeDemosConfig, env, out: Path) -> list[Checkpoint
 
 def _keys(config: MakeDemosConfig):
     """(training, measuring, rolling out): the three uses of the base seed."""
-    import jax
-
     return jax.random.split(jax.random.key(config.seed), 3)
 
 
@@ -204,11 +207,6 @@ class Episodes:
     parameters are arguments, not constants)."""
 
     def __init__(self, env, trpo_config):
-        import jax
-
-        from pngail_jax.demos.generate import rollout_episodes
-        from pngail_jax.rl import TRPOTrainer
-
         policy = TRPOTrainer(trpo_config, env).trpo.policy
 
         @jax.jit
@@ -221,8 +219,6 @@ class Episodes:
         self._episodes = episodes
 
     def __call__(self, snapshot: Checkpoint, key, num_episodes: int):
-        import jax
-
         keys = jax.random.split(key, num_episodes)
         return self._episodes(snapshot.policy_params, snapshot.normalizer, keys)
 
@@ -232,10 +228,6 @@ def pick_policies(
 ) -> Picked:
     """The best checkpoint (optimal), the earlier one nearest ``intermediate_target``, and
     the random, optimal and intermediate returns measured on fresh episodes."""
-    import jax
-
-    from pngail_jax.demos.generate import normalized_return, random_policy_return
-
     random_key, optimal_key, intermediate_key = jax.random.split(_keys(config)[1], 3)
     random_return = random_policy_return(env, random_key, config.measure_episodes)
     best = max(snapshots, key=lambda snapshot: snapshot.eval_return)
@@ -274,8 +266,6 @@ def roll_out_mixture(
 ) -> Demonstrations:
     """``num_trajectories`` deterministic episodes of the two policies at ``ratio`` (the
     optimal ones first), each labelled with its clipped normalised return."""
-    import jax
-
     num_optimal = config.num_optimal
     print(
         f"3/3 rolling out {num_optimal} optimal + "
@@ -315,10 +305,6 @@ def roll_out_mixture(
 
 def _labelled_rows(parts, env, picked: Picked):
     """Rows of the valid steps of each episode, labelled with the episode's confidence."""
-    import jax
-
-    from pngail_jax.demos.generate import normalized_return
-
     rows = {"observations": [], "actions": [], "confidence": [], "trajectory_ids": []}
     trajectory_returns = []
     for episodes in parts:
@@ -344,48 +330,12 @@ def _labelled_rows(parts, env, picked: Picked):
     return rows, trajectory_returns
 
 
-def cut_mixture(
-    source: Demonstrations, num_optimal: int, num_intermediate: int, name: str = "the mixture"
-) -> Demonstrations:
-    """The first ``num_optimal`` optimal and ``num_intermediate`` intermediate trajectories
-    of a made set (optimal ones first, as ``make_demonstrations`` writes them), ids
-    renumbered: a smaller mixture at another ratio without making again. ``name`` is for the
-    error when the made set is too small."""
-    made_optimal = source.metadata["num_optimal_trajectories"]
-    made_total = len(source.metadata["trajectory_returns"])
-    if num_optimal > made_optimal or num_intermediate > made_total - made_optimal:
-        raise ValueError(
-            f"{name}: needs {num_optimal} optimal + {num_intermediate} intermediate "
-            f"trajectories, the made set has {made_optimal} + {made_total - made_optimal}"
-        )
-    kept = [*range(num_optimal), *range(made_optimal, made_optimal + num_intermediate)]
-    rows = np.isin(source.trajectory_ids, kept)
-    renumber = np.zeros(made_total, np.int64)
-    renumber[kept] = np.arange(len(kept))
-    returns = source.metadata["trajectory_returns"]
-    return Demonstrations(
-        observations=source.observations[rows],
-        actions=source.actions[rows],
-        confidence=source.confidence[rows],
-        trajectory_ids=renumber[source.trajectory_ids[rows]],
-        metadata={
-            **source.metadata,
-            "ratio": f"{num_optimal}:{num_intermediate}",
-            "num_optimal_trajectories": num_optimal,
-            "trajectory_returns": [returns[i] for i in kept],
-            "source": f"{name}, cut from the made set",
-        },
-    )
-
-
 NORMALIZER_KEYS = ("env", "random_return", "optimal_return")
 
 
 def write_outputs(out: Path, demos: Demonstrations, normalizer: dict) -> Path:
     """``normalizer.json``, then ``demos.npz`` (the mark of a finished run), each written to
     a temporary sibling and renamed, so a kill never leaves a truncated file behind."""
-    from pngail_jax.integrity import atomic_path, atomic_write_text
-
     atomic_write_text(out / "normalizer.json", json.dumps(normalizer, indent=2))
     path = out / DEMOS_FILE
     with atomic_path(path) as temporary:  # keeps the .npz suffix np.savez would append
@@ -395,8 +345,6 @@ def write_outputs(out: Path, demos: Demonstrations, normalizer: dict) -> Path:
 
 def policies_table(picked: Picked) -> str:
     """The three policies' returns, raw and normalised, as a Markdown table."""
-    from pngail_jax.demos.generate import normalized_return
-
     best, intermediate = picked.optimal, picked.intermediate
     normalised = normalized_return(
         picked.intermediate_return, picked.random_return, picked.optimal_return

@@ -1,0 +1,294 @@
+"""``compare_settings(config, out)``: what a run setting does to learning. TRPO on the true
+reward, arms x the same seeds, each arm one ``train_rl`` run into ``out/<arm>/`` (kept when
+that directory holds a finished run, so an interrupted comparison continues where it
+stopped). Then every arm's final policies are evaluated by one protocol: the same reset keys,
+on the task's own MJX solver and on the fast one (a policy trained on the fast physics is
+also judged on the accurate one). Writes ``comparison.json`` (last: it marks a finished
+comparison), ``comparison.md`` and ``comparison.png``.
+
+An arm is "not worse" than the baseline when its mean final return is at least the
+baseline's mean minus one standard error (docs/performance.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+
+import jax
+import numpy as np
+import orbax.checkpoint as ocp
+
+from pngail_jax import envs, validation
+from pngail_jax.integrity import atomic_path, atomic_write_text, write_json
+from pngail_jax.jobs.errors import refusals
+from pngail_jax.jobs.train_rl import TrainRLConfig, train_rl
+from pngail_jax.networks import GaussianPolicy
+from pngail_jax.outputs import claimed, prepare_output
+from pngail_jax.report import json_safe, read_evaluations
+from pngail_jax.rl.rollout import evaluate
+from pngail_jax.rl.train import ObservationNormalizer
+from pngail_jax.settings import REFERENCE_SETTINGS, parse_solver, settings_for
+
+PROGRAM = "compare_settings"
+COMPARISON_FILE = "comparison.json"  # written last: its presence marks a finished comparison
+
+# Each arm: the settings it starts from ("table": the task's row; "reference": the authors'),
+# the settings it changes, and its Fisher subsample. The flags train_rl takes for the same
+# run are in ``arm_flags``.
+ARMS = {
+    "reference": {"settings": "reference"},
+    "reference-fast": {"settings": "reference", "solver": "fast"},
+    "mid-fast": {"settings": "reference", "solver": "fast", "num_envs": 100, "unroll_length": 50},
+    "wide-fast": {"settings": "reference", "solver": "fast", "num_envs": 250, "unroll_length": 20},
+    "table": {},
+    "table-own-solver": {"solver": "own"},
+    "table-normalized": {"normalize_observations": True},
+    "reference-fisher5": {"settings": "reference", "fisher_subsample": 5},
+    "table-fisher5": {"fisher_subsample": 5},
+}
+
+
+def arm_flags(arm: str) -> list[str]:
+    """The train_rl flags of ``arm`` (besides the common ones): what --help lists."""
+    flags = []
+    for name, value in ARMS[arm].items():
+        flag = "--" + name.replace("_", "-")
+        flags += [flag] if value is True else [flag, str(value)]
+    return flags
+
+
+@dataclasses.dataclass(frozen=True)
+class CompareSettingsConfig:
+    """Which arms (``ARMS``), judged against ``baseline`` (None: the first), with ``seeds``
+    seeds x ``iterations`` TRPO iterations each, evaluated every ``eval_every`` and at the
+    end on ``num_eval_episodes`` episodes."""
+
+    env: str
+    arms: tuple[str, ...] = ("reference-fast", "table")
+    baseline: str | None = None
+    seeds: int = 5
+    iterations: int = 400
+    eval_every: int = 50
+    num_eval_episodes: int = 32
+    seed: int = 0
+
+    def __post_init__(self):
+        object.__setattr__(self, "arms", tuple(self.arms))
+        unknown = [arm for arm in self.arms if arm not in ARMS]
+        if unknown or not self.arms:
+            validation.fail("arms", f"unknown arm {unknown[0]!r}; known: {', '.join(ARMS)}"
+                            if unknown else "give at least one arm")  # fmt: skip
+        if len(set(self.arms)) != len(self.arms):
+            validation.fail("arms", f"an arm is named twice: {', '.join(self.arms)}")
+        if self.baseline is None:
+            object.__setattr__(self, "baseline", self.arms[0])
+        elif self.baseline not in self.arms:
+            validation.fail("baseline", f"{self.baseline!r} is not among the arms")
+        for name in ("seeds", "iterations", "eval_every", "num_eval_episodes"):
+            validation.integer(name, getattr(self, name), 1)
+        if self.env == "Pendulum-v1" and any("solver" in ARMS[arm] for arm in self.arms):
+            validation.fail("arms", "Pendulum-v1 has no MJX solver: choose arms without one")
+
+    def arm_config(self, arm: str) -> TrainRLConfig:
+        """The train_rl run of ``arm``."""
+        spec = dict(ARMS[arm])
+        base = REFERENCE_SETTINGS if spec.pop("settings", "table") == "reference" else None
+        base = base or settings_for(self.env)
+        fisher_subsample = spec.pop("fisher_subsample", 1)
+        if "solver" in spec:
+            spec.update(parse_solver(spec.pop("solver")))
+        settings = dataclasses.replace(base, eval_every=self.eval_every, **spec)
+        return TrainRLConfig(
+            env=self.env,
+            iterations=self.iterations,
+            seeds=self.seeds,
+            seed=self.seed,
+            fisher="gauss_newton",
+            fisher_subsample=fisher_subsample,
+            settings=settings,
+        )
+
+
+def compare_settings(config: CompareSettingsConfig, out, *, overwrite: bool = False) -> dict:
+    """Runs (or keeps) every arm of ``config`` into ``out/<arm>/``, evaluates them alike and
+    writes the comparison; returns its summary. ``out`` is new, empty, an unfinished
+    comparison (continued), or with ``overwrite`` a finished one (rewritten, its arms kept).
+    Raises ``RunError`` with one line."""
+    out = Path(out)
+    unfinished = not (out / COMPARISON_FILE).exists()
+    with refusals(), claimed(out, PROGRAM, overwrite=overwrite or unfinished):
+        prepare_output(out, PROGRAM)  # marked, never emptied: its finished arms are reused
+        directories = {arm: run_arm(config, out, arm) for arm in config.arms}
+        results, curves = evaluate_arms(config, directories)
+        return write_comparison(config, out, results, curves)
+
+
+def run_arm(config: CompareSettingsConfig, out: Path, arm: str) -> Path:
+    """``arm``'s train_rl run in ``out/<arm>/``, or the finished one there."""
+    directory = out / arm
+    if (directory / "policy.json").exists():
+        print(f"{arm}: finished run in {directory}, reused", flush=True)
+        return directory
+    print(f"{arm}: train_rl {' '.join(arm_flags(arm)) or '(the table)'}", flush=True)
+    # An arm cut short is the comparison's own, started again.
+    train_rl(config.arm_config(arm), directory, overwrite=directory.exists())
+    return directory
+
+
+def write_comparison(config: CompareSettingsConfig, out: Path, results: dict, curves) -> dict:
+    """The verdicts, then comparison.md, .png and (last) .json."""
+    trained_on = {
+        arm: "fast" if result["env_options"] or config.env == "Ant" else "own"
+        for arm, result in results.items()
+    }
+    baseline_mean, baseline_se = results[config.baseline]["final_return_mean_se"][
+        trained_on[config.baseline]
+    ]
+    for arm, result in results.items():
+        mean, _ = result["final_return_mean_se"][trained_on[arm]]
+        result["trained_on"] = trained_on[arm]
+        result["not_worse_than_baseline"] = bool(mean >= baseline_mean - baseline_se)
+    summary = {
+        "env": config.env,
+        "seeds": config.seeds,
+        "iterations": config.iterations,
+        "baseline": config.baseline,
+        "eval_episodes": config.num_eval_episodes,
+        "arms": results,
+    }
+    markdown = comparison_markdown(summary)
+    atomic_write_text(out / "comparison.md", markdown + "\n")
+    plot(out / "comparison.png", curves, f"TRPO on {config.env}, true reward")
+    write_json(out / COMPARISON_FILE, json_safe(summary))  # null, never a bare NaN
+    print(f"\n{markdown}\n\nwrote {out}/comparison.{{json,md,png}}")
+    return summary
+
+
+def read_curves(directory: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(env_steps int[I], eval returns float[seeds, I]) at the evaluated iterations."""
+    ((steps, returns),) = read_evaluations(directory / "metrics.csv", "eval/return").values()
+    return steps, returns
+
+
+def make_evaluator(env_name: str, solver: dict, metadata: dict, num_episodes: int, key):
+    """A compiled ``(policy_params, normalizer) -> float[seeds]``: the final deterministic
+    return of every seed's policy on ``env_name`` with ``solver``, from the same
+    ``num_episodes`` reset keys for every arm (built once per physics, shared by the arms)."""
+    env = envs.make(env_name, **solver)
+    policy = GaussianPolicy(metadata["action_size"], tuple(metadata["hidden_sizes"]))
+    keys = jax.random.split(key, num_episodes)
+
+    def one_seed(params, normalizer_fields):
+        # A run without observation normalisation saved a never-updated normaliser
+        # (count 0), which is the identity.
+        normalizer = ObservationNormalizer(**normalizer_fields)
+        return evaluate(env, policy, params, normalizer, keys)
+
+    return jax.jit(jax.vmap(one_seed))
+
+
+def saved_policies(directory: Path):
+    """(policy.json metadata, {"policy_params", "normalizer"} stacked over seeds)."""
+    metadata = json.loads((directory / "policy.json").read_text())
+    return metadata, ocp.StandardCheckpointer().restore(directory / "policy_params")
+
+
+def mean_and_standard_error(values) -> tuple[float, float]:
+    values = np.asarray(values, float)
+    if len(values) < 2:
+        return float(values.mean()), float("nan")
+    return float(values.mean()), float(values.std(ddof=1) / math.sqrt(len(values)))
+
+
+def plot(path: Path, curves: dict, title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, axis = plt.subplots(figsize=(7, 4.5))
+    for arm, (steps, returns) in curves.items():
+        mean = returns.mean(axis=0)
+        error = returns.std(axis=0, ddof=1) / math.sqrt(len(returns))
+        axis.plot(steps, mean, lw=2, marker="o", ms=3, label=f"{arm} ({len(returns)} seeds)")
+        axis.fill_between(steps, mean - error, mean + error, alpha=0.25)
+    axis.set(xlabel="environment steps per run", ylabel="evaluation return", title=title)
+    axis.grid(alpha=0.3)
+    axis.legend()
+    figure.tight_layout()
+    with atomic_path(path) as temporary:  # keeps the .png suffix savefig takes the format from
+        figure.savefig(temporary, dpi=120)
+    plt.close(figure)
+
+
+def evaluate_arms(config: CompareSettingsConfig, directories: dict) -> tuple[dict, dict]:
+    """Each arm's saved policies evaluated on the task's own physics (and MJX's fast solver
+    beside it on the MuJoCo tasks), with its TRPO settings and learning curves."""
+    key = jax.random.key(config.seed + 10_000)  # evaluation keys unused by any training run
+    physics = {"own": {}}
+    if config.env != "Pendulum-v1":
+        physics["fast"] = dict(envs.FAST_SOLVER)
+    evaluators = {}
+    results, curves = {}, {}
+    for arm, directory in directories.items():
+        curves[arm] = read_curves(directory)
+        config = json.loads((directory / "config.json").read_text())
+        metadata, arrays = saved_policies(directory)
+        final = {}
+        for name, solver in physics.items():
+            if name not in evaluators:
+                evaluators[name] = make_evaluator(
+                    config.env, solver, metadata, config.num_eval_episodes, key
+                )
+            returns = evaluators[name](arrays["policy_params"], arrays["normalizer"])
+            final[name] = np.asarray(returns)
+        results[arm] = {
+            "trpo": {
+                name: config["trpo"][name]
+                for name in ("num_envs", "unroll_length", "normalize_observations")
+            },
+            "env_options": config["env_options"],
+            "fisher_subsample": config["trpo"]["fisher_subsample"],
+            "final_return": {name: values.tolist() for name, values in final.items()},
+            "final_return_mean_se": {
+                name: mean_and_standard_error(values) for name, values in final.items()
+            },
+            "average_eval_return_mean_se": mean_and_standard_error(curves[arm][1].mean(axis=1)),
+        }
+    return results, curves
+
+
+def comparison_markdown(summary: dict) -> str:
+    def cell(pair):
+        mean, se = pair
+        return f"{mean:.1f} ± {se:.1f}"
+
+    lines = [
+        f"{summary['env']}: TRPO on the true reward, {summary['seeds']} seeds x "
+        f"{summary['iterations']} iterations; final = deterministic return of the last policy "
+        f"on {summary['eval_episodes']} episodes (mean ± s.e. over seeds); baseline "
+        f"`{summary['baseline']}` (not worse = mean >= baseline mean - 1 s.e., on the physics "
+        "each arm trained on).",
+        "",
+        "| arm | settings | final, own solver | final, fast solver | average during training "
+        "| not worse |",
+        "|---|---|---:|---:|---:|---|",
+    ]
+    for arm, result in summary["arms"].items():
+        settings = result["trpo"]
+        shape = f"{settings['num_envs']} x {settings['unroll_length']}"
+        solver = "fast" if result["trained_on"] == "fast" else "own"
+        normalized = ", norm. obs" if settings["normalize_observations"] else ""
+        if result["fisher_subsample"] > 1:
+            normalized += f", Fisher on every {result['fisher_subsample']}th step"
+        lines.append(
+            f"| {arm} | {shape}, {solver} solver{normalized} | "
+            f"{cell(result['final_return_mean_se']['own'])} | "
+            f"{cell(result['final_return_mean_se'].get('fast', (math.nan, math.nan)))} | "
+            f"{cell(result['average_eval_return_mean_se'])} | "
+            f"{'yes' if result['not_worse_than_baseline'] else 'NO'} |"
+        )
+    return "\n".join(lines)

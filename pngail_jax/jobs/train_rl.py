@@ -1,0 +1,223 @@
+"""``train_rl(config, out)``: TRPO on an environment's true reward, several seeds in one
+compiled program, with progress, checkpoints it resumes from, and its outputs:
+``config.json``, ``metrics.csv`` (one row per seed and iteration), ``learning_curve.png`` and
+the policies (``policy.json`` + ``policy_params/``), which ``pngail_jax.load_policy(out)``
+loads without this code.
+
+    from pngail_jax.jobs.train_rl import TrainRLConfig, train_rl
+
+    train_rl(TrainRLConfig(env="Pendulum-v1", iterations=100, seeds=3), "runs/trpo")
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import shutil
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from pngail_jax import settings as run_settings
+from pngail_jax import validation
+from pngail_jax.checkpoint import save_trpo_policies
+from pngail_jax.integrity import atomic_path, read_json, write_json, write_manifest
+from pngail_jax.jobs.chunks import nanmean
+from pngail_jax.jobs.errors import RunError, refusals
+from pngail_jax.jobs.seeds import train_seeds
+from pngail_jax.outputs import claimed, output_owner
+from pngail_jax.rl import TRPOHyperparams, TRPOTrainer
+
+PROGRAM = "train_rl"  # the owner its directories are marked with (pngail_jax.outputs)
+METRIC_COLUMNS = (
+    "env_steps",
+    "eval/return",
+    "train/episode_return",
+    "trpo/kl",
+    "trpo/entropy",
+    "trpo/accepted",
+    "value/loss",
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainRLConfig:
+    """A TRPO run on the true reward. ``settings`` None: the task's row of
+    ``pngail_jax.settings``. ``truncation_as_terminal``: the reference's GAE, which does not
+    bootstrap through time limits."""
+
+    env: str = "Pendulum-v1"
+    iterations: int = 100
+    seeds: int = 3
+    seed: int = 0
+    fisher: str = "gauss_newton"
+    fisher_subsample: int = 1
+    truncation_as_terminal: bool = False
+    settings: run_settings.RunSettings | None = None
+
+    def __post_init__(self):
+        if self.settings is None:
+            object.__setattr__(self, "settings", run_settings.settings_for(self.env))
+        for name in ("iterations", "seeds", "fisher_subsample"):
+            validation.integer(name, getattr(self, name), 1)
+        validation.integer("seed", self.seed, 0)
+        if self.iterations % self.settings.eval_every:
+            validation.fail(
+                "iterations",
+                f"({self.iterations}) must be a multiple of the evaluation interval "
+                f"({self.settings.eval_every}, settings.eval_every)",
+            )
+        self.trpo_config  # noqa: B018  (the TRPO config's own checks)
+
+    @property
+    def trpo_config(self):
+        return self.settings.trpo_config(
+            self.iterations, fisher=self.fisher, fisher_subsample=self.fisher_subsample
+        )
+
+    @property
+    def hyperparams(self) -> TRPOHyperparams:
+        return TRPOHyperparams.create(bootstrap_truncation=not self.truncation_as_terminal)
+
+    def document(self, command: Sequence[str] | None = None) -> dict:
+        """config.json's content (``command``: the flags a program was given, which its
+        ``--resume`` reads back)."""
+        return json.loads(
+            json.dumps(
+                {
+                    "env": self.env,
+                    "env_options": self.settings.env_options,
+                    "settings": dataclasses.asdict(self.settings),
+                    "seeds": self.seeds,
+                    "seed": self.seed,
+                    "trpo": dataclasses.asdict(self.trpo_config),
+                    "hyperparams": jax.tree.map(lambda x: x.item(), self.hyperparams).__dict__,
+                    "argv": None if command is None else list(command),
+                }
+            )
+        )
+
+
+def train_rl(
+    config: TrainRLConfig,
+    out,
+    *,
+    overwrite: bool = False,
+    resume: bool = False,
+    command: Sequence[str] | None = None,
+) -> Path:
+    """Trains ``config`` into ``out`` (new, empty, or with ``overwrite`` a run of train_rl) and
+    returns ``out``. ``resume``: continue the interrupted run in ``out``, which must have
+    been begun with the same config (and ``command``). A stop asked for by a signal handler
+    ends at the next block's checkpoint. Raises ``RunError`` with one line."""
+    out = Path(out)
+    with refusals(), claimed(out, PROGRAM, overwrite=overwrite, resume=resume) as claim:
+        try:
+            env = run_settings.make_env(config.env, config.settings)
+        except ValueError as error:  # e.g. a custom factory that raised or returned no Env
+            raise RunError(f"environment: {error}") from None
+        document = config.document(command)
+        if resume:  # checked under the lock: another resume may have finished it meanwhile
+            check_resumable(out, document)
+        else:
+            claim.prepare()
+            write_json(out / "config.json", document)
+        _train(config, env, out)
+    return out
+
+
+def check_resumable(out: Path, document: dict) -> None:
+    """Refuses to resume a finished run, or one whose config.json is not ``document``."""
+    if output_owner(out) != PROGRAM:
+        raise RunError(f"--resume {out} holds no run of experiments.train_rl")
+    if (out / "policy.json").exists():
+        raise RunError(f"--resume {out}: the run is complete (its policy.json is written)")
+    if document != read_json(out / "config.json", "train_rl run config"):
+        raise RunError(
+            f"cannot resume {out}: its flags give another run in this version "
+            "(config.json differs); start a new run"
+        )
+
+
+def _train(config: TrainRLConfig, env, out: Path) -> None:
+    trpo_config = config.trpo_config
+    trainer = TRPOTrainer(trpo_config, env)
+    hyperparams = jax.tree.map(
+        lambda x: jnp.broadcast_to(x, (config.seeds, *x.shape)), config.hyperparams
+    )
+    keys = jax.random.split(jax.random.key(config.seed), config.seeds)
+    print(
+        f"TRPO on {config.env}: {config.seeds} seeds x {config.iterations} iterations x "
+        f"{trpo_config.batch_size} steps ({run_settings.describe(config.settings)}) -> {out}",
+        flush=True,
+    )
+    start = time.perf_counter()
+    state, metrics = train_seeds(trainer, hyperparams, keys, checkpoints=out / "checkpoints")
+    final_returns = metrics["eval/return"][:, -1]
+    write_metrics_csv(out / "metrics.csv", metrics)
+    plot_learning_curve(
+        out / "learning_curve.png", metrics, f"TRPO on {config.env} ({config.seeds} seeds)"
+    )
+    save_trpo_policies(
+        out, env, trpo_config, state, final_returns, {"env_options": config.settings.env_options}
+    )
+    # The run is complete: its checkpoints go, and the digests list what stays.
+    shutil.rmtree(out / "checkpoints", ignore_errors=True)
+    write_manifest(out)
+    print(
+        f"done in {time.perf_counter() - start:.0f} s; final deterministic returns "
+        f"[{', '.join(f'{r:.1f}' for r in final_returns)}] (mean {final_returns.mean():.1f}); "
+        f"wrote {out}/{{config.json,metrics.csv,learning_curve.png,policy.json}}"
+    )
+
+
+def write_metrics_csv(path: Path, metrics: dict[str, np.ndarray]) -> None:
+    num_seeds, num_iterations = metrics["env_steps"].shape
+    with atomic_path(path) as temporary, temporary.open("w", newline="") as file:
+        writer = csv.writer(file)
+        writer.writerow(["seed", "iteration", *METRIC_COLUMNS])
+        for seed in range(num_seeds):
+            for iteration in range(num_iterations):
+                values = [metrics[name][seed, iteration] for name in METRIC_COLUMNS]
+                writer.writerow([seed, iteration + 1, *(f"{v:.6g}" for v in values)])
+
+
+def plot_learning_curve(path: Path, metrics: dict[str, np.ndarray], title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, axis = plt.subplots(figsize=(7, 4.5))
+    steps = metrics["env_steps"][0]
+    evaluated = ~np.isnan(metrics["eval/return"][0])
+    for seed, returns in enumerate(metrics["eval/return"]):
+        axis.plot(
+            steps[evaluated],
+            returns[evaluated],
+            color="tab:blue",
+            alpha=0.35,
+            lw=1,
+            label="seeds (deterministic eval)" if seed == 0 else None,
+        )
+    mean = metrics["eval/return"][:, evaluated].mean(axis=0)
+    axis.plot(steps[evaluated], mean, color="black", lw=2, marker="o", ms=3, label="mean")
+    train_mean = nanmean(metrics["train/episode_return"], axis=0)
+    # Iterations where no episode ended are NaN (a 1000-step episode ends every fifth
+    # 200-step iteration): joined over them, or matplotlib draws isolated, invisible points.
+    ended = np.isfinite(train_mean)
+    axis.plot(
+        steps[ended], train_mean[ended], color="tab:orange", lw=1, label="training episodes (mean)"
+    )
+    axis.set(xlabel="environment steps", ylabel="episode return", title=title)
+    axis.grid(alpha=0.3)
+    axis.legend()
+    figure.tight_layout()
+    with atomic_path(path) as temporary:
+        figure.savefig(temporary, dpi=120)
+    plt.close(figure)

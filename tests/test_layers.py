@@ -1,0 +1,215 @@
+"""The house's shape, read from the code's own imports (every import, those inside functions
+too): no import circle inside pngail_jax, no module importing a higher layer, the jobs in
+their order, demos/ reading and writing data only, no private name imported across files,
+and no module too long. The layers are drawn in docs/architecture.md."""
+
+from __future__ import annotations
+
+import ast
+from fnmatch import fnmatch
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "pngail_jax"
+
+# Bottom to top: a module may import modules of its own layer or of the layers below.
+LAYERS = [
+    (
+        "foundation",
+        (
+            "validation", "integrity", "outputs", "compilation", "stats", "fitting",
+            "networks", "rl.gae", "rl.trpo", "envs", "envs.*", "demos.tables",
+        ),
+    ),
+    ("data", ("demos", "demos.*")),
+    (
+        "learners",
+        (
+            "rl", "rl.rollout", "rl.train", "settings", "checkpoint", "bc", "firl", "ranking",
+            "confidence", "methods", "losses", "cail",
+        ),
+    ),
+    ("trainers", ("adversarial", "grid", "train", "run_config", "report", "tracking", "compare")),
+    ("jobs", ("jobs", "jobs.*", "runner")),
+    ("paper", ("paper", "paper.*")),
+    ("programs", ("programs", "programs.*")),
+    ("package", ("",)),  # pngail_jax/__init__.py: the user's names, loaded on first use
+]  # fmt: skip
+
+# The jobs in their dependency order: each imports only those before it.
+JOB_ORDER = [
+    "errors", "chunks", "seeds", "make_demos", "train_rl", "compare_settings", "build", "record",
+    "results", "sweep",
+]  # fmt: skip
+LONGEST_MODULE = 700
+LONGEST_JOB = 400
+
+
+def _modules() -> dict[str, Path]:
+    found = {}
+    for path in PACKAGE.rglob("*.py"):
+        parts = path.relative_to(PACKAGE).with_suffix("").parts
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        found[".".join(parts)] = path
+    return found
+
+
+MODULES = _modules()
+
+
+def _imports(name: str) -> list[tuple[str, list[str], int]]:
+    """(module imported, names taken from it, line) for every pngail_jax import of ``name``
+    (a ``from package import submodule`` counts as the submodule)."""
+    path = MODULES[name]
+    found = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            targets = [(alias.name, []) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:  # relative: from the module's package
+                package = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+                package = package[: len(package) - node.level + 1]
+                base = ".".join(["pngail_jax", *package, *([node.module] if node.module else [])])
+            else:
+                base = node.module or ""
+            targets = []
+            for alias in node.names:
+                full = f"{base}.{alias.name}".removeprefix("pngail_jax.")
+                targets.append((base, []) if full not in MODULES else (f"{base}.{alias.name}", []))
+                if full not in MODULES:
+                    targets[-1][1].append(alias.name)
+        else:
+            continue
+        for target, names in targets:
+            if target == "pngail_jax" or target.startswith("pngail_jax."):
+                module = target.removeprefix("pngail_jax").removeprefix(".")
+                while module and module not in MODULES:
+                    module = module.rpartition(".")[0]
+                if module != name:
+                    found.append((module, names, node.lineno))
+    return found
+
+
+GRAPH = {name: _imports(name) for name in MODULES}
+
+
+def _layer(name: str) -> int:
+    for index, (_, patterns) in enumerate(LAYERS):
+        if any(fnmatch(name, pattern) for pattern in patterns):
+            return index
+    raise AssertionError(f"pngail_jax.{name} is in no layer: add it to LAYERS (and the docs)")
+
+
+def test_every_module_has_a_layer():
+    for name in MODULES:
+        _layer(name)
+
+
+def _upward(graph) -> list[str]:
+    return [
+        f"pngail_jax.{name} ({LAYERS[_layer(name)][0]}) imports pngail_jax.{target} "
+        f"({LAYERS[_layer(target)][0]}), line {line}"
+        for name, imports in graph.items()
+        for target, _, line in imports
+        if _layer(target) > _layer(name)
+    ]
+
+
+def _circles(graph) -> list[list[str]]:
+    """Tarjan's strongly connected components of ``graph`` that hold more than one module."""
+    index, low, stack, on_stack, circles = {}, {}, [], set(), []
+
+    def visit(name):
+        index[name] = low[name] = len(index)
+        stack.append(name)
+        on_stack.add(name)
+        for target, _, _ in graph[name]:
+            if target not in index:
+                visit(target)
+                low[name] = min(low[name], low[target])
+            elif target in on_stack:
+                low[name] = min(low[name], index[target])
+        if low[name] == index[name]:
+            component = []
+            while True:
+                member = stack.pop()
+                on_stack.discard(member)
+                component.append(member)
+                if member == name:
+                    break
+            if len(component) > 1:
+                circles.append(sorted(component))
+
+    for name in graph:
+        if name not in index:
+            visit(name)
+    return circles
+
+
+def test_no_module_imports_a_higher_layer():
+    upward = _upward(GRAPH)
+    assert not upward, "\n".join(upward)
+
+
+def test_no_import_circle():
+    assert not _circles(GRAPH), f"import circles: {_circles(GRAPH)}"
+
+
+def test_the_checks_find_a_circle_and_an_upward_import():
+    """On a made-up graph: demos.make -> jobs.sweep -> demos.make is both."""
+    graph = {"demos.make": [("jobs.sweep", [], 1)], "jobs.sweep": [("demos.make", [], 2)]}
+    assert _circles(graph) == [["demos.make", "jobs.sweep"]]
+    assert _upward(graph) == [
+        "pngail_jax.demos.make (data) imports pngail_jax.jobs.sweep (jobs), line 1"
+    ]
+
+
+def test_the_graph_holds_every_kind_of_import():
+    """A function-body import (the package root's), ``from package import submodule``
+    (runner's), a plain ``from module import name`` with the names it takes."""
+    assert any(target == "checkpoint" for target, _, _ in GRAPH[""])
+    assert any(target == "jobs.sweep" for target, _, _ in GRAPH["runner"])
+    assert ("demos.files", ["load_numpy"]) in [(t, n) for t, n, _ in GRAPH["demos.released"]]
+
+
+def test_the_jobs_import_only_the_jobs_before_them():
+    for position, job in enumerate(JOB_ORDER):
+        for target, _, line in GRAPH[f"jobs.{job}"]:
+            if target.startswith("jobs."):
+                assert JOB_ORDER.index(target.removeprefix("jobs.")) < position, (
+                    f"jobs.{job} imports {target} (line {line}), which comes after it"
+                )
+    assert sorted(JOB_ORDER) == sorted(
+        name.removeprefix("jobs.") for name in MODULES if name.startswith("jobs.")
+    )
+
+
+def test_demos_reads_and_writes_data_only():
+    for name, imports in GRAPH.items():
+        if name == "demos" or name.startswith("demos."):
+            for target, _, line in imports:
+                assert target.split(".")[0] in ("demos", "envs"), (
+                    f"pngail_jax.{name} imports pngail_jax.{target} (line {line}): demos/ "
+                    "imports envs alone"
+                )
+    assert not GRAPH["demos.tables"], "the released-file tables import nothing"
+
+
+def test_no_private_name_is_imported_across_files():
+    private = [
+        f"pngail_jax.{name} imports {target}.{imported} (line {line})"
+        for name, imports in GRAPH.items()
+        for target, names, line in imports
+        for imported in names
+        if imported.startswith("_")
+    ]
+    assert not private, "\n".join(private)
+
+
+@pytest.mark.parametrize("name", sorted(MODULES))
+def test_no_module_is_too_long(name):
+    lines = len(MODULES[name].read_text().splitlines())
+    limit = LONGEST_JOB if name.startswith("jobs.") else LONGEST_MODULE
+    assert lines <= limit, f"pngail_jax.{name} has {lines} lines (at most {limit})"
