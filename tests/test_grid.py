@@ -323,32 +323,44 @@ def test_two_processes_match_one():
     import subprocess
     import sys
 
-    with socket.socket() as probe:
-        probe.bind(("localhost", 0))
-        port = probe.getsockname()[1]
-    code = (
-        "import json, runpy, sys\n"
-        f"namespace = runpy.run_path({__file__!r})\n"
-        f"result = namespace['multihost_worker'](int(sys.argv[1]), {port})\n"
-        "print('RESULT ' + json.dumps(result))\n"
-    )
-    env = {**os.environ, "PYTHONPATH": os.getcwd()}
-    processes = [
-        subprocess.Popen(
-            [sys.executable, "-c", code, str(i)],
-            env=env,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
+    def attempt() -> tuple[list, str]:
+        """Both processes on a port free a moment ago ((results, "") or ([], their stderr)):
+        another program may take it before the coordinator binds it, so a failed start is
+        tried again on a new port."""
+        with socket.socket() as probe:
+            probe.bind(("localhost", 0))
+            port = probe.getsockname()[1]
+        code = (
+            "import json, runpy, sys\n"
+            f"namespace = runpy.run_path({__file__!r})\n"
+            f"result = namespace['multihost_worker'](int(sys.argv[1]), {port})\n"
+            "print('RESULT ' + json.dumps(result))\n"
         )
-        for i in range(2)
-    ]
-    outputs = [process.communicate(timeout=600) for process in processes]
-    results = []
-    for process, (stdout, stderr) in zip(processes, outputs, strict=True):
-        lines = [line for line in stdout.splitlines() if line.startswith("RESULT ")]
-        assert process.returncode == 0 and lines, stderr[-3000:]
-        results.append(json.loads(lines[-1].removeprefix("RESULT ")))
+        env = {**os.environ, "PYTHONPATH": os.getcwd()}
+        processes = [
+            subprocess.Popen(
+                [sys.executable, "-c", code, str(i)],
+                env=env,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                text=True,
+            )
+            for i in range(2)
+        ]
+        outputs = [process.communicate(timeout=600) for process in processes]
+        results, errors = [], ""
+        for process, (stdout, stderr) in zip(processes, outputs, strict=True):
+            lines = [line for line in stdout.splitlines() if line.startswith("RESULT ")]
+            if process.returncode != 0 or not lines:
+                return [], errors + stderr[-3000:]
+            results.append(json.loads(lines[-1].removeprefix("RESULT ")))
+        return results, ""
+
+    for _ in range(3):
+        results, errors = attempt()
+        if results:
+            break
+    assert results, errors
     assert results[0] == results[1]  # both processes see the whole gathered grid
     _, _, single = chunked_grid_results(chunks=2)
     for name in COMPARED:

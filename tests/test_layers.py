@@ -39,8 +39,8 @@ LAYERS = [
 
 # The jobs in their dependency order: each imports only those before it.
 JOB_ORDER = [
-    "errors", "chunks", "seeds", "make_demos", "train_rl", "compare_settings", "build", "record",
-    "results", "sweep",
+    "errors", "classify", "chunks", "seeds", "make_demos", "train_rl", "compare_settings",
+    "build", "record", "results", "sweep",
 ]  # fmt: skip
 LONGEST_MODULE = 700
 LONGEST_JOB = 400

@@ -8,6 +8,7 @@ import pytest
 from conftest import sigterm_to_self
 
 from pngail_jax.demos import Demonstrations
+from pngail_jax.jobs.errors import RunError
 from pngail_jax.methods import display_name
 from pngail_jax.programs import paper
 
@@ -207,10 +208,10 @@ def test_a_resume_checks_the_authors_files_and_its_own_options(tmp_path):
     released = {"Pendulum-v1": mixture}
     options = {"inputs": paper.released_inputs(released)}
     paper.check_paper_inputs(tmp_path, options, released)  # unchanged: goes on
-    with pytest.raises(SystemExit, match="authors' files for Pendulum-v1 are no longer found"):
+    with pytest.raises(RunError, match="authors' files for Pendulum-v1 are no longer found"):
         paper.check_paper_inputs(tmp_path, options, {})  # the folder moved
     np.save(mixture, np.ones((4, 4), np.float32))
-    with pytest.raises(SystemExit, match=f"demonstrations {mixture} has changed"):
+    with pytest.raises(RunError, match=f"demonstrations {mixture} has changed"):
         paper.check_paper_inputs(tmp_path, options, released)
     run = tmp_path / "run"
     run.mkdir()

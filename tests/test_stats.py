@@ -199,7 +199,10 @@ def test_bootstrap_rejects_bad_arguments():
         bootstrap_ci([1.0, 2.0], strata=[0])
 
 
-def test_bootstrap_of_five_values_is_fast():
+def test_bootstrap_of_five_values_is_not_pathologically_slow():
+    """A guard against a per-resample Python loop (2,000 resamples of a summary table's every
+    cell), with a margin no shared machine misses: about 1 ms measured, 0.5 s allowed. The
+    speed itself is measured by benchmarks/, not here."""
     values = [0.1, 0.5, 0.3, 0.9, 0.7]
     bootstrap_ci(values)
     best = math.inf
@@ -207,7 +210,7 @@ def test_bootstrap_of_five_values_is_fast():
         start = time.perf_counter()
         bootstrap_ci(values)
         best = min(best, time.perf_counter() - start)
-    assert best < 0.01
+    assert best < 0.5
 
 
 # ---------------------------------------------------------------- probability of improvement

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from jax.flatten_util import ravel_pytree
 
-from pngail_jax.networks import GaussianPolicy, gaussian_kl, gaussian_log_prob
+from pngail_jax.networks import GaussianPolicy, gaussian_entropy, gaussian_kl, gaussian_log_prob
 from pngail_jax.rl.train import gauss_newton_fisher_product
 from pngail_jax.rl.trpo import (
     backtracking_line_search,
@@ -120,3 +120,86 @@ def test_fisher_subsample_keeps_every_environment():
     np.testing.assert_array_equal(fisher_sample_indices(config), [0, 1, 2, 3, 12, 13, 14, 15])
     every = fisher_sample_indices(TRPOConfig(num_envs=4, unroll_length=6, num_value_minibatches=2))
     np.testing.assert_array_equal(every, np.arange(24))
+
+
+def _numpy_gaussian(rng, shape):
+    return rng.normal(size=shape), rng.normal(scale=0.5, size=shape)
+
+
+def test_gaussian_log_prob_kl_and_entropy_against_numpy():
+    """The diagonal Gaussian's formulas, written out independently in float64:
+    log N(a; m, s^2) = sum -(a - m)^2 / 2s^2 - log s - log(2 pi) / 2;
+    KL(N0 || N1) = sum log(s1 / s0) + (s0^2 + (m0 - m1)^2) / 2 s1^2 - 1/2;
+    H = sum log s + log(2 pi e) / 2."""
+    rng = np.random.default_rng(3)
+    (mean_0, log_std_0), (mean_1, log_std_1) = (_numpy_gaussian(rng, (7, 3)) for _ in range(2))
+    action = rng.normal(size=(7, 3))
+    s0, s1 = np.exp(log_std_0), np.exp(log_std_1)
+    log_prob = np.sum(
+        -((action - mean_0) ** 2) / (2 * s0**2) - np.log(s0) - 0.5 * np.log(2 * np.pi), axis=-1
+    )
+    kl = np.sum(np.log(s1 / s0) + (s0**2 + (mean_0 - mean_1) ** 2) / (2 * s1**2) - 0.5, axis=-1)
+    entropy = np.sum(np.log(s0[0]) + 0.5 * np.log(2 * np.pi * np.e))
+    f32 = lambda x: jnp.asarray(x, jnp.float32)  # noqa: E731
+    np.testing.assert_allclose(
+        gaussian_log_prob(f32(mean_0), f32(log_std_0), f32(action)), log_prob, rtol=1e-5
+    )
+    np.testing.assert_allclose(
+        gaussian_kl(f32(mean_0), f32(log_std_0), f32(mean_1), f32(log_std_1)), kl, rtol=1e-5
+    )
+    np.testing.assert_allclose(gaussian_entropy(f32(log_std_0[0])), entropy, rtol=1e-5)
+    # KL of a distribution with itself is 0, and KL is never negative
+    np.testing.assert_allclose(
+        gaussian_kl(f32(mean_0), f32(log_std_0), f32(mean_0), f32(log_std_0)), 0.0, atol=1e-6
+    )
+    assert (kl >= 0).all()
+
+
+def test_the_surrogate_loss_and_its_gradient_against_numpy():
+    """TRPO's surrogate -mean(A exp(log pi(a|s) - log pi_old(a|s))) at a policy's parameters,
+    against the same formula from the policy's outputs in NumPy; at the old parameters the
+    ratio is 1, so the loss is -mean(A) and its gradient is -mean(A grad log pi)."""
+    from pngail_jax import envs
+    from pngail_jax.rl.train import TRPO, TRPOConfig, TRPOHyperparams
+
+    trpo = TRPO(
+        TRPOConfig(num_envs=2, unroll_length=4, hidden_sizes=(5,), num_value_minibatches=2),
+        envs.make("Pendulum-v1"),
+    )
+    params = trpo.policy.init(jax.random.key(1), jnp.zeros(3))
+    rng = np.random.default_rng(4)
+    obs = jnp.asarray(rng.normal(size=(8, 3)), jnp.float32)
+    actions = jnp.asarray(rng.normal(size=(8, 1)), jnp.float32)
+    advantages = jnp.asarray(rng.normal(size=8), jnp.float32)
+    mean, log_std = trpo.policy.apply(params, obs)
+    old_log_prob = gaussian_log_prob(mean, log_std, actions) + jnp.asarray(
+        rng.normal(scale=0.1, size=8), jnp.float32
+    )  # an older policy than these parameters
+    objective = trpo.policy_objective(
+        TRPOHyperparams.create(), params, obs, actions, old_log_prob, advantages
+    )
+    ratio = np.exp(np.asarray(gaussian_log_prob(mean, log_std, actions) - old_log_prob))
+    np.testing.assert_allclose(
+        objective.surrogate_loss(objective.flat_params),
+        -np.mean(np.asarray(advantages) * ratio),
+        rtol=1e-5,
+    )
+    # with the old log-probabilities those of these parameters: ratio 1, gradient of -mean(A log pi)
+    current = gaussian_log_prob(mean, log_std, actions)
+    objective = trpo.policy_objective(
+        TRPOHyperparams.create(), params, obs, actions, current, advantages
+    )
+    np.testing.assert_allclose(
+        objective.surrogate_loss(objective.flat_params), -np.mean(advantages), rtol=1e-5
+    )
+
+    def log_prob_loss(flat):
+        mean, log_std = trpo.policy.apply(objective.unravel(flat), obs)
+        return -jnp.mean(advantages * gaussian_log_prob(mean, log_std, actions))
+
+    np.testing.assert_allclose(
+        jax.grad(objective.surrogate_loss)(objective.flat_params),
+        jax.grad(log_prob_loss)(objective.flat_params),
+        rtol=1e-4,
+        atol=1e-6,
+    )

@@ -4,6 +4,7 @@ before it):
 
 - ``errors``: ``RunError``, the one-line refusal every job raises; ``refusals``, which turns
   an output claim's refusal into one.
+- ``classify``: ``classify``, Table 1 and 5's classifiers on a demonstrations file.
 - ``chunks``: the one chunk step (run a compiled chunk, fetch, join its metrics, time it,
   print its line, checkpoint), the loop over chunks, stopping at a checkpoint, resuming.
 - ``seeds``: ``train_seeds``, a TRPO run of stacked seeds.

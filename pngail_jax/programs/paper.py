@@ -26,11 +26,9 @@ import time
 from pathlib import Path
 
 from pngail_jax import envs
-from pngail_jax.integrity import read_json, seal, write_json
-from pngail_jax.jobs.errors import RunError, refusals
-from pngail_jax.outputs import claimed
-from pngail_jax.paper.grids import demo_paths, grid_config, plan_eta, released_files, run_grids
-from pngail_jax.paper.page import weak_expert_notes, write_page
+from pngail_jax.jobs.errors import RunError
+from pngail_jax.paper.grids import grid_config, plan_eta
+from pngail_jax.paper.page import weak_expert_notes
 from pngail_jax.paper.plan import (
     BUDGETS,
     FIG2_METHODS,
@@ -42,6 +40,7 @@ from pngail_jax.paper.plan import (
     main_grid,
     plan,
 )
+from pngail_jax.paper.run import check_paper_inputs, paper_options, released_inputs, run_paper
 from pngail_jax.programs.cli import (
     ArgumentParser,
     HelpFormatter,
@@ -167,7 +166,6 @@ DEPRECATED_FLAGS = {"--budget": "--preset"}
 
 def command_line(argv) -> list[str]:
     """The command's words, quoted for a shell, deprecated flags in their current spelling."""
-    import shlex
 
     words = current_spellings(sys.argv[1:] if argv is None else argv, DEPRECATED_FLAGS)
     for index, word in enumerate(words):  # a renamed preset by its name now
@@ -181,128 +179,25 @@ def command_line(argv) -> list[str]:
 
 def main(argv=None) -> Path:
     args = parse_args(argv)
-    out = args.resume if args.resume is not None else args.out
     resume = args.resume is not None
+    out = args.resume if resume else args.out
+    use_compile_cache(args)
+    options = None
+    if not resume:
+        options = paper_options(
+            args.budget,
+            args.figures,
+            args.tasks,
+            args.released_demos,
+            args.physics,
+            " ".join([*invoked_as("paper"), *command_line(argv)]),
+        )
     try:
-        with signals_stop_at_a_checkpoint(), refusals():
-            with claimed(out, "paper", overwrite=args.overwrite, resume=resume) as claim:
-                return run_paper(args, argv, claim)
+        with signals_stop_at_a_checkpoint():
+            return run_paper(options, out, resume=resume, overwrite=args.overwrite)
     except RunError as error:  # a grid's or a demonstration making's refusal, one line
         raise SystemExit(str(error)) from None
     except KeyboardInterrupt:
         raise SystemExit(
             f"\ninterrupted: finished grids are kept; --resume {out} continues the plan"
         ) from None
-
-
-def run_paper(args, argv, claim) -> Path:
-    use_compile_cache(args)
-    out, options = run_options(args, argv)
-    budget = BUDGETS[options["budget"]]
-    released_dir = Path(options["released_demos"]) if options["released_demos"] else None
-    released = released_files(released_dir, options["envs"])
-    if args.resume is None:
-        options["inputs"] = released_inputs(released)
-    else:
-        check_paper_inputs(out, options, released)
-    figures, grids = plan(options["only"], options["envs"], set(released))
-    if not figures:
-        raise SystemExit(
-            f"none of {', '.join(options['only'])} has a panel on {', '.join(options['envs'])} "
-            "(Fig. 4: Ant, Hopper, Pendulum-v1; Fig. 5 / Table 4: Pendulum-v1, Ant; Fig. 6 and "
-            "7: Pendulum-v1; Fig. 8 and 10: Ant; Fig. 9: Ant, Pendulum-v1)"
-        )
-    if args.resume is None:
-        claim.prepare()
-        write_json(out / "paper.json", options)
-        seal(out / PAPER_SEAL, options)
-    print(
-        f"{len(figures)} figure(s) from {len(grids)} grid(s) on {', '.join(options['envs'])} "
-        f"at the {options['budget']} preset; the authors' files for: "
-        f"{', '.join(released) or 'none'} -> {out}",
-        flush=True,
-    )
-    physics = options.get("physics")  # absent from runs begun before the flag existed
-    demos = demo_paths(grids, out, budget, released, physics)
-    timings = run_grids(grids, demos, out, budget, physics, shlex.split(options["command"]))
-    page = write_page(out, options, figures, grids, timings)
-    print(f"\nwrote {page}")
-    return page
-
-
-PAPER_SEAL = ".paper.sealed.json"
-
-
-def released_inputs(released: dict[str, Path]) -> dict[str, dict]:
-    """``{role: integrity.file_record}`` of the authors' files (and their confidence files)
-    a plan reads, which ``--resume`` checks."""
-    from pngail_jax.demos import released_confidence_path
-    from pngail_jax.integrity import file_record
-
-    records = {}
-    for task, path in released.items():
-        records[f"{task} demonstrations"] = file_record(path)
-        records[f"{task} confidences"] = file_record(released_confidence_path(path))
-    return records
-
-
-def check_paper_inputs(out: Path, options: dict, released: dict[str, Path]) -> None:
-    """Refuses a resume whose authors' files are gone, changed or no longer found (a moved
-    folder would otherwise make demonstrations and label the page as before)."""
-    from pngail_jax.integrity import changed_inputs
-
-    recorded = options.get("inputs")
-    if recorded is None:  # a run from before inputs were recorded
-        return
-    changes = changed_inputs(recorded)
-    missing = sorted(
-        role.removesuffix(" demonstrations")
-        for role in recorded
-        if role.endswith(" demonstrations") and role.removesuffix(" demonstrations") not in released
-    )
-    if missing and not changes:
-        changes = [f"the authors' files for {', '.join(missing)} are no longer found"]
-    if changes:
-        raise SystemExit(
-            f"--resume {out}: {'; '.join(changes)}. The rest of the plan would run on other "
-            "data than its start: restore the files (the folder in paper.json's "
-            "released_demos), or start a new run"
-        )
-
-
-def run_options(args, argv) -> tuple[Path, dict]:
-    """The output directory and the run's options: a resumed run's paper.json (checked
-    against its seal and known presets), else the flags'."""
-    from pngail_jax.integrity import IntegrityError, sealed_differences
-
-    if args.resume is not None:
-        path = args.resume / "paper.json"
-        try:
-            options = read_json(path, "paper run options")
-            changes = sealed_differences(args.resume / PAPER_SEAL, options)
-        except IntegrityError as error:
-            raise SystemExit(f"--resume {args.resume}: {error}") from None
-        if changes:
-            raise SystemExit(
-                f"--resume {args.resume}: paper.json was changed since the run began ("
-                + "; ".join(changes[:5])
-                + "): restore it, or start a new run"
-            )
-        if not isinstance(options, dict) or "budget" not in options:
-            raise SystemExit(f"--resume {args.resume}: {path} is not a paper run's options")
-        budget = RENAMED_BUDGETS.get(options["budget"], options["budget"])
-        if budget not in BUDGETS:
-            raise SystemExit(
-                f"--resume {args.resume}: {path} names an unknown preset {options['budget']!r} "
-                f"(known: {', '.join(BUDGETS)})"
-            )
-        options["budget"] = budget
-        return args.resume, options
-    return args.out, {
-        "budget": args.budget,
-        "only": args.figures,
-        "envs": args.tasks,
-        "released_demos": None if args.released_demos is None else str(args.released_demos),
-        "physics": args.physics,
-        "command": " ".join([*invoked_as("paper"), *command_line(argv)]),
-    }

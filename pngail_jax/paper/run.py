@@ -1,0 +1,157 @@
+"""``run_paper(options, out)``: the paper's plan as one job: its options (``paper.json``,
+sealed), the demonstrations of every grid, the grids (each a sweep, resumed or kept) and the
+results page. ``python -m experiments.paper`` is its flags and one call of it.
+
+    from pngail_jax.paper.run import paper_options, run_paper
+
+    run_paper(paper_options(budget="check", only=["fig2"], envs=["Pendulum-v1"]), "results/p")
+"""
+
+from __future__ import annotations
+
+import shlex
+from pathlib import Path
+
+from pngail_jax.demos import released_confidence_path
+from pngail_jax.integrity import (
+    IntegrityError,
+    changed_inputs,
+    file_record,
+    read_json,
+    seal,
+    sealed_differences,
+    write_json,
+)
+from pngail_jax.jobs.errors import RunError, refusals
+from pngail_jax.outputs import claimed
+from pngail_jax.paper.grids import demo_paths, released_files, run_grids
+from pngail_jax.paper.page import write_page
+from pngail_jax.paper.plan import BUDGETS, FIGURES, PAPER_TASKS, RENAMED_BUDGETS, plan
+
+PROGRAM = "paper"
+
+
+def paper_options(
+    budget: str = "check",
+    only=None,
+    envs=None,
+    released_demos=None,
+    physics: str | None = None,
+    command: str = "python -m experiments.paper",
+) -> dict:
+    """A new plan's options (paper.json): the preset, the figures (None: all), the tasks
+    (None: the paper's six), a folder of the authors' files, the physics engine, and the
+    command line the page says it was made with."""
+    if budget not in BUDGETS:
+        raise RunError(f"unknown preset {budget!r} (known: {', '.join(BUDGETS)})")
+    return {
+        "budget": budget,
+        "only": list(FIGURES) if only is None else list(only),
+        "envs": list(PAPER_TASKS) if envs is None else list(envs),
+        "released_demos": None if released_demos is None else str(released_demos),
+        "physics": physics,
+        "command": command,
+    }
+
+
+def run_paper(options: dict | None, out, *, resume: bool = False, overwrite: bool = False):
+    """Runs the plan of ``options`` (``paper_options``) into ``out`` (new, empty, or with
+    ``overwrite`` a paper run), or with ``resume`` continues the plan in ``out`` (``options``
+    None: its paper.json's). Returns the page's path. Raises ``RunError`` with one line."""
+    out = Path(out)
+    with refusals(), claimed(out, PROGRAM, overwrite=overwrite, resume=resume) as claim:
+        if resume:
+            options = saved_options(out)
+        budget = BUDGETS[options["budget"]]
+        released_dir = Path(options["released_demos"]) if options["released_demos"] else None
+        released = released_files(released_dir, options["envs"])
+        if not resume:
+            options["inputs"] = released_inputs(released)
+        else:
+            check_paper_inputs(out, options, released)
+        figures, grids = plan(options["only"], options["envs"], set(released))
+        if not figures:
+            raise RunError(
+                f"none of {', '.join(options['only'])} has a panel on "
+                f"{', '.join(options['envs'])} (Fig. 4: Ant, Hopper, Pendulum-v1; Fig. 5 / "
+                "Table 4: Pendulum-v1, Ant; Fig. 6 and 7: Pendulum-v1; Fig. 8 and 10: Ant; "
+                "Fig. 9: Ant, Pendulum-v1)"
+            )
+        if not resume:
+            claim.prepare()
+            write_json(out / "paper.json", options)
+            seal(out / PAPER_SEAL, options)
+        print(
+            f"{len(figures)} figure(s) from {len(grids)} grid(s) on "
+            f"{', '.join(options['envs'])} at the {options['budget']} preset; the authors' "
+            f"files for: {', '.join(released) or 'none'} -> {out}",
+            flush=True,
+        )
+        physics = options.get("physics")  # absent from runs begun before the flag existed
+        demos = demo_paths(grids, out, budget, released, physics)
+        command = shlex.split(options["command"])
+        timings = run_grids(grids, demos, out, budget, physics, command)
+        page = write_page(out, options, figures, grids, timings)
+    print(f"\nwrote {page}")
+    return page
+
+
+def saved_options(out: Path) -> dict:
+    """A resumed plan's options: its paper.json, checked against its seal and the presets."""
+    path = out / "paper.json"
+    try:
+        options = read_json(path, "paper run options")
+        changes = sealed_differences(out / PAPER_SEAL, options)
+    except IntegrityError as error:
+        raise RunError(f"--resume {out}: {error}") from None
+    if changes:
+        raise RunError(
+            f"--resume {out}: paper.json was changed since the run began ("
+            + "; ".join(changes[:5])
+            + "): restore it, or start a new run"
+        )
+    if not isinstance(options, dict) or "budget" not in options:
+        raise RunError(f"--resume {out}: {path} is not a paper run's options")
+    budget = RENAMED_BUDGETS.get(options["budget"], options["budget"])
+    if budget not in BUDGETS:
+        raise RunError(
+            f"--resume {out}: {path} names an unknown preset {options['budget']!r} "
+            f"(known: {', '.join(BUDGETS)})"
+        )
+    options["budget"] = budget
+    return options
+
+
+PAPER_SEAL = ".paper.sealed.json"
+
+
+def released_inputs(released: dict[str, Path]) -> dict[str, dict]:
+    """``{role: integrity.file_record}`` of the authors' files (and their confidence files)
+    a plan reads, which ``--resume`` checks."""
+    records = {}
+    for task, path in released.items():
+        records[f"{task} demonstrations"] = file_record(path)
+        records[f"{task} confidences"] = file_record(released_confidence_path(path))
+    return records
+
+
+def check_paper_inputs(out: Path, options: dict, released: dict[str, Path]) -> None:
+    """Refuses a resume whose authors' files are gone, changed or no longer found (a moved
+    folder would otherwise make demonstrations and label the page as before)."""
+    recorded = options.get("inputs")
+    if recorded is None:  # a run from before inputs were recorded
+        return
+    changes = changed_inputs(recorded)
+    missing = sorted(
+        role.removesuffix(" demonstrations")
+        for role in recorded
+        if role.endswith(" demonstrations") and role.removesuffix(" demonstrations") not in released
+    )
+    if missing and not changes:
+        changes = [f"the authors' files for {', '.join(missing)} are no longer found"]
+    if changes:
+        raise RunError(
+            f"--resume {out}: {'; '.join(changes)}. The rest of the plan would run on other "
+            "data than its start: restore the files (the folder in paper.json's "
+            "released_demos), or start a new run"
+        )

@@ -1,0 +1,78 @@
+"""compare_settings: each arm is the train_rl run its flags give, and the verdict is the one
+docs/performance.md states (not worse: mean >= the baseline's mean - 1 s.e., each arm on the
+physics it trained on)."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from pngail_jax.jobs import compare_settings as job
+from pngail_jax.programs import train_rl
+from pngail_jax.validation import ConfigError
+
+
+@pytest.mark.parametrize("arm", sorted(job.ARMS))
+def test_each_arm_is_the_train_rl_run_of_its_flags(arm, tmp_path):
+    config = job.CompareSettingsConfig(env="Hopper-v4", arms=(arm,), iterations=100, seeds=2)
+    flags = [
+        *("--env", "Hopper-v4", "--seeds", "2", "--seed", "0", "--iterations", "100"),
+        *("--eval-every", "50", "--fisher", "gauss_newton", "--out", str(tmp_path / arm)),
+        *job.arm_flags(arm),
+    ]
+    assert config.arm_config(arm) == train_rl.config_of(train_rl.parse_args(flags))
+
+
+def test_arms_are_checked_in_one_line():
+    with pytest.raises(ConfigError, match="unknown arm 'fastest'"):
+        job.CompareSettingsConfig(env="Hopper-v4", arms=("table", "fastest"))
+    with pytest.raises(ConfigError, match="'table' is not among the arms"):
+        job.CompareSettingsConfig(env="Hopper-v4", arms=("reference",), baseline="table")
+    with pytest.raises(ConfigError, match="Pendulum-v1 has no MJX solver"):
+        job.CompareSettingsConfig(env="Pendulum-v1", arms=("reference-fast",))
+    assert job.CompareSettingsConfig(env="Hopper-v4", arms=("table", "reference")).baseline == (
+        "table"
+    )
+
+
+def _result(final_own, final_fast=None, env_options=None):
+    arrays = {"own": np.asarray(final_own, float)}
+    if final_fast is not None:
+        arrays["fast"] = np.asarray(final_fast, float)
+    return {
+        "trpo": {"num_envs": 25, "unroll_length": 200, "normalize_observations": False},
+        "env_options": env_options or {},
+        "fisher_subsample": 1,
+        "final_return": {k: v.tolist() for k, v in arrays.items()},
+        "final_return_mean_se": {k: job.mean_and_standard_error(v) for k, v in arrays.items()},
+        "average_eval_return_mean_se": (0.0, 0.0),
+    }
+
+
+def test_the_verdict_is_mean_at_least_the_baselines_mean_minus_one_standard_error(tmp_path):
+    """The baseline (own solver) has mean 100, s.e. 10: an arm at 91 is not worse, one at 89
+    is; an arm trained on the fast solver is judged by its fast-solver returns."""
+    config = job.CompareSettingsConfig(env="Hopper-v4", arms=("table", "reference", "wide-fast"))
+    assert job.mean_and_standard_error([90, 110]) == (100.0, 10.0)
+    results = {
+        "table": _result([90, 110]),
+        "reference": _result([89, 89]),
+        "wide-fast": _result([0, 0], [91, 91], env_options={"solver_iterations": 1}),
+    }
+    steps = np.array([10, 20])
+    curves = {arm: (steps, np.ones((2, 2))) for arm in results}
+    summary = job.write_comparison(config, tmp_path, results, curves)
+    verdicts = {arm: r["not_worse_than_baseline"] for arm, r in summary["arms"].items()}
+    assert verdicts == {"table": True, "reference": False, "wide-fast": True}
+    assert summary["arms"]["wide-fast"]["trained_on"] == "fast"
+    saved = json.loads((tmp_path / job.COMPARISON_FILE).read_text())
+    assert saved["arms"]["reference"]["not_worse_than_baseline"] is False
+    markdown = (tmp_path / "comparison.md").read_text()
+    assert "| reference | 25 x 200, own solver | 89.0 ± 0.0 |" in markdown
+    assert "| NO |" in markdown
+
+
+def test_one_seed_has_no_standard_error():
+    mean, se = job.mean_and_standard_error([3.0])
+    assert mean == 3.0 and math.isnan(se)
