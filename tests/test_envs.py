@@ -4,7 +4,10 @@ Compiling a MuJoCo task takes 20-40 s on a 2-core CPU, so each environment compi
 function once (a class-scoped fixture): two parallel slots, reset, then a little more than
 one full episode of auto-reset steps under random actions (20% beyond the action bounds, so
 the environments' clipping runs too). Every assertion below reads that one trace. One class
-per environment lets ``pytest -n 2 --dist loadscope`` compile two environments at once.
+per environment lets ``pytest -n 2 --dist loadscope`` compile two environments at once. The
+MJX tasks run with a 100-step time limit (each MJX step is milliseconds on a CPU, and the
+contract is about the limit set, whatever it is); gymnasium's tasks on the C engine and
+Pendulum-v1 keep their own 1000 and 200.
 """
 
 import jax
@@ -15,6 +18,7 @@ import pytest
 from pngail_jax import envs
 
 NUM_SLOTS = 2
+MJX_OPTIONS = {"max_episode_steps": 100}
 EXTRA_STEPS = 5  # past max_episode_steps, so every slot resets at least once
 
 
@@ -42,11 +46,12 @@ def _rollout(env, key):
 
 class EnvContract:
     env_name: str
+    options: dict = {}  # noqa: RUF012  (read only)
 
     @pytest.fixture(scope="class")
     @classmethod
     def rollout(cls):
-        env = envs.make(cls.env_name)
+        env = envs.make(cls.env_name, **cls.options)
         first, trace = _rollout(env, jax.random.key(0))
         return env, jax.device_get(first), jax.device_get(trace)
 
@@ -140,22 +145,27 @@ class TestPendulum(EnvContract):
 
 class TestAnt(EnvContract):
     env_name = "Ant"
+    options = MJX_OPTIONS
 
 
 class TestHalfCheetah(EnvContract):
     env_name = "HalfCheetah"
+    options = MJX_OPTIONS
 
 
 class TestHopper(EnvContract):
     env_name = "Hopper"
+    options = MJX_OPTIONS
 
 
 class TestWalker2d(EnvContract):
     env_name = "Walker2d"
+    options = MJX_OPTIONS
 
 
 class TestSwimmer(EnvContract):
     env_name = "Swimmer"
+    options = MJX_OPTIONS
 
 
 # gymnasium's tasks on the C engine (the tests run on a CPU): no XLA physics to compile.
