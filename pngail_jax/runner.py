@@ -3,6 +3,8 @@ modules it calls). This module re-exports its old names for one minor version (u
 and will then be removed; import from ``pngail_jax`` (``run``, ``RunConfig``,
 ``RunResult``, ``RunError``) or from the jobs."""
 
+import warnings
+
 from pngail_jax.jobs.build import (  # noqa: F401
     DEMO_CACHE,
     RANDOM_RETURN_EPISODES,
@@ -47,3 +49,10 @@ from pngail_jax.jobs.results import (  # noqa: F401
 )
 from pngail_jax.jobs.seeds import train_seeds  # noqa: F401
 from pngail_jax.jobs.sweep import PROGRAM, configure_devices, run  # noqa: F401
+
+warnings.warn(
+    "pngail_jax.runner is now pngail_jax.jobs (run, RunResult, RunError: from pngail_jax); "
+    "pngail_jax.runner goes in 0.3",
+    DeprecationWarning,
+    stacklevel=2,
+)

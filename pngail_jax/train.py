@@ -1,5 +1,6 @@
 """Deprecated: ``pngail_jax.train`` is now ``pngail_jax.adversarial`` (and ``Hyperparams`` is
-``AdversarialHyperparams``). This module re-exports them for one minor version."""
+``AdversarialHyperparams``). This module re-exports them until 0.3 and is removed
+then, with ``pngail_jax.runner``."""
 
 import warnings
 
@@ -9,7 +10,8 @@ from pngail_jax.adversarial import AdversarialHyperparams
 Hyperparams = AdversarialHyperparams
 
 warnings.warn(
-    "pngail_jax.train is now pngail_jax.adversarial (Hyperparams: AdversarialHyperparams)",
+    "pngail_jax.train is now pngail_jax.adversarial (Hyperparams: AdversarialHyperparams); "
+    "pngail_jax.train goes in 0.3",
     DeprecationWarning,
     stacklevel=2,
 )

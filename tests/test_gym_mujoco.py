@@ -183,8 +183,8 @@ def test_c_engine_sweep_resumed_after_a_kill_equals_the_uninterrupted_run(tmp_pa
     A copy of a finished run cut back to its first checkpoint (what a kill after it leaves;
     tests/test_sweep.py kills a run for real) resumes to the same metrics, bit for bit;
     config.json records the engine, and a resume keeps it."""
-    from pngail_jax import runner
     from pngail_jax.demos import Demonstrations, save_npz
+    from pngail_jax.jobs import record
     from pngail_jax.programs import sweep
 
     rng = np.random.default_rng(0)
@@ -232,7 +232,7 @@ def test_c_engine_sweep_resumed_after_a_kill_equals_the_uninterrupted_run(tmp_pa
     shutil.rmtree(killed / "policies")
     for name in ("metrics.csv", "summary.json", "summary.md", "curves.png"):
         (killed / name).unlink()
-    assert runner.load_saved(killed).config.settings.physics == "c"
+    assert record.load_saved(killed).config.settings.physics == "c"
     sweep.main(["--resume", str(killed)])
     assert metrics_numbers(killed / "metrics.csv") == metrics_numbers(whole / "metrics.csv")
     resumed, uninterrupted = (

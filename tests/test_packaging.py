@@ -28,3 +28,17 @@ def test_the_old_module_name_still_imports_with_a_warning():
     assert (
         old.Hyperparams is AdversarialHyperparams and old.AdversarialTrainer is AdversarialTrainer
     )
+
+
+def test_the_runners_old_names_still_import_with_a_warning():
+    import importlib
+    import sys
+
+    from pngail_jax.jobs import build, chunks, record, sweep
+
+    sys.modules.pop("pngail_jax.runner", None)
+    with pytest.warns(DeprecationWarning, match="pngail_jax.runner is now pngail_jax.jobs"):
+        old = importlib.import_module("pngail_jax.runner")
+    assert old.run is sweep.run and old.build is build.build
+    assert old.load_saved is record.load_saved and old.train_seeds.__module__.endswith("seeds")
+    assert old.intact_checkpoint is chunks.intact_checkpoint

@@ -1,4 +1,5 @@
-"""pngail_jax.runner: a whole run from Python, the same run the sweep program makes."""
+"""run(config, out): a whole run from Python (pngail_jax.jobs.sweep), the same run the sweep
+program makes."""
 
 from __future__ import annotations
 
