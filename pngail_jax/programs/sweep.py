@@ -234,7 +234,7 @@ def _task_of(demos: str | None) -> str | None:
     return None if demos is None else released_task(demos)
 
 
-# -- starting: devices, compilation cache, multi-host; then the runner ----------------------
+# -- starting: devices, compilation cache, multi-host; then the sweep job ----------------------
 
 
 def start(invocation: Invocation) -> tuple[RunConfig, record.SavedRun | None]:
