@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 
 from pngail_jax.jobs import compare_settings as job
+from pngail_jax.jobs.train_rl import TrainRLConfig
 from pngail_jax.programs import train_rl
+from pngail_jax.programs.cli import config_from
 from pngail_jax.validation import ConfigError
 
 
@@ -21,7 +23,7 @@ def test_each_arm_is_the_train_rl_run_of_its_flags(arm, tmp_path):
         *("--eval-every", "50", "--fisher", "gauss_newton", "--out", str(tmp_path / arm)),
         *job.arm_flags(arm),
     ]
-    assert config.arm_config(arm) == train_rl.config_of(train_rl.parse_args(flags))
+    assert config.arm_config(arm) == config_from(TrainRLConfig, train_rl.parse_args(flags))
 
 
 def test_arms_are_checked_in_one_line():

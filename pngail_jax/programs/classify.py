@@ -20,6 +20,7 @@ from pngail_jax.programs.cli import (
     ArgumentParser,
     HelpFormatter,
     check_positive,
+    config_from,
     known_names,
     note_deprecated,
     path_argument,
@@ -138,30 +139,11 @@ DEPRECATED_FLAGS = {
 }
 
 
-def config_of(args) -> ClassifyConfig:
-    """The job's config of checked flags."""
-    return ClassifyConfig(
-        demos=str(args.demos),
-        conf=None if args.conf is None else str(args.conf),
-        action_scale=args.action_scale,
-        env=args.env,
-        num_demos=args.num_demos,
-        label_ratio=args.label_ratio,
-        noise=args.noise,
-        classifiers=tuple(args.classifiers),
-        seeds=args.seeds,
-        seed=args.seed,
-        classifier_steps=args.classifier_steps,
-        batch_size=args.batch_size,
-        bsc_eps=args.bsc_eps,
-    )
-
-
 def main(argv=None) -> dict:
     """Trains the classifiers of the flags (every seed of each in one program), prints their
     errors (Table 1) and BSC risk variances (Table 5), and returns the summary."""
     args = parse_args(argv)
     try:
-        return classify(config_of(args), args.json)
+        return classify(config_from(ClassifyConfig, args), args.json)
     except RunError as error:
         raise SystemExit(str(error)) from None

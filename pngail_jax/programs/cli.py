@@ -56,6 +56,14 @@ def note_deprecated(argv: Sequence[str] | None, renamed: dict[str, str]) -> None
             print(f"note: {old} is deprecated; it is now {new}", file=sys.stderr)
 
 
+def config_from(config_type, args: argparse.Namespace):
+    """A job's config (a dataclass) of checked flags: each field from the flag of its name."""
+    import dataclasses
+
+    names = [field.name for field in dataclasses.fields(config_type)]
+    return config_type(**{name: getattr(args, name) for name in names if hasattr(args, name)})
+
+
 def current_spellings(argv: Sequence[str], renamed: dict[str, str]) -> list[str]:
     """``argv`` with each deprecated flag (``{old flag: new flag}``) spelled as it is now, so
     a recorded command line teaches the names to use."""

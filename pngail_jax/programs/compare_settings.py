@@ -38,6 +38,7 @@ from pngail_jax.programs.cli import (
     check_env,
     check_positive,
     claim_output,
+    config_from,
     known_names,
     note_deprecated,
     path_argument,
@@ -94,16 +95,7 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def main(argv=None) -> dict:
     args = parse_args(argv)
-    config = CompareSettingsConfig(
-        env=args.env,
-        arms=tuple(args.arms),
-        baseline=args.baseline,
-        seeds=args.seeds,
-        iterations=args.iterations,
-        eval_every=args.eval_every,
-        num_eval_episodes=args.num_eval_episodes,
-        seed=args.seed,
-    )
+    config = config_from(CompareSettingsConfig, args)
     try:
         return compare_settings(config, args.out, overwrite=args.overwrite)
     except RunError as error:

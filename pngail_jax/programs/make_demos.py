@@ -18,7 +18,6 @@ unless ``--overwrite`` is given (the sweep makes its own cache with the library'
 from __future__ import annotations
 
 import argparse
-import dataclasses
 from pathlib import Path
 
 from pngail_jax.jobs.errors import RunError
@@ -33,6 +32,7 @@ from pngail_jax.programs.cli import (
     check_finite,
     check_positive,
     claim_output,
+    config_from,
     path_argument,
     use_compile_cache,
 )
@@ -84,18 +84,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     check_finite(parser, args, ("intermediate_target",))
     args.settings = flags.settings_from_flags(parser, args, args.env)
     try:
-        args.config = config_of(args)
+        args.config = config_from(MakeDemosConfig, args)
     except ConfigError as error:  # every field of MakeDemosConfig is the flag of its name
         parser.error(error.named("--" + error.field.replace("_", "-")))
     except ValueError as error:
         parser.error(str(error))
     return args
-
-
-def config_of(args: argparse.Namespace) -> MakeDemosConfig:
-    """The library's config of the checked flags (each field is the flag of that name)."""
-    fields = dataclasses.fields(MakeDemosConfig)
-    return MakeDemosConfig(**{field.name: getattr(args, field.name) for field in fields})
 
 
 def main(argv=None) -> Path:

@@ -29,6 +29,7 @@ from pngail_jax.programs.cli import (
     check_env,
     check_positive,
     claim_output,
+    config_from,
     note_deprecated,
     path_argument,
     signals_stop_at_a_checkpoint,
@@ -142,27 +143,13 @@ def _resumed_args(parser, given: argparse.Namespace, argv: list[str]) -> argpars
     return args
 
 
-def config_of(args) -> TrainRLConfig:
-    """The job's config of checked flags."""
-    return TrainRLConfig(
-        env=args.env,
-        iterations=args.iterations,
-        seeds=args.seeds,
-        seed=args.seed,
-        fisher=args.fisher,
-        fisher_subsample=args.fisher_subsample,
-        truncation_as_terminal=args.truncation_as_terminal,
-        settings=args.settings,
-    )
-
-
 def main(argv=None) -> None:
     args = parse_args(argv)
     use_compile_cache(args)
     try:
         with signals_stop_at_a_checkpoint():
             train_rl(
-                config_of(args),
+                config_from(TrainRLConfig, args),
                 args.out,
                 overwrite=args.overwrite,
                 resume=args.resume is not None,
