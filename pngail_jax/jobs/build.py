@@ -89,19 +89,21 @@ def load_or_make_demos(config: RunConfig, saved_path: str | None = None, env=Non
         )
         return demos, source
     cached = DEMO_CACHE / config.env / "demos.npz"
+    damaged = False
     if cached.exists():
         demos = _cached_demos(cached)
         if demos is not None:
             return demos, str(cached.absolute())
+        damaged = True
     # Made once, under the cache's lock: a second run that finds another process making
     # them waits for it, then reuses what it made. The cache is the sweep's own: a making
     # cut short there is replaced.
     with refusals(), claimed(cached.parent, MAKE_PROGRAM, overwrite=True, wait=True) as claim:
-        if cached.exists():  # made by the process waited for
+        if cached.exists() and not damaged:  # made by the process waited for
             demos = _cached_demos(cached)
             if demos is not None:
                 return demos, str(cached.absolute())
-        else:
+        elif not damaged:
             print(f"no demonstrations given: making them into {cached.parent}")
         make_claimed(MakeDemosConfig(env=config.env), claim)
     return load_demonstrations(cached), str(cached.absolute())
