@@ -78,3 +78,21 @@ def test_the_verdict_is_mean_at_least_the_baselines_mean_minus_one_standard_erro
 def test_one_seed_has_no_standard_error():
     mean, se = job.mean_and_standard_error([3.0])
     assert mean == 3.0 and math.isnan(se)
+
+
+def test_the_job_trains_evaluates_and_reuses_a_finished_arm(tmp_path, capsys):
+    """The whole job on one Pendulum-v1 arm, one iteration: the arm is a train_rl run, its
+    policies are evaluated again on fresh keys, and a second call reuses the finished arm."""
+    config = job.CompareSettingsConfig(
+        env="Pendulum-v1", arms=("table",), seeds=2, iterations=1, eval_every=1,
+        num_eval_episodes=2,
+    )  # fmt: skip
+    summary = job.compare_settings(config, tmp_path / "cmp")
+    arm = summary["arms"]["table"]
+    assert len(arm["final_return"]["own"]) == 2 and "fast" not in arm["final_return"]
+    assert arm["trpo"] == {"num_envs": 25, "unroll_length": 200, "normalize_observations": False}
+    assert arm["not_worse_than_baseline"] is True  # the baseline itself
+    assert (tmp_path / "cmp" / "table" / "policy.json").exists()
+    again = job.compare_settings(config, tmp_path / "cmp", overwrite=True)
+    assert "table: finished run in" in capsys.readouterr().out
+    assert again["arms"]["table"]["final_return"] == arm["final_return"]  # same keys, same policies

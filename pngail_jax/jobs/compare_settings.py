@@ -235,7 +235,7 @@ def evaluate_arms(config: CompareSettingsConfig, directories: dict) -> tuple[dic
     results, curves = {}, {}
     for arm, directory in directories.items():
         curves[arm] = read_curves(directory)
-        config = json.loads((directory / "config.json").read_text())
+        saved = json.loads((directory / "config.json").read_text())
         metadata, arrays = saved_policies(directory)
         final = {}
         for name, solver in physics.items():
@@ -247,11 +247,11 @@ def evaluate_arms(config: CompareSettingsConfig, directories: dict) -> tuple[dic
             final[name] = np.asarray(returns)
         results[arm] = {
             "trpo": {
-                name: config["trpo"][name]
+                name: saved["trpo"][name]
                 for name in ("num_envs", "unroll_length", "normalize_observations")
             },
-            "env_options": config["env_options"],
-            "fisher_subsample": config["trpo"]["fisher_subsample"],
+            "env_options": saved["env_options"],
+            "fisher_subsample": saved["trpo"]["fisher_subsample"],
             "final_return": {name: values.tolist() for name, values in final.items()},
             "final_return_mean_se": {
                 name: mean_and_standard_error(values) for name, values in final.items()
