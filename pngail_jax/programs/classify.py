@@ -28,6 +28,7 @@ from pngail_jax.programs.cli import (
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The data flags (which rows, how they are read), then the split and training ones."""
     parser = ArgumentParser(
         "classify", description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
     )
@@ -64,6 +65,12 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="rows per seed, n_c + n_u (default: all)",
     )
+    add_training_flags(parser)
+    return parser
+
+
+def add_training_flags(parser: argparse.ArgumentParser) -> None:
+    """The split (rows, labelled share, noise), the classifiers and their training, the output."""
     parser.add_argument("--label-ratio", type=float, default=0.2, help="labelled share, n_c")
     parser.add_argument("--noise", type=float, default=0.0, help="confidence noise std")
     parser.add_argument(
@@ -94,7 +101,6 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--overwrite", action="store_true", help="replace an existing --json file (default: refuse)"
     )
-    return parser
 
 
 def parse_args(argv=None) -> argparse.Namespace:
