@@ -4,9 +4,10 @@
 
 1. the split of the demonstrations into D_c (labelled) and D_u, and the confidence classifier
    where the method needs one (``spec.classifier_coef``), giving a confidence r per row;
-2. ``num_iterations`` of: a TRPO rollout; the policy reward ``-log sigmoid(z)`` from the
+2. ``num_iterations`` of: a rollout; the policy reward ``-log sigmoid(z)`` from the
    discriminator *before* this iteration's update; one Adam step of the discriminator on the
-   agent batch and as many demonstration rows drawn with replacement; one TRPO update.
+   agent batch and as many demonstration rows drawn with replacement; one update of the
+   policy learner (TRPO, the paper's, or PPO: ``AdversarialConfig.learner``).
 
 The discriminator (and every other learned function that compares the agent with the
 demonstrations: WGAIL's weights, behaviour cloning, CAIL's rankings) sees agent and
@@ -40,20 +41,20 @@ from pngail_jax.fitting import tree_where
 from pngail_jax.losses import ConfidenceStats, discriminator_loss, policy_reward
 from pngail_jax.methods import PHASES, MethodSpec, required_phases, resolve
 from pngail_jax.networks import ClampedStateReward, Discriminator, ResidualDiscriminator
-from pngail_jax.rl.train import (
-    TRPO,
-    TRPOConfig,
-    TRPOHyperparams,
-    TRPOState,
-    run_evaluated_blocks,
-)
+from pngail_jax.rl.learners import check_learner, learner_hyperparams, make_learner
+from pngail_jax.rl.ppo import PPOConfig, PPOHyperparams, PPOState
+from pngail_jax.rl.train import TRPOConfig, TRPOHyperparams, TRPOState, run_evaluated_blocks
 
 
 @dataclasses.dataclass(frozen=True)
 class AdversarialConfig:
     """Static settings (shapes, counts, schedules) of an adversarial run."""
 
+    # The rollout's shape and the policy and value networks (both learners), TRPO's settings.
     trpo: TRPOConfig = TRPOConfig()
+    # The policy learner, "trpo" (the paper's) or "ppo" (``rl.learners``), and PPO's settings.
+    learner: str = "trpo"
+    ppo: PPOConfig = PPOConfig()
     classifier: ClassifierConfig = ClassifierConfig()
     # Rows per split (the paper's n_c + n_u); None = every demonstration row.
     num_demos: int | None = None
@@ -75,6 +76,9 @@ class AdversarialConfig:
     gradient_penalty: bool = False
 
     def __post_init__(self):
+        check_learner(self.learner)
+        if self.learner == "ppo":
+            self.ppo.check_batch(self.trpo)
         unknown = [phase for phase in self.phases if phase not in PHASES]
         if unknown or len(set(self.phases)) != len(self.phases):
             raise ValueError(
@@ -95,9 +99,10 @@ class AdversarialConfig:
 
 @struct.dataclass
 class AdversarialHyperparams:
-    """Per-cell values a grid may vary (pytree leaves)."""
+    """Per-cell values a grid may vary (pytree leaves). ``trpo`` holds the policy learner's
+    hyperparameters, TRPO's or PPO's."""
 
-    trpo: TRPOHyperparams
+    trpo: TRPOHyperparams | PPOHyperparams
     discriminator_learning_rate: jax.Array
     label_ratio: jax.Array  # fraction of the split that is labelled (D_c)
     noise_std: jax.Array  # confidence noise: r <- clip(r + N(0, noise_std^2), 0, 1)
@@ -108,8 +113,11 @@ class AdversarialHyperparams:
         label_ratio=0.2,
         noise_std=0.0,
         discriminator_learning_rate=1e-3,
-        **trpo_hyperparams,
+        learner="trpo",
+        **learner_values,
     ) -> AdversarialHyperparams:
+        """The values of one cell; ``learner_values`` are the learner's hyperparameters
+        (``TRPOHyperparams`` or, with ``learner="ppo"``, ``PPOHyperparams``)."""
         if not 0 < label_ratio < 1:
             raise ValueError(f"label_ratio must be in (0, 1), got {label_ratio!r}")
         if not noise_std >= 0:
@@ -119,7 +127,7 @@ class AdversarialHyperparams:
                 f"discriminator_learning_rate must be positive, got {discriminator_learning_rate!r}"
             )
         return cls(
-            trpo=TRPOHyperparams.create(**trpo_hyperparams),
+            trpo=learner_hyperparams(learner, **learner_values),
             discriminator_learning_rate=jnp.asarray(discriminator_learning_rate, jnp.float32),
             label_ratio=jnp.asarray(label_ratio, jnp.float32),
             noise_std=jnp.asarray(noise_std, jnp.float32),
@@ -128,7 +136,7 @@ class AdversarialHyperparams:
 
 @struct.dataclass
 class TrainState:
-    trpo: TRPOState
+    trpo: TRPOState | PPOState  # the policy learner's state
     discriminator_params: dict
     discriminator_optimizer_state: optax.OptState
     demo_rows: jax.Array  # int32[M]: the split's rows of the demonstration set
@@ -190,7 +198,8 @@ class AdversarialTrainer:
         self.env = env
         self.num_demos = num_demos
         self.has_confidence = demos.confidence is not None
-        self.trpo = TRPO(config.trpo, env)
+        # The policy learner (named ``trpo`` whichever it is, as its state's field).
+        self.trpo = make_learner(config.learner, config.trpo, env, config.ppo)
         self.discriminator = Discriminator(config.discriminator_hidden_sizes)
         self.optimizer = optax.scale_by_adam()
         # One action space on both sides of every learned comparison with the agent (the
@@ -531,7 +540,7 @@ class AdversarialTrainer:
             phase_metrics = {**phase_metrics, **cail_metrics}
         updated, trpo_metrics = self.trpo.update(hyperparams.trpo, trpo_state, transitions, rewards)
         if "bc" in phases:
-            updated = _keep_cloned_policy(spec, trpo_state, updated)
+            updated = _keep_cloned_policy(spec, self.trpo.LEARNED_FIELDS, trpo_state, updated)
         state = state.replace(
             trpo=updated,
             discriminator_params=disc_params,
@@ -671,19 +680,19 @@ class AdversarialTrainer:
         return state, {**metrics, **init_metrics}
 
     @staticmethod
-    def policy_state(state: TrainState) -> TRPOState:
+    def policy_state(state: TrainState) -> TRPOState | PPOState:
         """The learner's state inside a trainer state (for exporting its policy)."""
         return state.trpo
 
 
-def _keep_cloned_policy(spec: MethodSpec, before: TRPOState, updated: TRPOState) -> TRPOState:
+def _keep_cloned_policy(spec: MethodSpec, learned_fields, before, updated):
     """A cloned policy that no RL moves (BC's cells, ``policy_update_coef`` 0) stays as it
-    was: its learner's fields from ``before``, the rest (counters, keys) from ``updated``."""
+    was: the learner's ``learned_fields`` from ``before``, the rest (counters, keys, the
+    envs) from ``updated``."""
     frozen = spec.policy_update_coef == 0
-    learner = ("policy_params", "value_params", "value_optimizer_state", "normalizer")
     return updated.replace(
         **{
             name: tree_where(frozen, getattr(before, name), getattr(updated, name))
-            for name in learner
+            for name in learned_fields
         }
     )

@@ -48,11 +48,13 @@ class Trainer(Protocol):
 
 
 # Per-cell values a grid axis may vary besides label ratio and noise (their own axes): the
-# pytree leaves of AdversarialHyperparams (TRPO's included) and of MethodSpec. Everything else
-# (network widths, rollout shape, step counts) fixes the compiled program's shapes or loops,
-# which every cell shares.
+# pytree leaves of AdversarialHyperparams (the learner's included: TRPO's or PPO's, each only
+# on a run of its learner) and of MethodSpec. Everything else (network widths, rollout shape,
+# step counts, the learner itself) fixes the compiled program's shapes or loops, which every
+# cell shares.
 HYPERPARAM_AXES = (
     "discriminator_learning_rate", "gamma", "lam", "max_kl", "damping", "value_learning_rate",
+    "clip_eps", "learning_rate", "entropy_coef", "value_coef", "max_grad_norm",
 )  # fmt: skip
 METHOD_AXES = tuple(field.name for field in dataclasses.fields(MethodSpec))
 GRID_AXES = HYPERPARAM_AXES + METHOD_AXES

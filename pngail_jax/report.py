@@ -43,11 +43,18 @@ _METRIC_OF_COLUMN = {
     "disc_acc_agent": "disc/acc_agent",
     "disc_acc_demo": "disc/acc_demo",
     "mean_reward": "train/reward",
-    "kl": "trpo/kl",
+    "kl": ("trpo/kl", "ppo/kl"),  # the policy step's mean KL, whichever learner made it
     "train_return": "train/episode_return",
     "mean_abs_action": "rollout/mean_abs_action",
     "beyond_bounds": "rollout/beyond_bounds",
 }
+
+
+def _metric_of(column: str, metrics) -> str | None:
+    """The metric a metrics.csv column shows: the first of its names the run recorded
+    (None: none, an empty column)."""
+    names = _METRIC_OF_COLUMN[column]
+    return next((n for n in ((names,) if isinstance(names, str) else names) if n in metrics), None)
 
 
 # summary.json's reading of null: JSON has no NaN, and a statistic can be undefined.
@@ -86,6 +93,7 @@ def write_metrics_csv(path: Path, cells, metrics, normalizer, chunk_seconds=()) 
     ]
     # A grid's further axes (grid_axes) get a column each, after label_ratio and noise.
     axes = list(dict.fromkeys(field for cell in cells for field, _ in cell.axes))
+    columns = {column: _metric_of(column, metrics) for column in _METRIC_OF_COLUMN}
     with atomic_path(path) as temporary, temporary.open("w", newline="") as file:
         writer = csv.writer(file)
         writer.writerow([*CSV_COLUMNS[:5], *axes, *CSV_COLUMNS[5:]])
@@ -93,8 +101,8 @@ def write_metrics_csv(path: Path, cells, metrics, normalizer, chunk_seconds=()) 
             axis_values = dict(cell.axes)
             for iteration in range(num_iterations):
                 values = {
-                    column: _format(metrics[name][index, iteration]) if name in metrics else ""
-                    for column, name in _METRIC_OF_COLUMN.items()
+                    column: _format(metrics[name][index, iteration]) if name else ""
+                    for column, name in columns.items()
                 }
                 values["env_steps"] = str(int(metrics["env_steps"][index, iteration]))
                 values["normalized_return"] = _format(normalized[index, iteration])

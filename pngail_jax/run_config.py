@@ -38,6 +38,8 @@ from pngail_jax.methods import (
     required_phases,
     resolve,
 )
+from pngail_jax.rl.learners import LEARNERS
+from pngail_jax.rl.ppo import PPOConfig
 from pngail_jax.rl.train import TRPOConfig
 from pngail_jax.settings import RunSettings, settings_for
 from pngail_jax.tracking import BACKENDS as LOG_BACKENDS
@@ -127,6 +129,9 @@ class RunConfig:
     bsc_eps: float | None = None  # None: the task's (TASK_BSC_EPS, else 0.01)
     fisher: str = "gauss_newton"
     fisher_subsample: int = 1
+    # The policy learner: "trpo" (the paper's) or "ppo" (pngail_jax.rl.learners); the rollout's
+    # shape and the networks are the settings' either way.
+    learner: str = "trpo"
     discriminator_hidden_sizes: tuple[int, ...] = (100, 100)
     cpu_devices: int | None = None  # split a CPU into this many XLA devices
     log: tuple[str, ...] = ()  # "tensorboard" and/or "wandb"
@@ -232,6 +237,8 @@ class RunConfig:
                 fail("methods", f": {error}")
         if len(set(self.methods)) != len(self.methods):
             fail("methods", f"must not repeat, got {list(self.methods)}")
+        if not is_among(self.learner, LEARNERS):
+            fail("learner", f"must be one of {LEARNERS}, got {self.learner!r}")
         if not is_among(self.fisher, FISHER_FORMS):
             fail("fisher", f"must be one of {FISHER_FORMS}, got {self.fisher!r}")
         bad_backends = [name for name in self.log if not is_among(name, LOG_BACKENDS)]
@@ -250,7 +257,7 @@ class RunConfig:
                 continue
             for value in values:
                 try:
-                    AdversarialHyperparams.create(**{field: value})
+                    AdversarialHyperparams.create(learner=self.learner, **{field: value})
                 except ValueError as error:
                     fail("grid_axes", f": {field}={value:g}: {error}")
         for name in self.methods:  # every value of a coefficient axis, on every method
@@ -372,6 +379,7 @@ class RunConfig:
             trpo=self.settings.trpo_config(
                 self.iterations, fisher=self.fisher, fisher_subsample=self.fisher_subsample
             ),
+            learner=self.learner,
             classifier=classifier,
             num_demos=num_demos,
             discriminator_hidden_sizes=self.discriminator_hidden_sizes,
@@ -495,7 +503,8 @@ _STATIC_FIELDS = {
     *(field.name for field in dataclasses.fields(RunSettings)),
     *(field.name for field in dataclasses.fields(TRPOConfig)),
     *(field.name for field in dataclasses.fields(ClassifierConfig)),
-    "iterations", "seeds", "num_demos", "discriminator_hidden_sizes", "chunk_iterations",
+    *(field.name for field in dataclasses.fields(PPOConfig)),
+    "learner", "iterations", "seeds", "num_demos", "discriminator_hidden_sizes", "chunk_iterations",
 }  # fmt: skip
 
 

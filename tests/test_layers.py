@@ -26,7 +26,8 @@ LAYERS = [
     (
         "learners",
         (
-            "rl", "rl.rollout", "rl.train", "settings", "checkpoint", "bc", "firl", "ranking",
+            "rl", "rl.rollout", "rl.train", "rl.ppo", "rl.learners", "settings", "checkpoint",
+            "bc", "firl", "ranking",
             "confidence", "methods", "losses", "cail",
         ),
     ),

@@ -186,7 +186,10 @@ def build(config: RunConfig, saved=None) -> BuiltRun:
     cells = make_cells(
         config.methods, config.seeds, config.label_ratios, config.noise_stds, config.grid_axes
     )
-    inputs = stack_cells(cells, jax.random.key(config.seed), {"bsc_eps": config.task_bsc_eps})
+    inputs = stack_cells(
+        cells, jax.random.key(config.seed), {"bsc_eps": config.task_bsc_eps},
+        learner=config.learner,
+    )  # fmt: skip
     eval_every = config.settings.eval_every
     num_evaluations = config.iterations // eval_every
     chunk_blocks = blocks_per_chunk(num_evaluations, max(1, config.chunk_iterations // eval_every))

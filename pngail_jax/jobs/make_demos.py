@@ -43,7 +43,8 @@ from pngail_jax.integrity import atomic_path, atomic_write_text
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.jobs.seeds import train_seeds
 from pngail_jax.outputs import Claim, claimed
-from pngail_jax.rl import TRPOHyperparams, TRPOTrainer
+from pngail_jax.rl import TRPOTrainer
+from pngail_jax.rl.learners import LEARNERS, learner_hyperparams, make_learner
 
 DEMOS_FILE = "demos.npz"  # written last: its presence marks a finished run
 PROGRAM = "make_demos"  # the owner its directories are marked with (pngail_jax.outputs)
@@ -64,10 +65,13 @@ class MakeDemosConfig:
     intermediate_target: float = 0.45  # normalised return the intermediate policy is picked near
     measure_episodes: int = 64  # episodes for the random and optimal returns
     settings: run_settings.RunSettings | None = None
+    learner: str = "trpo"  # the policy learner that trains the candidates (rl.learners)
 
     def __post_init__(self):
         if self.settings is None:
             object.__setattr__(self, "settings", run_settings.settings_for(self.env, eval_every=10))
+        if self.learner not in LEARNERS:
+            validation.fail("learner", f"must be one of {LEARNERS}, got {self.learner!r}")
         for name in ("iterations", "seeds", "num_trajectories", "measure_episodes"):
             value = getattr(self, name)
             validation.integer(name, value, 1)
@@ -172,9 +176,11 @@ def train_candidates(config: MakeDemosConfig, env, out: Path) -> list[Checkpoint
     """TRPO on the true reward, every evaluated checkpoint of every seed kept (in memory and
     under ``out/checkpoints/iter_XXXX/``)."""
     trpo_config = config.trpo_config
-    trainer = TRPOTrainer(trpo_config, env)
+    learner = make_learner(config.learner, trpo_config, env)
+    trainer = TRPOTrainer(trpo_config, env, learner=learner)
     hyperparams = jax.tree.map(
-        lambda x: jnp.broadcast_to(x, (config.seeds, *x.shape)), TRPOHyperparams.create()
+        lambda x: jnp.broadcast_to(x, (config.seeds, *x.shape)),
+        learner_hyperparams(config.learner),
     )
     snapshots: list[Checkpoint] = []
 
@@ -188,8 +194,8 @@ def train_candidates(config: MakeDemosConfig, env, out: Path) -> list[Checkpoint
             snapshots.append(Checkpoint(iteration, seed, *pick, float(returns[seed])))
 
     print(
-        f"1/3 training TRPO on {config.env} ({config.seeds} seeds x {config.iterations} "
-        f"iterations; {run_settings.describe(config.settings)})",
+        f"1/3 training {config.learner.upper()} on {config.env} ({config.seeds} seeds x "
+        f"{config.iterations} iterations; {run_settings.describe(config.settings)})",
         flush=True,
     )
     train_key = _keys(config)[0]

@@ -1,4 +1,4 @@
-"""``train_rl(config, out)``: TRPO on an environment's true reward, several seeds in one
+"""``train_rl(config, out)``: TRPO (or PPO) on an environment's true reward, several seeds in one
 compiled program, with progress, checkpoints it resumes from, and its outputs:
 ``config.json``, ``metrics.csv`` (one row per seed and iteration), ``learning_curve.png`` and
 the policies (``policy.json`` + ``policy_params/``), which ``pngail_jax.load_policy(out)``
@@ -31,25 +31,28 @@ from pngail_jax.jobs.chunks import nanmean
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.jobs.seeds import train_seeds
 from pngail_jax.outputs import claimed, output_owner
-from pngail_jax.rl import TRPOHyperparams, TRPOTrainer
+from pngail_jax.rl import PPOConfig, TRPOHyperparams, TRPOTrainer
+from pngail_jax.rl.learners import LEARNERS, learner_hyperparams, make_learner
 
 PROGRAM = "train_rl"  # the owner its directories are marked with (pngail_jax.outputs)
-METRIC_COLUMNS = (
-    "env_steps",
-    "eval/return",
-    "train/episode_return",
-    "trpo/kl",
-    "trpo/entropy",
-    "trpo/accepted",
-    "value/loss",
-)
+# metrics.csv's columns after seed and iteration, by learner.
+METRIC_COLUMNS = {
+    "trpo": (
+        "env_steps", "eval/return", "train/episode_return", "trpo/kl", "trpo/entropy",
+        "trpo/accepted", "value/loss",
+    ),
+    "ppo": (
+        "env_steps", "eval/return", "train/episode_return", "ppo/kl", "ppo/entropy",
+        "ppo/clip_fraction", "value/loss",
+    ),
+}  # fmt: skip
 
 
 @dataclasses.dataclass(frozen=True)
 class TrainRLConfig:
-    """A TRPO run on the true reward. ``settings`` None: the task's row of
-    ``pngail_jax.settings``. ``truncation_as_terminal``: the reference's GAE, which does not
-    bootstrap through time limits."""
+    """A TRPO (or, ``learner="ppo"``, PPO) run on the true reward. ``settings`` None: the
+    task's row of ``pngail_jax.settings``. ``truncation_as_terminal``: the reference's GAE,
+    which does not bootstrap through time limits. ``ppo``: PPO's static settings."""
 
     env: str = "Pendulum-v1"
     iterations: int = 100
@@ -59,6 +62,8 @@ class TrainRLConfig:
     fisher_subsample: int = 1
     truncation_as_terminal: bool = False
     settings: run_settings.RunSettings | None = None
+    learner: str = "trpo"
+    ppo: PPOConfig = PPOConfig()
 
     def __post_init__(self):
         if self.settings is None:
@@ -66,6 +71,13 @@ class TrainRLConfig:
         for name in ("iterations", "seeds", "fisher_subsample"):
             validation.integer(name, getattr(self, name), 1)
         validation.integer("seed", self.seed, 0)
+        if self.learner not in LEARNERS:
+            validation.fail("learner", f"must be one of {LEARNERS}, got {self.learner!r}")
+        if self.learner == "ppo":
+            try:
+                self.ppo.check_batch(self.trpo_config)
+            except ValueError as error:
+                validation.fail("ppo", str(error))
         if self.iterations % self.settings.eval_every:
             validation.fail(
                 "iterations",
@@ -82,7 +94,14 @@ class TrainRLConfig:
 
     @property
     def hyperparams(self) -> TRPOHyperparams:
-        return TRPOHyperparams.create(bootstrap_truncation=not self.truncation_as_terminal)
+        return learner_hyperparams(
+            self.learner, bootstrap_truncation=not self.truncation_as_terminal
+        )
+
+    def trainer(self, env) -> TRPOTrainer:
+        """The trainer of this run in ``env`` (its learner on the true reward)."""
+        config = self.trpo_config
+        return TRPOTrainer(config, env, learner=make_learner(self.learner, config, env, self.ppo))
 
     def document(self, command: Sequence[str] | None = None) -> dict:
         """config.json's content (``command``: the flags a program was given, which its
@@ -95,7 +114,9 @@ class TrainRLConfig:
                     "settings": dataclasses.asdict(self.settings),
                     "seeds": self.seeds,
                     "seed": self.seed,
+                    "learner": self.learner,
                     "trpo": dataclasses.asdict(self.trpo_config),
+                    **({"ppo": dataclasses.asdict(self.ppo)} if self.learner == "ppo" else {}),
                     "hyperparams": jax.tree.map(lambda x: x.item(), self.hyperparams).__dict__,
                     "argv": None if command is None else list(command),
                 }
@@ -146,22 +167,23 @@ def check_resumable(out: Path, document: dict) -> None:
 
 def _train(config: TrainRLConfig, env, out: Path) -> None:
     trpo_config = config.trpo_config
-    trainer = TRPOTrainer(trpo_config, env)
+    trainer = config.trainer(env)
+    learner = config.learner.upper()
     hyperparams = jax.tree.map(
         lambda x: jnp.broadcast_to(x, (config.seeds, *x.shape)), config.hyperparams
     )
     keys = jax.random.split(jax.random.key(config.seed), config.seeds)
     print(
-        f"TRPO on {config.env}: {config.seeds} seeds x {config.iterations} iterations x "
+        f"{learner} on {config.env}: {config.seeds} seeds x {config.iterations} iterations x "
         f"{trpo_config.batch_size} steps ({run_settings.describe(config.settings)}) -> {out}",
         flush=True,
     )
     start = time.perf_counter()
     state, metrics = train_seeds(trainer, hyperparams, keys, checkpoints=out / "checkpoints")
     final_returns = metrics["eval/return"][:, -1]
-    write_metrics_csv(out / "metrics.csv", metrics)
+    write_metrics_csv(out / "metrics.csv", metrics, METRIC_COLUMNS[config.learner])
     plot_learning_curve(
-        out / "learning_curve.png", metrics, f"TRPO on {config.env} ({config.seeds} seeds)"
+        out / "learning_curve.png", metrics, f"{learner} on {config.env} ({config.seeds} seeds)"
     )
     save_trpo_policies(
         out, env, trpo_config, state, final_returns, {"env_options": config.settings.env_options}
@@ -176,14 +198,16 @@ def _train(config: TrainRLConfig, env, out: Path) -> None:
     )
 
 
-def write_metrics_csv(path: Path, metrics: dict[str, np.ndarray]) -> None:
+def write_metrics_csv(
+    path: Path, metrics: dict[str, np.ndarray], columns: Sequence[str] = METRIC_COLUMNS["trpo"]
+) -> None:
     num_seeds, num_iterations = metrics["env_steps"].shape
     with atomic_path(path) as temporary, temporary.open("w", newline="") as file:
         writer = csv.writer(file)
-        writer.writerow(["seed", "iteration", *METRIC_COLUMNS])
+        writer.writerow(["seed", "iteration", *columns])
         for seed in range(num_seeds):
             for iteration in range(num_iterations):
-                values = [metrics[name][seed, iteration] for name in METRIC_COLUMNS]
+                values = [metrics[name][seed, iteration] for name in columns]
                 writer.writerow([seed, iteration + 1, *(f"{v:.6g}" for v in values)])
 
 

@@ -45,9 +45,11 @@ def released_files(directory: Path | None, tasks: Sequence[str]) -> dict[str, Pa
     return found
 
 
-def demo_paths(grids, out: Path, budget: Budget, released: dict[str, Path], physics=None):
+def demo_paths(
+    grids, out: Path, budget: Budget, released: dict[str, Path], physics=None, learner="trpo"
+):
     """The demonstrations file of every grid's set (made, mixed and saved when missing);
-    made ones on ``physics`` (``Budget.run_settings``)."""
+    made ones on ``physics`` (``Budget.run_settings``) by ``learner``'s policies."""
     sets = list(dict.fromkeys(grid.demos for grid in grids.values()))
     paths = {}
     for demo_set in sets:
@@ -67,7 +69,8 @@ def demo_paths(grids, out: Path, budget: Budget, released: dict[str, Path], phys
         full = directory / "demos.npz"
         if not full.exists():
             print(f"\n== demonstrations for {task}: making them into {directory}", flush=True)
-            make_demonstrations(demo_config(task, budget, counts, physics), directory)
+            config = demo_config(task, budget, counts, physics, learner)
+            make_demonstrations(config, directory)
         source = load_npz(full)
         for demo_set, (optimal, intermediate) in counts.items():
             path = directory / f"{demo_set.name}.npz"
@@ -82,7 +85,9 @@ def demo_paths(grids, out: Path, budget: Budget, released: dict[str, Path], phys
     return paths
 
 
-def demo_config(task: str, budget: Budget, counts: dict, physics: str | None):
+def demo_config(
+    task: str, budget: Budget, counts: dict, physics: str | None, learner: str = "trpo"
+):
     """The making of ``task``'s demonstrations: enough optimal and intermediate trajectories
     for every set of ``counts`` (``{DemoSet: (optimal, intermediate)}``) at ``budget``."""
     num_optimal = max(c[0] for c in counts.values())
@@ -95,6 +100,7 @@ def demo_config(task: str, budget: Budget, counts: dict, physics: str | None):
         ratio=f"{num_optimal}:{num_intermediate}",
         measure_episodes=budget.measure_episodes,
         settings=budget.run_settings(task, physics, demos=True),
+        learner=learner,
     )
 
 
@@ -113,6 +119,7 @@ def grid_config(
     budget: Budget,
     num_rows: int | None,
     physics: str | None = None,
+    learner: str = "trpo",
 ):
     """The ``RunConfig`` of a grid; ``num_rows``, the demonstrations' row count, is read only
     by a grid with fewer unlabelled rows (Fig. 6)."""
@@ -142,6 +149,7 @@ def grid_config(
         demos=str(Path(path).absolute()),
         action_scale=None if scale == 1.0 else scale,
         num_demos=num_demos,
+        learner=learner,
     )
 
 
@@ -171,10 +179,12 @@ def run_grid(grid: GridSpec, directory: Path, config, command: list[str]) -> boo
     return False
 
 
-def run_grids(grids, demos, out: Path, budget: Budget, physics, command: list[str]) -> dict:
+def run_grids(
+    grids, demos, out: Path, budget: Budget, physics, command: list[str], learner: str = "trpo"
+) -> dict:
     """Runs (or resumes, or keeps) every grid; each grid's wall-clock seconds over all calls,
     interrupted ones included, kept in ``out/timings.json``. ``command``: the plan's,
-    recorded in each grid's config."""
+    recorded in each grid's config; ``learner``: the policy learner of every grid."""
     timings_path = out / "timings.json"
     try:
         timings = read_json(timings_path, "timings record") if timings_path.exists() else {}
@@ -187,7 +197,9 @@ def run_grids(grids, demos, out: Path, budget: Budget, physics, command: list[st
         path, scale = demos[grid.demos]
         if grid.unlabelled_fraction != 1 and grid.demos not in num_rows:
             num_rows[grid.demos] = load_demonstrations(path, action_scale=scale).num_rows
-        config = grid_config(grid, demos[grid.demos], budget, num_rows.get(grid.demos), physics)
+        config = grid_config(
+            grid, demos[grid.demos], budget, num_rows.get(grid.demos), physics, learner
+        )
         print(f"\n== grid {index + 1} of {len(grids)}{plan_eta(ran, len(grids) - index)}")
         start, kept = time.perf_counter(), False
         try:

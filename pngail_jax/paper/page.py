@@ -281,7 +281,9 @@ def write_page(out: Path, options: dict, figures: list[Figure], grids, timings: 
         + ("**The check preset checks that everything runs; its numbers are not results.**"
            if budget in ("check", "test") else ""),
         "",
-        f"Made with `{options['command']}`.",
+        f"Made with `{options['command']}`. Policy learner: "
+        + ("PPO (not the paper's; docs/ppo.md)." if options.get("learner") == "ppo"
+           else "TRPO, as the paper."),
         "",
         "| grid | task | demonstrations | methods | wall time |",
         "|---|---|---|---|---:|",

@@ -38,10 +38,11 @@ def paper_options(
     released_demos=None,
     physics: str | None = None,
     command: str = "python -m experiments.paper",
+    learner: str = "trpo",
 ) -> dict:
     """A new plan's options (paper.json): the preset, the figures (None: all), the tasks
-    (None: the paper's six), a folder of the authors' files, the physics engine, and the
-    command line the page says it was made with."""
+    (None: the paper's six), a folder of the authors' files, the physics engine, the command
+    line the page says it was made with, and the policy learner (TRPO, the paper's, or PPO)."""
     if budget not in BUDGETS:
         raise RunError(f"unknown preset {budget!r} (known: {', '.join(BUDGETS)})")
     return {
@@ -51,6 +52,7 @@ def paper_options(
         "released_demos": None if released_demos is None else str(released_demos),
         "physics": physics,
         "command": command,
+        "learner": learner,
     }
 
 
@@ -88,9 +90,10 @@ def run_paper(options: dict | None, out, *, resume: bool = False, overwrite: boo
             flush=True,
         )
         physics = options.get("physics")  # absent from runs begun before the flag existed
-        demos = demo_paths(grids, out, budget, released, physics)
+        learner = options.get("learner", "trpo")  # absent from runs begun before the flag
+        demos = demo_paths(grids, out, budget, released, physics, learner)
         command = shlex.split(options["command"])
-        timings = run_grids(grids, demos, out, budget, physics, command)
+        timings = run_grids(grids, demos, out, budget, physics, command, learner)
         page = write_page(out, options, figures, grids, timings)
     print(f"\nwrote {page}")
     return page

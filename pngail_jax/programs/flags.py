@@ -18,7 +18,7 @@ from typing import Any
 
 from pngail_jax import envs
 from pngail_jax.programs.cli import comma_floats, known_names, text_argument
-from pngail_jax.run_config import FISHER_FORMS, LOG_BACKENDS, TASK_CLASSIFIER_STEPS
+from pngail_jax.run_config import FISHER_FORMS, LEARNERS, LOG_BACKENDS, TASK_CLASSIFIER_STEPS
 from pngail_jax.settings import REFERENCE_SETTINGS, RunSettings, parse_solver, settings_for
 from pngail_jax.validation import ConfigError
 
@@ -327,6 +327,12 @@ RUN_FLAGS = (
         type=int,
     ),
     FieldFlag("bsc_eps", "BSC's clip (default 0.01; 0.05 on Walker2d, the paper's)", type=float),
+    FieldFlag(
+        "learner",
+        "the policy learner under every method: trpo (the paper's) or ppo (docs/ppo.md) "
+        "(default trpo)",
+        choices=LEARNERS,
+    ),
     FieldFlag(
         "fisher",
         "Fisher-vector product: the same matrix either way (the Hessian of the mean KL at the "

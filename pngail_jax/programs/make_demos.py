@@ -36,6 +36,7 @@ from pngail_jax.programs.cli import (
     path_argument,
     use_compile_cache,
 )
+from pngail_jax.rl.learners import LEARNERS
 from pngail_jax.validation import ConfigError
 
 
@@ -53,8 +54,14 @@ def parse_args(argv=None) -> argparse.Namespace:
         help="replace an earlier run's demos.npz, normalizer.json and checkpoints in --out "
         "(default: refuse)",
     )
-    parser.add_argument("--iterations", type=int, default=150, help="TRPO iterations")
-    parser.add_argument("--seeds", type=int, default=3, help="TRPO seeds; the best is optimal")
+    parser.add_argument("--iterations", type=int, default=150, help="policy iterations")
+    parser.add_argument("--seeds", type=int, default=3, help="policy seeds; the best is optimal")
+    parser.add_argument(
+        "--learner",
+        choices=LEARNERS,
+        default="trpo",
+        help="the policy learner: trpo (the paper's) or ppo (docs/ppo.md)",
+    )
     parser.add_argument("--seed", type=int, default=0, help="base PRNG seed")
     parser.add_argument("--ratio", default="1:4", help="optimal:intermediate trajectories")
     parser.add_argument(

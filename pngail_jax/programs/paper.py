@@ -54,6 +54,7 @@ from pngail_jax.programs.cli import (
     signals_stop_at_a_checkpoint,
     use_compile_cache,
 )
+from pngail_jax.rl.learners import LEARNERS
 
 # Names of the library's paper modules that this program's users (and tests) read from it.
 __all__ = [
@@ -100,6 +101,12 @@ def build_parser() -> argparse.ArgumentParser:
         choices=envs.PHYSICS,
         help="physics engine of gymnasium's MuJoCo tasks in every grid and make_demos run "
         "(default: c on a CPU, mjx on a GPU or TPU)",
+    )
+    parser.add_argument(
+        "--learner",
+        choices=LEARNERS,
+        help="the policy learner of every grid and make_demos run: trpo (the paper's) or ppo "
+        "(docs/ppo.md) (default trpo)",
     )
     parser.add_argument("--out", type=path_argument, help="default results/paper-<timestamp>")
     parser.add_argument("--resume", type=path_argument, metavar="DIR", help="continue a run in DIR")
@@ -151,7 +158,7 @@ def _check_resume(parser: argparse.ArgumentParser, args) -> None:
     """``--resume DIR`` takes every option from DIR's paper.json: refuses others, and a DIR
     that is not a run of this program."""
     flags = {"only": "--only", "envs": "--envs", "released_demos": "--released-demos"}
-    flags |= {"out": "--out", "physics": "--physics", "budget": "--preset"}
+    flags |= {"out": "--out", "physics": "--physics", "budget": "--preset", "learner": "--learner"}
     if args.overwrite:
         parser.error("--resume continues a run; --overwrite replaces one: give one")
     given = [flag for name, flag in flags.items() if getattr(args, name) is not None]
@@ -191,6 +198,7 @@ def main(argv=None) -> Path:
             args.released_demos,
             args.physics,
             " ".join([*invoked_as("paper"), *command_line(argv)]),
+            args.learner or "trpo",
         )
     try:
         with signals_stop_at_a_checkpoint():

@@ -1,4 +1,5 @@
-"""Train TRPO on an environment's true reward, several seeds in one compiled program.
+"""Train TRPO (or PPO, ``--learner ppo``) on an environment's true reward, several seeds in
+one compiled program.
 
     python -m experiments.train_rl --env Pendulum-v1 --iterations 100 --seeds 3 --out runs/trpo
 
@@ -35,6 +36,7 @@ from pngail_jax.programs.cli import (
     signals_stop_at_a_checkpoint,
     use_compile_cache,
 )
+from pngail_jax.rl.learners import LEARNERS
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -43,14 +45,20 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add = parser.add_argument
     add("--env", default="Pendulum-v1", help=ENV_HELP)
-    add("--iterations", type=int, default=100, help="TRPO iterations")
+    add("--iterations", type=int, default=100, help="policy iterations (rollout + update)")
+    add(
+        "--learner",
+        choices=LEARNERS,
+        default="trpo",
+        help="the policy learner: trpo (the paper's) or ppo (docs/ppo.md)",
+    )
     add("--seeds", type=int, default=3, help="seeds, trained side by side")
     add("--seed", type=int, default=0, help="base PRNG seed")
     add(
         "--out",
         type=path_argument,
         default=None,
-        help="output directory (default runs/trpo-<env>-<timestamp>)",
+        help="output directory (default runs/<learner>-<env>-<timestamp>)",
     )
     add(
         "--overwrite",
@@ -97,7 +105,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     note_deprecated(argv, {"--fast-solver": "--solver fast"})
     _check(parser, args)
     if args.out is None:
-        args.out = Path("runs") / f"trpo-{args.env}-{time.strftime('%Y%m%d-%H%M%S')}"
+        args.out = Path("runs") / f"{args.learner}-{args.env}-{time.strftime('%Y%m%d-%H%M%S')}"
     claim_output(parser, args.out, "train_rl", args.overwrite)
     args.argv = argv
     return args

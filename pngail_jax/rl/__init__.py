@@ -1,5 +1,8 @@
-"""TRPO in pure JAX: rollouts, GAE, conjugate gradient, Fisher products, line search."""
+"""Policy learners in pure JAX: TRPO (the paper's: conjugate gradient, Fisher products, line
+search) and PPO, on shared rollouts, GAE, networks and evaluation."""
 
+from pngail_jax.rl.learners import LEARNERS, learner_hyperparams, make_learner
+from pngail_jax.rl.ppo import PPO, PPOConfig, PPOHyperparams, PPOState
 from pngail_jax.rl.train import (
     TRPO,
     TRPOConfig,
@@ -9,4 +12,18 @@ from pngail_jax.rl.train import (
     TRPOTrainState,
 )
 
-__all__ = ["TRPO", "TRPOConfig", "TRPOHyperparams", "TRPOState", "TRPOTrainState", "TRPOTrainer"]
+__all__ = [
+    "LEARNERS",
+    "PPO",
+    "PPOConfig",
+    "PPOHyperparams",
+    "PPOState",
+    "TRPO",
+    "TRPOConfig",
+    "TRPOHyperparams",
+    "TRPOState",
+    "TRPOTrainState",
+    "TRPOTrainer",
+    "learner_hyperparams",
+    "make_learner",
+]

@@ -236,12 +236,17 @@ class TRPOState:
     key: jax.Array
 
 
-class TRPO:
-    """The pieces of a TRPO run for one environment and static config.
+class OnPolicyLearner:
+    """What TRPO and PPO share for one environment and static config: the Gaussian policy and
+    value networks, the auto-resetting envs, the rollout, log-probabilities and evaluation.
 
-    ``init``, ``rollout``, ``update`` and ``evaluate`` are pure; an adversarial trainer calls
-    ``rollout``, computes its own rewards and calls ``update`` with them.
+    A learner's state has at least ``policy_params``, ``value_params``, ``normalizer``,
+    ``env_state``, ``env_steps`` and ``key``; ``LEARNED_FIELDS`` names the fields its update
+    learns (what a frozen cloned policy keeps, ``adversarial``).
     """
+
+    name = "on-policy"
+    LEARNED_FIELDS: tuple[str, ...] = ("policy_params", "value_params", "normalizer")
 
     def __init__(self, config: TRPOConfig, env: envs.Env):
         self.config = config
@@ -249,6 +254,64 @@ class TRPO:
         self.auto_env = envs.AutoReset(env)
         self.policy = GaussianPolicy(env.action_size, config.hidden_sizes)
         self.value = ValueNetwork(config.hidden_sizes)
+
+    def reset_envs(self, key: jax.Array) -> envs.AutoResetState:
+        """The ``num_envs`` parallel envs' first states (leaves [N, ...]); with
+        ``stagger_starts``, each first episode cut at its own random length."""
+        num_envs = self.config.num_envs
+        if not self.config.stagger_starts:
+            return jax.vmap(self.auto_env.reset)(jax.random.split(key, num_envs))
+        reset_key, limit_key = jax.random.split(key)
+        return jax.vmap(self.auto_env.staggered_reset)(
+            jax.random.split(reset_key, num_envs), jax.random.split(limit_key, num_envs)
+        )
+
+    def rollout(self, state):
+        """``unroll_length`` steps of the ``num_envs`` envs with the current stochastic policy:
+        (state with the envs, key and step count moved on, Transitions float[T, N, ...])."""
+        key, rollout_key = jax.random.split(state.key)
+        env_state, transitions = collect(
+            self.auto_env,
+            self.policy,
+            state.policy_params,
+            state.normalizer,
+            state.env_state,
+            self.config.unroll_length,
+            rollout_key,
+        )
+        state = state.replace(
+            env_state=env_state, key=key, env_steps=state.env_steps + self.config.batch_size
+        )
+        return state, transitions
+
+    def log_prob(self, state, obs: jax.Array, action: jax.Array) -> jax.Array:
+        """log pi(action | obs) of the current policy: obs float[..., O], action float[..., A]."""
+        mean, log_std = self.policy.apply(state.policy_params, state.normalizer(obs))
+        return gaussian_log_prob(mean, log_std, action)
+
+    def evaluate(self, state, keys: jax.Array) -> jax.Array:
+        return evaluate(self.env, self.policy, state.policy_params, state.normalizer, keys)
+
+    def updated_normalizer(self, state, transitions: Transitions) -> ObservationNormalizer:
+        """The observation normaliser after this rollout (unchanged when normalisation is
+        off)."""
+        if self.config.normalize_observations:
+            return state.normalizer.update(transitions.obs)
+        return state.normalizer
+
+
+class TRPO(OnPolicyLearner):
+    """The pieces of a TRPO run for one environment and static config.
+
+    ``init``, ``rollout``, ``update`` and ``evaluate`` are pure; an adversarial trainer calls
+    ``rollout``, computes its own rewards and calls ``update`` with them.
+    """
+
+    name = "trpo"
+    LEARNED_FIELDS = ("policy_params", "value_params", "value_optimizer_state", "normalizer")
+
+    def __init__(self, config: TRPOConfig, env: envs.Env):
+        super().__init__(config, env)
         self.value_optimizer = optax.scale_by_adam()
 
     def init(self, key: jax.Array) -> TRPOState:
@@ -265,33 +328,6 @@ class TRPO:
             env_steps=jnp.zeros((), jnp.int32),
             key=carry_key,
         )
-
-    def reset_envs(self, key: jax.Array) -> envs.AutoResetState:
-        """The ``num_envs`` parallel envs' first states (leaves [N, ...]); with
-        ``stagger_starts``, each first episode cut at its own random length."""
-        num_envs = self.config.num_envs
-        if not self.config.stagger_starts:
-            return jax.vmap(self.auto_env.reset)(jax.random.split(key, num_envs))
-        reset_key, limit_key = jax.random.split(key)
-        return jax.vmap(self.auto_env.staggered_reset)(
-            jax.random.split(reset_key, num_envs), jax.random.split(limit_key, num_envs)
-        )
-
-    def rollout(self, state: TRPOState) -> tuple[TRPOState, Transitions]:
-        key, rollout_key = jax.random.split(state.key)
-        env_state, transitions = collect(
-            self.auto_env,
-            self.policy,
-            state.policy_params,
-            state.normalizer,
-            state.env_state,
-            self.config.unroll_length,
-            rollout_key,
-        )
-        state = state.replace(
-            env_state=env_state, key=key, env_steps=state.env_steps + self.config.batch_size
-        )
-        return state, transitions
 
     def update(
         self,
@@ -344,9 +380,7 @@ class TRPO:
         advantages (lambda) and the value targets, bootstrapped discounted returns (lambda =
         1) as the reference's; each float[T, N] (observations float[T, N, O])."""
         config = self.config
-        normalizer = state.normalizer
-        if config.normalize_observations:
-            normalizer = normalizer.update(transitions.obs)
+        normalizer = self.updated_normalizer(state, transitions)
         obs = normalizer(transitions.obs)
         values = self.value.apply(state.value_params, obs)
         next_values = self.value.apply(state.value_params, normalizer(transitions.final_obs))
@@ -364,14 +398,6 @@ class TRPO:
         advantages, targets = both_advantages[0], both_targets[1]
         advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
         return LearningTargets(normalizer, obs, advantages, targets)
-
-    def log_prob(self, state: TRPOState, obs: jax.Array, action: jax.Array) -> jax.Array:
-        """log pi(action | obs) of the current policy: obs float[..., O], action float[..., A]."""
-        mean, log_std = self.policy.apply(state.policy_params, state.normalizer(obs))
-        return gaussian_log_prob(mean, log_std, action)
-
-    def evaluate(self, state: TRPOState, keys: jax.Array) -> jax.Array:
-        return evaluate(self.env, self.policy, state.policy_params, state.normalizer, keys)
 
     def fit_value(self, hyperparams, state, obs, targets, key):
         """The update's value step: Adam over one permutation of the flattened batch (obs
@@ -509,13 +535,15 @@ class TRPOTrainState:
 
 
 class TRPOTrainer:
-    """TRPO on a fixed reward (the environment's by default), in blocks.
+    """TRPO (or another ``learner``, e.g. ``rl.PPO``) on a fixed reward (the environment's by
+    default), in blocks.
 
     The trainer interface shared with ``pngail_jax.adversarial.AdversarialTrainer`` (and used by
     ``pngail_jax.grid.Grid``): ``init(*cell_inputs, key) -> (state, init_metrics)``,
     ``run_blocks(*cell_inputs, state, num_blocks) -> (state, metrics)`` and
     ``train(*cell_inputs, key)``, their composition. Here the cell inputs are one
-    ``TRPOHyperparams``. All three are pure and jittable; ``num_blocks`` is static.
+    ``TRPOHyperparams`` (the learner's: ``PPOHyperparams`` for PPO). All three are pure and
+    jittable; ``num_blocks`` is static.
 
     ``metrics`` map names to float[num_blocks * eval_every]; ``eval/return`` (the
     deterministic policy on ``num_eval_episodes`` fixed-key episodes) is set at the end of
@@ -523,10 +551,19 @@ class TRPOTrainer:
     counts each iteration's steps that applied a NaN or inf action (0 in a healthy run).
     """
 
-    def __init__(self, config: TRPOConfig, env: envs.Env, reward_fn: RewardFunction = true_reward):
+    def __init__(
+        self,
+        config: TRPOConfig,
+        env: envs.Env,
+        reward_fn: RewardFunction = true_reward,
+        learner: OnPolicyLearner | None = None,
+    ):
         self.config = config
         self.env = env
-        self.trpo = TRPO(config, env)
+        # The learner's state is the ``trpo`` field of the trainer's state, whichever it is.
+        self.trpo = TRPO(config, env) if learner is None else learner
+        if self.trpo.config != config:
+            raise ValueError("TRPOTrainer: the learner was built with another TRPOConfig")
         self.reward_fn = reward_fn
 
     @property

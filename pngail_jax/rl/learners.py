@@ -1,0 +1,59 @@
+"""The policy learners by name: ``"trpo"`` (the paper's, the default) and ``"ppo"``.
+
+A learner is one static choice of a run: every cell of a grid uses the same one, so a grid
+compiles into one program per learner. Its per-cell values are a hyperparameter pytree of
+its own (``TRPOHyperparams`` or ``PPOHyperparams``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from pngail_jax import envs
+from pngail_jax.rl.ppo import PPO, PPOConfig, PPOHyperparams
+from pngail_jax.rl.train import TRPO, OnPolicyLearner, TRPOConfig, TRPOHyperparams
+
+LEARNERS = ("trpo", "ppo")
+HYPERPARAMS = {"trpo": TRPOHyperparams, "ppo": PPOHyperparams}
+
+
+def check_learner(name) -> str:
+    """``name`` when it is a learner's, else ValueError naming the choices."""
+    if not isinstance(name, str) or name not in LEARNERS:
+        raise ValueError(f"learner must be one of {', '.join(LEARNERS)}, got {name!r}")
+    return name
+
+
+def make_learner(
+    name: str, config: TRPOConfig, env: envs.Env, ppo: PPOConfig | None = None
+) -> OnPolicyLearner:
+    """The learner ``name`` for ``env``: ``config`` gives the rollout's shape and networks
+    (and TRPO's settings), ``ppo`` PPO's (None: the defaults)."""
+    if check_learner(name) == "ppo":
+        return PPO(config, env, ppo)
+    return TRPO(config, env)
+
+
+def hyperparam_names(name: str) -> tuple[str, ...]:
+    """The per-cell values learner ``name`` reads (its hyperparameters' fields)."""
+    return tuple(field.name for field in dataclasses.fields(HYPERPARAMS[check_learner(name)]))
+
+
+def learner_hyperparams(name: str, **values) -> TRPOHyperparams | PPOHyperparams:
+    """Learner ``name``'s hyperparameters with ``values`` (ValueError naming a value the
+    learner does not read, and which learner does)."""
+    known = hyperparam_names(name)
+    foreign = [field for field in values if field not in known]
+    if foreign:
+        others = {
+            field: [other for other in LEARNERS if field in hyperparam_names(other)]
+            for field in foreign
+        }
+        described = ", ".join(
+            f"{field} ({'/'.join(owners)}'s)" if owners else field
+            for field, owners in others.items()
+        )
+        raise ValueError(
+            f"the {name} learner has no hyperparameter {described}; its own: {', '.join(known)}"
+        )
+    return HYPERPARAMS[name].create(**values)
