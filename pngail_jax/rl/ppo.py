@@ -184,9 +184,9 @@ class PPO(OnPolicyLearner):
     )  # fmt: skip
 
     def __init__(self, config: TRPOConfig, env: envs.Env, ppo: PPOConfig | None = None):
-        super().__init__(config, env)
         ppo = PPOConfig() if ppo is None else ppo
         ppo.check_batch(config)
+        super().__init__(config, env)
         self.ppo = ppo
         self.optimizer = optax.scale_by_adam(eps=1e-5)
 
@@ -312,7 +312,7 @@ class PPO(OnPolicyLearner):
             grads, parts = jax.grad(lambda p: self.loss(hyperparams, p, minibatch), has_aux=True)(
                 params
             )
-            norm = optax.global_norm(grads)
+            norm = jnp.sqrt(sum(jnp.sum(g**2) for g in jax.tree.leaves(grads)))
             scale = jnp.minimum(1.0, hyperparams.max_grad_norm / jnp.maximum(norm, 1e-12))
             grads = jax.tree.map(lambda g: g * scale, grads)
             updates, optimizer_state = self.optimizer.update(grads, optimizer_state)
