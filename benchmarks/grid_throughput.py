@@ -64,7 +64,11 @@ without a file, 1000 random rows of the task's shapes (the run says so).
 
 ``--physics c,mjx`` measures gymnasium's task on MuJoCo's C engine and on MJX one after the
 other in this run and ends with a side-by-side table: training and env-only steps/s per engine
-and the C engine's ratio over MJX at each grid size (rows gain ``physics``).
+and the C engine's ratio over MJX at each grid size (rows gain ``physics``). ``--learner
+trpo,ppo`` does the same for the policy learner under every method (rows gain ``learner``;
+one of the two flags may list several values).
+
+    python benchmarks/grid_throughput.py --env HalfCheetah-v4 --learner trpo,ppo --sizes 1,7
 
 ``--devices N`` shards every grid over N devices; on a CPU it re-runs this script in a
 subprocess with ``XLA_FLAGS=--xla_force_host_platform_device_count=N`` (XLA reads it when its
@@ -81,7 +85,7 @@ peak_memory_bytes, device, jax_version}`` plus ``cells``, ``num_envs``, ``unroll
 ``chunk_compile_seconds``, ``cold_cache_hits``, ``compile_seconds_warm``,
 ``init_compile_seconds_warm``, ``chunk_compile_seconds_warm``, ``warm_cache_hits``,
 ``init_peak_memory_bytes``, ``init_seconds`` (the untimed init call), ``nonfinite_cells``,
-``synthetic_demos``, ``physics`` (the engine of gymnasium's tasks, else None).
+``synthetic_demos``, ``physics`` (the engine of gymnasium's tasks, else None), ``learner``.
 """
 
 from __future__ import annotations
@@ -121,6 +125,7 @@ from pngail_jax.demos import Demonstrations, load_demonstrations
 from pngail_jax.grid import Grid, make_cells, nonfinite_cells, stack_cells
 from pngail_jax.methods import METHOD_NAMES
 from pngail_jax.programs import flags
+from pngail_jax.rl.learners import LEARNERS
 from pngail_jax.rl.train import TRPO
 
 DEFAULT_ENV = "Pendulum-v1"
@@ -252,7 +257,9 @@ def compile_worker(args, devices) -> None:
     demos, _ = load_demos(args.demos, args.env, env)
     train = make_grid_train(args, env, demos)
     methods, seeds = grid_layout(args.compile_worker)
-    inputs = stack_cells(make_cells(methods, seeds), jax.random.key(args.seed))
+    inputs = stack_cells(
+        make_cells(methods, seeds), jax.random.key(args.seed), learner=args.learner
+    )
     with counting_cache_hits() as hits:
         grid = Grid(train, inputs, blocks_per_chunk=1, devices=devices)
     times = {
@@ -291,7 +298,7 @@ def measure_grid(args, train, full_trpo, size: int, devices, key) -> dict:
     evaluation timings in this process."""
     compiling = compile_times(args, size)
     methods, seeds = grid_layout(size)
-    inputs = stack_cells(make_cells(methods, seeds), key)
+    inputs = stack_cells(make_cells(methods, seeds), key, learner=args.learner)
     grid = Grid(train, inputs, blocks_per_chunk=1, devices=devices)
     if compiling["compile_seconds"] is None:
         compiling["compile_seconds"] = grid.compile_seconds
@@ -327,6 +334,7 @@ def make_grid_train(args, env, demos):
         trpo=chunk_settings.trpo_config(args.iterations, fisher=args.fisher),
         classifier=ClassifierConfig(num_steps=args.classifier_steps),
         num_demos=None,
+        learner=args.learner,
     )
     return AdversarialTrainer(config, env, demos)
 
@@ -455,6 +463,13 @@ def parse_args(argv=None) -> argparse.Namespace:
         default="gauss_newton",
         help="Fisher-vector product form (default gauss_newton, as experiments.sweep)",
     )
+    parser.add_argument(
+        "--learner",
+        choices=LEARNERS,
+        default="trpo",
+        help="the policy learner under every method (default trpo); trpo,ppo measures both "
+        "in this run, side by side",
+    )
     parser.add_argument("--devices", type=int, default=None, help="shard every grid over N devices")
     parser.add_argument(
         "--quick",
@@ -524,6 +539,7 @@ def measure_environment(args, devices) -> list[dict]:
         **context(),
         "synthetic_demos": demos_note.startswith("SYNTHETIC"),
         "physics": getattr(env, "physics", None),
+        "learner": args.learner,
     }
     rows = measure_rows(args, env, demos, devices, common)
     per_device = "; peak memory per device" if len(devices) > 1 else ""
@@ -537,30 +553,34 @@ def measure_environment(args, devices) -> list[dict]:
     return rows
 
 
-def split_physics(argv: list[str]) -> tuple[list[str], list[str | None]]:
-    """``argv`` without its ``--physics`` flag, and the engines that flag lists (``c,mjx``:
-    both, measured one after the other in this run; no flag: [None], the platform's)."""
-    rest, engines = [], [None]
+# The flags that may list several values, each measured in turn in one run: {flag: choices}.
+COMPARED_FLAGS = {"physics": envs.PHYSICS, "learner": LEARNERS}
+
+
+def split_compared(argv: list[str], name: str) -> tuple[list[str], list[str | None]]:
+    """``argv`` without its ``--<name>`` flag, and the values that flag lists (``c,mjx``:
+    both, measured one after the other in this run; no flag: [None], the default)."""
+    rest, values, known = [], [None], COMPARED_FLAGS[name]
     items = iter(argv)
     for item in items:
-        if item == "--physics" or item.startswith("--physics="):
+        if item == f"--{name}" or item.startswith(f"--{name}="):
             value = item.partition("=")[2] if "=" in item else next(items, "")
-            engines = [engine.strip() for engine in value.split(",")]
-            bad = [engine for engine in engines if engine not in envs.PHYSICS]
-            if bad or not engines:
+            values = [choice.strip() for choice in value.split(",")]
+            bad = [choice for choice in values if choice not in known]
+            if bad or not values:
                 raise SystemExit(
-                    f"--physics: comma-separated engines among {', '.join(envs.PHYSICS)}, "
-                    f"got {value!r}"
+                    f"--{name}: comma-separated values among {', '.join(known)}, got {value!r}"
                 )
         else:
             rest.append(item)
-    return rest, engines
+    return rest, values
 
 
-def physics_table(rows: list[dict]) -> str:
-    """Training and env-only steps/s per engine, side by side per grid size, with the
-    ratios of the first engine listed over each other one (all measured in this run)."""
-    engines = list(dict.fromkeys(row["physics"] for row in rows))
+def side_by_side_table(rows: list[dict], name: str) -> str:
+    """Training and env-only steps/s per value of ``name`` (a row field: physics, learner),
+    side by side per grid size, with the ratios of the first value listed over each other
+    one (all measured in this run)."""
+    engines = list(dict.fromkeys(row[name] for row in rows))
     sizes = list(dict.fromkeys(row["cells"] for row in rows))
     first = engines[0]
     header = "| cells | " + " | ".join(
@@ -569,7 +589,7 @@ def physics_table(rows: list[dict]) -> str:
     header += "".join(f" | {first} / {other}: training, env-only" for other in engines[1:])
     lines = [header + " |", "|---:|" + "---:|" * (2 * len(engines) - 1)]
     for size in sizes:
-        by_engine = {row["physics"]: row for row in rows if row["cells"] == size}
+        by_engine = {row[name]: row for row in rows if row["cells"] == size}
         cells = [
             f"{by_engine[e]['steps_per_second']:,.0f} / {by_engine[e]['env_steps_per_second']:,.0f}"
             for e in engines
@@ -586,17 +606,24 @@ def physics_table(rows: list[dict]) -> str:
 
 def main(argv=None) -> None:
     argv = list(sys.argv[1:] if argv is None else argv)
-    rest, engines = split_physics(argv)
-    if len(engines) > 1 and "--devices" in " ".join(rest):
-        raise SystemExit("--physics with several engines and --devices: measure one at a time")
-    if len(engines) > 1:
+    compared = {}
+    for name in COMPARED_FLAGS:
+        rest, values = split_compared(argv, name)
+        if len(values) > 1:
+            compared[name] = (rest, values)
+    if len(compared) > 1:
+        raise SystemExit("--physics and --learner: list several values for one of them only")
+    if compared and "--devices" in " ".join(argv):
+        raise SystemExit("several --physics or --learner values and --devices: one at a time")
+    if compared:
+        ((name, (rest, values)),) = compared.items()
         rows = []
-        for engine in engines:
-            print(f"\n=== physics: {engine}", flush=True)
-            rows += run(rest + ["--physics", engine])
-        print("\n" + physics_table(rows), flush=True)
+        for value in values:
+            print(f"\n=== {name}: {value}", flush=True)
+            rows += run(rest + [f"--{name}", value])
+        print("\n" + side_by_side_table(rows, name), flush=True)
     else:
-        rows = run(argv)
+        rest, rows = argv, run(argv)
     if rows:
         write_rows(parse_args(rest).json, rows)
 

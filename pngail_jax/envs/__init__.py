@@ -6,10 +6,11 @@
 
 ``make(name, **options)`` knows ``Pendulum-v1`` (pure JAX, equal to gymnasium's), gymnasium's
 MuJoCo tasks ``Hopper-v4``, ``HalfCheetah-v4``, ``Walker2d-v4``, ``Swimmer-v4`` and ``Ant-v4``
-(exact, on MuJoCo's C engine on a CPU or on MJX: ``gym_mujoco``), Brax's variants ``Ant``,
-``HalfCheetah``, ``Hopper``, ``Walker2d`` (on MJX) and ``Swimmer`` (gymnasium's Swimmer-v5 on
-MJX), the names given to ``register`` and ``"package.module:factory"``, your own ``Env``
-or Brax environment (``docs/environments.md``, "Bring your own environment").
+and the -v5 of all but Ant (exact, on MuJoCo's C engine on a CPU or on MJX: ``gym_mujoco``),
+Brax's variants ``Ant``, ``HalfCheetah``, ``Hopper``, ``Walker2d`` (on MJX) and ``Swimmer``
+(gymnasium's Swimmer-v5 on MJX), the names given to ``register`` and
+``"package.module:factory"``, your own ``Env`` or Brax environment (``docs/environments.md``,
+"Bring your own environment").
 ``AutoReset(env)`` restarts finished episodes.
 """
 
@@ -117,10 +118,11 @@ def register(name: str, factory: Callable[..., Any], *, overwrite: bool = False)
 
 
 def task_family(name: str) -> str:
-    """The task a name runs, whichever variant: ``"Hopper"`` for ``"Hopper-v4"`` (gymnasium's)
-    and ``"Hopper"`` (Brax's); any other name as it is. Per-task tables (the paper's
-    demonstration counts, classifier settings, Table 1) are keyed by it."""
-    return name.removesuffix("-v4") if name in GYM_TASKS else name
+    """The task a name runs, whichever variant: ``"Hopper"`` for ``"Hopper-v4"`` and
+    ``"Hopper-v5"`` (gymnasium's) and ``"Hopper"`` (Brax's); any other name as it is.
+    Per-task tables (the paper's demonstration counts, classifier settings, Table 1) are keyed
+    by it."""
+    return name.rsplit("-v", 1)[0] if name in GYM_TASKS else name
 
 
 def check_name(name: str) -> None:

@@ -1,9 +1,12 @@
-"""gymnasium's MuJoCo tasks (-v4), exactly, on MuJoCo's C engine or on MJX.
+"""gymnasium's MuJoCo tasks (-v4 and -v5), exactly, on MuJoCo's C engine or on MJX.
 
 ``Hopper-v4``, ``HalfCheetah-v4``, ``Walker2d-v4``, ``Swimmer-v4`` and ``Ant-v4`` are
 gymnasium's tasks of those names: the same model files (read from the installed gymnasium),
 frame skip, observation, reward terms, termination and reset noise. They are the closest
 available to the paper's gym -v2 tasks (mujoco-py), which used the same model files.
+``Hopper-v5``, ``HalfCheetah-v5``, ``Walker2d-v5`` and ``Swimmer-v5`` are gymnasium's current
+versions (those of Minari's MuJoCo datasets), with their own model file and healthy reward
+where they have them; Ant-v5 is not built yet.
 
 One task, two physics engines (``physics=``):
 
@@ -82,14 +85,16 @@ def _observe_from(start: int):
 
 @dataclasses.dataclass(frozen=True)
 class TaskSpec:
-    """One gymnasium -v4 task, as data.
+    """One gymnasium -v4 or -v5 task, as data.
 
     Reward: ``x_velocity + healthy_reward - ctrl_cost_weight * |action|^2`` with
     ``x_velocity = (x_after - x_before) / dt``, ``dt = timestep * frame_skip``. ``x`` is
     ``qpos[0]``, except where ``position_body`` names a body: then it is that body's frame
     position from MuJoCo's last forward pass (gymnasium's ``get_body_com``), which after a
-    step lags the state by one substep. Terminating tasks pay ``healthy_reward`` on every
-    step, the last one included, as gymnasium does with ``terminate_when_unhealthy``.
+    step lags the state by one substep. Terminating -v4 tasks pay ``healthy_reward`` on every
+    step, the last one included, as gymnasium's -v4 do with ``terminate_when_unhealthy``;
+    -v5 tasks pay it on healthy steps only (``healthy_reward_on_every_step`` False), so not on
+    the step that terminates.
     Reset: ``qpos0 + U(-s, s)`` and ``U(-s, s)`` (or ``s * N(0, 1)``) velocities.
 
     Attributes:
@@ -102,6 +107,7 @@ class TaskSpec:
       healthy: ``(xp, qpos, qvel) -> bool``, or None for a task that never terminates.
       healthy_reward: reward per step of a terminating task.
       position_body: see above.
+      healthy_reward_on_every_step: see above (True for -v4, False for -v5).
     """
 
     xml: str
@@ -113,6 +119,7 @@ class TaskSpec:
     healthy: Callable | None = None
     healthy_reward: float = 0.0
     position_body: str | None = None
+    healthy_reward_on_every_step: bool = True
 
 
 def outcome(xp, spec: TaskSpec, terminate_when_unhealthy: bool, dt: float, step: dict):
@@ -129,8 +136,9 @@ def outcome(xp, spec: TaskSpec, terminate_when_unhealthy: bool, dt: float, step:
     if spec.healthy is not None:
         healthy = spec.healthy(xp, qpos, qvel)
         if terminate_when_unhealthy:
-            rewards = rewards + spec.healthy_reward
             terminated = ~healthy
+        if terminate_when_unhealthy and spec.healthy_reward_on_every_step:
+            rewards = rewards + spec.healthy_reward
         else:
             rewards = rewards + xp.where(healthy, spec.healthy_reward, 0.0)
     # gymnasium's order of operations, so that float64 rewards agree to the last bit.
@@ -149,6 +157,18 @@ TASKS: dict[str, TaskSpec] = {
     "Ant-v4": TaskSpec(
         "ant.xml", 5, 0.5, 0.1, True, _observe_from(2), _healthy_ant, 1.0, position_body="torso"
     ),
+}
+# gymnasium's -v5 tasks: Hopper and Walker2d pay the healthy reward on healthy steps only, and
+# Walker2d-v5 has its own model file (both feet with friction 0.9; -v4's left foot has 1.9);
+# HalfCheetah-v5 and Swimmer-v5 step, observe and reward as their -v4. Ant-v5 (contact forces
+# in its observation and a contact cost) is not here yet.
+TASKS |= {
+    "Hopper-v5": dataclasses.replace(TASKS["Hopper-v4"], healthy_reward_on_every_step=False),
+    "HalfCheetah-v5": TASKS["HalfCheetah-v4"],
+    "Walker2d-v5": dataclasses.replace(
+        TASKS["Walker2d-v4"], xml="walker2d_v5.xml", healthy_reward_on_every_step=False
+    ),
+    "Swimmer-v5": TASKS["Swimmer-v4"],
 }
 
 
@@ -188,7 +208,7 @@ class MjxState:
 
 
 class GymMujocoTask(Env):
-    """A gymnasium -v4 MuJoCo task (``TASKS``) on the C engine or on MJX.
+    """A gymnasium -v4 or -v5 MuJoCo task (``TASKS``) on the C engine or on MJX.
 
     Args:
       name: a key of ``TASKS``.

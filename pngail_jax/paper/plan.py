@@ -18,7 +18,7 @@ SEVEN_METHODS = ("gail", "2iwil", "icgail", "wgail", "pngail", "pngail-no-bsc", 
 # The paper's six tasks: its MuJoCo tasks as gymnasium's -v4 (gym -v2's model files and
 # observations). Figures name tasks by family (``envs.task_family``), so Brax's variants
 # (``--envs Hopper``) fill the same panels.
-MUJOCO_TASKS = envs.GYM_TASKS
+MUJOCO_TASKS = tuple(task for task in envs.GYM_TASKS if task.endswith("-v4"))  # the paper's
 PAPER_TASKS = ("Pendulum-v1", *MUJOCO_TASKS)
 FIGURES = (
     "fig2", "fig3", "fig4", "fig5", "fig6", "fig7", "fig8", "fig9", "fig10", "table1", "table4",

@@ -179,7 +179,7 @@ SETTINGS_FLAGS = (
     ),
     FieldFlag(
         "settings.normalize_observations",
-        f"running mean/std observation normalisation in TRPO {TABLE}",
+        f"running mean/std observation normalisation in the policy learner {TABLE}",
         boolean=True,
     ),
     FieldFlag(
