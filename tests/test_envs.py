@@ -189,5 +189,25 @@ class TestAntV4(EnvContract):
     env_name = "Ant-v4"
 
 
+class TestHopperV5(EnvContract):
+    env_name = "Hopper-v5"
+
+
+class TestHalfCheetahV5(EnvContract):
+    env_name = "HalfCheetah-v5"
+
+
+class TestWalker2dV5(EnvContract):
+    env_name = "Walker2d-v5"
+
+
+class TestSwimmerV5(EnvContract):
+    env_name = "Swimmer-v5"
+
+
+class TestAntV5(EnvContract):
+    env_name = "Ant-v5"
+
+
 def test_every_environment_has_a_contract_class():
     assert {cls.env_name for cls in EnvContract.__subclasses__()} == set(envs.ENV_NAMES)

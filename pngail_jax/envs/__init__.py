@@ -6,7 +6,7 @@
 
 ``make(name, **options)`` knows ``Pendulum-v1`` (pure JAX, equal to gymnasium's), gymnasium's
 MuJoCo tasks ``Hopper-v4``, ``HalfCheetah-v4``, ``Walker2d-v4``, ``Swimmer-v4`` and ``Ant-v4``
-and the -v5 of all but Ant (exact, on MuJoCo's C engine on a CPU or on MJX: ``gym_mujoco``),
+and their -v5 (exact, on MuJoCo's C engine on a CPU or on MJX: ``gym_mujoco``),
 Brax's variants ``Ant``, ``HalfCheetah``, ``Hopper``, ``Walker2d`` (on MJX) and ``Swimmer``
 (gymnasium's Swimmer-v5 on MJX), the names given to ``register`` and
 ``"package.module:factory"``, your own ``Env`` or Brax environment (``docs/environments.md``,

@@ -4,9 +4,9 @@
 gymnasium's tasks of those names: the same model files (read from the installed gymnasium),
 frame skip, observation, reward terms, termination and reset noise. They are the closest
 available to the paper's gym -v2 tasks (mujoco-py), which used the same model files.
-``Hopper-v5``, ``HalfCheetah-v5``, ``Walker2d-v5`` and ``Swimmer-v5`` are gymnasium's current
-versions (those of Minari's MuJoCo datasets), with their own model file and healthy reward
-where they have them; Ant-v5 is not built yet.
+``Hopper-v5``, ``HalfCheetah-v5``, ``Walker2d-v5``, ``Swimmer-v5`` and ``Ant-v5`` are
+gymnasium's current versions (those of Minari's MuJoCo datasets), with their own model file,
+healthy reward and contact forces where they have them.
 
 One task, two physics engines (``physics=``):
 
@@ -108,6 +108,11 @@ class TaskSpec:
       healthy_reward: reward per step of a terminating task.
       position_body: see above.
       healthy_reward_on_every_step: see above (True for -v4, False for -v5).
+      contact_cost_weight: with it (Ant-v5), the task reads MuJoCo's external contact forces
+        on every body after the step (``cfrc_ext``, from ``mj_rnePostConstraint``, as
+        gymnasium computes them), clipped to [-1, 1]: the observation ends with those of
+        every body but the world, and the reward pays ``contact_cost_weight`` times their
+        squared sum. 0: the task reads none.
     """
 
     xml: str
@@ -120,13 +125,20 @@ class TaskSpec:
     healthy_reward: float = 0.0
     position_body: str | None = None
     healthy_reward_on_every_step: bool = True
+    contact_cost_weight: float = 0.0
+
+    @property
+    def reads_contact_forces(self) -> bool:
+        return self.contact_cost_weight > 0
 
 
 def outcome(xp, spec: TaskSpec, terminate_when_unhealthy: bool, dt: float, step: dict):
     """``(obs, reward, terminated)`` of a step, gymnasium's formulas on the last axis.
 
     ``step``: ``qpos``, ``qvel`` after the step, ``x_before`` / ``x_after`` (the positions
-    the forward velocity reads) and ``action`` as given; arrays of the namespace ``xp``.
+    the forward velocity reads) and ``action`` as given, and for a task that reads them
+    ``contact_forces`` (every body's six, world first, flattened); arrays of the namespace
+    ``xp``.
     """
     qpos, qvel, action = step["qpos"], step["qvel"], step["action"]
     forward_reward = (step["x_after"] - step["x_before"]) / dt
@@ -141,8 +153,15 @@ def outcome(xp, spec: TaskSpec, terminate_when_unhealthy: bool, dt: float, step:
             rewards = rewards + spec.healthy_reward
         else:
             rewards = rewards + xp.where(healthy, spec.healthy_reward, 0.0)
+    obs = spec.observe(xp, qpos, qvel)
+    if spec.reads_contact_forces:
+        forces = xp.clip(step["contact_forces"], -1.0, 1.0)
+        contact_cost = spec.contact_cost_weight * xp.sum(xp.square(forces), axis=-1)
+        # gymnasium's order of operations, so that float64 rewards agree to the last bit.
+        obs = xp.concatenate([obs, forces[..., 6:]], axis=-1)
+        return obs, rewards - (ctrl_cost + contact_cost), terminated
     # gymnasium's order of operations, so that float64 rewards agree to the last bit.
-    return spec.observe(xp, qpos, qvel), rewards - ctrl_cost, terminated
+    return obs, rewards - ctrl_cost, terminated
 
 
 TASKS: dict[str, TaskSpec] = {
@@ -158,10 +177,10 @@ TASKS: dict[str, TaskSpec] = {
         "ant.xml", 5, 0.5, 0.1, True, _observe_from(2), _healthy_ant, 1.0, position_body="torso"
     ),
 }
-# gymnasium's -v5 tasks: Hopper and Walker2d pay the healthy reward on healthy steps only, and
-# Walker2d-v5 has its own model file (both feet with friction 0.9; -v4's left foot has 1.9);
-# HalfCheetah-v5 and Swimmer-v5 step, observe and reward as their -v4. Ant-v5 (contact forces
-# in its observation and a contact cost) is not here yet.
+# gymnasium's -v5 tasks: Hopper, Walker2d and Ant pay the healthy reward on healthy steps
+# only; Walker2d-v5 has its own model file (both feet with friction 0.9; -v4's left foot has
+# 1.9); Ant-v5 observes the bodies' contact forces and pays a contact cost; HalfCheetah-v5 and
+# Swimmer-v5 step, observe and reward as their -v4.
 TASKS |= {
     "Hopper-v5": dataclasses.replace(TASKS["Hopper-v4"], healthy_reward_on_every_step=False),
     "HalfCheetah-v5": TASKS["HalfCheetah-v4"],
@@ -169,6 +188,9 @@ TASKS |= {
         TASKS["Walker2d-v4"], xml="walker2d_v5.xml", healthy_reward_on_every_step=False
     ),
     "Swimmer-v5": TASKS["Swimmer-v4"],
+    "Ant-v5": dataclasses.replace(
+        TASKS["Ant-v4"], healthy_reward_on_every_step=False, contact_cost_weight=5e-4
+    ),
 }
 
 
@@ -244,7 +266,9 @@ class GymMujocoTask(Env):
         for field, value in solver.items():
             setattr(model.opt, field, value)
         self.name = name
-        self.observation_size = int(
+        # A task that reads contact forces observes those of every body but the world.
+        self._num_contact_forces = 6 * (model.nbody - 1) if self.spec.reads_contact_forces else 0
+        self.observation_size = self._num_contact_forces + int(
             jax.eval_shape(
                 functools.partial(self.spec.observe, jnp),
                 jax.ShapeDtypeStruct((model.nq,), jnp.float32),
@@ -295,7 +319,10 @@ class GymMujocoTask(Env):
         ``reset`` leaves it after ``set_state`` (time 0, no solver warm start)."""
         qpos = jnp.asarray(qpos, float_dtype())
         qvel = jnp.asarray(qvel, float_dtype())
-        obs = self.spec.observe(jnp, qpos, qvel)
+        # The contact forces are 0 at a reset: gymnasium's reset computes none (mj_forward).
+        obs = jnp.concatenate(
+            [self.spec.observe(jnp, qpos, qvel), jnp.zeros(self._num_contact_forces, qpos.dtype)]
+        )
         # A free root body's frame sits at its joint's position: the start x is qpos[0]
         # whichever x the task reads.
         if self.physics == "c":
@@ -323,6 +350,8 @@ class GymMujocoTask(Env):
         data = jax.lax.fori_loop(
             0, self.spec.frame_skip, lambda _, d: self._mjx.step(self._mjx_model, d), data
         )
+        if self.spec.reads_contact_forces:  # as gymnasium, after the steps
+            data = self._mjx.rne_postconstraint(self._mjx_model, data)
         x_after = data.qpos[0] if self._body is None else data.xpos[self._body, 0]
         dtype = float_dtype()
         step = {
@@ -332,6 +361,8 @@ class GymMujocoTask(Env):
             "x_after": x_after.astype(dtype),
             "action": action,
         }
+        if self.spec.reads_contact_forces:
+            step["contact_forces"] = data.cfrc_ext.reshape(-1).astype(dtype)
         obs, reward, terminated = outcome(
             jnp, self.spec, self.terminate_when_unhealthy, self.dt, step
         )
@@ -455,8 +486,12 @@ class _CEngine:
         # action; MuJoCo's controls are float64.
         action = np.asarray(action).reshape(count, self._model.nu)
         x_before = state[:, -1].copy()
+        # Each row's contact forces after its step, for a task that reads them.
+        forces = None
+        if self._task.spec.reads_contact_forces:
+            forces = np.empty((count, 6 * self._model.nbody), np.float64)
         with self._run_lock:
-            self._run(state, action.astype(np.float64))
+            self._run(state, action.astype(np.float64), forces)
         nq, nv = self._model.nq, self._model.nv
         step = {
             "qpos": state[:, self._qpos_at : self._qpos_at + nq],
@@ -464,6 +499,7 @@ class _CEngine:
             "x_before": x_before,
             "x_after": state[:, -1],
             "action": action,
+            "contact_forces": forces,
         }
         task = self._task
         obs, reward, terminated = outcome(
@@ -476,29 +512,35 @@ class _CEngine:
             terminated.reshape(batch),
         )
 
-    def _run(self, state: np.ndarray, controls: np.ndarray) -> None:
-        """Steps each row of ``state`` (float64[N, state_size + 1]) in place."""
+    def _run(self, state: np.ndarray, controls: np.ndarray, forces=None) -> None:
+        """Steps each row of ``state`` (float64[N, state_size + 1]) in place; with ``forces``
+        (float64[N, 6 nbody]), writes each row's contact forces after its step there."""
         count = state.shape[0]
         threads = min(self._num_threads, count)
         if threads <= 1:
-            self._run_rows(self._data(0), state, controls, 0, count)
+            self._run_rows(self._data(0), state, controls, forces, 0, count)
             return
         pool = self._thread_pool(threads)
         bounds = np.linspace(0, count, threads + 1).astype(int)
         futures = [
-            pool.submit(self._run_rows, self._data(i), state, controls, bounds[i], bounds[i + 1])
+            pool.submit(
+                self._run_rows, self._data(i), state, controls, forces, bounds[i], bounds[i + 1]
+            )
             for i in range(threads)
         ]
         for future in futures:
             future.result()
 
-    def _run_rows(self, data, state, controls, start: int, stop: int) -> None:
+    def _run_rows(self, data, state, controls, forces, start: int, stop: int) -> None:
         mujoco, model, spec = self._mujoco, self._model, self._spec
         for row in range(start, stop):
             mujoco.mj_setState(model, data, state[row, :-1], spec)
             data.ctrl[:] = controls[row]
             mujoco.mj_step(model, data, nstep=self._frame_skip)
             mujoco.mj_getState(model, data, state[row, :-1], spec)
+            if forces is not None:  # as gymnasium, after the steps
+                mujoco.mj_rnePostConstraint(model, data)
+                forces[row] = data.cfrc_ext.reshape(-1)
             state[row, -1] = data.qpos[0] if self._body is None else data.xpos[self._body, 0]
 
     def _data(self, index: int):
