@@ -337,6 +337,7 @@ class AdversarialTrainer:
         return self.config.trpo.eval_every
 
     def init(self, hyperparams: AdversarialHyperparams, spec: MethodSpec, key: jax.Array):
+        self.trpo.check_hyperparams(hyperparams.trpo)
         split_key, classifier_key, trpo_key, disc_key, eval_key, carry_key = jax.random.split(
             key, 6
         )

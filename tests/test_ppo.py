@@ -162,6 +162,10 @@ def test_bad_values_and_foreign_hyperparameters_are_named():
         learner_hyperparams("ppo", max_kl=0.01)
     with pytest.raises(ValueError, match="learner must be one of trpo, ppo"):
         make_learner("sac", TRPOConfig(), envs.make("Pendulum-v1"))
+    pendulum, config = envs.make("Pendulum-v1"), TRPOConfig(num_iterations=1, eval_every=1)
+    trainer = TRPOTrainer(config, pendulum, learner=PPO(config, pendulum))
+    with pytest.raises(ValueError, match="learner is PPO, which reads PPOHyperparams, but the"):
+        trainer.init(learner_hyperparams("trpo"), jax.random.key(0))
     with pytest.raises(ValueError, match="at least PPO's 32 minibatches"):
         PPO(TRPOConfig(num_envs=1, unroll_length=10, num_value_minibatches=1), None)
 

@@ -178,10 +178,10 @@ class PPO(OnPolicyLearner):
     ``rollout``, ``update`` and ``evaluate``, pure, with the same signatures as ``TRPO``'s, so
     a trainer runs either."""
 
-    name = "ppo"
     LEARNED_FIELDS = (
         "policy_params", "value_params", "optimizer_state", "normalizer", "return_normalizer",
     )  # fmt: skip
+    HYPERPARAMS = PPOHyperparams
 
     def __init__(self, config: TRPOConfig, env: envs.Env, ppo: PPOConfig | None = None):
         ppo = PPOConfig() if ppo is None else ppo

@@ -245,8 +245,19 @@ class OnPolicyLearner:
     learns (what a frozen cloned policy keeps, ``adversarial``).
     """
 
-    name = "on-policy"
     LEARNED_FIELDS: tuple[str, ...] = ("policy_params", "value_params", "normalizer")
+    HYPERPARAMS: type  # the per-cell values its update reads
+
+    def check_hyperparams(self, hyperparams) -> None:
+        """ValueError unless ``hyperparams`` are this learner's (a cell made for the other
+        learner would otherwise fail deep inside the update)."""
+        if not isinstance(hyperparams, self.HYPERPARAMS):
+            raise ValueError(
+                f"this trainer's learner is {type(self).__name__}, which reads "
+                f"{self.HYPERPARAMS.__name__}, but the cell gives "
+                f"{type(hyperparams).__name__}: make the cells for the same learner "
+                "(AdversarialHyperparams.create(learner=...), stack_cells(..., learner=...))"
+            )
 
     def __init__(self, config: TRPOConfig, env: envs.Env):
         self.config = config
@@ -307,8 +318,8 @@ class TRPO(OnPolicyLearner):
     ``rollout``, computes its own rewards and calls ``update`` with them.
     """
 
-    name = "trpo"
     LEARNED_FIELDS = ("policy_params", "value_params", "value_optimizer_state", "normalizer")
+    HYPERPARAMS = TRPOHyperparams
 
     def __init__(self, config: TRPOConfig, env: envs.Env):
         super().__init__(config, env)
@@ -572,7 +583,7 @@ class TRPOTrainer:
         return self.config.eval_every
 
     def init(self, hyperparams: TRPOHyperparams, key: jax.Array):
-        del hyperparams  # the same signature as every trainer's; TRPO's init reads none
+        self.trpo.check_hyperparams(hyperparams)  # init reads none, but the blocks will
         init_key, eval_key = jax.random.split(key)
         state = TRPOTrainState(
             trpo=self.trpo.init(init_key),
