@@ -21,7 +21,7 @@ from pngail_jax import envs
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.methods import METHOD_NAMES
 from pngail_jax.programs import cli, compare_settings, sweep
-from pngail_jax.run_config import FISHER_FORMS, LOG_BACKENDS, RunConfig
+from pngail_jax.run_config import FISHER_FORMS, LEARNERS, LOG_BACKENDS, RunConfig
 from pngail_jax.settings import RunSettings
 from pngail_jax.validation import ConfigError
 
@@ -90,6 +90,7 @@ FIELD_VALUES = {
     | JUNK,
     "bsc_eps": FLOATS,
     "fisher": st.sampled_from(FISHER_FORMS) | JUNK,
+    "learner": st.sampled_from(LEARNERS) | JUNK,
     "fisher_subsample": COUNTS,
     "discriminator_hidden_sizes": tuples_of(COUNTS),
     "cpu_devices": COUNTS,
@@ -149,7 +150,7 @@ def assert_stored_types(config: RunConfig) -> None:
         assert getattr(config, name) is None or type(getattr(config, name)) is int, name
     for name in ("demos", "conf", "confidence_field", "preset_name"):
         assert getattr(config, name) is None or type(getattr(config, name)) is str, name
-    assert type(config.fisher) is str
+    assert type(config.fisher) is str and type(config.learner) is str
     for name in ("action_scale", "bsc_eps", "random_return", "optimal_return"):
         assert getattr(config, name) is None or type(getattr(config, name)) is float, name
     assert type(config.settings) is RunSettings and type(config.classifier) is ClassifierConfig
