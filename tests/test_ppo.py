@@ -237,8 +237,7 @@ def test_a_ppo_grid_resumes_from_a_checkpoint_bit_exactly(tmp_path):
 def test_the_sweep_runs_with_ppo_and_keeps_a_cloned_policy_cloned(demos_path, tmp_path):
     """GAIL, PN-GAIL and behaviour cloning (whose policy PPO must leave as cloned) under PPO
     through the sweep: the run records its learner, and metrics.csv fills its kl column from
-    PPO's step. (Every method, the appendix's too, ran with PPO at the check preset:
-    docs/ppo.md; here three keep the suite short.)"""
+    PPO's step."""
     from conftest import tiny_sweep_args
 
     from pngail_jax.methods import METHOD_NAMES
