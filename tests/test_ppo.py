@@ -15,12 +15,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from test_gae import numpy_gae
-from test_grid import assert_close_across_programs, small_setup
+from test_grid import assert_close_across_programs, assert_resumes_bit_exactly, small_setup
 
 from pngail_jax import envs
 from pngail_jax.adversarial import AdversarialHyperparams, AdversarialTrainer
-from pngail_jax.checkpoint import restore_tree, save_tree
-from pngail_jax.grid import Grid, make_cells, stack_cells
+from pngail_jax.grid import make_cells, stack_cells
 from pngail_jax.rl import PPO, PPOConfig, PPOHyperparams, TRPOConfig, TRPOTrainer
 from pngail_jax.rl.learners import learner_hyperparams, make_learner
 from pngail_jax.rl.ppo import clipped_surrogate_loss, value_loss
@@ -218,16 +217,7 @@ def test_a_grid_of_ppo_cells_equals_its_cells_run_alone():
 def test_a_ppo_grid_resumes_from_a_checkpoint_bit_exactly(tmp_path):
     trainer = ppo_trainer()
     inputs = stack_cells(make_cells(["pngail"], 2), jax.random.key(0), learner="ppo")
-    grid = Grid(trainer, inputs, blocks_per_chunk=1)
-    state, _ = grid.init()
-    state, _ = grid.run_chunk(state)
-    template = jax.eval_shape(lambda: grid.unpad(state))
-    save_tree(tmp_path / "state", grid.unpad(state))
-    _, uninterrupted = grid.run_chunk(state)
-    restored = grid.place(restore_tree(tmp_path / "state", template))
-    _, resumed = grid.run_chunk(restored)
-    for name in uninterrupted:
-        np.testing.assert_array_equal(resumed[name], uninterrupted[name], err_msg=name)
+    assert_resumes_bit_exactly(trainer, inputs, tmp_path)
 
 
 # -- the entry points ------------------------------------------------------------------------

@@ -287,24 +287,12 @@ class PPO(OnPolicyLearner):
         }
         return total, parts
 
-    def update(
-        self,
-        hyperparams: PPOHyperparams,
-        state: PPOState,
-        transitions: Transitions,
-        rewards: jax.Array,
-    ) -> tuple[PPOState, dict[str, jax.Array]]:
-        """``num_epochs`` epochs of minibatch Adam steps on ``rewards`` float[T, N]. Returns
-        the new state and scalar metrics of the update and of the rollout it learnt from."""
+    def epochs(self, hyperparams, params, optimizer_state, batch, learning_rate, key):
+        """``num_epochs`` passes over ``batch``, each a fresh permutation cut into
+        ``num_minibatches`` minibatches, one clipped-gradient Adam step on each: ((params,
+        optimizer state), each step's loss parts float[epochs, minibatches])."""
         config, ppo = self.config, self.ppo
-        chex.assert_shape(rewards, (config.unroll_length, config.num_envs))
-        scaled, return_normalizer, discounted_return = self.normalized_rewards(
-            hyperparams, state, transitions, rewards
-        )
-        normalizer, batch = self.batch(hyperparams, state, transitions, scaled)
-        learning_rate = self.learning_rate(hyperparams, state)
         minibatch_size = config.batch_size // ppo.num_minibatches
-        key, epochs_key = jax.random.split(state.key)
 
         def minibatch_step(carry, indices):
             params, optimizer_state = carry
@@ -328,9 +316,28 @@ class PPO(OnPolicyLearner):
                 minibatch_step, carry, order.reshape(ppo.num_minibatches, minibatch_size)
             )
 
+        return jax.lax.scan(epoch, (params, optimizer_state), jax.random.split(key, ppo.num_epochs))
+
+    def update(
+        self,
+        hyperparams: PPOHyperparams,
+        state: PPOState,
+        transitions: Transitions,
+        rewards: jax.Array,
+    ) -> tuple[PPOState, dict[str, jax.Array]]:
+        """``num_epochs`` epochs of minibatch Adam steps on ``rewards`` float[T, N]. Returns
+        the new state and scalar metrics of the update and of the rollout it learnt from."""
+        config = self.config
+        chex.assert_shape(rewards, (config.unroll_length, config.num_envs))
+        scaled, return_normalizer, discounted_return = self.normalized_rewards(
+            hyperparams, state, transitions, rewards
+        )
+        normalizer, batch = self.batch(hyperparams, state, transitions, scaled)
+        learning_rate = self.learning_rate(hyperparams, state)
+        key, epochs_key = jax.random.split(state.key)
         params = {"policy": state.policy_params, "value": state.value_params}
-        (params, optimizer_state), parts = jax.lax.scan(
-            epoch, (params, state.optimizer_state), jax.random.split(epochs_key, ppo.num_epochs)
+        (params, optimizer_state), parts = self.epochs(
+            hyperparams, params, state.optimizer_state, batch, learning_rate, epochs_key
         )
         old_mean, old_log_std = self.policy.apply(state.policy_params, batch.obs)
         new_mean, new_log_std = self.policy.apply(params["policy"], batch.obs)
