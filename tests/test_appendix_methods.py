@@ -24,6 +24,7 @@ from pngail_jax.methods import METHOD_NAMES, method_spec, required_phases, stack
 from pngail_jax.networks import orthogonal_init
 from pngail_jax.ranking import DrexConfig, RankingConfig
 from pngail_jax.rl import TRPOConfig
+from pngail_jax.rl.ppo import PPOConfig
 from pngail_jax.run_config import RunConfig
 
 METHODS = ("trex", "drex", "cail", "firl-fkl", "firl-rkl", "firl-js", "bc", "bc-weighted")
@@ -43,8 +44,10 @@ def demos(trajectories: bool = True) -> Demonstrations:
     )
 
 
-def trainer_for(methods, data=None, num_iterations=2):
+def trainer_for(methods, data=None, num_iterations=2, learner="trpo"):
     config = AdversarialConfig(
+        learner=learner,
+        ppo=PPOConfig(num_minibatches=4),
         trpo=TRPOConfig(
             num_envs=4, unroll_length=25, num_iterations=num_iterations, eval_every=1,
             num_eval_episodes=1, num_value_minibatches=5,
@@ -104,6 +107,24 @@ def test_a_grid_of_the_appendix_methods_equals_its_cells_run_alone():
     for index, cell in enumerate(cells):
         moved = not np.all(returns[index] == returns[index][0])
         assert moved == (cell.method not in ("bc", "bc-weighted")), cell.method
+
+
+@pytest.mark.slow
+def test_the_appendix_methods_train_under_ppo():
+    """The learner is one static choice under every method: the appendix methods' phases
+    (rankings, D-REX's clone and noise rollouts, CAIL's confidences, f-IRL's refits) feed
+    PPO's update as they feed TRPO's, in one vmapped program."""
+    methods = METHODS[:6]  # BC has no policy learner to swap
+    trainer = trainer_for(methods, learner="ppo")
+    inputs = stack_cells(make_cells(methods, 1), key(0), learner="ppo")
+    state, metrics = jax.jit(jax.vmap(trainer.train))(*inputs)
+    returns = np.asarray(metrics["eval/return"])
+    assert np.all(np.isfinite(returns)) and np.all(np.isfinite(metrics["train/reward"]))
+    assert np.all(returns[:, 0] != returns[:, -1])  # every policy moved
+    assert np.all(np.asarray(metrics["ppo/kl"]) > 0)
+    # PPO's Adam took 10 epochs x 4 minibatches in each of 2 iterations in every cell.
+    assert np.all(np.asarray(state.trpo.optimizer_state.count) == 80)
+    assert np.all(np.asarray(state.firl.discriminator_optimizer_state[1].count) == 10)
 
 
 def ranked_problem(num_trajectories=4, steps=20):

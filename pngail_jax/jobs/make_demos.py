@@ -57,7 +57,7 @@ class MakeDemosConfig:
     intermediate policy is picked among the evaluated checkpoints: finer than the table's)."""
 
     env: str = "Pendulum-v1"
-    iterations: int = 150  # TRPO iterations
+    iterations: int = 150  # policy iterations (TRPO or PPO)
     seeds: int = 3  # TRPO seeds; the best is optimal
     seed: int = 0  # base PRNG seed
     ratio: str = "1:4"  # optimal:intermediate trajectories

@@ -241,7 +241,11 @@ RUN_FLAGS = (
         convert=_methods,
     ),
     FieldFlag("seeds", "seeds per method and setting (default {default})", type=int),
-    FieldFlag("iterations", "TRPO iterations per run (default {default})", type=int),
+    FieldFlag(
+        "iterations",
+        "policy iterations (TRPO or PPO updates) per run (default {default})",
+        type=int,
+    ),
     FieldFlag(
         "demos",
         "*_mixture.npy (authors' layout), *.npz, or minari:<dataset id> "
@@ -298,10 +302,10 @@ RUN_FLAGS = (
     ),
     FieldFlag(
         "grid_axes",
-        "another grid axis, repeatable: a per-cell value (a discriminator or TRPO "
-        "hyperparameter, e.g. max_kl, or a MethodSpec coefficient, e.g. pn_coef) and its "
-        "values; every axis multiplies the grid; --grid none clears a --config file's "
-        "(default: none)",
+        "another grid axis, repeatable: a per-cell value (a discriminator or learner "
+        "hyperparameter, e.g. max_kl or clip_eps, or a MethodSpec coefficient, e.g. "
+        "pn_coef) and its values; every axis multiplies the grid; --grid none clears a "
+        "--config file's (default: none)",
         flag="--grid",
         convert=_grid_axes,
         append=True,

@@ -1,10 +1,11 @@
-"""Generate imperfect demonstrations: an optimal and an intermediate TRPO policy, mixed.
+"""Generate imperfect demonstrations: an optimal and an intermediate policy (TRPO, or PPO
+with ``--learner ppo``), mixed.
 
     python -m experiments.make_demos --env Pendulum-v1 --out demos/pendulum
 
 The flags of ``pngail_jax.jobs.make_demos.MakeDemosConfig`` and one call of
-``make_demonstrations``, which says what is made and how: a TRPO run on the true reward whose
-evaluated checkpoints are kept (``checkpoints/iter_XXXX/``), the best one as the optimal
+``make_demonstrations``, which says what is made and how: a learner's run on the true reward
+whose evaluated checkpoints are kept (``checkpoints/iter_XXXX/``), the best one as the optimal
 policy and an earlier one near ``--intermediate-target`` as the intermediate one, the random
 and optimal returns measured (Table 3), and ``--num-trajectories`` deterministic episodes at
 the optimal:intermediate ``--ratio`` labelled with their normalised returns in ``demos.npz``.
