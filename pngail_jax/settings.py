@@ -61,7 +61,8 @@ def describe(settings: RunSettings, env: envs.Env | None = None) -> str:
 
 @dataclasses.dataclass(frozen=True)
 class RunSettings:
-    """Static per-task settings. ``num_envs * unroll_length`` samples per policy iteration (TRPO or PPO)."""
+    """Static per-task settings. ``num_envs * unroll_length`` samples per policy iteration
+    (TRPO or PPO)."""
 
     num_envs: int = 25
     unroll_length: int = 200
