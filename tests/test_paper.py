@@ -183,10 +183,9 @@ def test_an_interrupted_grid_keeps_its_wall_time_on_the_plan_record(tmp_path, mo
 
     grid = paper.main_grid("Pendulum-v1", released=True)
     (tmp_path / "timings.json").write_text(json.dumps({"g": 60.0}))  # an earlier call's
-    monkeypatch.setattr(plan, "grid_config", lambda *args: None)
     monkeypatch.setattr(plan, "run_grid", interrupted)
     with pytest.raises(KeyboardInterrupt):
-        plan.run_grids({"g": grid}, {grid.demos: (None, 1.0)}, tmp_path, None, None, [])
+        plan.run_grids({"g": grid}, {"g": None}, tmp_path, [])
     assert 60.05 <= json.loads((tmp_path / "timings.json").read_text())["g"] < 70.0
 
 
@@ -255,3 +254,65 @@ def test_a_grid_config_is_the_sweep_config_of_the_same_flags(tmp_path):
         "--out", str(tmp_path / "out"),
     ]  # fmt: skip
     assert config == sweep.parse_args(flags).config
+
+
+def fake_released_pendulum(directory):
+    """An authors'-layout Pendulum-v1 file of 1,000 random rows (5 trajectories) and its
+    confidences: enough for a test-preset grid."""
+    rng = np.random.default_rng(0)
+    directory.mkdir()
+    rows = np.concatenate([rng.normal(size=(1000, 3)), rng.uniform(-1, 1, (1000, 1))], axis=1)
+    np.save(directory / "Pendulum-v1_mixture.npy", rows.astype(np.float32))
+    np.save(directory / "Pendulum-v1_mixture_conf.npy", rng.uniform(size=(1000, 1)))
+
+
+@pytest.mark.slow
+@pytest.mark.filterwarnings("ignore:.*normalised returns run backwards")  # 4 iterations
+def test_a_finished_sweep_of_a_planned_grid_is_adopted_not_run_again(tmp_path, monkeypatch):
+    from pngail_jax.paper import grids as plan
+
+    released = tmp_path / "released"
+    fake_released_pendulum(released)
+    argv = ["--preset", "test", "--only", "fig2", "--envs", "Pendulum-v1"]
+    argv += ["--released-demos", str(released)]
+    first = tmp_path / "first"
+    paper.main([*argv, "--out", str(first)])
+    grid = first / "grids" / "Pendulum-v1-main"
+
+    def no_grid_runs(*args, **kwargs):
+        raise AssertionError("a grid ran")
+
+    monkeypatch.setattr(plan, "run", no_grid_runs)
+    second = tmp_path / "second"
+    text = paper.main([*argv, "--out", str(second), "--adopt", str(grid)]).read_text()
+    copied = second / "grids" / "Pendulum-v1-main"
+    assert (copied / "metrics.csv").read_bytes() == (grid / "metrics.csv").read_bytes()
+    assert f"adopted from `{grid.absolute()}`" in text
+    assert json.loads((second / "results.json").read_text())["adopted"]["Pendulum-v1-main"]
+    # The same adoption again on --resume is a no-op; another plan's grid is refused by name.
+    assert paper.main(["--resume", str(second), "--adopt", str(grid)]).read_text() == text
+    with pytest.raises(SystemExit, match="the plan has no grid on Pendulum-v1 .its grids: Hop"):
+        paper.main(["--preset", "test", "--only", "fig2", "--envs", "Hopper-v4",
+                    "--out", str(tmp_path / "third"), "--adopt", str(grid)])  # fmt: skip
+
+
+def test_adoption_refuses_unfinished_and_different_sweeps(tmp_path):
+    from pngail_jax.paper.adopt import finished_sweep, matching_grid
+    from pngail_jax.run_config import RunConfig
+
+    with pytest.raises(RunError, match="not a sweep run"):
+        finished_sweep(tmp_path)
+    (tmp_path / "config.json").write_text(json.dumps(RunConfig().to_dict()))
+    (tmp_path / "summary.json").write_text(json.dumps(
+        {"complete": False, "iterations_done": 100, "iterations": 300}
+    ))  # fmt: skip
+    with pytest.raises(RunError, match=r"not finished \(100 of 300 iterations\); finish it first"):
+        finished_sweep(tmp_path)
+    planned = {"Pendulum-v1-main": RunConfig(seeds=5, chunk_iterations=100)}
+    saved = RunConfig(seeds=5, chunk_iterations=10).to_dict()
+    assert matching_grid(tmp_path, saved, planned) == "Pendulum-v1-main"  # chunks aside
+    saved["seeds"], saved["iterations"] = 3, 200
+    with pytest.raises(
+        RunError, match="not the plan's grid Pendulum-v1-main: seeds 3, the plan's 5; iterations"
+    ):
+        matching_grid(tmp_path, saved, planned)

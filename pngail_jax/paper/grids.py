@@ -179,31 +179,37 @@ def run_grid(grid: GridSpec, directory: Path, config, command: list[str]) -> boo
     return False
 
 
-def run_grids(
-    grids, demos, out: Path, budget: Budget, physics, command: list[str], learner: str = "trpo"
-) -> dict:
-    """Runs (or resumes, or keeps) every grid; each grid's wall-clock seconds over all calls,
-    interrupted ones included, kept in ``out/timings.json``. ``command``: the plan's,
-    recorded in each grid's config; ``learner``: the policy learner of every grid."""
+def planned_configs(grids, demos, budget: Budget, physics, learner: str = "trpo") -> dict:
+    """``{name: RunConfig}`` of every grid of the plan (``grid_config``); the row count of a
+    demonstration set is read only for a grid with fewer unlabelled rows (Fig. 6)."""
+    num_rows = {}
+    configs = {}
+    for name, grid in grids.items():
+        path, scale = demos[grid.demos]
+        if grid.unlabelled_fraction != 1 and grid.demos not in num_rows:
+            num_rows[grid.demos] = load_demonstrations(path, action_scale=scale).num_rows
+        configs[name] = grid_config(
+            grid, demos[grid.demos], budget, num_rows.get(grid.demos), physics, learner
+        )
+    return configs
+
+
+def run_grids(grids, configs: dict, out: Path, command: list[str]) -> dict:
+    """Runs (or resumes, or keeps) every grid with its config (``planned_configs``); each
+    grid's wall-clock seconds over all calls, interrupted ones included, kept in
+    ``out/timings.json``. ``command``: the plan's, recorded in each grid's config."""
     timings_path = out / "timings.json"
     try:
         timings = read_json(timings_path, "timings record") if timings_path.exists() else {}
     except IntegrityError as error:
         print(f"note: {error}; wall times start again from this call")
         timings = {}
-    num_rows = {}  # of each demonstration set, read once, where a grid sizes its split by it
     ran: list[float] = []  # seconds of the grids this call ran
     for index, (name, grid) in enumerate(grids.items()):
-        path, scale = demos[grid.demos]
-        if grid.unlabelled_fraction != 1 and grid.demos not in num_rows:
-            num_rows[grid.demos] = load_demonstrations(path, action_scale=scale).num_rows
-        config = grid_config(
-            grid, demos[grid.demos], budget, num_rows.get(grid.demos), physics, learner
-        )
         print(f"\n== grid {index + 1} of {len(grids)}{plan_eta(ran, len(grids) - index)}")
         start, kept = time.perf_counter(), False
         try:
-            kept = run_grid(grid, out / "grids" / name, config, command)
+            kept = run_grid(grid, out / "grids" / name, configs[name], command)
         finally:  # an interrupted call (Ctrl-C, SIGTERM) counts its time too
             if not kept:
                 ran.append(time.perf_counter() - start)

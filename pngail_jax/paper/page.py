@@ -260,8 +260,12 @@ def figure_results(out: Path, figures: list[Figure], grids) -> dict:
     return results
 
 
-def write_page(out: Path, options: dict, figures: list[Figure], grids, timings: dict) -> Path:
-    """``README.md``, one plot per figure and ``results.json`` from the grids' outputs."""
+def write_page(
+    out: Path, options: dict, figures: list[Figure], grids, timings: dict, adopted=None
+) -> Path:
+    """``README.md``, one plot per figure and ``results.json`` from the grids' outputs;
+    ``adopted``: the grids copied from finished sweeps (``paper.adopt``), named as such."""
+    adopted = adopted or {}
     from pngail_jax.report import json_safe
 
     results = figure_results(out, figures, grids)
@@ -291,6 +295,9 @@ def write_page(out: Path, options: dict, figures: list[Figure], grids, timings: 
     for name, grid in grids.items():
         seconds = timings.get(name)
         wall = "n/a" if seconds is None else f"{seconds / 60:.1f} min"
+        if name in adopted:
+            commit = (adopted[name].get("commit") or "unknown")[:7]
+            wall = f"adopted from `{adopted[name]['from']}` (commit {commit})"
         lines.append(
             f"| [{name}](grids/{name}/summary.md) | {grid.task} | {grid.demos.description} | "
             f"{', '.join(grid.methods)} | {wall} |"
@@ -304,7 +311,7 @@ def write_page(out: Path, options: dict, figures: list[Figure], grids, timings: 
         lines += figure_markdown(figure, results[figure.name], command)
         if figure.name not in ("table1", "table4"):
             plot_figure(out / f"{figure.name}.png", figure, results[figure.name])
-    document = {"options": options, "timings": timings, **results}
+    document = {"options": options, "timings": timings, "adopted": adopted, **results}
     write_json(out / "results.json", json_safe(document))
     page = out / "README.md"
     atomic_write_text(page, "\n".join(lines))

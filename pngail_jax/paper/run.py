@@ -24,7 +24,8 @@ from pngail_jax.integrity import (
 )
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.outputs import claimed
-from pngail_jax.paper.grids import demo_paths, released_files, run_grids
+from pngail_jax.paper.adopt import adopt_grids, finished_sweep
+from pngail_jax.paper.grids import demo_paths, planned_configs, released_files, run_grids
 from pngail_jax.paper.page import write_page
 from pngail_jax.paper.plan import BUDGETS, FIGURES, PAPER_TASKS, RENAMED_BUDGETS, plan
 
@@ -56,10 +57,13 @@ def paper_options(
     }
 
 
-def run_paper(options: dict | None, out, *, resume: bool = False, overwrite: bool = False):
+def run_paper(
+    options: dict | None, out, *, resume: bool = False, overwrite: bool = False, adopt=()
+):
     """Runs the plan of ``options`` (``paper_options``) into ``out`` (new, empty, or with
     ``overwrite`` a paper run), or with ``resume`` continues the plan in ``out`` (``options``
-    None: its paper.json's). Returns the page's path. Raises ``RunError`` with one line."""
+    None: its paper.json's); ``adopt``: finished sweep folders to keep as the plan's grids
+    they match (``paper.adopt``). Returns the page's path. Raises ``RunError`` with one line."""
     out = Path(out)
     with refusals(), claimed(out, PROGRAM, overwrite=overwrite, resume=resume) as claim:
         if resume:
@@ -71,6 +75,8 @@ def run_paper(options: dict | None, out, *, resume: bool = False, overwrite: boo
             options["inputs"] = released_inputs(released)
         else:
             check_paper_inputs(out, options, released)
+        for directory in adopt:  # before any demonstrations are made: a typo fails at once
+            finished_sweep(Path(directory))
         figures, grids = plan(options["only"], options["envs"], set(released))
         if not figures:
             raise RunError(
@@ -93,8 +99,10 @@ def run_paper(options: dict | None, out, *, resume: bool = False, overwrite: boo
         learner = options.get("learner", "trpo")  # absent from runs begun before the flag
         demos = demo_paths(grids, out, budget, released, physics, learner)
         command = shlex.split(options["command"])
-        timings = run_grids(grids, demos, out, budget, physics, command, learner)
-        page = write_page(out, options, figures, grids, timings)
+        configs = planned_configs(grids, demos, budget, physics, learner)
+        adopted = adopt_grids(adopt, configs, out)
+        timings = run_grids(grids, configs, out, command)
+        page = write_page(out, options, figures, grids, timings, adopted)
     print(f"\nwrote {page}")
     return page
 

@@ -108,6 +108,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="the policy learner of every grid and make_demos run: trpo (the paper's) or ppo "
         "(docs/ppo.md) (default trpo)",
     )
+    parser.add_argument(
+        "--adopt",
+        action="append",
+        type=path_argument,
+        metavar="DIR",
+        help="repeatable: a finished experiments.sweep run to keep as the plan's grid whose "
+        "config it is (up to --chunk-iterations), instead of running that grid again; with "
+        "--resume too (default: none)",
+    )
     parser.add_argument("--out", type=path_argument, help="default results/paper-<timestamp>")
     parser.add_argument("--resume", type=path_argument, metavar="DIR", help="continue a run in DIR")
     parser.add_argument(
@@ -202,7 +211,9 @@ def main(argv=None) -> Path:
         )
     try:
         with signals_stop_at_a_checkpoint():
-            return run_paper(options, out, resume=resume, overwrite=args.overwrite)
+            return run_paper(
+                options, out, resume=resume, overwrite=args.overwrite, adopt=args.adopt or ()
+            )
     except RunError as error:  # a grid's or a demonstration making's refusal, one line
         raise SystemExit(str(error)) from None
     except KeyboardInterrupt:
