@@ -100,7 +100,11 @@ def run_paper(
         demos = demo_paths(grids, out, budget, released, physics, learner)
         command = shlex.split(options["command"])
         configs = planned_configs(grids, demos, budget, physics, learner)
-        adopted = adopt_grids(adopt, configs, out)
+        try:
+            adopted = adopt_grids(adopt, configs, out)
+        except RunError as error:
+            kept = f"(the plan so far is kept: --resume {out} continues it)"
+            raise RunError(f"{error} {kept}") from None
         timings = run_grids(grids, configs, out, command)
         page = write_page(out, options, figures, grids, timings, adopted)
     print(f"\nwrote {page}")
