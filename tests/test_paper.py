@@ -166,6 +166,11 @@ def test_the_page_warns_of_a_made_expert_worse_than_random_and_the_plan_has_an_e
     (note,) = paper.weak_expert_notes(tmp_path, grids)
     assert "Pendulum-v1's made expert (-1300.0) does not beat the random policy" in note
     assert paper.weak_expert_notes(tmp_path, {"g": paper.main_grid("Pendulum-v1", True)}) == []
+    from pngail_jax.paper.page import made_expert_notes
+
+    (line,) = made_expert_notes(tmp_path, grids)  # the made expert beside Table 3's
+    assert "random policy -1,200.0, expert -1,300.0 (the paper's Table 3: -1,201.0 and" in line
+    assert "-116.8, so the made expert is at -0.09 of the paper's normalised scale)" in line
     assert paper.plan_eta([], 3) == ""
     assert paper.plan_eta([60.0, 120.0], 2) == ", about 3m00s left for the plan"
 

@@ -238,6 +238,35 @@ def weak_expert_notes(out: Path, grids) -> list[str]:
     return notes
 
 
+def made_expert_notes(out: Path, grids) -> list[str]:
+    """One line per made demonstration set: its measured random and optimal returns (the
+    normalisers of its task's figures) beside the paper's Table 3 returns of that task."""
+    from pngail_jax.demos import DemonstrationError, load_npz
+    from pngail_jax.demos.tables import PAPER_NORMALIZERS
+
+    notes = []
+    for task in dict.fromkeys(g.task for g in grids.values() if g.demos.ratio is not None):
+        try:
+            metadata = load_npz(out / "demos" / task / "demos.npz").metadata
+        except (DemonstrationError, FileNotFoundError):
+            continue
+        paper = {name.rsplit("-v", 1)[0]: returns for name, returns in PAPER_NORMALIZERS.items()}
+        random, optimal = paper.get(task.rsplit("-v", 1)[0], (None, None))  # Ant-v4 -> Ant
+        table3 = (
+            f" (the paper's Table 3: {random:,.1f} and {optimal:,.1f}, so the made expert is at "
+            f"{(metadata['optimal_return'] - random) / (optimal - random):.2f} of the paper's "
+            "normalised scale)"
+            if optimal is not None
+            else ""
+        )
+        notes.append(
+            f"{task}'s made demonstrations: random policy {metadata['random_return']:,.1f}, "
+            f"expert {metadata['optimal_return']:,.1f}{table3}; {task}'s normalised returns "
+            "use these two measured returns."
+        )
+    return notes
+
+
 def figure_results(out: Path, figures: list[Figure], grids) -> dict:
     """``{figure: {task: {series label: statistics, "normalizer": [random, optimal]}}}`` from
     the grids' curves and summaries under ``out/grids``."""
@@ -302,7 +331,7 @@ def write_page(
             f"| [{name}](grids/{name}/summary.md) | {grid.task} | {grid.demos.description} | "
             f"{', '.join(grid.methods)} | {wall} |"
         )
-    lines += ["", *weak_expert_notes(out, grids), ""]
+    lines += ["", *made_expert_notes(out, grids), "", *weak_expert_notes(out, grids), ""]
     base = f"python -m experiments.paper --preset {budget}"
     if options.get("released_demos"):
         base += f" --released-demos {options['released_demos']}"
