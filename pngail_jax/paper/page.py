@@ -215,42 +215,39 @@ def table4_markdown(figure: Figure, results: dict) -> list[str]:
     return lines
 
 
+def made_sets(out: Path, grids):
+    """``(task, metadata)`` of every made demonstration set the plan has made so far."""
+    from pngail_jax.demos import DemonstrationError, load_npz
+
+    for task in dict.fromkeys(g.task for g in grids.values() if g.demos.ratio is not None):
+        try:
+            yield task, load_npz(out / "demos" / task / "demos.npz").metadata
+        except (DemonstrationError, FileNotFoundError):
+            continue
+
+
 def weak_expert_notes(out: Path, grids) -> list[str]:
     """One warning line per made demonstration set whose best policy did not beat the random
     one (tiny budgets): its normalised returns run backwards and its confidences mean
     little, which the page must say, not only make_demos' terminal."""
-    from pngail_jax.demos import DemonstrationError, load_npz
-
-    notes = []
-    for task in dict.fromkeys(g.task for g in grids.values() if g.demos.ratio is not None):
-        path = out / "demos" / task / "demos.npz"
-        try:
-            metadata = load_npz(path).metadata
-        except (DemonstrationError, FileNotFoundError):
-            continue
-        if not metadata.get("optimal_beats_random", True):
-            notes.append(
-                f"**Warning: {task}'s made expert ({metadata['optimal_return']:.1f}) does not "
-                f"beat the random policy ({metadata['random_return']:.1f}).** Its normalised "
-                "returns run backwards and its confidences mean little: a larger preset trains "
-                "the expert longer."
-            )
-    return notes
+    return [
+        f"**Warning: {task}'s made expert ({metadata['optimal_return']:.1f}) does not "
+        f"beat the random policy ({metadata['random_return']:.1f}).** Its normalised "
+        "returns run backwards and its confidences mean little: a larger preset trains "
+        "the expert longer."
+        for task, metadata in made_sets(out, grids)
+        if not metadata.get("optimal_beats_random", True)
+    ]
 
 
 def made_expert_notes(out: Path, grids) -> list[str]:
     """One line per made demonstration set: its measured random and optimal returns (the
     normalisers of its task's figures) beside the paper's Table 3 returns of that task."""
-    from pngail_jax.demos import DemonstrationError, load_npz
     from pngail_jax.demos.tables import PAPER_NORMALIZERS
 
+    paper = {name.rsplit("-v", 1)[0]: returns for name, returns in PAPER_NORMALIZERS.items()}
     notes = []
-    for task in dict.fromkeys(g.task for g in grids.values() if g.demos.ratio is not None):
-        try:
-            metadata = load_npz(out / "demos" / task / "demos.npz").metadata
-        except (DemonstrationError, FileNotFoundError):
-            continue
-        paper = {name.rsplit("-v", 1)[0]: returns for name, returns in PAPER_NORMALIZERS.items()}
+    for task, metadata in made_sets(out, grids):
         random, optimal = paper.get(task.rsplit("-v", 1)[0], (None, None))  # Ant-v4 -> Ant
         table3 = (
             f" (the paper's Table 3: {random:,.1f} and {optimal:,.1f}, so the made expert is at "
@@ -294,9 +291,9 @@ def write_page(
 ) -> Path:
     """``README.md``, one plot per figure and ``results.json`` from the grids' outputs;
     ``adopted``: the grids copied from finished sweeps (``paper.adopt``), named as such."""
-    adopted = adopted or {}
     from pngail_jax.report import json_safe
 
+    adopted = adopted or {}
     results = figure_results(out, figures, grids)
     budget = options["budget"]
     lines = [
