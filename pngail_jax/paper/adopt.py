@@ -34,7 +34,8 @@ def adopt_grids(directories: Iterable[Path], configs: Mapping[str, RunConfig], o
         saved = finished_sweep(Path(directory))
         name = matching_grid(Path(directory), saved, configs)
         target = out / "grids" / name
-        if record.get(name, {}).get("from") == str(Path(directory).absolute()):
+        same = record.get(name, {}).get("from") == str(Path(directory).absolute())
+        if same and target.exists():
             continue  # adopted by an earlier call of the same command
         if target.exists():
             raise RunError(
