@@ -125,7 +125,9 @@ def test_old_spellings_still_work_with_a_note_naming_the_new_one(tmp_path, capsy
 
 
 @pytest.mark.filterwarnings("ignore:.*normalised returns run backwards")  # 4 iterations
-def test_a_tiny_fig2_run_writes_the_page_with_every_method_and_resumes(tmp_path):
+def test_a_tiny_fig2_run_writes_the_page_with_every_method_resumes_and_adopts(
+    tmp_path, monkeypatch
+):
     out = tmp_path / "paper"
     argv = ["--preset", "test", "--only", "fig2", "--envs", "Pendulum-v1", "--out", str(out)]
     page = paper.main(argv)
@@ -145,6 +147,36 @@ def test_a_tiny_fig2_run_writes_the_page_with_every_method_and_resumes(tmp_path)
     before = (out / "grids" / "Pendulum-v1-main" / "metrics.csv").read_bytes()
     assert paper.main(["--resume", str(out)]).read_text() == text
     assert (out / "grids" / "Pendulum-v1-main" / "metrics.csv").read_bytes() == before
+    assert_a_sweep_of_the_grid_is_adopted(out, text, monkeypatch)
+
+
+def assert_a_sweep_of_the_grid_is_adopted(out, text, monkeypatch):
+    """The finished grid moved out (as a sweep run on its own would be) comes back with
+    --adopt, no grid running; a sweep of another config is refused, the plan kept."""
+    import shutil
+
+    from pngail_jax.paper import grids as plan
+
+    def no_grid_runs(*args, **kwargs):
+        raise AssertionError("a grid ran")
+
+    monkeypatch.setattr(plan, "run", no_grid_runs)
+    sweep = out.parent / "sweep"
+    shutil.move(out / "grids" / "Pendulum-v1-main", sweep)
+    other = out.parent / "other"
+    shutil.copytree(sweep, other)
+    config = json.loads((other / "config.json").read_text())
+    (other / "config.json").write_text(json.dumps({**config, "seeds": 3}))
+    with pytest.raises(SystemExit, match="seeds 3, the plan's 2 .the plan so far is kept: --r"):
+        paper.main(["--resume", str(out), "--adopt", str(other)])
+    adopted = paper.main(["--resume", str(out), "--adopt", str(sweep)]).read_text()
+    copied = out / "grids" / "Pendulum-v1-main"
+    assert (copied / "metrics.csv").read_bytes() == (sweep / "metrics.csv").read_bytes()
+    commit = (config["provenance"]["git_commit"] or "unknown")[:7]
+    assert f"adopted from `{sweep.absolute()}` (commit {commit})" in adopted
+    assert json.loads((out / "results.json").read_text())["adopted"]["Pendulum-v1-main"]
+    # The same adoption again is a no-op.
+    assert paper.main(["--resume", str(out), "--adopt", str(sweep)]).read_text() == adopted
 
 
 def test_the_page_warns_of_a_made_expert_worse_than_random_and_the_plan_has_an_eta(
@@ -259,49 +291,6 @@ def test_a_grid_config_is_the_sweep_config_of_the_same_flags(tmp_path):
         "--out", str(tmp_path / "out"),
     ]  # fmt: skip
     assert config == sweep.parse_args(flags).config
-
-
-def fake_released_pendulum(directory):
-    """An authors'-layout Pendulum-v1 file of 1,000 random rows (5 trajectories) and its
-    confidences: enough for a test-preset grid."""
-    rng = np.random.default_rng(0)
-    directory.mkdir()
-    rows = np.concatenate([rng.normal(size=(1000, 3)), rng.uniform(-1, 1, (1000, 1))], axis=1)
-    np.save(directory / "Pendulum-v1_mixture.npy", rows.astype(np.float32))
-    np.save(directory / "Pendulum-v1_mixture_conf.npy", rng.uniform(size=(1000, 1)))
-
-
-@pytest.mark.slow
-@pytest.mark.filterwarnings("ignore:.*normalised returns run backwards")  # 4 iterations
-def test_a_finished_sweep_of_a_planned_grid_is_adopted_not_run_again(tmp_path, monkeypatch):
-    from pngail_jax.paper import grids as plan
-
-    released = tmp_path / "released"
-    fake_released_pendulum(released)
-    argv = ["--preset", "test", "--only", "fig2", "--envs", "Pendulum-v1"]
-    argv += ["--released-demos", str(released)]
-    first = tmp_path / "first"
-    paper.main([*argv, "--out", str(first)])
-    grid = first / "grids" / "Pendulum-v1-main"
-
-    def no_grid_runs(*args, **kwargs):
-        raise AssertionError("a grid ran")
-
-    monkeypatch.setattr(plan, "run", no_grid_runs)
-    second = tmp_path / "second"
-    text = paper.main([*argv, "--out", str(second), "--adopt", str(grid)]).read_text()
-    copied = second / "grids" / "Pendulum-v1-main"
-    assert (copied / "metrics.csv").read_bytes() == (grid / "metrics.csv").read_bytes()
-    assert f"adopted from `{grid.absolute()}`" in text
-    assert json.loads((second / "results.json").read_text())["adopted"]["Pendulum-v1-main"]
-    # The same adoption again on --resume is a no-op; another preset's grid is refused.
-    assert paper.main(["--resume", str(second), "--adopt", str(grid)]).read_text() == text
-    third = tmp_path / "third"
-    argv[1] = "check"
-    with pytest.raises(
-        SystemExit, match=f"grid Pendulum-v1-main: iterations 4, the plan's 20.*--resume {third}"
-    ):
-        paper.main([*argv, "--out", str(third), "--adopt", str(grid)])
 
 
 def test_adoption_refuses_unfinished_and_different_sweeps(tmp_path):
