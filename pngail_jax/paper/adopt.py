@@ -10,6 +10,7 @@ plan's, which makes it a different compiled program with the same numbers up to 
 
 from __future__ import annotations
 
+import json
 import shutil
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -31,11 +32,11 @@ def adopt_grids(directories: Iterable[Path], configs: Mapping[str, RunConfig], o
     matches no planned grid, or whose grid the plan already has."""
     record = read_adopted(out)
     for directory in directories:
+        source = str(Path(directory).absolute())
         saved = finished_sweep(Path(directory))
         name = matching_grid(Path(directory), saved, configs)
         target = out / "grids" / name
-        same = record.get(name, {}).get("from") == str(Path(directory).absolute())
-        if same and target.exists():
+        if record.get(name, {}).get("from") == source and target.exists():
             continue  # adopted by an earlier call of the same command
         if target.exists():
             raise RunError(
@@ -47,7 +48,7 @@ def adopt_grids(directories: Iterable[Path], configs: Mapping[str, RunConfig], o
         shutil.copytree(directory, partial)
         partial.rename(target)
         commit = saved.get("provenance", {}).get("git_commit")
-        record[name] = {"from": str(Path(directory).absolute()), "commit": commit}
+        record[name] = {"from": source, "commit": commit}
         write_json(out / ADOPTED_FILE, record)
         print(f"== {name}: adopted {directory} (commit {commit or 'unknown'})", flush=True)
     return record
@@ -114,7 +115,5 @@ def matching_grid(directory: Path, saved: dict, configs: Mapping[str, RunConfig]
 
 def comparable(config: RunConfig) -> dict:
     """``config``'s fields but ``ADOPT_IGNORES``, as JSON would hold them (tuples as lists)."""
-    import json
-
     values = json.loads(json.dumps(config.to_dict()))
     return {key: value for key, value in values.items() if key not in ADOPT_IGNORES}

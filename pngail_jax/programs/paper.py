@@ -108,6 +108,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="the policy learner of every grid and make_demos run: trpo (the paper's) or ppo "
         "(docs/ppo.md) (default trpo)",
     )
+    add_run_folder_flags(parser)
+    add_compile_cache_flags(parser)
+    return parser
+
+
+def add_run_folder_flags(parser: argparse.ArgumentParser) -> None:
+    """Where the plan runs and what it starts from: --adopt, --out, --resume, --overwrite."""
     parser.add_argument(
         "--adopt",
         action="append",
@@ -125,8 +132,6 @@ def build_parser() -> argparse.ArgumentParser:
         help="replace a run of this program already in --out (default: refuse; anything "
         "else there is always refused)",
     )
-    add_compile_cache_flags(parser)
-    return parser
 
 
 def parse_args(argv=None) -> argparse.Namespace:
