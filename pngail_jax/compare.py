@@ -15,6 +15,10 @@ each with a stratified bootstrap interval (seeds resampled within each task). A
 same bootstrap band. The **probability of improvement** of X over Y is the mean over their
 common tasks of P(X's score > Y's) + P(equal) / 2 (the Mann-Whitney statistic per task), its
 interval from resampling each method's seeds independently within each task.
+
+Each task is also summarised on its own (every task, including those not every method ran):
+each method's mean ± standard error, IQM with its bootstrap interval over the task's seeds,
+and the baseline's probability of improvement over it there.
 """
 
 from __future__ import annotations
@@ -215,11 +219,40 @@ def _finite(values: np.ndarray) -> np.ndarray:
     return values[np.isfinite(values)]
 
 
+def per_task(scores: Scores, baseline: str, *, seed: int = 0) -> dict:
+    """Each task's methods on their own: ``{task: {method: {"seeds", "mean", "se", "iqm",
+    "baseline_improvement"}}}``, the IQM with its bootstrap interval over the task's seeds and
+    ``baseline_improvement`` the baseline's P(baseline > method) there (absent for the
+    baseline, and where it did not run the task)."""
+    table = {}
+    for task in scores.tasks:
+        rows = {}
+        for method, by_task in scores.values.items():
+            if task not in by_task:
+                continue
+            values = _finite(by_task[task])
+            rows[method] = {
+                "seeds": int(values.size),
+                "mean": float(values.mean()) if values.size else math.nan,
+                "se": stats.standard_error(values),
+                "iqm": aggregate(Scores({method: {task: values}}), method, "iqm", seed=seed),
+            }
+            if method != baseline and task in scores.values[baseline]:
+                pair = Scores({baseline: {task: scores.values[baseline][task]},
+                               method: {task: values}})  # fmt: skip
+                rows[method]["baseline_improvement"] = probability_of_improvement(
+                    pair, baseline, method, seed=seed
+                )
+        table[task] = rows
+    return table
+
+
 def compare(scores: Scores, baseline: str, *, seed: int = 0) -> dict:
     """Every aggregate of every method, and each method's probability of improvement over
     ``baseline``: the document ``compare.json`` holds."""
     if baseline not in scores.values:
         raise CompareError(f"baseline {baseline!r} is not among the methods: {scores.methods}")
+    tasks = per_task(scores, baseline, seed=seed)  # every task, before those in common
     scores, left_out = scores.common()
     taus = np.linspace(-0.25, 1.25, 61)
     return {
@@ -243,6 +276,7 @@ def compare(scores: Scores, baseline: str, *, seed: int = 0) -> dict:
             "taus": taus.tolist(),
             **{m: performance_profile(scores, m, taus, seed=seed) for m in scores.methods},
         },
+        "per_task": tasks,
     }
 
 
@@ -265,10 +299,7 @@ def markdown(result: dict) -> str:
     ]
     for method, values in result["aggregates"].items():
         seeds = sum(result["seeds"][method].values())
-        cells = [
-            f"{values[n]['estimate']:.2f} [{values[n]['ci95'][0]:.2f}, {values[n]['ci95'][1]:.2f}]"
-            for n in AGGREGATES
-        ]
+        cells = [_estimate(values[n]) for n in AGGREGATES]
         lines.append(f"| {method} | {seeds} | " + " | ".join(cells) + " |")
     baseline = result["baseline"]
     lines += ["", f"| method | P(method > {baseline}) | 95% CI | tasks |", "|---|---:|---:|---:|"]
@@ -278,7 +309,34 @@ def markdown(result: dict) -> str:
             f"| {method} | {value['estimate']:.2f} | [{low:.2f}, {high:.2f}] | "
             f"{len(value['tasks'])} |"
         )
+    lines += per_task_markdown(result["per_task"], baseline)
     return "\n".join(lines) + "\n"
+
+
+def _estimate(value: dict) -> str:
+    low, high = value["ci95"]
+    return f"{value['estimate']:.2f} [{low:.2f}, {high:.2f}]"
+
+
+def per_task_markdown(table: dict, baseline: str) -> list[str]:
+    """One table per task: each method's final score (mean ± s.e., IQM with its 95% bootstrap
+    interval) and the baseline's probability of improvement over it."""
+    lines = ["", "## Per task", ""]
+    for task, rows in table.items():
+        lines += [
+            f"**{task}**",
+            "",
+            f"| method | seeds | mean ± s.e. | IQM [95% CI] | P({baseline} > method) [95% CI] |",
+            "|---|---:|---:|---:|---:|",
+        ]
+        for method, row in rows.items():
+            improvement = row.get("baseline_improvement")
+            lines.append(
+                f"| {method} | {row['seeds']} | {row['mean']:.2f} ± {row['se']:.2f} | "
+                f"{_estimate(row['iqm'])} | {_estimate(improvement) if improvement else '-'} |"
+            )
+        lines.append("")
+    return lines
 
 
 def write_json(path: Path, result: dict) -> None:

@@ -117,3 +117,20 @@ def test_the_program_reads_runs_and_writes_its_page(tmp_path, capsys):
     assert "is one of the runs" in capsys.readouterr().err
     with pytest.raises(SystemExit):  # the comparison is not replaced without --overwrite
         program.main([str(one), str(two), "--out", str(out)])
+
+
+def test_each_task_is_summarised_on_its_own_with_the_baselines_improvement():
+    s = Scores({"a": {**A, "t3": np.array([0.9, 0.8])}, "b": B})
+    table = compare.compare(s, "a", seed=0)["per_task"]
+    assert list(table) == ["t1", "t2", "t3"]  # t3 too, though only a ran it
+    row = table["t1"]["b"]
+    assert row["seeds"] == 3 and row["mean"] == pytest.approx(0.3)
+    assert row["se"] == pytest.approx(np.std([0.0, 0.3, 0.6], ddof=1) / np.sqrt(3))
+    assert row["iqm"]["estimate"] == pytest.approx(0.3)  # 3 scores: int(0.75) = 0 cut
+    assert row["baseline_improvement"]["estimate"] == pytest.approx(6 / 9)  # P(a > b) on t1
+    low, high = row["baseline_improvement"]["ci95"]
+    assert 0 <= low <= 6 / 9 <= high <= 1
+    assert "baseline_improvement" not in table["t1"]["a"]  # the baseline itself
+    assert list(table["t3"]) == ["a"]
+    text = compare.markdown(compare.compare(s, "a", seed=0))
+    assert "**t1**" in text and "| b | 3 | 0.30 ± 0.17 | 0.30 [" in text and "P(a > method)" in text
