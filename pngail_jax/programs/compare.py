@@ -5,8 +5,9 @@ profiles and probabilities of improvement, with stratified bootstrap intervals.
     python -m experiments.compare runs/a runs/b --baseline gail --out runs/compare-ab
 
 Reads each run's final normalised returns (``metrics.csv``; runs of one task pool their
-seeds), and writes to ``--out``: ``compare.json``, ``compare.md`` (the tables: the aggregates, then each task on its own) and
-``aggregates.png``, ``profiles.png``, ``improvement.png``. The definitions:
+seeds), and writes to ``--out``: ``compare.json``, ``compare.md`` (the tables: the
+aggregates, then each task on its own) and ``aggregates.png``, ``profiles.png``,
+``improvement.png``. The definitions:
 ``pngail_jax.compare`` (rliable's, Agarwal et al. 2021).
 """
 
