@@ -313,3 +313,17 @@ def test_adoption_refuses_unfinished_and_different_sweeps(tmp_path):
         RunError, match="not the plan's grid Pendulum-v1-main: seeds 3, the plan's 5; iterations"
     ):
         matching_grid(tmp_path, saved, planned)
+
+
+def test_an_unset_action_scale_compares_as_the_scale_the_loader_applies():
+    """A sweep of the authors' Pendulum file given no --action-scale runs on its known scale
+    (2), as the plan's grid, which names it: adoptable. Another scale is not."""
+    from pngail_jax.paper.adopt import comparable
+    from pngail_jax.run_config import RunConfig
+
+    def config(scale, name="Pendulum-v1_mixture.npy"):
+        return RunConfig(env="Pendulum-v1", demos=f"/data/{name}", action_scale=scale)
+
+    assert comparable(config(None)) == comparable(config(2.0))
+    assert comparable(config(None)) != comparable(config(1.0))
+    assert comparable(config(None, "Hopper-v2_mixture.npy"))["action_scale"] == 1.0

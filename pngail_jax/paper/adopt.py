@@ -15,6 +15,7 @@ import shutil
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
+from pngail_jax.demos import RELEASED_ACTION_SCALES
 from pngail_jax.integrity import IntegrityError, read_json, write_json
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.run_config import RunConfig
@@ -114,6 +115,11 @@ def matching_grid(directory: Path, saved: dict, configs: Mapping[str, RunConfig]
 
 
 def comparable(config: RunConfig) -> dict:
-    """``config``'s fields but ``ADOPT_IGNORES``, as JSON would hold them (tuples as lists)."""
+    """``config``'s fields but ``ADOPT_IGNORES``, as JSON would hold them (tuples as lists),
+    with the action scale the loader applies in place of None (a sweep of the authors'
+    Pendulum file given no ``--action-scale`` runs on its known scale, 2, as the plan does)."""
     values = json.loads(json.dumps(config.to_dict()))
+    if values.get("action_scale") is None and config.demos is not None:
+        name = Path(config.demos).name.removesuffix("_mixture.npy")
+        values["action_scale"] = RELEASED_ACTION_SCALES.get(name, 1.0)
     return {key: value for key, value in values.items() if key not in ADOPT_IGNORES}
