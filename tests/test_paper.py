@@ -105,6 +105,7 @@ def test_figures_without_a_panel_on_the_tasks_asked_for_are_refused(tmp_path):
         (["--resume", "nowhere", "--only", "fig2"], "drop --only"),
         (["--resume", "nowhere"], "no paper.json"),
         (["--resume", "nowhere", "--preset", "cpu"], "drop --preset"),  # not silently ignored
+        (["--resume", "nowhere", "--demo-learner", "ppo"], "drop --demo-learner"),
         (["--preset", "huge"], "invalid choice: 'huge'"),
     ],
 )
@@ -327,3 +328,40 @@ def test_an_unset_action_scale_compares_as_the_scale_the_loader_applies():
     assert comparable(config(None)) == comparable(config(2.0))
     assert comparable(config(None)) != comparable(config(1.0))
     assert comparable(config(None, "Hopper-v2_mixture.npy"))["action_scale"] == 1.0
+
+
+def test_the_made_experts_learner_is_the_demo_learner_and_the_grids_keep_theirs(
+    tmp_path, monkeypatch
+):
+    """--demo-learner ppo trains the made sets' experts by PPO (a stronger Ant expert at the
+    preset's budget) while every grid keeps --learner (TRPO, the paper's); the page says so."""
+    from pngail_jax.paper import run as plan_run
+    from pngail_jax.paper.page import learner_line
+
+    seen = {}
+
+    def demo_paths(grids, out, budget, released, physics, learner):
+        seen["demos"] = learner
+        return {}
+
+    def planned_configs(grids, demos, budget, physics, learner):
+        seen["grids"] = learner
+        raise RunError("stop here")
+
+    monkeypatch.setattr(plan_run, "demo_paths", demo_paths)
+    monkeypatch.setattr(plan_run, "planned_configs", planned_configs)
+    out = tmp_path / "p"
+    argv = ["--preset", "test", "--envs", "Ant-v4", "--only", "fig2", "--out", str(out)]
+    with pytest.raises(SystemExit, match="stop here"):
+        paper.main([*argv, "--demo-learner", "ppo"])
+    assert seen == {"demos": "ppo", "grids": "trpo"}
+    options = json.loads((out / "paper.json").read_text())
+    assert (options["learner"], options["demo_learner"]) == ("trpo", "ppo")
+    assert learner_line(options) == (
+        "Policy learner: TRPO, as the paper. The made demonstrations' experts were trained by PPO."
+    )
+    assert learner_line({"learner": "trpo"}) == "Policy learner: TRPO, as the paper."
+    seen.clear()
+    with pytest.raises(SystemExit, match="stop here"):  # by default, the grids' learner
+        paper.main([*argv, "--learner", "ppo", "--overwrite"])
+    assert seen == {"demos": "ppo", "grids": "ppo"}

@@ -286,6 +286,18 @@ def figure_results(out: Path, figures: list[Figure], grids) -> dict:
     return results
 
 
+def learner_line(options: dict) -> str:
+    """The page's sentence on the policy learners: the grids', and the made experts' where
+    they differ (``--demo-learner``)."""
+    names = {"ppo": "PPO (not the paper's; docs/ppo.md)", "trpo": "TRPO, as the paper"}
+    learner = options.get("learner", "trpo")
+    line = f"Policy learner: {names[learner]}."
+    demo_learner = options.get("demo_learner", learner)
+    if demo_learner != learner:
+        line += f" The made demonstrations' experts were trained by {demo_learner.upper()}."
+    return line
+
+
 def write_page(
     out: Path, options: dict, figures: list[Figure], grids, timings: dict, adopted=None
 ) -> Path:
@@ -311,9 +323,7 @@ def write_page(
         + ("**The check preset checks that everything runs; its numbers are not results.**"
            if budget in ("check", "test") else ""),
         "",
-        f"Made with `{options['command']}`. Policy learner: "
-        + ("PPO (not the paper's; docs/ppo.md)." if options.get("learner") == "ppo"
-           else "TRPO, as the paper."),
+        f"Made with `{options['command']}`. {learner_line(options)}",
         "",
         "| grid | task | demonstrations | methods | wall time |",
         "|---|---|---|---|---:|",

@@ -40,10 +40,12 @@ def paper_options(
     physics: str | None = None,
     command: str = "python -m experiments.paper",
     learner: str = "trpo",
+    demo_learner: str | None = None,
 ) -> dict:
     """A new plan's options (paper.json): the preset, the figures (None: all), the tasks
     (None: the paper's six), a folder of the authors' files, the physics engine, the command
-    line the page says it was made with, and the policy learner (TRPO, the paper's, or PPO)."""
+    line the page says it was made with, the policy learner (TRPO, the paper's, or PPO) and
+    that of the made demonstrations' experts (None: the same)."""
     if budget not in BUDGETS:
         raise RunError(f"unknown preset {budget!r} (known: {', '.join(BUDGETS)})")
     return {
@@ -54,6 +56,7 @@ def paper_options(
         "physics": physics,
         "command": command,
         "learner": learner,
+        "demo_learner": demo_learner or learner,
     }
 
 
@@ -97,7 +100,8 @@ def run_paper(
         )
         physics = options.get("physics")  # absent from runs begun before the flag existed
         learner = options.get("learner", "trpo")  # absent from runs begun before the flag
-        demos = demo_paths(grids, out, budget, released, physics, learner)
+        demo_learner = options.get("demo_learner", learner)  # likewise
+        demos = demo_paths(grids, out, budget, released, physics, demo_learner)
         command = shlex.split(options["command"])
         configs = planned_configs(grids, demos, budget, physics, learner)
         try:

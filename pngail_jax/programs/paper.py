@@ -108,6 +108,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="the policy learner of every grid and make_demos run: trpo (the paper's) or ppo "
         "(docs/ppo.md) (default trpo)",
     )
+    parser.add_argument(
+        "--demo-learner",
+        choices=LEARNERS,
+        help="the policy learner of the make_demos runs alone (default: --learner's): a "
+        "stronger made expert at the preset's budget, the grids' learner unchanged",
+    )
     add_run_folder_flags(parser)
     add_compile_cache_flags(parser)
     return parser
@@ -173,6 +179,7 @@ def _check_resume(parser: argparse.ArgumentParser, args) -> None:
     that is not a run of this program."""
     flags = {"only": "--only", "envs": "--envs", "released_demos": "--released-demos"}
     flags |= {"out": "--out", "physics": "--physics", "budget": "--preset", "learner": "--learner"}
+    flags |= {"demo_learner": "--demo-learner"}
     if args.overwrite:
         parser.error("--resume continues a run; --overwrite replaces one: give one")
     given = [flag for name, flag in flags.items() if getattr(args, name) is not None]
@@ -213,6 +220,7 @@ def main(argv=None) -> Path:
             args.physics,
             " ".join([*invoked_as("paper"), *command_line(argv)]),
             args.learner or "trpo",
+            args.demo_learner,
         )
     try:
         with signals_stop_at_a_checkpoint():
