@@ -51,6 +51,7 @@ def test_make_demos_tiny_pendulum(tmp_path):
     assert np.all(np.abs(demos.actions) <= 2.0)
     np.testing.assert_array_equal(np.bincount(demos.trajectory_ids), [200] * 5)
     meta = demos.metadata
+    assert meta["learner"] == "trpo" and "TRPO policies" in meta["source"]
     # 4 tiny iterations do not beat the random policy; the run says so instead of hiding it.
     assert meta["optimal_beats_random"] == (meta["optimal_return"] > meta["random_return"])
     backwards = any("normalised returns run backwards" in str(w.message) for w in caught)
@@ -80,6 +81,7 @@ def test_make_demos_tiny_mujoco_task(tmp_path):
     """A MuJoCo task (early terminations, so trajectories of any length) at a tiny budget."""
     flags = "--iterations 2 --eval-every 1 --seeds 1 --num-envs 2 --unroll-length 16 "
     flags += "--num-eval-episodes 1 --measure-episodes 1 --num-trajectories 3 --ratio 1:2"
+    flags += " --learner ppo"  # the metadata names the learner that trained the policies
     path = make_demos.main(["--env", "Hopper-v4", "--out", str(tmp_path), *flags.split()])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # 2 iterations may not beat the random policy
@@ -87,6 +89,7 @@ def test_make_demos_tiny_mujoco_task(tmp_path):
     demos.check_env(envs.make("Hopper-v4"))
     meta = demos.metadata
     assert meta["env"] == "Hopper-v4" and meta["num_optimal_trajectories"] == 1
+    assert meta["learner"] == "ppo" and "PPO policies" in meta["source"]
     lengths = np.bincount(demos.trajectory_ids)
     assert len(lengths) == 3 and lengths.sum() == demos.num_rows and lengths.max() <= 1000
     # Each trajectory's rows carry its own normalised return, clipped to [0, 1].

@@ -301,7 +301,8 @@ def roll_out_mixture(
         "num_optimal_trajectories": num_optimal,
         "trajectory_returns": trajectory_returns,
         "optimal_beats_random": picked.optimal_return > picked.random_return,
-        "source": "experiments.make_demos (deterministic TRPO policies)",
+        "source": f"experiments.make_demos (deterministic {config.learner.upper()} policies)",
+        "learner": config.learner,
         "env_options": config.settings.env_options,
     }
     demos = Demonstrations(**{k: np.concatenate(v) for k, v in rows.items()}, metadata=metadata)
