@@ -331,8 +331,9 @@ def per_task_markdown(table: dict, baseline: str) -> list[str]:
         ]
         for method, row in rows.items():
             improvement = row.get("baseline_improvement")
+            spread = f" ± {row['se']:.2f}" if row["seeds"] > 1 else " (n = 1)"
             lines.append(
-                f"| {method} | {row['seeds']} | {row['mean']:.2f} ± {row['se']:.2f} | "
+                f"| {method} | {row['seeds']} | {row['mean']:.2f}{spread} | "
                 f"{_estimate(row['iqm'])} | {_estimate(improvement) if improvement else '-'} |"
             )
         lines.append("")

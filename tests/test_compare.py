@@ -134,3 +134,5 @@ def test_each_task_is_summarised_on_its_own_with_the_baselines_improvement():
     assert list(table["t3"]) == ["a"]
     text = compare.markdown(compare.compare(s, "a", seed=0))
     assert "**t1**" in text and "| b | 3 | 0.30 ± 0.17 | 0.30 [" in text and "P(a > method)" in text
+    one = compare.markdown(compare.compare(Scores({"a": {"t": np.array([0.5])}}), "a"))
+    assert "| a | 1 | 0.50 (n = 1) | 0.50 [0.50, 0.50] | - |" in one
