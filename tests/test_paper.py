@@ -127,7 +127,7 @@ def test_old_spellings_still_work_with_a_note_naming_the_new_one(tmp_path, capsy
 
 @pytest.mark.filterwarnings("ignore:.*normalised returns run backwards")  # 4 iterations
 def test_a_tiny_fig2_run_writes_the_page_with_every_method_resumes_and_adopts(
-    tmp_path, monkeypatch
+    tmp_path, monkeypatch, capsys
 ):
     out = tmp_path / "paper"
     argv = ["--preset", "test", "--only", "fig2", "--envs", "Pendulum-v1", "--out", str(out)]
@@ -148,7 +148,64 @@ def test_a_tiny_fig2_run_writes_the_page_with_every_method_resumes_and_adopts(
     before = (out / "grids" / "Pendulum-v1-main" / "metrics.csv").read_bytes()
     assert paper.main(["--resume", str(out)]).read_text() == text
     assert (out / "grids" / "Pendulum-v1-main" / "metrics.csv").read_bytes() == before
+    assert_a_page_so_far_shows_what_ran(out, text, capsys)
     assert_a_sweep_of_the_grid_is_adopted(out, text, monkeypatch)
+
+
+def assert_a_page_so_far_shows_what_ran(out, text, capsys):
+    """--page writes the page of a plan's grids as they are into its own folder, touching
+    nothing in the plan: a finished plan's as its own page; a grid in progress at the
+    iteration it reached, a task not started left out, each said; no outputs, one line."""
+    import shutil
+
+    from pngail_jax.integrity import seal
+    from pngail_jax.paper.run import PAPER_SEAL
+
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    page = paper.main(["--page", str(out), "--out", str(out.parent / "page")]).read_text()
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+
+    def rows(page_text):
+        return [line for line in page_text.splitlines() if line.startswith("| Pendulum-v1 |")]
+
+    assert rows(page) == rows(text)
+    assert "](../paper/grids/Pendulum-v1-main/summary.md)" in page and "so far" not in page
+    capsys.readouterr()
+    with pytest.raises(SystemExit):  # its own page again: --overwrite
+        paper.main(["--page", str(out), "--out", str(out.parent / "page")])
+    assert (
+        "already holds a run of experiments.paper-page: pass --overwrite" in capsys.readouterr().err
+    )
+    with pytest.raises(SystemExit):
+        paper.parse_args(["--page", str(out), "--preset", "cpu"])
+    assert "--page writes the page of the plan in DIR as it is: drop --preset" in (
+        capsys.readouterr().err
+    )
+    # The same plan on two tasks, its Pendulum grid at iteration 2 of 4 and Hopper not begun.
+    partial = out.parent / "partial"
+    shutil.copytree(out, partial)
+    options = json.loads((partial / "paper.json").read_text())
+    options["envs"] = ["Pendulum-v1", "Hopper-v4"]
+    (partial / "paper.json").write_text(json.dumps(options))
+    seal(partial / PAPER_SEAL, options)
+    summary_path = partial / "grids" / "Pendulum-v1-main" / "summary.json"
+    summary = json.loads(summary_path.read_text())
+    summary.update(complete=False, iterations_done=2)
+    summary_path.write_text(json.dumps(summary))
+    page = paper.main(["--page", str(partial), "--out", str(out.parent / "p2")]).read_text()
+    assert "| Hopper-v4 | made, 1:4 |" in page and "| not started |" in page
+    assert "| in progress: 2 of 4 iterations |" in page and "A page so far" in page
+    assert "Pendulum-v1 is unfinished: Pendulum-v1-main in progress: 2 of 4 iterations." in page
+    assert "Not in this figure yet: Hopper-v4 (Hopper-v4-main has not started)." in page
+    assert "| Hopper-v4 | GAIL |" not in page and "| Pendulum-v1 | GAIL |" in page
+    assert list(json.loads((out.parent / "p2" / "results.json").read_text())["fig2"]) == [
+        "Pendulum-v1"
+    ]
+    shutil.rmtree(partial / "grids" / "Pendulum-v1-main")
+    with pytest.raises(SystemExit, match=f"--page {partial}: no grid of the plan has outputs"):
+        paper.main(["--page", str(partial), "--out", str(out.parent / "p3")])
+    with pytest.raises(SystemExit, match="no paper.json there"):
+        paper.main(["--page", str(out.parent / "p2"), "--out", str(out.parent / "p4")])
 
 
 def assert_a_sweep_of_the_grid_is_adopted(out, text, monkeypatch):

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import types
 from pathlib import Path
@@ -267,9 +268,11 @@ def made_expert_notes(out: Path, grids) -> list[str]:
 def figure_results(out: Path, figures: list[Figure], grids) -> dict:
     """``{figure: {task: {series label: statistics, "normalizer": [random, optimal]}}}`` from
     the grids' curves and summaries under ``out/grids``."""
+    shown = {s.grid for figure in figures for series in figure.panels.values() for s in series}
     loaded = {
         name: (read_curves(out / "grids" / name), read_json(out / "grids" / name / "summary.json"))
         for name in grids
+        if name in shown
     }
     results = {}
     for figure in figures:
@@ -299,14 +302,29 @@ def learner_line(options: dict) -> str:
 
 
 def write_page(
-    out: Path, options: dict, figures: list[Figure], grids, timings: dict, adopted=None
+    out: Path,
+    options: dict,
+    figures: list[Figure],
+    grids,
+    timings: dict,
+    adopted=None,
+    *,
+    source: Path | None = None,
+    progress: dict | None = None,
 ) -> Path:
-    """``README.md``, one plot per figure and ``results.json`` from the grids' outputs;
-    ``adopted``: the grids copied from finished sweeps (``paper.adopt``), named as such."""
+    """``README.md``, one plot per figure and ``results.json`` in ``out`` from the outputs of
+    the grids in ``source/grids`` (default ``out``'s); ``adopted``: the grids copied from
+    finished sweeps (``paper.adopt``), named as such; ``progress``: ``{grid: (iterations
+    done, planned) or None}`` of the grids not finished (None: not started), whose panels a
+    page so far leaves out (not started) or shows at the iteration reached, saying so."""
+    import os
+
     from pngail_jax.report import json_safe
 
-    adopted = adopted or {}
-    results = figure_results(out, figures, grids)
+    adopted, progress = adopted or {}, progress or {}
+    source = out if source is None else source
+    shown = shown_panels(figures, progress)
+    results = figure_results(source, shown, grids)
     budget = options["budget"]
     lines = [
         f"# The paper's figures at the {budget} preset",
@@ -334,17 +352,31 @@ def write_page(
         if name in adopted:
             commit = (adopted[name].get("commit") or "unknown")[:7]
             wall = f"adopted from `{adopted[name]['from']}` (commit {commit})"
+        if name in progress:
+            wall = progress_words(progress[name])
+        link = Path(os.path.relpath(source / "grids" / name, out)).as_posix()
         lines.append(
-            f"| [{name}](grids/{name}/summary.md) | {grid.task} | {grid.demos.description} | "
+            f"| [{name}]({link}/summary.md) | {grid.task} | {grid.demos.description} | "
             f"{', '.join(grid.methods)} | {wall} |"
         )
-    lines += ["", *made_expert_notes(out, grids), "", *weak_expert_notes(out, grids), ""]
+    lines += ["", *made_expert_notes(source, grids), "", *weak_expert_notes(source, grids), ""]
+    if progress:
+        lines += [
+            "**A page so far: the plan is not finished.** A grid in progress is shown at the "
+            "iteration it reached (its 'final' is its latest evaluation); a task whose grid has "
+            "not started is left out of its figures.",
+            "",
+        ]
     base = f"python -m experiments.paper --preset {budget}"
     if options.get("released_demos"):
         base += f" --released-demos {options['released_demos']}"
-    for figure in figures:
-        command = f"{base} --only {figure.name} --envs {','.join(figure.panels)}"
+    for planned, figure in zip(figures, shown, strict=True):
+        command = f"{base} --only {figure.name} --envs {','.join(planned.panels)}"
+        if not figure.panels:
+            lines += [f"## {figure.title}", "", "No task of this figure has run yet.", ""]
+            continue
         lines += figure_markdown(figure, results[figure.name], command)
+        lines[-1:-1] = unfinished_notes(planned, progress)
         if figure.name not in ("table1", "table4"):
             plot_figure(out / f"{figure.name}.png", figure, results[figure.name])
     document = {"options": options, "timings": timings, "adopted": adopted, **results}
@@ -352,3 +384,40 @@ def write_page(
     page = out / "README.md"
     atomic_write_text(page, "\n".join(lines))
     return page
+
+
+def progress_words(progress) -> str:
+    """A grid's state on a page so far: not started, or the iterations it reached."""
+    if progress is None:
+        return "not started"
+    done, planned = progress
+    return f"in progress: {done:,} of {planned:,} iterations"
+
+
+def shown_panels(figures: list[Figure], progress: dict) -> list[Figure]:
+    """Each figure with the panels whose grids have outputs: a task with a grid not started
+    (``progress`` None) is left out."""
+    return [
+        dataclasses.replace(
+            figure,
+            panels={
+                task: series
+                for task, series in figure.panels.items()
+                if all(progress.get(s.grid, ()) is not None for s in series)
+            },
+        )
+        for figure in figures
+    ]
+
+
+def unfinished_notes(figure: Figure, progress: dict) -> list[str]:
+    """Lines under a figure of a page so far: its tasks at fewer iterations, and not run."""
+    notes = []
+    for task, series in figure.panels.items():
+        states = {s.grid: progress[s.grid] for s in series if s.grid in progress}
+        for grid, state in states.items():
+            if state is None:
+                notes.append(f"Not in this figure yet: {task} ({grid} has not started).")
+            else:
+                notes.append(f"{task} is unfinished: {grid} {progress_words(state)}.")
+    return ["", *dict.fromkeys(notes)] if notes else []  # a blank line ends the table

@@ -115,26 +115,80 @@ def run_paper(
     return page
 
 
-def saved_options(out: Path) -> dict:
-    """A resumed plan's options: its paper.json, checked against its seal and the presets."""
+def page_so_far(plan_dir, out, *, overwrite: bool = False) -> Path:
+    """Writes a results page of the plan in ``plan_dir`` into ``out`` (new, or with
+    ``overwrite`` a page of this kind) from what its grids have run so far, running nothing and
+    writing nothing in ``plan_dir`` (whose run may go on meanwhile): finished grids as the
+    plan's own page shows them, one in progress at the iteration it reached, one not started
+    left out, each said. Returns the page's path. Raises ``RunError`` with one line."""
+    plan_dir, out = Path(plan_dir), Path(out)
+    if not (plan_dir / "paper.json").exists():
+        raise RunError(f"--page {plan_dir}: no paper.json there (not a run of experiments.paper)")
+    options = saved_options(plan_dir, "--page")
+    released = {  # the tasks the plan runs on the authors' files, from its input records
+        role.rsplit(" ", 1)[0]
+        for role in options.get("inputs", {})
+        if role.endswith(" demonstrations")
+    }
+    figures, grids = plan(options["only"], options["envs"], released)
+    progress = {name: grid_progress(plan_dir / "grids" / name) for name in grids}
+    progress = {name: state for name, state in progress.items() if state != "complete"}
+    if len(progress) == len(grids) and all(state is None for state in progress.values()):
+        raise RunError(f"--page {plan_dir}: no grid of the plan has outputs yet")
+    try:
+        timings, adopted = (
+            read_json(plan_dir / name, name) if (plan_dir / name).exists() else {}
+            for name in ("timings.json", "adopted.json")
+        )
+    except IntegrityError as error:
+        raise RunError(f"--page {plan_dir}: {error}") from None
+    with refusals(), claimed(out, PAGE_PROGRAM, overwrite=overwrite) as claim:
+        claim.prepare()
+        page = write_page(
+            out, options, figures, grids, timings, adopted, source=plan_dir, progress=progress
+        )
+    print(f"wrote {page} ({len(grids) - len(progress)} of {len(grids)} grids finished)")
+    return page
+
+
+PAGE_PROGRAM = "paper-page"
+
+
+def grid_progress(directory: Path):
+    """``"complete"``, ``(iterations done, planned)`` or None (no outputs yet) from a grid's
+    summary.json (written after each chunk)."""
+    try:
+        summary = read_json(directory / "summary.json", "grid summary")
+    except FileNotFoundError:
+        return None
+    except IntegrityError as error:
+        raise RunError(f"--page: {error}") from None
+    if summary.get("complete"):
+        return "complete"
+    return summary["iterations_done"], summary["iterations"]
+
+
+def saved_options(out: Path, flag: str = "--resume") -> dict:
+    """A resumed (or with ``flag`` another flag's) plan's options: its paper.json, checked
+    against its seal and the presets."""
     path = out / "paper.json"
     try:
         options = read_json(path, "paper run options")
         changes = sealed_differences(out / PAPER_SEAL, options)
     except IntegrityError as error:
-        raise RunError(f"--resume {out}: {error}") from None
+        raise RunError(f"{flag} {out}: {error}") from None
     if changes:
         raise RunError(
-            f"--resume {out}: paper.json was changed since the run began ("
+            f"{flag} {out}: paper.json was changed since the run began ("
             + "; ".join(changes[:5])
             + "): restore it, or start a new run"
         )
     if not isinstance(options, dict) or "budget" not in options:
-        raise RunError(f"--resume {out}: {path} is not a paper run's options")
+        raise RunError(f"{flag} {out}: {path} is not a paper run's options")
     budget = RENAMED_BUDGETS.get(options["budget"], options["budget"])
     if budget not in BUDGETS:
         raise RunError(
-            f"--resume {out}: {path} names an unknown preset {options['budget']!r} "
+            f"{flag} {out}: {path} names an unknown preset {options['budget']!r} "
             f"(known: {', '.join(BUDGETS)})"
         )
     options["budget"] = budget

@@ -4,6 +4,7 @@
     python -m experiments.paper --preset paper --released-demos data/released   # a GPU
     python -m experiments.paper --only fig2,table1 --envs Hopper,Pendulum-v1
     python -m experiments.paper --resume results/paper-20261123-120000
+    python -m experiments.paper --page results/paper-20261123-120000   # the page so far
 
 Each figure is a set of ``experiments.sweep`` grids, one compiled program per task and
 demonstration set (a task's Fig. 2 and Fig. 3 share one grid of the seven methods). The
@@ -15,6 +16,8 @@ asks for. Writes ``DIR/README.md`` (every figure's plot and table beside the pap
 each with the command that makes it alone), ``DIR/<figure>.png``, ``DIR/results.json``,
 ``DIR/demos/`` and one sweep directory per grid in ``DIR/grids/``. An interrupted run continues
 with ``--resume DIR``: finished grids are kept, an unfinished one resumes from its checkpoint.
+``--page DIR`` writes the page of what DIR's plan has run so far (while it runs, or between
+``--resume`` calls) into ``--out``, running nothing.
 """
 
 from __future__ import annotations
@@ -40,7 +43,13 @@ from pngail_jax.paper.plan import (
     main_grid,
     plan,
 )
-from pngail_jax.paper.run import check_paper_inputs, paper_options, released_inputs, run_paper
+from pngail_jax.paper.run import (
+    check_paper_inputs,
+    page_so_far,
+    paper_options,
+    released_inputs,
+    run_paper,
+)
 from pngail_jax.programs.cli import (
     ArgumentParser,
     HelpFormatter,
@@ -133,6 +142,14 @@ def add_run_folder_flags(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=path_argument, help="default results/paper-<timestamp>")
     parser.add_argument("--resume", type=path_argument, metavar="DIR", help="continue a run in DIR")
     parser.add_argument(
+        "--page",
+        type=path_argument,
+        metavar="DIR",
+        help="write the results page of what the plan in DIR has run so far into --out "
+        "(default results/paper-page-<timestamp>), running nothing: a grid in progress at the "
+        "iteration it reached, one not started left out, each said",
+    )
+    parser.add_argument(
         "--overwrite",
         action="store_true",
         help="replace a run of this program already in --out (default: refuse; anything "
@@ -145,6 +162,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser = build_parser()
     args = parser.parse_args(argv)
     note_deprecated(argv, DEPRECATED_FLAGS)
+    if args.page is not None:
+        _check_page(parser, args)
+        return args
     if args.resume is not None:
         _check_resume(parser, args)
         return args
@@ -189,6 +209,19 @@ def _check_resume(parser: argparse.ArgumentParser, args) -> None:
         parser.error(f"--resume {args.resume}: no paper.json there (not a run of this)")
 
 
+def _check_page(parser: argparse.ArgumentParser, args) -> None:
+    """``--page DIR`` reads the plan's options from DIR: takes only --out and --overwrite."""
+    flags = {"only": "--only", "envs": "--envs", "released_demos": "--released-demos"}
+    flags |= {"physics": "--physics", "budget": "--preset", "learner": "--learner"}
+    flags |= {"demo_learner": "--demo-learner", "resume": "--resume", "adopt": "--adopt"}
+    given = [flag for name, flag in flags.items() if getattr(args, name) is not None]
+    if given:
+        parser.error(f"--page writes the page of the plan in DIR as it is: drop {given[0]}")
+    if args.out is None:
+        args.out = Path("results") / f"paper-page-{time.strftime('%Y%m%d-%H%M%S')}"
+    claim_output(parser, args.out, "paper-page", args.overwrite)
+
+
 DEPRECATED_FLAGS = {"--budget": "--preset"}
 
 
@@ -207,6 +240,11 @@ def command_line(argv) -> list[str]:
 
 def main(argv=None) -> Path:
     args = parse_args(argv)
+    if args.page is not None:
+        try:
+            return page_so_far(args.page, args.out, overwrite=args.overwrite)
+        except RunError as error:
+            raise SystemExit(str(error)) from None
     resume = args.resume is not None
     out = args.resume if resume else args.out
     use_compile_cache(args)
