@@ -46,6 +46,7 @@ class Scores:
     """Final normalised returns: ``values[method][task]`` float[seeds]."""
 
     values: dict[str, dict[str, np.ndarray]]
+    unfinished: dict[str, str] = dataclasses.field(default_factory=dict)  # run -> how far
 
     @property
     def methods(self) -> list[str]:
@@ -70,7 +71,8 @@ class Scores:
             for method, by_task in self.values.items()
         }
         kept = {m: {t: by[t] for t in shared} for m, by in self.values.items()}
-        return Scores(kept), {m: tasks for m, tasks in left_out.items() if tasks}
+        left_out = {m: tasks for m, tasks in left_out.items() if tasks}
+        return Scores(kept, self.unfinished), left_out
 
     def pooled(self, method: str) -> tuple[np.ndarray, np.ndarray]:
         """float[n] scores and int[n] task labels (index into ``tasks``) of ``method``'s
@@ -122,12 +124,31 @@ def load_scores(run_dirs: Sequence[Path]) -> Scores:
     """The final scores of every run, pooled per task (two runs of one task: their seeds
     together). Methods keep the order they first appear in."""
     values: dict[str, dict[str, np.ndarray]] = {}
+    unfinished = {}
     for run_dir in run_dirs:
         task, scores = final_scores(run_dir)
         for method, seeds in scores.items():
             by_task = values.setdefault(method, {})
             by_task[task] = np.concatenate([by_task.get(task, np.empty(0)), seeds])
-    return Scores(values)
+        progress = run_progress(run_dir)
+        if progress is not None:
+            unfinished[str(run_dir)] = progress
+    return Scores(values, unfinished)
+
+
+def run_progress(run_dir: Path) -> str | None:
+    """None for a finished run (or one whose summary.json is missing: nothing says it is not),
+    else how far it got ("200 of 500 iterations") from its summary.json, written each chunk."""
+    try:
+        summary = read_json(Path(run_dir) / "summary.json", "run summary")
+    except FileNotFoundError:
+        return None
+    except (OSError, IntegrityError):
+        return "unknown: its summary.json is unreadable"
+    if not isinstance(summary, dict) or summary.get("complete"):
+        return None
+    done, planned = summary.get("iterations_done"), summary.get("iterations")
+    return "unfinished" if done is None else f"{done:,} of {planned:,} iterations"
 
 
 # -- aggregates: statistic(samples float[R, n], labels int[n]) -> float[R] ------------------
@@ -277,6 +298,7 @@ def compare(scores: Scores, baseline: str, *, seed: int = 0) -> dict:
             **{m: performance_profile(scores, m, taus, seed=seed) for m in scores.methods},
         },
         "per_task": tasks,
+        "unfinished": scores.unfinished,
     }
 
 
@@ -288,12 +310,22 @@ def markdown(result: dict) -> str:
         "",
         "Final normalised return; 95% stratified bootstrap intervals (seeds resampled within "
         "each task). Optimality gap: lower is better.",
+        "",
         *(
             [f"Left out (not every method ran them): {result['left_out']}.", ""]
             if result["left_out"]
             else []
         ),
-        "",
+        *(
+            [
+                "**Unfinished runs**, their 'final' the latest evaluation so far: "
+                + "; ".join(f"{run} ({how})" for run, how in result["unfinished"].items())
+                + ".",
+                "",
+            ]
+            if result.get("unfinished")
+            else []
+        ),
         "| method | seeds | IQM | mean | median | optimality gap |",
         "|---|---:|---:|---:|---:|---:|",
     ]

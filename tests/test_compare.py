@@ -117,6 +117,19 @@ def test_the_program_reads_runs_and_writes_its_page(tmp_path, capsys):
     assert "is one of the runs" in capsys.readouterr().err
     with pytest.raises(SystemExit):  # the comparison is not replaced without --overwrite
         program.main([str(one), str(two), "--out", str(out)])
+    assert "Unfinished" not in (out / "compare.md").read_text() and not result["unfinished"]
+    # A run still going (its summary.json says so) is compared, and named as unfinished.
+    (two / "summary.json").write_text(
+        json.dumps({"complete": False, "iterations_done": 200, "iterations": 500})
+    )
+    (one / "summary.json").write_text(json.dumps({"complete": True}))
+    out = program.main([str(one), str(two), "--out", str(tmp_path / "e")])
+    assert json.loads((out / "compare.json").read_text())["unfinished"] == {
+        str(two): "200 of 500 iterations"
+    }
+    assert f"**Unfinished runs**, their 'final' the latest evaluation so far: {two} (200 of " in (
+        (out / "compare.md").read_text()
+    )
 
 
 def test_each_task_is_summarised_on_its_own_with_the_baselines_improvement():
