@@ -72,7 +72,7 @@ class Scores:
         }
         kept = {m: {t: by[t] for t in shared} for m, by in self.values.items()}
         left_out = {m: tasks for m, tasks in left_out.items() if tasks}
-        return Scores(kept, self.unfinished), left_out
+        return Scores(kept, self.unfinished), left_out  # (unfinished: every run read, named)
 
     def pooled(self, method: str) -> tuple[np.ndarray, np.ndarray]:
         """float[n] scores and int[n] task labels (index into ``tasks``) of ``method``'s
@@ -145,10 +145,12 @@ def run_progress(run_dir: Path) -> str | None:
         return None
     except (OSError, IntegrityError):
         return "unknown: its summary.json is unreadable"
-    if not isinstance(summary, dict) or summary.get("complete"):
-        return None
+    if not isinstance(summary, dict) or summary.get("complete") is not False:
+        return None  # complete, or a run from before summaries said (nothing says it is not)
     done, planned = summary.get("iterations_done"), summary.get("iterations")
-    return "unfinished" if done is None else f"{done:,} of {planned:,} iterations"
+    if isinstance(done, int) and isinstance(planned, int):
+        return f"{done:,} of {planned:,} iterations"
+    return "unfinished"
 
 
 # -- aggregates: statistic(samples float[R, n], labels int[n]) -> float[R] ------------------

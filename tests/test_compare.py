@@ -130,6 +130,10 @@ def test_the_program_reads_runs_and_writes_its_page(tmp_path, capsys):
     assert f"**Unfinished runs**, their 'final' the latest evaluation so far: {two} (200 of " in (
         (out / "compare.md").read_text()
     )
+    (two / "summary.json").write_text(json.dumps({"complete": False, "iterations_done": 2}))
+    assert compare.run_progress(two) == "unfinished"  # how far, when the summary says
+    (two / "summary.json").write_text(json.dumps({"methods": {}}))  # before the key existed
+    assert compare.run_progress(two) is None
 
 
 def test_each_task_is_summarised_on_its_own_with_the_baselines_improvement():

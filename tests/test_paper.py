@@ -198,9 +198,15 @@ def assert_a_page_so_far_shows_what_ran(out, text, capsys):
     assert "Pendulum-v1 is unfinished: Pendulum-v1-main in progress: 2 of 4 iterations." in page
     assert "Not in this figure yet: Hopper-v4 (Hopper-v4-main has not started)." in page
     assert "| Hopper-v4 | GAIL |" not in page and "| Pendulum-v1 | GAIL |" in page
-    assert list(json.loads((out.parent / "p2" / "results.json").read_text())["fig2"]) == [
-        "Pendulum-v1"
-    ]
+    assert "| Hopper-v4-main | Hopper-v4 |" in page  # not started: no link to a summary
+    results = json.loads((out.parent / "p2" / "results.json").read_text())
+    assert list(results["fig2"]) == ["Pendulum-v1"]
+    assert results["unfinished"] == {
+        "Pendulum-v1-main": "in progress: 2 of 4 iterations",
+        "Hopper-v4-main": "not started",
+    }
+    with pytest.raises(SystemExit, match="is inside the plan's folder"):
+        paper.main(["--page", str(partial), "--out", str(partial / "page")])
     shutil.rmtree(partial / "grids" / "Pendulum-v1-main")
     with pytest.raises(SystemExit, match=f"--page {partial}: no grid of the plan has outputs"):
         paper.main(["--page", str(partial), "--out", str(out.parent / "p3")])

@@ -355,8 +355,9 @@ def write_page(
         if name in progress:
             wall = progress_words(progress[name])
         link = Path(os.path.relpath(source / "grids" / name, out)).as_posix()
+        named = name if progress.get(name, ()) is None else f"[{name}]({link}/summary.md)"
         lines.append(
-            f"| [{name}]({link}/summary.md) | {grid.task} | {grid.demos.description} | "
+            f"| {named} | {grid.task} | {grid.demos.description} | "
             f"{', '.join(grid.methods)} | {wall} |"
         )
     lines += ["", *made_expert_notes(source, grids), "", *weak_expert_notes(source, grids), ""]
@@ -380,6 +381,8 @@ def write_page(
         if figure.name not in ("table1", "table4"):
             plot_figure(out / f"{figure.name}.png", figure, results[figure.name])
     document = {"options": options, "timings": timings, "adopted": adopted, **results}
+    if progress:  # a page so far: the grids not finished, and how far each got
+        document["unfinished"] = {name: progress_words(state) for name, state in progress.items()}
     write_json(out / "results.json", json_safe(document))
     page = out / "README.md"
     atomic_write_text(page, "\n".join(lines))

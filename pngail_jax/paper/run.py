@@ -125,11 +125,13 @@ def page_so_far(plan_dir, out, *, overwrite: bool = False) -> Path:
     if not (plan_dir / "paper.json").exists():
         raise RunError(f"--page {plan_dir}: no paper.json there (not a run of experiments.paper)")
     options = saved_options(plan_dir, "--page")
-    released = {  # the tasks the plan runs on the authors' files, from its input records
-        role.rsplit(" ", 1)[0]
-        for role in options.get("inputs", {})
-        if role.endswith(" demonstrations")
-    }
+    if "inputs" in options:  # the tasks the plan runs on the authors' files, as recorded
+        released = {
+            role.rsplit(" ", 1)[0] for role in options["inputs"] if role.endswith(" demonstrations")
+        }
+    else:  # a plan from before the records: its folder of the authors' files, as --resume
+        folder = options.get("released_demos")
+        released = set(released_files(Path(folder) if folder else None, options["envs"]))
     figures, grids = plan(options["only"], options["envs"], released)
     progress = {name: grid_progress(plan_dir / "grids" / name) for name in grids}
     progress = {name: state for name, state in progress.items() if state != "complete"}
@@ -142,11 +144,19 @@ def page_so_far(plan_dir, out, *, overwrite: bool = False) -> Path:
         )
     except IntegrityError as error:
         raise RunError(f"--page {plan_dir}: {error}") from None
+    if out.resolve().is_relative_to(plan_dir.resolve()):
+        raise RunError(f"--out {out} is inside the plan's folder {plan_dir}: give one outside it")
     with refusals(), claimed(out, PAGE_PROGRAM, overwrite=overwrite) as claim:
         claim.prepare()
-        page = write_page(
-            out, options, figures, grids, timings, adopted, source=plan_dir, progress=progress
-        )
+        try:
+            page = write_page(
+                out, options, figures, grids, timings, adopted, source=plan_dir, progress=progress
+            )
+        except (OSError, ValueError, IntegrityError) as error:  # the plan wrote meanwhile
+            raise RunError(
+                f"--page {plan_dir}: its outputs changed while they were read ({error}); "
+                "run --page again"
+            ) from None
     print(f"wrote {page} ({len(grids) - len(progress)} of {len(grids)} grids finished)")
     return page
 
@@ -157,15 +167,21 @@ PAGE_PROGRAM = "paper-page"
 def grid_progress(directory: Path):
     """``"complete"``, ``(iterations done, planned)`` or None (no outputs yet) from a grid's
     summary.json (written after each chunk)."""
+    path = directory / "summary.json"
     try:
-        summary = read_json(directory / "summary.json", "grid summary")
+        summary = read_json(path, "grid summary")
     except FileNotFoundError:
         return None
-    except IntegrityError as error:
+    except (OSError, IntegrityError) as error:
         raise RunError(f"--page: {error}") from None
+    if not isinstance(summary, dict):
+        raise RunError(f"--page: {path} is not a grid summary")
     if summary.get("complete"):
         return "complete"
-    return summary["iterations_done"], summary["iterations"]
+    done, planned = summary.get("iterations_done"), summary.get("iterations")
+    if not (isinstance(done, int) and isinstance(planned, int)):
+        raise RunError(f"--page: {path} does not say how many iterations are done")
+    return done, planned
 
 
 def saved_options(out: Path, flag: str = "--resume") -> dict:
