@@ -317,8 +317,6 @@ def write_page(
     finished sweeps (``paper.adopt``), named as such; ``progress``: ``{grid: (iterations
     done, planned) or None}`` of the grids not finished (None: not started), whose panels a
     page so far leaves out (not started) or shows at the iteration reached, saying so."""
-    import os
-
     from pngail_jax.report import json_safe
 
     adopted, progress = adopted or {}, progress or {}
@@ -327,40 +325,10 @@ def write_page(
     results = figure_results(source, shown, grids)
     budget = options["budget"]
     lines = [
-        f"# The paper's figures at the {budget} preset",
-        "",
-        f"Preset `{budget}`: {BUDGETS[budget].iterations:,} iterations, {BUDGETS[budget].seeds} "
-        "seeds per method. Normalised return: (R - R_random) / (R_optimal - R_random), with "
-        "the paper's Table 3 returns for the authors' files and each made set's own measured "
-        "random and optimal returns. 'Final' is the last evaluation, 'average over the last "
-        "10%' the mean of a seed's evaluations in the last tenth of training (our reading of "
-        "the paper's Table 4 'average reward after training convergence'), 'average over all "
-        "of training' the mean of every evaluation; mean ± standard error over seeds and a "
-        "95% percentile-bootstrap interval of the mean (the paper's own Table 4 numbers are "
-        "± its std). "
-        + ("**The check preset checks that everything runs; its numbers are not results.**"
-           if budget in ("check", "test") else ""),
-        "",
-        f"Made with `{options['command']}`. {learner_line(options)}",
-        "",
-        "| grid | task | demonstrations | methods | wall time |",
-        "|---|---|---|---|---:|",
+        *page_header(options),
+        *grid_table(out, source, grids, timings, adopted, progress),
+        "", *made_expert_notes(source, grids), "", *weak_expert_notes(source, grids), "",
     ]  # fmt: skip
-    for name, grid in grids.items():
-        seconds = timings.get(name)
-        wall = "n/a" if seconds is None else f"{seconds / 60:.1f} min"
-        if name in adopted:
-            commit = (adopted[name].get("commit") or "unknown")[:7]
-            wall = f"adopted from `{adopted[name]['from']}` (commit {commit})"
-        if name in progress:
-            wall = progress_words(progress[name])
-        link = Path(os.path.relpath(source / "grids" / name, out)).as_posix()
-        named = name if progress.get(name, ()) is None else f"[{name}]({link}/summary.md)"
-        lines.append(
-            f"| {named} | {grid.task} | {grid.demos.description} | "
-            f"{', '.join(grid.methods)} | {wall} |"
-        )
-    lines += ["", *made_expert_notes(source, grids), "", *weak_expert_notes(source, grids), ""]
     if progress:
         lines += [
             "**A page so far: the plan is not finished.** A grid in progress is shown at the "
@@ -387,6 +355,55 @@ def write_page(
     page = out / "README.md"
     atomic_write_text(page, "\n".join(lines))
     return page
+
+
+def page_header(options: dict) -> list[str]:
+    """The page's title, what its numbers mean, and the command that made it."""
+    budget = options["budget"]
+    return [
+        f"# The paper's figures at the {budget} preset",
+        "",
+        f"Preset `{budget}`: {BUDGETS[budget].iterations:,} iterations, {BUDGETS[budget].seeds} "
+        "seeds per method. Normalised return: (R - R_random) / (R_optimal - R_random), with "
+        "the paper's Table 3 returns for the authors' files and each made set's own measured "
+        "random and optimal returns. 'Final' is the last evaluation, 'average over the last "
+        "10%' the mean of a seed's evaluations in the last tenth of training (our reading of "
+        "the paper's Table 4 'average reward after training convergence'), 'average over all "
+        "of training' the mean of every evaluation; mean ± standard error over seeds and a "
+        "95% percentile-bootstrap interval of the mean (the paper's own Table 4 numbers are "
+        "± its std). "
+        + ("**The check preset checks that everything runs; its numbers are not results.**"
+           if budget in ("check", "test") else ""),
+        "",
+        f"Made with `{options['command']}`. {learner_line(options)}",
+        "",
+    ]  # fmt: skip
+
+
+def grid_table(out: Path, source: Path, grids, timings: dict, adopted: dict, progress: dict):
+    """The table of the plan's grids: task, demonstrations, methods and wall time (or adopted
+    from where, or how far a grid not finished got), each linked to its summary from ``out``."""
+    import os
+
+    lines = [
+        "| grid | task | demonstrations | methods | wall time |",
+        "|---|---|---|---|---:|",
+    ]
+    for name, grid in grids.items():
+        seconds = timings.get(name)
+        wall = "n/a" if seconds is None else f"{seconds / 60:.1f} min"
+        if name in adopted:
+            commit = (adopted[name].get("commit") or "unknown")[:7]
+            wall = f"adopted from `{adopted[name]['from']}` (commit {commit})"
+        if name in progress:
+            wall = progress_words(progress[name])
+        link = Path(os.path.relpath(source / "grids" / name, out)).as_posix()
+        named = name if progress.get(name, ()) is None else f"[{name}]({link}/summary.md)"
+        lines.append(
+            f"| {named} | {grid.task} | {grid.demos.description} | "
+            f"{', '.join(grid.methods)} | {wall} |"
+        )
+    return lines
 
 
 def progress_words(progress) -> str:

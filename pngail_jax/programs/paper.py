@@ -194,12 +194,18 @@ def parse_args(argv=None) -> argparse.Namespace:
     return args
 
 
+# The flags that set a plan's options (paper.json): --resume and --page read them from the run.
+PLAN_FLAGS = {
+    "only": "--only", "envs": "--envs", "released_demos": "--released-demos",
+    "physics": "--physics", "budget": "--preset", "learner": "--learner",
+    "demo_learner": "--demo-learner",
+}  # fmt: skip
+
+
 def _check_resume(parser: argparse.ArgumentParser, args) -> None:
     """``--resume DIR`` takes every option from DIR's paper.json: refuses others, and a DIR
     that is not a run of this program."""
-    flags = {"only": "--only", "envs": "--envs", "released_demos": "--released-demos"}
-    flags |= {"out": "--out", "physics": "--physics", "budget": "--preset", "learner": "--learner"}
-    flags |= {"demo_learner": "--demo-learner"}
+    flags = PLAN_FLAGS | {"out": "--out"}
     if args.overwrite:
         parser.error("--resume continues a run; --overwrite replaces one: give one")
     given = [flag for name, flag in flags.items() if getattr(args, name) is not None]
@@ -211,9 +217,7 @@ def _check_resume(parser: argparse.ArgumentParser, args) -> None:
 
 def _check_page(parser: argparse.ArgumentParser, args) -> None:
     """``--page DIR`` reads the plan's options from DIR: takes only --out and --overwrite."""
-    flags = {"only": "--only", "envs": "--envs", "released_demos": "--released-demos"}
-    flags |= {"physics": "--physics", "budget": "--preset", "learner": "--learner"}
-    flags |= {"demo_learner": "--demo-learner", "resume": "--resume", "adopt": "--adopt"}
+    flags = PLAN_FLAGS | {"resume": "--resume", "adopt": "--adopt"}
     given = [flag for name, flag in flags.items() if getattr(args, name) is not None]
     if given:
         parser.error(f"--page writes the page of the plan in DIR as it is: drop {given[0]}")
