@@ -9,6 +9,21 @@ import numpy as np
 import pytest
 
 
+def pytest_configure(config):
+    """The suite compiles through JAX's persistent compilation cache, as the programs do: in
+    ``$PNGAIL_JAX_COMPILATION_CACHE`` (else ``~/.cache/pngail-jax/xla``), for this process and,
+    through JAX's own environment variables, for the fresh interpreters that some tests start.
+    Tests that build the same program (a tiny sweep in-process and again in a subprocess, the
+    same environment rolled out by two modules, both xdist workers) then compile it once; a
+    second run of the suite on the same machine reads every program from disk. A test never
+    depends on the cache: an empty folder gives the same results, only slower."""
+    from pngail_jax.compilation import enable_compilation_cache
+
+    directory = enable_compilation_cache()
+    os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", str(directory))
+    os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "1")
+
+
 def run_x64(test_file: str, function_name: str) -> dict:
     """Runs ``function_name()`` from ``test_file`` in a fresh Python with float64 JAX.
 
