@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
 import platform
 import subprocess
 import sys
@@ -638,6 +639,10 @@ def provenance(argv: list[str] | None = None, program: str | None = None) -> dic
         },
         "platform": devices[0].platform,
         "device_kind": devices[0].device_kind,
+        # XLA compiles for the CPU it runs on and under XLA_FLAGS: two runs give the same
+        # bits only on the same CPU model with the same flags (docs/sweep.md).
+        "cpu_model": _cpu_model(),
+        "xla_flags": os.environ.get("XLA_FLAGS", ""),
         "device_count": len(devices),
         "local_device_count": len(jax.local_devices()),
         "process_count": jax.process_count(),
@@ -646,6 +651,18 @@ def provenance(argv: list[str] | None = None, program: str | None = None) -> dic
             *(sys.argv[1:] if argv is None else argv),
         ],
     }
+
+
+def _cpu_model() -> str:
+    """The host CPU's model name (Linux's /proc/cpuinfo), else what the platform says."""
+    try:
+        with open("/proc/cpuinfo") as file:
+            for line in file:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
 
 
 def _git_commit() -> str | None:

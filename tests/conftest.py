@@ -34,9 +34,13 @@ def run_x64(test_file: str, function_name: str) -> dict:
     return run_in_subprocess(test_file, function_name, {"JAX_ENABLE_X64": "1"})
 
 
-def run_in_subprocess(test_file: str, function_name: str, environment: dict) -> dict:
+def run_in_subprocess(
+    test_file: str, function_name: str, environment: dict, cpus: set[int] | None = None
+) -> dict:
     """Runs ``function_name()`` from ``test_file`` in a fresh Python with ``environment``
-    added to the environment variables (settings fixed at JAX start-up, e.g. XLA_FLAGS)."""
+    added to the environment variables (settings fixed at JAX start-up, e.g. XLA_FLAGS),
+    on the CPUs ``cpus`` only if given (the process's affinity from its start, as
+    ``taskset`` sets it: what XLA sizes its thread pools by)."""
     code = (
         "import json, runpy, sys\n"
         f"sys.path.insert(0, {os.path.dirname(os.path.abspath(test_file))!r})\n"
@@ -51,6 +55,7 @@ def run_in_subprocess(test_file: str, function_name: str, environment: dict) -> 
         text=True,
         timeout=600,
         check=False,
+        preexec_fn=(lambda: os.sched_setaffinity(0, cpus)) if cpus else None,
     )
     results = [line for line in done.stdout.splitlines() if line.startswith("RESULT ")]
     assert done.returncode == 0 and results, f"subprocess failed:\n{done.stderr[-3000:]}"

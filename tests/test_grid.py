@@ -9,6 +9,7 @@ differently on each machine.
 """
 
 import functools
+import os
 
 import jax
 import jax.numpy as jnp
@@ -141,6 +142,36 @@ def test_sharded_over_four_devices_matches_one_device():
     assert results.pop("num_padded") == 8  # 6 cells padded to a multiple of 4 devices
     for name, (sharded, unsharded) in results.items():
         assert_close_across_programs(sharded, unsharded, name)
+
+
+def grid_metrics_bytes() -> dict:
+    """The 6-cell grid's metrics (2 iterations), as hexadecimal bytes per metric."""
+    env, demos, config = small_setup()
+    trainer = AdversarialTrainer(config, env, demos)
+    _, inputs = small_grid_inputs()
+    _, metrics = jax.device_get(jax.jit(jax.vmap(trainer.train))(*inputs))
+    return {name: np.ascontiguousarray(metrics[name]).tobytes().hex() for name in COMPARED}
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(
+    not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2,
+    reason="needs a second CPU to run on",
+)
+def test_the_number_of_cores_does_not_change_a_single_bit():
+    """What docs/sweep.md promises for reproducibility: the same program on the same machine
+    gives the same bits, whatever the number of cores it runs on (XLA's CPU thread pools are
+    sized by the process's CPUs). A fresh Python on one CPU, compiling the 6-cell grid itself
+    (the persistent cache off), against this process's run of it on every CPU it has."""
+    from conftest import run_in_subprocess
+
+    one_core = run_in_subprocess(
+        __file__,
+        "grid_metrics_bytes",
+        {"JAX_ENABLE_COMPILATION_CACHE": "false"},
+        cpus={min(os.sched_getaffinity(0))},
+    )
+    assert one_core == grid_metrics_bytes()
 
 
 @pytest.mark.slow
