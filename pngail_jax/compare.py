@@ -23,7 +23,9 @@ and the baseline's probability of improvement over it there.
 
 from __future__ import annotations
 
+import csv
 import dataclasses
+import json
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -90,21 +92,29 @@ def final_scores(run_dir: Path) -> tuple[str, dict[str, np.ndarray]]:
     """A sweep run's task and each method label's final normalised returns float[seeds]
     (NaN for a seed that diverged). CompareError when the run has none to read."""
     from pngail_jax.outputs import output_owner
-    from pngail_jax.report import read_evaluations
+    from pngail_jax.report import iterations_per_cell, read_evaluations
 
     run_dir = Path(run_dir)
     if output_owner(run_dir) != "sweep":
         raise CompareError(f"{run_dir} holds no sweep run (experiments.sweep writes one)")
     try:
-        env = read_json(run_dir / "config.json", "run config")["env"]
+        config = read_json(run_dir / "config.json", "run config")
+        env = config["env"]
     except (OSError, IntegrityError, KeyError, TypeError) as error:
         raise CompareError(f"{run_dir}: no readable config.json ({error})") from None
     path = run_dir / "metrics.csv"
     if not path.exists():
         raise CompareError(f"{run_dir}: no metrics.csv yet (the run has not finished a chunk)")
-    groups = read_evaluations(
-        path, "normalized_return", evaluated_by="eval_return", group_by=("method", "setting")
-    )
+    try:
+        _check_whole(path, iterations_per_cell(path), run_progress_numbers(run_dir), config)
+        groups = read_evaluations(
+            path, "normalized_return", evaluated_by="eval_return", group_by=("method", "setting")
+        )
+    except (KeyError, ValueError, TypeError, csv.Error, UnicodeDecodeError) as error:
+        reason = f"no column {error}" if isinstance(error, KeyError) else str(error)
+        raise CompareError(
+            f"{path} is damaged: not a metrics.csv as the sweep writes it ({reason})"
+        ) from None
     if not groups:
         raise CompareError(f"{path}: no evaluated iteration")
     settings = {setting for _, setting in groups}
@@ -120,9 +130,79 @@ def final_scores(run_dir: Path) -> tuple[str, dict[str, np.ndarray]]:
     return env, scores
 
 
+def _check_whole(path: Path, reached: dict, progress: tuple[int, int] | None, config: dict) -> None:
+    """CompareError when ``metrics.csv`` ends before the run did: a cell of the config
+    missing (``config``'s methods x seeds, in every setting the file has), cells that stop at
+    different iterations (a file cut within a cell), or all of them before the iteration its
+    summary.json says the run reached (``progress``: iterations done and planned)."""
+    if not reached:
+        raise CompareError(f"{path}: no rows")
+    methods, seeds = config.get("methods"), config.get("seeds")
+    if isinstance(methods, list) and isinstance(seeds, int):
+        settings = {setting for _, setting, _ in reached}
+        for method in methods:
+            found = sum(1 for cell in reached if cell[0] == method)
+            if found < seeds * len(settings):
+                raise CompareError(
+                    f"{path} is cut short: it holds {found} of the {seeds * len(settings)} "
+                    f"runs of {method} that config.json asks for"
+                )
+    lowest, highest = min(reached.values()), max(reached.values())
+    if lowest != highest:
+        short = next(cell for cell, last in reached.items() if last == lowest)
+        raise CompareError(
+            f"{path} is cut short: {short[0]} seed {short[2]} ends at iteration {lowest}, "
+            f"other cells at {highest}"
+        )
+    if progress is not None and highest < progress[0]:
+        raise CompareError(
+            f"{path} is cut short: it ends at iteration {highest}, and summary.json says the "
+            f"run reached {progress[0]}"
+        )
+
+
+def _same_run_key(run_dir: Path) -> str | None:
+    """What makes two runs the same seeds of the same config: config.json without where and
+    how it ran (``provenance``) and the log; None when it cannot be read."""
+    try:
+        config = read_json(run_dir / "config.json", "run config")
+    except (OSError, IntegrityError):
+        return None
+    if not isinstance(config, dict):
+        return None
+    kept = {key: value for key, value in config.items() if key not in ("provenance", "log")}
+    return json.dumps(kept, sort_keys=True)
+
+
+def _check_distinct(run_dirs: Sequence[Path]) -> None:
+    """CompareError when a run is given twice, or two runs hold the same seeds of the same
+    config (a copy, or the same command run again): pooling them would count each seed
+    twice and shrink every interval."""
+    seen_paths: dict[Path, Path] = {}
+    seen_configs: dict[str, Path] = {}
+    for run_dir in map(Path, run_dirs):
+        resolved = run_dir.resolve()
+        if resolved in seen_paths:
+            first = seen_paths[resolved]
+            also = "" if str(first) == str(run_dir) else f" (as {first} too)"
+            raise CompareError(f"{run_dir} is given twice{also}")
+        seen_paths[resolved] = run_dir
+        key = _same_run_key(run_dir)
+        if key is not None and key in seen_configs:
+            raise CompareError(
+                f"{run_dir} and {seen_configs[key]} are the same seeds of the same config "
+                "(a copy, or the same command run twice): compare one of them, or give the "
+                "sweep another --seed for more seeds"
+            )
+        if key is not None:
+            seen_configs[key] = run_dir
+
+
 def load_scores(run_dirs: Sequence[Path]) -> Scores:
     """The final scores of every run, pooled per task (two runs of one task: their seeds
-    together). Methods keep the order they first appear in."""
+    together). Methods keep the order they first appear in. CompareError for a run given
+    twice, two runs of the same seeds and config, or a damaged or cut-short metrics.csv."""
+    _check_distinct(run_dirs)
     values: dict[str, dict[str, np.ndarray]] = {}
     unfinished = {}
     for run_dir in run_dirs:
@@ -134,6 +214,21 @@ def load_scores(run_dirs: Sequence[Path]) -> Scores:
         if progress is not None:
             unfinished[str(run_dir)] = progress
     return Scores(values, unfinished)
+
+
+def run_progress_numbers(run_dir: Path) -> tuple[int, int] | None:
+    """(iterations done, planned) from a run's summary.json, None where it does not say."""
+    try:
+        summary = read_json(Path(run_dir) / "summary.json", "run summary")
+    except (OSError, IntegrityError):
+        return None
+    if not isinstance(summary, dict):
+        return None
+    planned = summary.get("iterations")
+    done = planned if summary.get("complete") is True else summary.get("iterations_done")
+    if isinstance(done, int) and isinstance(planned, int):
+        return done, planned
+    return None
 
 
 def run_progress(run_dir: Path) -> str | None:

@@ -151,6 +151,18 @@ def read_evaluations(
     return evaluations
 
 
+def iterations_per_cell(path: Path) -> dict[tuple[str, str, int], int]:
+    """The highest iteration each cell (method, setting, seed) of a ``metrics.csv`` reached.
+    The sweep writes every cell to the same iteration, so cells that differ mean a file cut
+    short."""
+    reached: dict[tuple[str, str, int], int] = {}
+    with Path(path).open() as file:
+        for row in csv.DictReader(file):
+            cell = (row["method"], row["setting"], int(row["seed"]))
+            reached[cell] = max(reached.get(cell, 0), int(row["iteration"]))
+    return reached
+
+
 def group_label(cell, settings: Sequence[str]) -> str:
     """The method's name, plus its setting when the grid has more than one."""
     return cell.method if len(settings) == 1 else f"{cell.method} [{cell.setting}]"

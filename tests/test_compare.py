@@ -120,14 +120,14 @@ def test_the_program_reads_runs_and_writes_its_page(tmp_path, capsys):
     assert "Unfinished" not in (out / "compare.md").read_text() and not result["unfinished"]
     # A run still going (its summary.json says so) is compared, and named as unfinished.
     (two / "summary.json").write_text(
-        json.dumps({"complete": False, "iterations_done": 200, "iterations": 500})
+        json.dumps({"complete": False, "iterations_done": 1, "iterations": 500})
     )
     (one / "summary.json").write_text(json.dumps({"complete": True}))
     out = program.main([str(one), str(two), "--out", str(tmp_path / "e")])
     assert json.loads((out / "compare.json").read_text())["unfinished"] == {
-        str(two): "200 of 500 iterations"
+        str(two): "1 of 500 iterations"
     }
-    assert f"**Unfinished runs**, their 'final' the latest evaluation so far: {two} (200 of " in (
+    assert f"**Unfinished runs**, their 'final' the latest evaluation so far: {two} (1 of " in (
         (out / "compare.md").read_text()
     )
     (two / "summary.json").write_text(json.dumps({"complete": False, "iterations_done": 2}))
@@ -153,3 +153,86 @@ def test_each_task_is_summarised_on_its_own_with_the_baselines_improvement():
     assert "**t1**" in text and "| b | 3 | 0.30 ± 0.17 | 0.30 [" in text and "P(a > method)" in text
     one = compare.markdown(compare.compare(Scores({"a": {"t": np.array([0.5])}}), "a"))
     assert "| a | 1 | 0.50 (n = 1) | 0.50 [0.50, 0.50] | - |" in one
+
+
+def long_fake_run(directory, env="t1", iterations=3, seed=0):
+    """A sweep run of methods a and b x 2 seeds, ``iterations`` rows per cell, with the
+    config.json fields that say which cells it holds."""
+    fake_run(directory, env, {"a": [0.5, 0.6], "b": [0.2, 0.3]})
+    config = {"env": env, "methods": ["a", "b"], "seeds": 2, "seed": seed,
+              "iterations": iterations, "provenance": {"host": str(directory)}}  # fmt: skip
+    (directory / "config.json").write_text(json.dumps(config))
+    cells = [Cell(m, s) for m in ("a", "b") for s in range(2)]
+    returns = np.tile(np.array([[-500.0], [-400.0], [-800.0], [-700.0]]), (1, iterations))
+    metrics = {name: np.zeros_like(returns) for name in ("disc/acc_agent", "disc/acc_demo",
+               "train/reward", "trpo/kl", "train/episode_return")}  # fmt: skip
+    metrics |= {"eval/return": returns, "env_steps": np.full_like(returns, 5000)}
+    write_metrics_csv(directory / "metrics.csv", cells, metrics, (-1000.0, 0.0))
+    return directory
+
+
+def refusal(runs, tmp_path, capsys) -> str:
+    """The one line ``experiments.compare RUNS`` exits with (nothing written)."""
+    out = tmp_path / "comparison"
+    with pytest.raises(SystemExit) as stop:
+        program.main([*map(str, runs), "--out", str(out)])
+    assert not out.exists()
+    message = str(stop.value.code) + capsys.readouterr().err
+    assert "Traceback" not in message
+    return message
+
+
+def test_the_same_seeds_given_twice_are_refused_not_pooled(tmp_path, capsys):
+    """Pooling a run with itself (or with a copy, or the same command run again) doubles n
+    and shrinks the interval: refused, naming both."""
+    import shutil
+
+    run = long_fake_run(tmp_path / "run")
+    assert "is given twice" in refusal([run, run], tmp_path, capsys)
+    assert "is given twice" in refusal([run, tmp_path / "." / "run"], tmp_path, capsys)
+    copy = tmp_path / "copy"
+    shutil.copytree(run, copy)
+    config = json.loads((copy / "config.json").read_text())
+    config["provenance"] = {"host": "another"}  # run again elsewhere: same seeds still
+    (copy / "config.json").write_text(json.dumps(config))
+    message = refusal([run, copy], tmp_path, capsys)
+    assert "the same seeds of the same config" in message and str(run) in message
+    # Another base seed is other seeds: pooled.
+    other = long_fake_run(tmp_path / "other", seed=1)
+    scores = compare.load_scores([run, other])
+    assert scores.values["a"]["t1"].size == 4
+
+
+def test_a_damaged_metrics_file_is_named_in_one_line(tmp_path, capsys):
+    run = long_fake_run(tmp_path / "run")
+    path = run / "metrics.csv"
+    good = path.read_text()
+    lines = good.splitlines()
+    for damaged, expected in (
+        (good.replace("normalized_return", "normalised", 1), "no column"),  # a renamed column
+        (good.replace(lines[1], "a,x," + lines[1].removeprefix("a,0,"), 1), "'x'"),  # a seed
+        ("\x00\xff" * 50, "is damaged"),  # not text at all
+    ):
+        path.write_bytes(damaged.encode("latin-1") if "\xff" in damaged else damaged.encode())
+        message = refusal([run], tmp_path, capsys)
+        assert f"{path} is damaged" in message and expected in message, message
+
+
+def test_a_metrics_file_cut_short_is_refused_not_read_as_final(tmp_path, capsys):
+    run = long_fake_run(tmp_path / "run", iterations=3)
+    path = run / "metrics.csv"
+    lines = path.read_text().splitlines(keepends=True)
+    path.write_text("".join(lines[:-1]))  # the last cell one row short
+    assert "b seed 1 ends at iteration 2, other cells at 3" in refusal([run], tmp_path, capsys)
+    path.write_text("".join(lines[:-3]))  # the last cell gone
+    assert "it holds 1 of the 2 runs of b" in refusal([run], tmp_path, capsys)
+    path.write_text("".join(lines))
+    (run / "summary.json").write_text(
+        json.dumps({"complete": False, "iterations_done": 5, "iterations": 10})
+    )
+    message = refusal([run], tmp_path, capsys)
+    assert "ends at iteration 3, and summary.json says the run reached 5" in message
+    (run / "summary.json").write_text(
+        json.dumps({"complete": False, "iterations_done": 3, "iterations": 10})
+    )
+    assert compare.load_scores([run]).unfinished == {str(run): "3 of 10 iterations"}
