@@ -92,7 +92,6 @@ def final_scores(run_dir: Path) -> tuple[str, dict[str, np.ndarray]]:
     """A sweep run's task and each method label's final normalised returns float[seeds]
     (NaN for a seed that diverged). CompareError when the run has none to read."""
     from pngail_jax.outputs import output_owner
-    from pngail_jax.report import iterations_per_cell, read_evaluations
 
     run_dir = Path(run_dir)
     if output_owner(run_dir) != "sweep":
@@ -105,12 +104,24 @@ def final_scores(run_dir: Path) -> tuple[str, dict[str, np.ndarray]]:
     path = run_dir / "metrics.csv"
     if not path.exists():
         raise CompareError(f"{run_dir}: no metrics.csv yet (the run has not finished a chunk)")
+    return env, scores_of_metrics(path, config, run_progress_numbers(run_dir))
+
+
+def scores_of_metrics(
+    path: Path, config: dict, progress: tuple[int, int] | None
+) -> dict[str, np.ndarray]:
+    """Each method label's final normalised returns float[seeds] in a sweep's metrics file
+    (``metrics.csv``, or a run record's ``metrics.csv.gz``), checked whole against the run's
+    ``config`` and ``progress`` (iterations done and planned, when known). CompareError for a
+    damaged or cut-short file."""
+    from pngail_jax.report import iterations_per_cell, read_evaluations
+
     try:
-        _check_whole(path, iterations_per_cell(path), run_progress_numbers(run_dir), config)
+        _check_whole(path, iterations_per_cell(path), progress, config)
         groups = read_evaluations(
             path, "normalized_return", evaluated_by="eval_return", group_by=("method", "setting")
         )
-    except (KeyError, ValueError, TypeError, csv.Error, UnicodeDecodeError) as error:
+    except (KeyError, ValueError, TypeError, EOFError, OSError, csv.Error) as error:
         reason = f"no column {error}" if isinstance(error, KeyError) else str(error)
         raise CompareError(
             f"{path} is damaged: not a metrics.csv as the sweep writes it ({reason})"
@@ -127,7 +138,7 @@ def final_scores(run_dir: Path) -> tuple[str, dict[str, np.ndarray]]:
             )
         label = method if len(settings) == 1 else f"{method} [{setting}]"
         scores[label] = values[:, -1]
-    return env, scores
+    return scores
 
 
 def _check_whole(path: Path, reached: dict, progress: tuple[int, int] | None, config: dict) -> None:

@@ -7,6 +7,7 @@ iterations, as ``pngail_jax.grid`` returns them) and ``cells`` lists the G ``Cel
 from __future__ import annotations
 
 import csv
+import gzip
 import math
 import warnings
 from collections.abc import Sequence
@@ -118,6 +119,15 @@ def write_metrics_csv(path: Path, cells, metrics, normalizer, chunk_seconds=()) 
                 )
 
 
+def open_metrics(path: Path):
+    """A metrics file opened for reading as text: ``metrics.csv``, or ``metrics.csv.gz`` (a run
+    record's, ``pngail_jax.run_records``)."""
+    path = Path(path)
+    if path.suffix == ".gz":
+        return gzip.open(path, "rt", newline="")
+    return path.open(newline="")
+
+
 def read_evaluations(
     path: Path, value: str, *, evaluated_by: str | None = None, group_by: Sequence[str] = ()
 ) -> dict[tuple, tuple[np.ndarray, np.ndarray]]:
@@ -130,7 +140,7 @@ def read_evaluations(
     evaluated_by = evaluated_by or value
     rows: dict[tuple, dict[int, dict[int, float]]] = {}
     steps: dict[int, int] = {}
-    with Path(path).open() as file:
+    with open_metrics(path) as file:
         for row in csv.DictReader(file):
             marker = row[evaluated_by]
             if marker == "" or math.isnan(float(marker)):
@@ -156,7 +166,7 @@ def iterations_per_cell(path: Path) -> dict[tuple[str, str, int], int]:
     The sweep writes every cell to the same iteration, so cells that differ mean a file cut
     short."""
     reached: dict[tuple[str, str, int], int] = {}
-    with Path(path).open() as file:
+    with open_metrics(path) as file:
         for row in csv.DictReader(file):
             cell = (row["method"], row["setting"], int(row["seed"]))
             reached[cell] = max(reached.get(cell, 0), int(row["iteration"]))

@@ -31,7 +31,13 @@ LAYERS = [
             "confidence", "methods", "losses", "cail",
         ),
     ),
-    ("trainers", ("adversarial", "grid", "train", "run_config", "report", "tracking", "compare")),
+    (
+        "trainers",
+        (
+            "adversarial", "grid", "train", "run_config", "report", "tracking", "compare",
+            "run_records",
+        ),
+    ),
     ("jobs", ("jobs", "jobs.*", "runner")),
     ("paper", ("paper", "paper.*")),
     ("programs", ("programs", "programs.*")),

@@ -2,6 +2,7 @@
 
 import csv
 import dataclasses
+import hashlib
 import json
 import shutil
 from pathlib import Path
@@ -479,3 +480,66 @@ def test_a_signal_during_a_chunk_stops_the_sweep_once_that_chunk_is_saved(
     monkeypatch.setattr(Grid, "run_chunk", run_chunk)
     sweep.main(["--resume", str(out)])
     assert metrics_numbers(out / "metrics.csv") == metrics_numbers(finished / "metrics.csv")
+
+
+# -- run records (pngail_jax.run_records), on this module's finished run: no new compile ------
+
+
+def test_a_record_keeps_the_run_small_and_checks_itself(finished, tmp_path, capsys):
+    """experiments.record writes config, command, commit, machine and the gzipped metrics,
+    reads them back, and recomputes the final returns; --check finds each kind of damage."""
+    import gzip
+
+    from pngail_jax import run_records
+    from pngail_jax.programs import record as program
+
+    [folder] = program.main([str(finished), "--name", "tiny", "--records", str(tmp_path)])
+    assert folder == tmp_path / "tiny"
+    assert sorted(p.name for p in folder.iterdir()) == ["metrics.csv.gz", "record.json"]
+    record = json.loads((folder / "record.json").read_text())
+    config = json.loads((finished / "config.json").read_text())
+    assert record["config"] == {k: v for k, v in config.items() if k != "provenance"}
+    assert record["command"] == config["provenance"]["command_line"]
+    assert record["commit"] == config["provenance"]["git_commit"]
+    assert record["machine"]["cpu_model"] and record["complete"] is True
+    assert record["iterations_done"] == record["iterations"] == 4
+    summary = json.loads((finished / "summary.json").read_text())
+    for method, values in record["final_normalized_return"].items():
+        # metrics.csv keeps 6 significant digits; the summary, the full float.
+        assert len(values) == 2 and np.mean(values) == pytest.approx(
+            summary["methods"][method]["final_normalized_return_mean"], rel=1e-5, abs=1e-6
+        )
+    with gzip.open(folder / "metrics.csv.gz", "rt") as file:
+        assert file.read() == (finished / "metrics.csv").read_text()
+    assert "ok  tiny: Pendulum-v1, 2 methods, 4 runs, complete" in (
+        program.main(["--check", str(folder)]) and capsys.readouterr().out
+    )
+    # The same run recorded again gives the same bytes; a folder of other files is refused.
+    program.main([str(finished), "--name", "tiny", "--records", str(tmp_path)])
+    assert json.loads((folder / "record.json").read_text()) == record
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "notes.txt").write_text("mine")
+    with pytest.raises(SystemExit, match="holds files a record does not .notes.txt."):
+        program.main([str(finished), "--name", "other", "--records", str(tmp_path)])
+    # Damage: a metrics file changed, a stated return edited, a cell cut out.
+    good = (folder / "metrics.csv.gz").read_bytes()
+    (folder / "metrics.csv.gz").write_bytes(good[:-10])
+    with pytest.raises(SystemExit, match="metrics.csv.gz differs from what the record wrote"):
+        program.main(["--check", str(folder)])
+    (folder / "metrics.csv.gz").write_bytes(good)
+    edited = json.loads(json.dumps(record))
+    first = next(iter(edited["final_normalized_return"]))
+    edited["final_normalized_return"][first][0] += 0.5
+    (folder / "record.json").write_text(json.dumps(edited))
+    with pytest.raises(SystemExit, match="its final returns differ from those of metrics.csv"):
+        program.main(["--check", str(folder)])
+    text = (finished / "metrics.csv").read_text().splitlines(keepends=True)
+    cut = gzip.compress("".join(text[:-4]).encode(), mtime=0)
+    (folder / "metrics.csv.gz").write_bytes(cut)
+    record["metrics"] |= {"bytes": len(cut), "sha256": hashlib.sha256(cut).hexdigest()}
+    (folder / "record.json").write_text(json.dumps(record))
+    with pytest.raises(run_records.RecordError, match="is cut short"):
+        run_records.check_record(folder)
+    with pytest.raises(SystemExit, match="holds no sweep run"):
+        program.main([str(tmp_path), "--name", "x", "--records", str(tmp_path / "r")])

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 PROGRAMS = (
     "sweep", "paper", "train_rl", "make_demos", "classify", "compare_settings", "early_rewards",
-    "seeds", "compare",
+    "seeds", "compare", "record",
 )  # fmt: skip
 
 
@@ -59,5 +59,11 @@ def seeds() -> None:
 
 def compare() -> None:
     from pngail_jax.programs import compare as program
+
+    program.main()
+
+
+def record() -> None:
+    from pngail_jax.programs import record as program
 
     program.main()

@@ -1,0 +1,198 @@
+"""Run records: what a results table in the docs rests on, small enough to commit.
+
+A record is a folder (``records/<name>/``) made from a sweep run's folder:
+
+- ``record.json``: the name, the command, the commit, the machine (CPU model, devices,
+  library versions, ``XLA_FLAGS``), the run's config (``config.json`` without its
+  provenance), how far it got, its training and compile seconds, the digest of the metrics
+  file, and each method's final normalised return per seed;
+- ``metrics.csv.gz``: the run's ``metrics.csv``, every cell and iteration (the evaluations
+  and the diagnostics columns), gzipped.
+
+No checkpoints, policies or plots: a 12-cell run of 5,000 iterations is about 2 MB.
+``check_record`` reads a record back and verifies it: the metrics file against its digest,
+whole against the config (every cell, every iteration the record says the run reached),
+and the final returns recomputed from it against those the record states.
+"""
+
+from __future__ import annotations
+
+import gzip
+import hashlib
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from pngail_jax.compare import CompareError, run_progress_numbers, scores_of_metrics
+from pngail_jax.integrity import IntegrityError, atomic_path, read_json, write_json
+
+FORMAT = 1
+RECORD_FILE = "record.json"
+METRICS_FILE = "metrics.csv.gz"
+MACHINE_KEYS = (
+    "cpu_model", "platform", "device_kind", "device_count", "process_count", "python",
+    "libraries", "xla_flags",
+)  # fmt: skip
+
+
+class RecordError(Exception):
+    """A run that cannot be recorded, or a record that does not check (the message names the
+    file and the problem)."""
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as file:
+        for block in iter(lambda: file.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _final_returns(scores: dict[str, np.ndarray]) -> dict[str, list[float | None]]:
+    """Per method label, its seeds' final normalised returns (None for a diverged seed)."""
+    return {
+        label: [float(v) if np.isfinite(v) else None for v in values]
+        for label, values in scores.items()
+    }
+
+
+def _training_seconds(metrics_path: Path) -> float | None:
+    """The run's training seconds so far: the largest ``wall_seconds`` of its metrics file."""
+    import csv
+
+    from pngail_jax.report import open_metrics
+
+    with open_metrics(metrics_path) as file:
+        rows = csv.DictReader(file)
+        seconds = [float(row["wall_seconds"]) for row in rows if row.get("wall_seconds")]
+    return max(seconds) if seconds else None
+
+
+def write_record(run_dir: Path, name: str, records: Path = Path("records")) -> Path:
+    """Records the sweep run in ``run_dir`` as ``records/<name>/`` and checks it. A record of
+    that name already there is replaced only if it records the same run (same config and
+    commit); anything else in the way is refused. Returns the record's folder."""
+    from pngail_jax.compare import final_scores
+    from pngail_jax.outputs import output_owner
+
+    run_dir = Path(run_dir)
+    if not name or "/" in name or name.startswith("."):
+        raise RecordError(f"record name {name!r}: give a plain folder name, e.g. hopper-cpu")
+    if output_owner(run_dir) != "sweep":
+        raise RecordError(f"{run_dir} holds no sweep run (experiments.sweep writes one)")
+    try:
+        config = read_json(run_dir / "config.json", "run config")
+        summary = read_json(run_dir / "summary.json", "run summary")
+        _, scores = final_scores(run_dir)
+    except FileNotFoundError as error:
+        raise RecordError(f"{run_dir}: {Path(error.filename).name} is missing") from None
+    except (OSError, IntegrityError, CompareError) as error:
+        raise RecordError(str(error)) from None
+    provenance = config.get("provenance", {})
+    progress = run_progress_numbers(run_dir)
+    record = {
+        "format": FORMAT,
+        "name": name,
+        "program": "experiments.sweep",
+        "command": provenance.get("command_line"),
+        "commit": provenance.get("git_commit"),
+        "machine": {key: provenance.get(key) for key in MACHINE_KEYS},
+        "config": {key: value for key, value in config.items() if key != "provenance"},
+        "complete": summary.get("complete") is not False,
+        "iterations_done": progress[0] if progress else None,
+        "iterations": progress[1] if progress else config.get("iterations"),
+        "training_seconds": _training_seconds(run_dir / "metrics.csv"),
+        "compile_seconds": summary.get("compile_seconds"),
+        "final_normalized_return": _final_returns(scores),
+    }
+    folder = Path(records) / name
+    _check_replaceable(folder, record)
+    folder.mkdir(parents=True, exist_ok=True)
+    metrics = folder / METRICS_FILE
+    # No file name and no time in the gzip header: the same run gives the same bytes.
+    with atomic_path(metrics) as temporary, temporary.open("wb") as raw:
+        with (run_dir / "metrics.csv").open("rb") as source:
+            with gzip.GzipFile(filename="", mode="wb", fileobj=raw, mtime=0) as target:
+                shutil.copyfileobj(source, target)
+    record["metrics"] = {"file": METRICS_FILE, "bytes": metrics.stat().st_size,
+                         "sha256": _sha256(metrics)}  # fmt: skip
+    write_json(folder / RECORD_FILE, record)
+    check_record(folder)
+    return folder
+
+
+def _check_replaceable(folder: Path, record: dict) -> None:
+    """RecordError unless ``folder`` is new, empty, or a record of the same run."""
+    if not folder.exists():
+        return
+    if not folder.is_dir():
+        raise RecordError(f"{folder} is a file: give another --name")
+    found = {path.name for path in folder.iterdir()}
+    if not found:
+        return
+    if not found <= {RECORD_FILE, METRICS_FILE}:
+        strangers = ", ".join(sorted(found - {RECORD_FILE, METRICS_FILE}))
+        raise RecordError(f"{folder} holds files a record does not ({strangers}): not replaced")
+    try:
+        old = read_json(folder / RECORD_FILE, "run record")
+    except (OSError, IntegrityError) as error:
+        raise RecordError(
+            f"{folder}: not replaced, its record.json is unreadable ({error})"
+        ) from None
+    if old.get("config") != record["config"] or old.get("commit") != record["commit"]:
+        raise RecordError(
+            f"{folder} records another run (its config or commit differs): give another --name"
+        )
+
+
+def check_record(folder: Path) -> dict:
+    """Verifies the record in ``folder`` and returns its ``record.json``: the metrics file is
+    the one recorded (size and SHA-256), whole (every cell of the config, to the iteration the
+    record says), and gives the final returns the record states. RecordError otherwise."""
+    folder = Path(folder)
+    try:
+        record = read_json(folder / RECORD_FILE, "run record")
+    except FileNotFoundError:
+        raise RecordError(f"{folder} holds no run record ({RECORD_FILE} is missing)") from None
+    except (OSError, IntegrityError) as error:
+        raise RecordError(f"{folder / RECORD_FILE}: unreadable ({error})") from None
+    if not isinstance(record, dict) or record.get("format") != FORMAT:
+        raise RecordError(f"{folder / RECORD_FILE}: not a run record of format {FORMAT}")
+    metrics = folder / METRICS_FILE
+    expected = record.get("metrics", {})
+    if not metrics.is_file():
+        raise RecordError(f"{metrics} is missing")
+    if metrics.stat().st_size != expected.get("bytes") or _sha256(metrics) != expected.get(
+        "sha256"
+    ):
+        raise RecordError(f"{metrics} differs from what the record wrote (size or SHA-256)")
+    done, planned = record.get("iterations_done"), record.get("iterations")
+    progress = (done, planned) if isinstance(done, int) and isinstance(planned, int) else None
+    try:
+        scores = scores_of_metrics(metrics, record["config"], progress)
+    except CompareError as error:
+        raise RecordError(str(error)) from None
+    stated = record.get("final_normalized_return")
+    if _final_returns(scores) != stated:
+        raise RecordError(
+            f"{folder / RECORD_FILE}: its final returns differ from those of {METRICS_FILE}"
+        )
+    return record
+
+
+def describe(record: dict) -> str:
+    """One paragraph for the terminal: what the record holds."""
+    finals = record["final_normalized_return"]
+    cells = sum(len(values) for values in finals.values())
+    how_far = (
+        "complete"
+        if record["complete"]
+        else f"{record['iterations_done']:,} of {record['iterations']:,} iterations"
+    )
+    return (
+        f"{record['name']}: {record['config'].get('env')}, {len(finals)} methods, "
+        f"{cells} runs, {how_far}; commit {str(record['commit'])[:10]}, "
+        f"{record['machine'].get('cpu_model') or 'CPU not recorded'}; "
+        f"metrics {record['metrics']['bytes']:,} bytes"
+    )
