@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import gzip
 import hashlib
+import math
 import shutil
 from pathlib import Path
 
@@ -196,3 +197,89 @@ def describe(record: dict) -> str:
         f"{record['machine'].get('cpu_model') or 'CPU not recorded'}; "
         f"metrics {record['metrics']['bytes']:,} bytes"
     )
+
+
+# Keys of a run config that do not change its numbers (or say where its files were).
+_NOT_NUMBERS = ("demos", "conf", "resolved", "log", "chunk_iterations", "cpu_devices",
+                "preset_name", "provenance")  # fmt: skip
+
+
+def config_differences(config: dict, record: dict) -> list[str]:
+    """The config fields (``config.json``'s top level) in which a run differs from the
+    record's run, leaving out those that do not change the numbers."""
+    reference = record["config"]
+    keys = sorted((set(config) | set(reference)) - set(_NOT_NUMBERS))
+    return [key for key in keys if config.get(key) != reference.get(key)]
+
+
+def expected_rows(scores, record: dict) -> list[dict]:
+    """Per method of the record: is the IQM of your seeds' final normalised returns
+    (``scores``, a ``compare.Scores``) inside the record's 95% bootstrap interval of its IQM
+    over seeds, and by how much is it outside. RecordError when your runs hold no run of the
+    record's task."""
+    from pngail_jax import stats
+
+    task = record["config"].get("env")
+    if task not in scores.tasks:
+        raise RecordError(
+            f"the record {record['name']} is of {task}; your runs are of {', '.join(scores.tasks)}"
+        )
+    rows = []
+    for method, seeds in record["final_normalized_return"].items():
+        reference = stats.seed_summary([math.nan if v is None else v for v in seeds])
+        row = {
+            "method": method,
+            "reference_iqm": reference["iqm"],
+            "reference_ci95": reference["ci95"],
+            "reference_seeds": reference["num_seeds"],
+        }
+        yours = scores.values.get(method, {}).get(task)
+        if yours is None:
+            rows.append({**row, "verdict": "not in your runs"})
+            continue
+        mine = stats.seed_summary(yours)
+        low, high = reference["ci95"]
+        estimate = mine["iqm"]
+        if not math.isfinite(estimate):
+            verdict, distance = "no finite return", math.nan
+        elif low <= estimate <= high:
+            verdict, distance = "within", 0.0
+        elif estimate < low:
+            verdict, distance = "below", low - estimate
+        else:
+            verdict, distance = "above", estimate - high
+        rows.append({**row, "your_iqm": estimate, "your_seeds": mine["num_seeds"],
+                     "verdict": verdict, "outside_by": distance})  # fmt: skip
+    return rows
+
+
+def expected_markdown(rows: list[dict], record: dict, differences: list[str]) -> str:
+    """The ``--expected`` table: your IQM against the record's interval, per method."""
+    lines = [
+        f"## Against the record {record['name']} ({record['config'].get('env')}, commit "
+        f"{str(record['commit'])[:10]})",
+        "",
+        "Final normalised return: the IQM of your seeds against the record's IQM and its 95% "
+        "bootstrap interval over its seeds. Outside it is a difference to look at, not proof "
+        "of one: a run on another machine is another draw (docs/sweep.md, what is "
+        "reproducible).",
+        "",
+    ]
+    if differences:
+        lines += [f"Your config differs from the record's in: {', '.join(differences)}.", ""]
+    lines += ["| method | yours (IQM, seeds) | record: IQM [95% CI] (seeds) | verdict |",
+              "|---|---:|---:|---|"]  # fmt: skip
+    for row in rows:
+        low, high = row["reference_ci95"]
+        reference = f"{row['reference_iqm']:.2f} [{low:.2f}, {high:.2f}] ({row['reference_seeds']})"
+        if "your_iqm" not in row:
+            lines.append(f"| {row['method']} | - | {reference} | {row['verdict']} |")
+            continue
+        verdict = row["verdict"] + (
+            f" by {row['outside_by']:.2f}" if row["verdict"] in ("below", "above") else ""
+        )
+        lines.append(
+            f"| {row['method']} | {row['your_iqm']:.2f} ({row['your_seeds']}) | {reference} | "
+            f"{verdict} |"
+        )
+    return "\n".join(lines) + "\n"

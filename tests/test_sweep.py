@@ -543,3 +543,36 @@ def test_a_record_keeps_the_run_small_and_checks_itself(finished, tmp_path, caps
         run_records.check_record(folder)
     with pytest.raises(SystemExit, match="holds no sweep run"):
         program.main([str(tmp_path), "--name", "x", "--records", str(tmp_path / "r")])
+
+
+def test_compare_expected_says_where_a_run_lies_against_a_record(finished, tmp_path):
+    """compare --expected: a run against its own record lies within every interval; made-up
+    scores below and above the record's interval are named so, with the distance; a record
+    of another task is refused."""
+    from pngail_jax import run_records
+    from pngail_jax.compare import Scores
+    from pngail_jax.programs import compare as compare_program
+    from pngail_jax.programs import record as record_program
+
+    [folder] = record_program.main([str(finished), "--name", "r", "--records", str(tmp_path)])
+    out = compare_program.main([str(finished), "--expected", str(folder),
+                                "--out", str(tmp_path / "cmp")])  # fmt: skip
+    expected = json.loads((out / "compare.json").read_text())["expected"]
+    assert expected["config_differences"] == []
+    assert [row["verdict"] for row in expected["rows"]] == ["within", "within"]
+    assert "## Against the record r (Pendulum-v1" in (out / "compare.md").read_text()
+    record = run_records.check_record(folder)
+    record["final_normalized_return"] = {"gail": [0.4, 0.5, 0.6], "pngail": [0.8, 0.9, 1.0]}
+    scores = Scores({"gail": {"Pendulum-v1": np.array([0.1, 0.2, 0.15])}})
+    rows = run_records.expected_rows(scores, record)
+    assert rows[0]["verdict"] == "below" and rows[0]["outside_by"] == pytest.approx(
+        rows[0]["reference_ci95"][0] - 0.15
+    )
+    assert rows[1]["verdict"] == "not in your runs"
+    high = Scores({"gail": {"Pendulum-v1": np.array([0.9, 0.95, 1.0])}})
+    assert run_records.expected_rows(high, record)[0]["verdict"] == "above"
+    other = Scores({"gail": {"Hopper-v4": np.array([0.5])}})
+    with pytest.raises(run_records.RecordError, match="is of Pendulum-v1; your runs are of Hopper"):
+        run_records.expected_rows(other, record)
+    changed = {**record["config"], "iterations": 8, "log": ["x"]}
+    assert run_records.config_differences(changed, record) == ["iterations"]

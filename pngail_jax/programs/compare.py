@@ -17,7 +17,7 @@ import argparse
 import time
 from pathlib import Path
 
-from pngail_jax import compare
+from pngail_jax import compare, run_records
 from pngail_jax.integrity import atomic_write_text
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.outputs import claimed
@@ -45,6 +45,11 @@ def parse_args(argv=None) -> argparse.Namespace:
         "--overwrite", action="store_true", help="replace a comparison already in --out"
     )
     parser.add_argument("--seed", type=int, default=0, help="the bootstrap's seed")
+    parser.add_argument(
+        "--expected", type=path_argument, metavar="RECORD",
+        help="a kept run record (records/<name>, experiments.record): per method, is your "
+        "runs' IQM inside the record's 95%% interval over seeds, and how far outside",
+    )  # fmt: skip
     args = parser.parse_args(argv)
     for run in args.runs:
         if not run.is_dir():
@@ -62,7 +67,7 @@ def main(argv=None) -> Path:
     try:
         with refusals(), claimed(args.out, "compare", overwrite=args.overwrite) as claim:
             write_comparison(args, claim)
-    except (compare.CompareError, RunError) as error:
+    except (compare.CompareError, RunError, run_records.RecordError) as error:
         raise SystemExit(str(error)) from None
     return args.out
 
@@ -72,11 +77,31 @@ def write_comparison(args, claim) -> None:
     scores = compare.load_scores(args.runs)
     baseline = args.baseline or ("pngail" if "pngail" in scores.methods else scores.methods[0])
     result = compare.compare(scores, baseline, seed=args.seed)
+    expected, expected_text = _against_record(args, scores)
     claim.prepare()
-    compare.write_json(args.out / "compare.json", {**result, "runs": [str(r) for r in args.runs]})
-    text = compare.markdown(result)
+    compare.write_json(
+        args.out / "compare.json",
+        {**result, "runs": [str(r) for r in args.runs], **expected},
+    )
+    text = compare.markdown(result) + expected_text
     atomic_write_text(args.out / "compare.md", text)
     compare.plot(result, args.out)
     print(text)
     print(f"wrote {args.out}/{{compare.json,compare.md,aggregates.png,profiles.png,"
           "improvement.png}")  # fmt: skip
+
+
+def _against_record(args, scores) -> tuple[dict, str]:
+    """``--expected``: ({"expected": rows, "expected_record": ...}, its markdown), or
+    nothing without the flag. The record is verified first."""
+    if args.expected is None:
+        return {}, ""
+    from pngail_jax.integrity import read_json
+
+    record = run_records.check_record(args.expected)
+    rows = run_records.expected_rows(scores, record)
+    config = read_json(args.runs[0] / "config.json", "run config")
+    differences = run_records.config_differences(config, record)
+    text = "\n" + run_records.expected_markdown(rows, record, differences)
+    info = {"record": str(args.expected), "config_differences": differences, "rows": rows}
+    return {"expected": info}, text
