@@ -183,6 +183,10 @@ def json_digest(document) -> str:
     return "sha256:" + hashlib.sha256(text.encode()).hexdigest()
 
 
+# Where a run keeps the seal of the config it began with (beside config.json).
+CONFIG_SEAL = ".config.sealed.json"
+
+
 def seal(path: str | Path, document) -> None:
     """Writes ``document`` and its digest to ``path``: what a run was created with, kept
     apart from the file a user may edit, so that a resume can compare the two."""

@@ -167,6 +167,22 @@ def test_an_interrupted_run_resumes_to_the_same_numbers(run_dir, tmp_path, monke
     with pytest.raises(SystemExit):
         train_rl.main(["--resume", str(out), "--seeds", "3"])  # its own flags only
     assert "takes no other flags" in capsys.readouterr().err
+    # config.json edited so that its flags and fields agree: refused by the seal, which keeps
+    # what the run began with; a copy without its dot-files has no seal: refused too.
+    config_path = out / "config.json"
+    began = config_path.read_text()
+    edited = json.loads(began)
+    edited["seed"], edited["argv"] = 5, [*edited["argv"], "--seed", "5"]
+    config_path.write_text(json.dumps(edited))
+    with pytest.raises(SystemExit, match="config.json was changed since the run began") as stop:
+        train_rl.main(["--resume", str(out)])
+    assert "seed: was 0, now 5" in str(stop.value)
+    config_path.write_text(began)
+    sealed = (out / ".config.sealed.json").read_bytes()
+    (out / ".config.sealed.json").unlink()
+    with pytest.raises(SystemExit, match="its seal .config.sealed.json is missing"):
+        train_rl.main(["--resume", str(out)])
+    (out / ".config.sealed.json").write_bytes(sealed)
     train_rl.main(["--resume", str(out)])
     assert "resumed from" in capsys.readouterr().out
     assert (out / "metrics.csv").read_bytes() == (run_dir / "metrics.csv").read_bytes()

@@ -15,6 +15,7 @@ from pathlib import Path
 from pngail_jax import methods
 from pngail_jax.demos.minari import MINARI_PREFIX
 from pngail_jax.integrity import (
+    CONFIG_SEAL,
     IntegrityError,
     changed_inputs,
     read_json,
@@ -43,7 +44,7 @@ class SavedRun:
     normalizer: list[float] | None = None  # what the run normalised returns by
 
 
-SEAL = ".config.sealed.json"
+SEAL = CONFIG_SEAL
 
 
 def sealed_part(document: dict) -> dict:

@@ -26,7 +26,16 @@ import numpy as np
 from pngail_jax import settings as run_settings
 from pngail_jax import validation
 from pngail_jax.checkpoint import save_trpo_policies
-from pngail_jax.integrity import atomic_path, read_json, write_json, write_manifest
+from pngail_jax.integrity import (
+    CONFIG_SEAL,
+    IntegrityError,
+    atomic_path,
+    read_json,
+    seal,
+    sealed_differences,
+    write_json,
+    write_manifest,
+)
 from pngail_jax.jobs.chunks import nanmean
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.jobs.seeds import train_seeds
@@ -147,21 +156,36 @@ def train_rl(
             check_resumable(out, document)
         else:
             claim.prepare()
+            seal(out / CONFIG_SEAL, document)  # first: config.json never exists without it
             write_json(out / "config.json", document)
         _train(config, env, out)
     return out
 
 
 def check_resumable(out: Path, document: dict) -> None:
-    """Refuses to resume a finished run, or one whose config.json is not ``document``."""
+    """Refuses to resume a finished run, a run without its seal, or one whose flags or
+    config.json differ from the config it was sealed with when it began (``document``: what
+    the resumed flags give)."""
     if output_owner(out) != PROGRAM:
         raise RunError(f"--resume {out} holds no run of experiments.train_rl")
     if (out / "policy.json").exists():
         raise RunError(f"--resume {out}: the run is complete (its policy.json is written)")
-    if document != read_json(out / "config.json", "train_rl run config"):
+    try:
+        changes = sealed_differences(out / CONFIG_SEAL, document)
+        saved = read_json(out / "config.json", "train_rl run config")
+    except IntegrityError as error:
+        raise RunError(f"--resume {out}: {error}") from None
+    if changes is None:
         raise RunError(
-            f"cannot resume {out}: its flags give another run in this version "
-            "(config.json differs); start a new run"
+            f"--resume {out}: its seal {CONFIG_SEAL} is missing (a copy made without its "
+            "dot-files, or a run from before train_rl sealed its config), so what the run "
+            "began with cannot be checked; start a new run"
+        )
+    if changes or saved != document:
+        listed = "; ".join(changes[:5]) or "config.json differs from its flags"
+        raise RunError(
+            f"cannot resume {out}: config.json was changed since the run began, or these "
+            f"flags give another run ({listed}); start a new run"
         )
 
 
