@@ -18,7 +18,6 @@ and the final returns recomputed from it against those the record states.
 from __future__ import annotations
 
 import gzip
-import hashlib
 import math
 import shutil
 from pathlib import Path
@@ -26,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from pngail_jax.compare import CompareError, run_progress_numbers, scores_of_metrics
-from pngail_jax.integrity import IntegrityError, atomic_path, read_json, write_json
+from pngail_jax.integrity import IntegrityError, atomic_path, file_digest, read_json, write_json
 
 FORMAT = 1
 RECORD_FILE = "record.json"
@@ -40,14 +39,6 @@ MACHINE_KEYS = (
 class RecordError(Exception):
     """A run that cannot be recorded, or a record that does not check (the message names the
     file and the problem)."""
-
-
-def _sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    with path.open("rb") as file:
-        for block in iter(lambda: file.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def _final_returns(scores: dict[str, np.ndarray]) -> dict[str, list[float | None]]:
@@ -117,7 +108,7 @@ def write_record(run_dir: Path, name: str, records: Path = Path("records")) -> P
             with gzip.GzipFile(filename="", mode="wb", fileobj=raw, mtime=0) as target:
                 shutil.copyfileobj(source, target)
     record["metrics"] = {"file": METRICS_FILE, "bytes": metrics.stat().st_size,
-                         "sha256": _sha256(metrics)}  # fmt: skip
+                         "sha256": file_digest(metrics)}  # fmt: skip
     write_json(folder / RECORD_FILE, record)
     check_record(folder)
     return folder
@@ -164,7 +155,7 @@ def check_record(folder: Path) -> dict:
     expected = record.get("metrics", {})
     if not metrics.is_file():
         raise RecordError(f"{metrics} is missing")
-    if metrics.stat().st_size != expected.get("bytes") or _sha256(metrics) != expected.get(
+    if metrics.stat().st_size != expected.get("bytes") or file_digest(metrics) != expected.get(
         "sha256"
     ):
         raise RecordError(f"{metrics} differs from what the record wrote (size or SHA-256)")

@@ -537,7 +537,7 @@ def test_a_record_keeps_the_run_small_and_checks_itself(finished, tmp_path, caps
     text = (finished / "metrics.csv").read_text().splitlines(keepends=True)
     cut = gzip.compress("".join(text[:-4]).encode(), mtime=0)
     (folder / "metrics.csv.gz").write_bytes(cut)
-    record["metrics"] |= {"bytes": len(cut), "sha256": hashlib.sha256(cut).hexdigest()}
+    record["metrics"] |= {"bytes": len(cut), "sha256": f"sha256:{hashlib.sha256(cut).hexdigest()}"}
     (folder / "record.json").write_text(json.dumps(record))
     with pytest.raises(run_records.RecordError, match="is cut short"):
         run_records.check_record(folder)
