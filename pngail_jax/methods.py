@@ -176,6 +176,11 @@ DISPLAY_NAMES = {
     "firl-fkl": "f-IRL (FKL)",
     "firl-rkl": "f-IRL (RKL)",
     "firl-js": "f-IRL (JS)",
+    # the offline family (pngail_jax.offline), which a report names the same way
+    "bc-expert": "BC (expert rows)",
+    "bc-all": "BC (all rows)",
+    "dwbc": "DWBC",
+    "iswbc": "ISW-BC",
 }
 
 

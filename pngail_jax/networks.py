@@ -126,10 +126,15 @@ class ValueNetwork(nn.Module):
         return MLP(self.hidden_sizes, 1)(obs)[..., 0]
 
 
+def gaussian_log_density(mean: jax.Array, log_std: jax.Array, action: jax.Array) -> jax.Array:
+    """log N(action_j; mean_j, exp(log_std_j)^2) of each action dimension: float[..., A]."""
+    z = (action - mean) * jnp.exp(-log_std)
+    return -0.5 * z**2 - log_std - 0.5 * jnp.log(2 * jnp.pi)
+
+
 def gaussian_log_prob(mean: jax.Array, log_std: jax.Array, action: jax.Array) -> jax.Array:
     """log N(action; mean, exp(log_std)^2), summed over the last axis: float[...]."""
-    z = (action - mean) * jnp.exp(-log_std)
-    return jnp.sum(-0.5 * z**2 - log_std - 0.5 * jnp.log(2 * jnp.pi), axis=-1)
+    return jnp.sum(gaussian_log_density(mean, log_std, action), axis=-1)
 
 
 def gaussian_kl(
@@ -220,3 +225,44 @@ class ClampedStateReward(nn.Module):
             x = jax.nn.relu(torch_dense(size, x))
         reward = torch_dense(1, x)[..., 0]
         return jnp.clip(reward, -self.clamp_magnitude, self.clamp_magnitude)
+
+
+class LogDensityDiscriminator(nn.Module):
+    """DWBC's discriminator (``Discriminator`` of ryanxhr/DWBC): [obs, action] through
+    ``Linear(branch_size)`` + ReLU, the policy's per-dimension log-density feature through
+    another, the two joined, ``Linear(hidden_size)`` + ReLU, ``Linear(1)``, a sigmoid clipped
+    to ``[low, high]`` (the clip also stops the gradient once d saturates, as torch's).
+    PyTorch's default initialisation throughout.
+
+    Inputs float[..., O + A] and float[..., A]; output float[...], d in [low, high] (expert
+    = 1).
+    """
+
+    branch_size: int = 128
+    hidden_size: int = 256
+    low: float = 0.1
+    high: float = 0.9
+
+    @nn.compact
+    def __call__(self, inputs: jax.Array, log_density_feature: jax.Array) -> jax.Array:
+        pairs = jax.nn.relu(torch_dense(self.branch_size, inputs))
+        densities = jax.nn.relu(torch_dense(self.branch_size, log_density_feature))
+        x = jax.nn.relu(torch_dense(self.hidden_size, jnp.concatenate([pairs, densities], -1)))
+        return jnp.clip(jax.nn.sigmoid(torch_dense(1, x)[..., 0]), self.low, self.high)
+
+
+class LogitDiscriminator(nn.Module):
+    """ISW-BC's discriminator: a ReLU MLP over [obs, action] with a linear logit c (expert =
+    label 1), PyTorch's default initialisation (theirs: Keras' he-normal hidden layers).
+
+    Input float[..., O + A]; output float[...].
+    """
+
+    hidden_sizes: Sequence[int] = (256, 256)
+
+    @nn.compact
+    def __call__(self, inputs: jax.Array) -> jax.Array:
+        x = inputs
+        for size in self.hidden_sizes:
+            x = jax.nn.relu(torch_dense(size, x))
+        return torch_dense(1, x)[..., 0]

@@ -384,10 +384,15 @@ def summary_markdown(summary, cells, metrics, title: str, notes: Sequence[str] =
         summary.get("probability_of_improvement", {}), summary.get("improvement", {}).get("over")
     )
     lines += _per_seed_lines(summary)
-    lines += [
+    throughput = summary["train_env_steps_per_second"]
+    lines += [  # an offline grid takes no environment step: its notes give its throughput
         "",
-        f"Training throughput: {summary['train_env_steps_per_second']:,.0f} env steps/s "
-        f"(adversarial phase, all cells); compile {summary['compile_seconds']:.1f} s.",
+        (
+            f"Training throughput: {throughput:,.0f} env steps/s (adversarial phase, all cells); "
+            if throughput
+            else ""
+        )
+        + f"compile {summary['compile_seconds']:.1f} s.",
     ]
     lines += [f"\n{note}" for note in notes]
     return "\n".join(lines) + "\n"
@@ -489,11 +494,20 @@ def write_summary(directory: Path, summary: dict, markdown: str) -> None:
     atomic_write_text(Path(directory) / "summary.md", markdown)
 
 
-def plot_curves(path: Path, cells, metrics, normalizer, title: str, excluded=()) -> None:
-    """Normalised evaluation return vs environment steps: the mean over seeds with its 95%
-    bootstrap interval per method (one panel per setting), like the paper's Fig. 2. Falls
-    back to raw returns without a normaliser. Cells in ``excluded`` (diverged) are left out,
-    as from the summary."""
+def plot_curves(
+    path: Path,
+    cells,
+    metrics,
+    normalizer,
+    title: str,
+    excluded=(),
+    xlabel: str = "M environment steps per run",
+) -> None:
+    """Normalised evaluation return vs environment steps (``metrics["env_steps"]``; the
+    offline family passes its gradient steps there, with its ``xlabel``): the mean over seeds
+    with its 95% bootstrap interval per method (one panel per setting), like the paper's
+    Fig. 2. Falls back to raw returns without a normaliser. Cells in ``excluded`` (diverged)
+    are left out, as from the summary."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -533,7 +547,7 @@ def plot_curves(path: Path, cells, metrics, normalizer, title: str, excluded=())
             axis.axhline(1.0, color="grey", ls="--", lw=0.8)
             axis.axhline(0.0, color="grey", ls=":", lw=0.8)
         axis.set(
-            xlabel="M environment steps per run",
+            xlabel=xlabel,
             ylabel="normalised return" if normalizer is not None else "return",
             title=setting if len(settings) > 1 else None,
         )

@@ -28,14 +28,14 @@ LAYERS = [
         (
             "rl", "rl.rollout", "rl.train", "rl.ppo", "rl.learners", "settings", "checkpoint",
             "bc", "firl", "ranking",
-            "confidence", "methods", "losses", "cail",
+            "confidence", "methods", "losses", "cail", "offline_losses",
         ),
     ),
     (
         "trainers",
         (
             "adversarial", "grid", "train", "run_config", "report", "tracking", "compare",
-            "run_records",
+            "run_records", "offline",
         ),
     ),
     ("jobs", ("jobs", "jobs.*", "runner")),
@@ -47,7 +47,7 @@ LAYERS = [
 # The jobs in their dependency order: each imports only those before it.
 JOB_ORDER = [
     "errors", "classify", "chunks", "seeds", "make_demos", "train_rl", "compare_settings",
-    "build", "record", "results", "sweep",
+    "build", "record", "results", "sweep", "offline",
 ]  # fmt: skip
 LONGEST_MODULE = 700
 LONGEST_JOB = 400

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 PROGRAMS = (
     "sweep", "paper", "train_rl", "make_demos", "classify", "compare_settings", "early_rewards",
-    "seeds", "compare", "record",
+    "seeds", "compare", "record", "offline",
 )  # fmt: skip
 
 
@@ -65,5 +65,11 @@ def compare() -> None:
 
 def record() -> None:
     from pngail_jax.programs import record as program
+
+    program.main()
+
+
+def offline() -> None:
+    from pngail_jax.programs import offline as program
 
     program.main()

@@ -1,0 +1,93 @@
+"""The offline family on a task's demonstrations: BC on the expert rows, BC on every row,
+DWBC and ISW-BC, every method x seed in one compiled program.
+
+    python -m experiments.offline --demos data/released/Pendulum-v1_mixture.npy --out runs/offline
+
+The data they see is PN-GAIL's: each seed's split labels a ``--label-ratio`` share of the rows
+(D_c); the expert set is D_c's rows at confidence >= 0.5 (``<method>+bsc``: plus D_u's rows a
+BSC classifier puts there). Writes config.json, metrics.csv, summary.json / summary.md (IQM,
+intervals, each method's probability of beating BC on every row) and curves.png into --out;
+docs/methods.md ("Offline methods") has the losses and their codebases' settings.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from pngail_jax.jobs.errors import RunError
+from pngail_jax.jobs.offline import OfflineRunConfig, run_offline
+from pngail_jax.offline import CLASSIFIED_SUFFIX, OFFLINE_METHOD_NAMES
+from pngail_jax.programs.cli import (
+    ENV_HELP,
+    ArgumentParser,
+    HelpFormatter,
+    add_compile_cache_flags,
+    check_env,
+    claim_output,
+    path_argument,
+    use_compile_cache,
+)
+
+DEFAULTS = OfflineRunConfig()
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    parser = ArgumentParser(
+        "offline", description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
+    )
+    parser.add_argument("--env", default=DEFAULTS.env, help=ENV_HELP)
+    parser.add_argument("--demos", help="demonstrations (default: made once and cached)")
+    parser.add_argument("--conf", help="their confidence file (default: beside an authors' file)")
+    parser.add_argument("--action-scale", type=float, help="multiplies the stored actions")
+    parser.add_argument(
+        "--methods",
+        default=",".join(OFFLINE_METHOD_NAMES),
+        help=f"comma-separated, of {', '.join(OFFLINE_METHOD_NAMES)}, each also as "
+        f"<name>{CLASSIFIED_SUFFIX}",
+    )
+    parser.add_argument("--seeds", type=int, default=DEFAULTS.seeds)
+    parser.add_argument("--seed", type=int, default=DEFAULTS.seed, help="base PRNG seed")
+    parser.add_argument("--label-ratio", type=float, default=DEFAULTS.label_ratio)
+    parser.add_argument("--noise", type=float, default=DEFAULTS.noise_std, dest="noise_std",
+                        help="confidence noise std")  # fmt: skip
+    parser.add_argument(
+        "--gradient-steps", type=int, default=DEFAULTS.gradient_steps,
+        help="gradient steps per run (DWBC's codebase: 500,000; ISW-BC's: 1,000,000)",
+    )  # fmt: skip
+    parser.add_argument("--steps-per-iteration", type=int, default=DEFAULTS.steps_per_iteration)
+    parser.add_argument(
+        "--eval-every", type=int, default=DEFAULTS.eval_every,
+        help="iterations (of --steps-per-iteration gradient steps) per evaluation",
+    )  # fmt: skip
+    parser.add_argument("--chunk-iterations", type=int, default=DEFAULTS.chunk_iterations,
+                        help="iterations per compiled chunk (a progress line each)")  # fmt: skip
+    parser.add_argument("--batch-size", type=int, default=DEFAULTS.batch_size)
+    parser.add_argument("--out", type=path_argument, required=True, help="output directory")
+    parser.add_argument(
+        "--overwrite", action="store_true", help="replace an earlier offline run in --out"
+    )
+    add_compile_cache_flags(parser)
+    args = parser.parse_args(argv)
+    claim_output(parser, args.out, "offline", args.overwrite)
+    check_env(parser, args.env)
+    try:
+        args.config = OfflineRunConfig(
+            env=args.env, demos=args.demos, conf=args.conf, action_scale=args.action_scale,
+            methods=tuple(name.strip() for name in args.methods.split(",") if name.strip()),
+            seeds=args.seeds, seed=args.seed, label_ratio=args.label_ratio,
+            noise_std=args.noise_std, gradient_steps=args.gradient_steps,
+            steps_per_iteration=args.steps_per_iteration, eval_every=args.eval_every,
+            chunk_iterations=args.chunk_iterations, batch_size=args.batch_size,
+        )  # fmt: skip
+    except ValueError as error:
+        parser.error(str(error))
+    return args
+
+
+def main(argv=None) -> dict:
+    args = parse_args(argv)
+    use_compile_cache(args)
+    try:
+        return run_offline(args.config, args.out, overwrite=args.overwrite)
+    except RunError as error:
+        raise SystemExit(str(error)) from None

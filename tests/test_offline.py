@@ -1,0 +1,231 @@
+"""The offline trainer (pngail_jax.offline): the expert set it builds from the split, vmapped
+equals one at a time, the same key the same bits, a cell's numbers independent of the parts
+its grid compiles for other methods, the discriminator schedules, and bad configs refused."""
+
+import csv
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from pngail_jax import envs
+from pngail_jax.confidence import ClassifierConfig
+from pngail_jax.demos import Demonstrations, make_split
+from pngail_jax.grid import make_cells
+from pngail_jax.offline import (
+    OFFLINE_METHOD_NAMES,
+    OfflineConfig,
+    OfflineTrainer,
+    offline_spec,
+    required_components,
+    stack_offline_cells,
+)
+
+TINY = OfflineConfig(
+    num_iterations=4,
+    steps_per_iteration=10,
+    eval_every=2,
+    num_eval_episodes=2,
+    batch_size=16,
+    hidden_sizes=(16,),
+    dwbc_discriminator_every=5,
+    dwbc_branch_size=8,
+    dwbc_hidden_size=16,
+    iswbc_hidden_sizes=(16,),
+    classifier=ClassifierConfig(num_steps=20),
+    components=("dwbc", "iswbc", "classifier"),
+)
+METHODS = (*OFFLINE_METHOD_NAMES, "dwbc+bsc")
+
+
+@pytest.fixture(scope="module")
+def demos():
+    rng = np.random.default_rng(0)
+    return Demonstrations(
+        observations=rng.normal(size=(200, 3)).astype(np.float32),
+        actions=rng.uniform(-2, 2, size=(200, 1)).astype(np.float32),
+        confidence=np.repeat([1.0, 0.2, 0.7, 0.0], 50).astype(np.float32),
+        metadata={"env": "Pendulum-v1"},
+    )
+
+
+@pytest.fixture(scope="module")
+def trainer(demos):
+    return OfflineTrainer(TINY, envs.make("Pendulum-v1"), demos)
+
+
+@pytest.fixture(scope="module")
+def grid_run(trainer):
+    """Every method x 2 seeds in one jit(vmap(train)) program."""
+    cells = make_cells(METHODS, 2)
+    inputs = stack_offline_cells(cells, jax.random.key(3))
+    state, metrics = jax.jit(jax.vmap(trainer.train))(*inputs)
+    return cells, inputs, state, metrics
+
+
+def _cell(inputs, index):
+    return jax.tree.map(lambda x: x[index], inputs)
+
+
+def test_expert_set_is_the_labelled_rows_at_confidence_at_least_one_half(demos, grid_run):
+    cells, inputs, state, metrics = grid_run
+    for index, cell in enumerate(cells):
+        if cell.method.endswith("+bsc"):
+            continue
+        hyperparams, _, key = _cell(inputs, index)
+        split_key = jax.random.split(key, 7)[0]
+        split = make_split(split_key, jnp.asarray(demos.confidence), 200, 0.2)
+        expected = np.asarray(split.labelled & (split.confidence >= 0.5))
+        assert metrics["offline/num_expert"][index] == expected.sum() > 0
+        probability = np.asarray(state.expert_probability[index])
+        np.testing.assert_allclose(probability[expected], 1 / expected.sum(), rtol=1e-6)
+        assert (probability[~expected] == 0).all()
+        assert (np.asarray(state.other_probability[index])[expected] == 0).all()
+        assert metrics["offline/expert_true_confidence"][index] >= 0.7
+
+
+def test_classified_rows_join_the_expert_set_and_the_classifier_is_measured(grid_run):
+    cells, _, _, metrics = grid_run
+    num_expert = dict(zip(cells, np.asarray(metrics["offline/num_expert"]), strict=True))
+    mae = dict(zip(cells, np.asarray(metrics["confidence/mae"]), strict=True))
+    for seed in range(2):
+        plain, classified = (
+            next(c for c in cells if c.method == name and c.seed == seed)
+            for name in ("dwbc", "dwbc+bsc")
+        )
+        assert num_expert[classified] > num_expert[plain]
+        assert np.isnan(mae[plain]) and 0 <= mae[classified] < 1
+
+
+def test_a_grid_equals_its_cells_run_one_at_a_time(trainer, grid_run):
+    """vmap invariance: each cell alone (jit, no vmap) gives its grid row's returns and
+    final policy to float rounding (1e-5 relative)."""
+    cells, inputs, state, metrics = grid_run
+    train = jax.jit(trainer.train)
+    for index in (0, 2, 3, 4):
+        alone_state, alone_metrics = train(*_cell(inputs, index))
+        np.testing.assert_allclose(
+            alone_metrics["eval/return"], metrics["eval/return"][index], rtol=1e-5, atol=1e-3
+        )
+        for got, want in zip(
+            jax.tree.leaves(alone_state.policy_params),
+            jax.tree.leaves(_cell(state.policy_params, index)),
+            strict=True,
+        ):
+            np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-5)
+
+
+def test_the_same_key_gives_the_same_bits(trainer, grid_run):
+    cells, inputs, state, metrics = grid_run
+    again_state, again = jax.jit(jax.vmap(trainer.train))(*inputs)
+    for name in metrics:
+        np.testing.assert_array_equal(again[name], metrics[name], err_msg=name)
+    for a, b in zip(jax.tree.leaves(again_state.policy_params),
+                    jax.tree.leaves(state.policy_params), strict=True):  # fmt: skip
+        np.testing.assert_array_equal(a, b)
+
+
+def test_a_cell_does_not_depend_on_the_parts_compiled_for_other_methods(demos, grid_run):
+    """BC (all rows) in a grid that compiles neither discriminator nor the classifier learns
+    the same policy as in the grid with all three (common random numbers: no part draws
+    from the policy's keys)."""
+    cells, inputs, state, _ = grid_run
+    bare = OfflineTrainer(dataclasses.replace(TINY, components=()), envs.make("Pendulum-v1"), demos)
+    index = next(i for i, c in enumerate(cells) if c.method == "bc-all")
+    alone_state, _ = jax.jit(bare.train)(*_cell(inputs, index))
+    for got, want in zip(
+        jax.tree.leaves(alone_state.policy_params),
+        jax.tree.leaves(_cell(state.policy_params, index)),
+        strict=True,
+    ):
+        np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-5)
+
+
+def test_each_discriminator_moves_only_in_its_own_cells_and_dwbc_on_schedule(trainer, grid_run):
+    cells, inputs, state, metrics = grid_run
+    start, _ = jax.jit(jax.vmap(trainer.init))(*inputs)
+    for index, cell in enumerate(cells):
+        for part in ("dwbc", "iswbc"):
+            before = jax.tree.leaves(_cell(getattr(start, f"{part}_params"), index))
+            after = jax.tree.leaves(_cell(getattr(state, f"{part}_params"), index))
+            moved = any(not np.array_equal(a, b) for a, b in zip(before, after, strict=True))
+            assert moved == cell.method.startswith(part), (cell, part)
+    # DWBC's Adam counts only its scheduled steps: 40 steps, one in 5.
+    counts = jax.tree.leaves(state.dwbc_optimizer_state)[0]
+    assert set(np.asarray(counts).tolist()) == {8}
+
+
+def test_num_gradient_steps_stops_a_methods_policy(trainer, demos):
+    cells = make_cells(["bc-all"], 1)
+    hyperparams, specs, keys = stack_offline_cells(cells, jax.random.key(0))
+    short = offline_spec("bc-all", num_gradient_steps=20.0)
+    specs = jax.tree.map(lambda x: x[None], short)
+    _, metrics = jax.jit(jax.vmap(trainer.train))(hyperparams, specs, keys)
+    np.testing.assert_array_equal(metrics["gradient_steps"][0], [10, 20, 20, 20])
+    returns = np.asarray(metrics["eval/return"][0])
+    assert returns[1] == returns[3]  # the same policy evaluated on the same episodes
+
+
+def test_required_components_and_unknown_methods():
+    assert required_components(["bc-all", "bc-expert"]) == ()
+    assert required_components(["iswbc", "dwbc+bsc"]) == ("dwbc", "iswbc", "classifier")
+    with pytest.raises(ValueError, match="unknown offline method 'gail'"):
+        required_components(["gail"])
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "match"),
+    [
+        ("num_iterations", 3, "multiple of eval_every"),
+        ("batch_size", 0, "batch_size must be a positive integer"),
+        ("components", ("ilid",), "components must be distinct names"),
+        ("num_demos", 1, "num_demos must be an integer >= 2"),
+    ],
+)
+def test_bad_configs_are_refused_in_one_line(field, value, match):
+    with pytest.raises(ValueError, match=match):
+        dataclasses.replace(TINY, **{field: value})
+
+
+def test_demonstrations_without_confidences_are_refused(demos):
+    bare = dataclasses.replace(demos, confidence=None)
+    with pytest.raises(ValueError, match="need confidences"):
+        OfflineTrainer(TINY, envs.make("Pendulum-v1"), bare)
+
+
+def test_the_program_writes_the_sweeps_outputs_and_refuses_a_second_run(
+    demos_path, tmp_path, capsys
+):
+    """experiments.offline end to end on a tiny grid: config.json, metrics.csv (no
+    environment step), summary.json with each method's probability of beating BC on every
+    row, curves.png; a second run into the same folder is refused."""
+    from pngail_jax.programs import offline as program
+
+    out = tmp_path / "offline"
+    argv = [
+        "--demos", str(demos_path), "--methods", "bc-all,iswbc", "--seeds", "2",
+        "--gradient-steps", "40", "--steps-per-iteration", "10", "--eval-every", "2",
+        "--chunk-iterations", "2", "--batch-size", "8", "--out", str(out),
+    ]  # fmt: skip
+    summary = program.main(argv)
+    assert {p.name for p in out.iterdir()} >= {
+        "config.json",
+        "metrics.csv",
+        "summary.json",
+        "summary.md",
+        "curves.png",
+    }
+    assert set(summary["methods"]) == {"bc-all", "iswbc"}
+    assert summary["gradient_steps"] == 40
+    assert "iswbc" in summary["probability_of_improvement"]
+    with (out / "metrics.csv").open() as file:
+        rows = list(csv.DictReader(file))
+    assert len(rows) == 2 * 2 * 4  # 2 methods x 2 seeds x 4 iterations
+    assert {row["env_steps"] for row in rows} == {"0"}  # no environment step taken
+    assert all(row["wall_seconds"] for row in rows)
+    assert sum(bool(row["normalized_return"]) for row in rows) == 2 * 2 * 2  # 2 evaluations
+    with pytest.raises(SystemExit):
+        program.parse_args(argv)
+    assert "already holds a run of experiments.offline" in capsys.readouterr().err
