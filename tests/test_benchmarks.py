@@ -118,3 +118,16 @@ def test_method_cost(tmp_path):
     (row,) = rows_of("method_cost", argv, tmp_path / "rows.json")
     assert row["method"] == "gail" and row["ratio_to_first"] == 1.0
     assert positive(row["iteration_seconds"]) and positive(row["init_seconds"])
+
+
+def test_offline_throughput(tmp_path):
+    rng = np.random.default_rng(0)  # a file in the authors' layout: rows [obs, action / 2]
+    mixture = tmp_path / "Pendulum-v1_mixture.npy"
+    np.save(mixture, rng.normal(size=(50, 4)).astype(np.float32))
+    np.save(tmp_path / "Pendulum-v1_mixture_conf.npy", rng.uniform(size=(50, 1)))
+    argv = ["--demos", str(mixture), "--methods", "bc-all,iswbc", "--seeds", "1", "--steps",
+            "2", "--iterations", "1", "--batch-size", "4"]  # fmt: skip
+    rows = rows_of("offline_throughput", argv, tmp_path / "rows.json")
+    assert [row["methods"] for row in rows] == ["bc-all,iswbc", "bc-all", "iswbc"]
+    assert all(positive(row["steps_per_second_per_cell"]) for row in rows)
+    assert positive(rows[0]["over_separate_ratio"])
