@@ -214,3 +214,36 @@ def seed_summary(values: ArrayLike, *, seed: int = 0) -> dict:
         "ci95": [low, high],
         "num_seeds": int(finite.size),
     }
+
+
+def split_half_agreement(scores: ArrayLike, *, num_splits: int = 1000, seed: int = 0) -> dict:
+    """How well two re-runs agree when each has half the seeds: ``scores`` float[M, S] (M
+    methods, S seeds, S >= 4, finite) split at random into two halves of S // 2 seeds, many
+    times (``num_splits``, a fixed ``seed``); per split, each half's per-method means.
+
+    Returns the means over splits of ``kendall_tau`` (the two halves' method orderings; 1:
+    the same order), ``same_best`` (the share of splits whose halves put the same method
+    first) and ``mean_abs_difference`` (|half A's mean - half B's| averaged over methods: how
+    far a method's figure moves between re-runs), with ``num_splits`` and ``half``."""
+    scores = np.asarray(scores, np.float64)
+    if scores.ndim != 2 or scores.shape[1] < 4 or not np.isfinite(scores).all():
+        raise ValueError(f"scores must be finite float[methods, seeds >= 4], got {scores.shape}")
+    rng = np.random.default_rng(seed)
+    num_seeds = scores.shape[1]
+    half = num_seeds // 2
+    taus, same_best, differences = [], [], []
+    for _ in range(num_splits):
+        order = rng.permutation(num_seeds)
+        first = scores[:, order[:half]].mean(axis=1)
+        second = scores[:, order[half : 2 * half]].mean(axis=1)
+        tau = scipy.stats.kendalltau(first, second).statistic
+        taus.append(0.0 if np.isnan(tau) else tau)
+        same_best.append(np.argmax(first) == np.argmax(second))
+        differences.append(np.mean(np.abs(first - second)))
+    return {
+        "kendall_tau": float(np.mean(taus)),
+        "same_best": float(np.mean(same_best)),
+        "mean_abs_difference": float(np.mean(differences)),
+        "num_splits": num_splits,
+        "half": half,
+    }

@@ -16,6 +16,7 @@ from pngail_jax.stats import (
     probability_of_improvement_ci,
     sample_std,
     seed_summary,
+    split_half_agreement,
     standard_error,
 )
 
@@ -295,3 +296,26 @@ def test_seed_summary_undefined_parts_are_nan():
     assert empty["num_seeds"] == 0
     assert all(math.isnan(empty[key]) for key in ("mean", "std", "se", "iqm"))
     assert all(math.isnan(bound) for bound in empty["ci95"])
+
+
+def test_split_half_agreement_on_known_cases():
+    rng = np.random.default_rng(0)
+    # Methods far apart and seeds that barely vary: every split agrees completely.
+    separated = np.arange(4)[:, None] + 0.01 * rng.normal(size=(4, 10))
+    agreement = split_half_agreement(separated, num_splits=200)
+    assert agreement["kendall_tau"] == 1.0 and agreement["same_best"] == 1.0
+    assert agreement["mean_abs_difference"] < 0.02 and agreement["half"] == 5
+    # Methods that are one distribution: over many draws of such data, the halves agree as
+    # by chance (tau about 0; the same best method in about 1 split of 6). One draw alone can
+    # favour a method by luck, which the halves then share.
+    draws = [
+        split_half_agreement(rng.normal(size=(6, 10)), num_splits=100, seed=k) for k in range(40)
+    ]
+    assert abs(np.mean([d["kendall_tau"] for d in draws])) < 0.1
+    assert np.mean([d["same_best"] for d in draws]) < 0.35
+    # By hand, two seeds per half: scores [[0, 1, 2, 3], [3, 2, 1, 0]] have equal means in
+    # half {0, 3} / {1, 2}, so a split either ties (tau 0) or reverses them (tau -1).
+    tied = split_half_agreement(np.array([[0.0, 1, 2, 3], [3, 2, 1, 0]]), num_splits=300)
+    assert -1 <= tied["kendall_tau"] <= 0
+    with pytest.raises(ValueError, match="seeds >= 4"):
+        split_half_agreement(np.zeros((3, 3)))

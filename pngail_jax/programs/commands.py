@@ -5,7 +5,7 @@ from __future__ import annotations
 
 PROGRAMS = (
     "sweep", "paper", "train_rl", "make_demos", "classify", "compare_settings", "early_rewards",
-    "seeds", "compare", "record", "offline",
+    "seeds", "compare", "record", "offline", "agreement",
 )  # fmt: skip
 
 
@@ -71,5 +71,11 @@ def record() -> None:
 
 def offline() -> None:
     from pngail_jax.programs import offline as program
+
+    program.main()
+
+
+def agreement() -> None:
+    from pngail_jax.programs import agreement as program
 
     program.main()

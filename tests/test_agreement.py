@@ -1,0 +1,51 @@
+"""experiments.agreement: each statistic of a run's seeds scored by split-half agreement."""
+
+import json
+
+import numpy as np
+import pytest
+
+from pngail_jax.grid import make_cells
+from pngail_jax.programs import agreement
+from pngail_jax.report import write_metrics_csv
+
+
+def _run(tmp_path, num_seeds: int):
+    """A metrics.csv of two methods whose final evaluation is noise but whose late evaluations
+    separate them: 'good' ends at 0.8 +- 0.02, 'bad' at 0.2 +- 0.02, with one last wild
+    evaluation (+-0.5) in every seed."""
+    rng = np.random.default_rng(0)
+    cells = make_cells(["good", "bad"], num_seeds)
+    returns = np.full((len(cells), 20), np.nan)
+    for index, cell in enumerate(cells):
+        level = 0.8 if cell.method == "good" else 0.2
+        returns[index, 1::2] = level + 0.02 * rng.normal(size=10)
+        returns[index, -1] = 0.5 + rng.uniform(-0.5, 0.5)
+    metrics = {"eval/return": returns, "env_steps": np.tile(np.arange(1, 21), (len(cells), 1))}
+    write_metrics_csv(tmp_path / "metrics.csv", cells, metrics, (0.0, 1.0))
+    return tmp_path
+
+
+def test_late_means_agree_where_the_final_evaluation_does_not(tmp_path, capsys):
+    run = _run(tmp_path, num_seeds=8)
+    rows = agreement.main([str(run), "--lasts", "1,5", "--splits", "500",
+                           "--json", str(tmp_path / "a.json")])  # fmt: skip
+    by_name = {row["statistic"]: row for row in rows}
+    assert set(by_name) == {
+        "final evaluation", "mean of the last 5", "last 10% (1 evaluations)", "all of training"
+    }  # fmt: skip
+    assert by_name["mean of the last 5"]["same_best"] == 1.0
+    assert by_name["mean of the last 5"]["kendall_tau"] == 1.0
+    assert by_name["final evaluation"]["same_best"] < 0.9
+    assert by_name["mean of the last 5"]["mean_abs_difference"] < 0.1
+    assert json.loads((tmp_path / "a.json").read_text()) == rows
+    assert "| final evaluation |" in capsys.readouterr().out
+
+
+def test_too_few_seeds_and_no_run_are_one_line(tmp_path, capsys):
+    run = _run(tmp_path, num_seeds=3)
+    with pytest.raises(SystemExit, match="fewer than 4 seeds"):
+        agreement.main([str(run)])
+    with pytest.raises(SystemExit):
+        agreement.main([str(tmp_path / "nothing")])
+    assert "no metrics.csv there" in capsys.readouterr().err
