@@ -520,6 +520,16 @@ def required_components(methods) -> tuple[str, ...]:
     return tuple(c for c in COMPONENTS if c in needed)
 
 
+def program_groups(methods) -> list[tuple[str, ...]]:
+    """``methods`` grouped by the parts they need compiled (``required_components``), in
+    order of first appearance: each group is one program, so no cell pays for a part only
+    another method reads (a vmapped program computes every part in every cell)."""
+    groups: dict[tuple[str, ...], list[str]] = {}
+    for name in methods:
+        groups.setdefault(required_components([name]), []).append(name)
+    return [tuple(group) for group in groups.values()]
+
+
 def stack_offline_cells(cells, key: jax.Array, **overrides):
     """``(hyperparams, specs, keys)`` stacked over ``grid.Cell``s (method, seed, label ratio,
     noise), each cell's key ``fold_in(key, seed)``: the inputs of ``Grid(OfflineTrainer)``."""

@@ -84,14 +84,21 @@ def write_metrics_csv(path: Path, cells, metrics, normalizer, chunk_seconds=()) 
     ``chunk_seconds``: the cumulative training seconds at the end of each chunk (all cells run
     a chunk's iterations in one program, so that is the finest wall clock there is); an
     iteration gets its chunk's, empty where unknown (a run resumed from an older version).
+    A list per cell instead (float[G][chunks]) gives each cell its own program's (the
+    offline family runs its methods in several programs).
     A metric the run did not record (an appendix-only trainer, a checkpoint of an older
     version) leaves its column empty."""
     normalized = normalize(metrics["eval/return"], normalizer)
     num_iterations = metrics["env_steps"].shape[1]
-    per_chunk = num_iterations // len(chunk_seconds) if chunk_seconds else 0
-    wall = [
-        f"{chunk_seconds[i // per_chunk]:.1f}" if per_chunk else "" for i in range(num_iterations)
-    ]
+    per_cell = bool(chunk_seconds) and isinstance(chunk_seconds[0], (list, tuple, np.ndarray))
+    if not per_cell:
+        chunk_seconds = [chunk_seconds] * len(cells)
+
+    def wall_clock(seconds) -> list[str]:
+        per_chunk = num_iterations // len(seconds) if len(seconds) else 0
+        return [f"{seconds[i // per_chunk]:.1f}" if per_chunk and seconds[i // per_chunk]
+                is not None else "" for i in range(num_iterations)]  # fmt: skip
+
     # A grid's further axes (grid_axes) get a column each, after label_ratio and noise.
     axes = list(dict.fromkeys(field for cell in cells for field, _ in cell.axes))
     columns = {column: _metric_of(column, metrics) for column in _METRIC_OF_COLUMN}
@@ -100,6 +107,7 @@ def write_metrics_csv(path: Path, cells, metrics, normalizer, chunk_seconds=()) 
         writer.writerow([*CSV_COLUMNS[:5], *axes, *CSV_COLUMNS[5:]])
         for index, cell in enumerate(cells):
             axis_values = dict(cell.axes)
+            wall = wall_clock(chunk_seconds[index])
             for iteration in range(num_iterations):
                 values = {
                     column: _format(metrics[name][index, iteration]) if name else ""

@@ -19,6 +19,7 @@ from pngail_jax.offline import (
     OfflineConfig,
     OfflineTrainer,
     offline_spec,
+    program_groups,
     required_components,
     stack_offline_cells,
 )
@@ -215,7 +216,7 @@ def test_the_program_writes_the_sweeps_outputs_and_refuses_a_second_run(
 
     out = tmp_path / "offline"
     argv = [
-        "--demos", str(demos_path), "--methods", "bc-all,bc-expert", "--seeds", "2",
+        "--demos", str(demos_path), "--methods", "bc-all,dwbc,bc-expert", "--seeds", "2",
         "--gradient-steps", "40", "--steps-per-iteration", "10", "--eval-every", "2",
         "--chunk-iterations", "2", "--batch-size", "8", "--out", str(out),
     ]  # fmt: skip
@@ -227,15 +228,16 @@ def test_the_program_writes_the_sweeps_outputs_and_refuses_a_second_run(
         "summary.md",
         "curves.png",
     }
-    assert set(summary["methods"]) == {"bc-all", "bc-expert"}
+    assert list(summary["methods"]) == ["bc-all", "dwbc", "bc-expert"]  # two programs
     assert summary["gradient_steps"] == 40
     assert "bc-expert" in summary["probability_of_improvement"]
     with (out / "metrics.csv").open() as file:
         rows = list(csv.DictReader(file))
-    assert len(rows) == 2 * 2 * 4  # 2 methods x 2 seeds x 4 iterations
+    assert len(rows) == 3 * 2 * 4  # 3 methods x 2 seeds x 4 iterations
+    assert [row["method"] for row in rows[::8]] == ["bc-all", "dwbc", "bc-expert"]
     assert {row["env_steps"] for row in rows} == {"0"}  # no environment step taken
     assert all(row["wall_seconds"] for row in rows)
-    assert sum(bool(row["normalized_return"]) for row in rows) == 2 * 2 * 2  # 2 evaluations
+    assert sum(bool(row["normalized_return"]) for row in rows) == 3 * 2 * 2  # 2 evaluations
     with pytest.raises(SystemExit):
         program.parse_args(argv)
     assert "already holds a run of experiments.offline" in capsys.readouterr().err
@@ -288,3 +290,9 @@ def test_each_method_beats_bc_on_every_row_on_a_mostly_poor_mixture():
     iswbc = [i for i, c in enumerate(cells) if c.method == "iswbc"]
     assert (last["dwbc/mean_d_expert"][dwbc] > last["dwbc/mean_d_other"][dwbc] + 0.3).all()
     assert (last["iswbc/weight_expert"][iswbc] > 2 * last["iswbc/mean_weight"][iswbc]).all()
+
+
+def test_program_groups_compile_each_part_only_for_its_methods():
+    assert program_groups(["dwbc", "bc-all", "iswbc", "bc-expert", "dwbc+bsc"]) == [
+        ("dwbc",), ("bc-all", "bc-expert"), ("iswbc",), ("dwbc+bsc",)
+    ]  # fmt: skip

@@ -25,12 +25,19 @@ from pngail_jax.demos import DemonstrationError
 from pngail_jax.grid import Grid, make_cells, nonfinite_cells
 from pngail_jax.integrity import write_json
 from pngail_jax.jobs.build import input_files, load_or_make_demos, resolve_normalizer
-from pngail_jax.jobs.chunks import blocks_per_chunk, format_seconds, run_chunks, start
+from pngail_jax.jobs.chunks import (
+    Progress,
+    blocks_per_chunk,
+    format_seconds,
+    run_chunks,
+    start,
+)
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.offline import (
     OFFLINE_METHOD_NAMES,
     OfflineConfig,
     OfflineTrainer,
+    program_groups,
     required_components,
     stack_offline_cells,
 )
@@ -107,7 +114,12 @@ class OfflineRunConfig:
 
 def run_offline(config: OfflineRunConfig, out: str | Path, overwrite: bool = False) -> dict:
     """Trains the grid and writes its outputs into ``out``; returns the summary. Raises
-    ``RunError`` with one line for a refused output directory or unusable inputs."""
+    ``RunError`` with one line for a refused output directory or unusable inputs.
+
+    The methods run in one compiled program per set of parts they need
+    (``offline.program_groups``: both BCs together, DWBC, ISW-BC): a vmapped program computes
+    every compiled part in every cell, and one mixed program ran 3.2 times as long as the
+    separate ones together (benchmarks/offline_throughput.py, docs/methods.md)."""
     out = Path(out)
     with refusals(), claimed(out, PROGRAM, overwrite=overwrite) as claim:
         run_config = config.run_config
@@ -118,53 +130,36 @@ def run_offline(config: OfflineRunConfig, out: str | Path, overwrite: bool = Fal
             raise RunError(f"demonstrations: {error}") from None
         if demos.confidence is None:
             raise RunError(f"{demos_path}: no confidences, which every offline method reads")
-        trainer = OfflineTrainer(config.trainer_config(demos.num_rows), env, demos)
         normalizer, normalizer_source = resolve_normalizer(run_config, demos, env)
         claim.prepare()
         cells = make_cells(config.methods, config.seeds, (config.label_ratio,),
                            (config.noise_std,))  # fmt: skip
-        inputs = stack_offline_cells(cells, jax.random.key(config.seed))
-        trainer_config = trainer.config
-        target = max(1, config.chunk_iterations // trainer_config.eval_every)
-        chunk_blocks = blocks_per_chunk(trainer_config.num_evaluations, target)
+        trainer_config = config.trainer_config(demos.num_rows)
         print(
             f"{len(cells)} offline runs ({', '.join(config.methods)} x {config.seeds} seeds) on "
             f"{config.env}, {config.gradient_steps:,} gradient steps of {config.batch_size} "
-            f"rows per batch, {trainer.num_demos} demonstration rows "
+            f"rows per batch, {trainer_config.num_demos or demos.num_rows} demonstration rows "
             f"(label ratio {config.label_ratio:g})",
             flush=True,
         )
-        with ticking("compiling"):
-            grid = Grid(trainer, inputs, chunk_blocks)
-        print(f"compiled in {grid.compile_seconds:.1f} s", flush=True)
-        state, progress = start(grid, None)
-        steps_per_chunk = grid.num_cells * grid.iterations_per_chunk
-        steps_per_chunk *= trainer_config.steps_per_iteration
-        num_chunks = trainer_config.num_evaluations // chunk_blocks
-
-        def line(progress, metrics) -> str:
-            done = progress.chunks_done * grid.iterations_per_chunk
-            done *= trainer_config.steps_per_iteration
-            rate = steps_per_chunk / progress.last_chunk_seconds
-            final = report.normalize(metrics["eval/return"][:, -1], normalizer)
-            shown = final if normalizer is not None else metrics["eval/return"][:, -1]
-            best = int(np.nanargmax(shown)) if np.isfinite(shown).any() else 0
-            left = (num_chunks - progress.chunks_done) * progress.last_chunk_seconds
-            return (
-                f"step {done:9,d}/{config.gradient_steps:,}  {rate:9,.0f} gradient steps/s "
-                f"(all cells)  ETA {format_seconds(left)}  best {cells[best].method}/seed "
-                f"{cells[best].seed} {shown[best]:.2f}"
-            )
-
         start_time = time.perf_counter()
-        run_chunks(grid, state, progress, num_chunks, steps_per_chunk=steps_per_chunk, line=line)
-        summary = _write_outputs(out, config, cells, grid, progress, normalizer, trainer)
+        runs = []
+        for methods in program_groups(config.methods):
+            group = [cell for cell in cells if cell.method in methods]
+            trainer_config = dataclasses.replace(
+                trainer_config, components=required_components(methods)
+            )
+            trainer = OfflineTrainer(trainer_config, env, demos)
+            runs.append(_run_group(config, trainer, group, normalizer))
+        compile_seconds = sum(grid.compile_seconds for grid, _, _ in runs)
+        progress = _joined(cells, runs)
+        summary = _write_outputs(out, config, cells, progress, normalizer, compile_seconds)
         write_json(
             out / "config.json",
             {
                 "program": PROGRAM,
                 "config": _json_config(config),
-                "trainer": _json_config(trainer_config),
+                "trainer": _json_config(dataclasses.replace(trainer_config, components=())),
                 "demonstrations": demos_path,
                 "input_files": input_files(run_config, demos_path),
                 "normalizer": normalizer,
@@ -177,22 +172,89 @@ def run_offline(config: OfflineRunConfig, out: str | Path, overwrite: bool = Fal
     return summary
 
 
+def _run_group(config: OfflineRunConfig, trainer: OfflineTrainer, cells, normalizer):
+    """One program's cells, compiled and run in chunks with a progress line each: (grid,
+    cells, Progress)."""
+    trainer_config = trainer.config
+    target = max(1, config.chunk_iterations // trainer_config.eval_every)
+    chunk_blocks = blocks_per_chunk(trainer_config.num_evaluations, target)
+    inputs = stack_offline_cells(cells, jax.random.key(config.seed))
+    methods = ", ".join(dict.fromkeys(cell.method for cell in cells))
+    with ticking(f"compiling {methods}"):
+        grid = Grid(trainer, inputs, chunk_blocks)
+    print(f"{methods}: {len(cells)} cells, compiled in {grid.compile_seconds:.1f} s", flush=True)
+    state, progress = start(grid, None)
+    steps_per_chunk = grid.num_cells * grid.iterations_per_chunk
+    steps_per_chunk *= trainer_config.steps_per_iteration
+    num_chunks = trainer_config.num_evaluations // chunk_blocks
+
+    def line(progress, metrics) -> str:
+        done = progress.chunks_done * grid.iterations_per_chunk
+        done *= trainer_config.steps_per_iteration
+        rate = steps_per_chunk / progress.last_chunk_seconds
+        returns = metrics["eval/return"][:, -1]
+        shown = report.normalize(returns, normalizer) if normalizer is not None else returns
+        best = int(np.nanargmax(shown)) if np.isfinite(shown).any() else 0
+        left = (num_chunks - progress.chunks_done) * progress.last_chunk_seconds
+        return (
+            f"  {methods}: step {done:9,d}/{config.gradient_steps:,}  {rate:9,.0f} gradient "
+            f"steps/s (all its cells)  ETA {format_seconds(left)}  best {cells[best].method}/"
+            f"seed {cells[best].seed} {shown[best]:.2f}"
+        )
+
+    run_chunks(grid, state, progress, num_chunks, steps_per_chunk=steps_per_chunk, line=line)
+    return grid, cells, progress
+
+
+def _joined(cells, runs) -> Progress:
+    """The groups' progress as one, their cells in ``cells``' order; a metric one group does
+    not record (BC has no discriminator) is NaN in its cells."""
+    order = [cell for _, group, _ in runs for cell in group]
+    position = [order.index(cell) for cell in cells]
+
+    def join(kind: str) -> dict:
+        names = dict.fromkeys(n for _, _, progress in runs for n in getattr(progress, kind))
+        joined = {}
+        for name in names:
+            parts = []
+            for _, _, progress in runs:
+                values = getattr(progress, kind)
+                reference = next(iter(values.values()))
+                parts.append(values.get(name, np.full(reference.shape, np.nan)))
+            joined[name] = np.concatenate(parts)[position]
+        return joined
+
+    timing = {
+        "seconds": sum(progress.timing["seconds"] for _, _, progress in runs),
+        "steps": sum(progress.timing["steps"] for _, _, progress in runs),
+    }
+    # metrics.csv's wall clock: the training seconds at each chunk's end, counted from the
+    # first group's start (the groups run one after another).
+    chunk_seconds, offset = [], 0.0
+    for _, _, progress in runs:
+        chunk_seconds.append([offset + t for t in progress.timing["chunk_seconds"]])
+        offset += progress.timing["seconds"]
+    timing["chunk_seconds"] = chunk_seconds
+    group_of = {cell: g for g, (_, group, _) in enumerate(runs) for cell in group}
+    timing["group_of_cell"] = [group_of[cell] for cell in cells]
+    return Progress(runs[0][2].chunks_done, join("init_metrics"), join("metrics"), timing)
+
+
 def _json_config(config) -> dict:
     values = dataclasses.asdict(config)
     return {k: list(v) if isinstance(v, tuple) else v for k, v in values.items()}
 
 
-def _write_outputs(out, config, cells, grid, progress, normalizer, trainer) -> dict:
+def _write_outputs(out, config, cells, progress, normalizer, compile_seconds) -> dict:
     """metrics.csv (``env_steps`` 0: no environment step is taken), summary.json / .md and
     curves.png; returns the summary."""
     metrics = {**progress.metrics, **progress.init_metrics}
     metrics["env_steps"] = np.zeros_like(progress.metrics["gradient_steps"], np.int64)
-    chunk_seconds = progress.timing["chunk_seconds"]
-    report.write_metrics_csv(out / "metrics.csv", cells, metrics, normalizer, chunk_seconds)
-    excluded = nonfinite_cells(progress.metrics, trainer.config.eval_every)
+    _write_metrics(out / "metrics.csv", cells, metrics, normalizer, progress.timing)
+    excluded = nonfinite_cells(progress.metrics, config.eval_every)
     seconds = max(progress.timing["seconds"], 1e-9)
     baseline = "bc-all" if "bc-all" in config.methods else None
-    summary = report.summarize(cells, metrics, normalizer, 0.0, grid.compile_seconds,
+    summary = report.summarize(cells, metrics, normalizer, 0.0, compile_seconds,
                                excluded, baseline)  # fmt: skip
     summary["gradient_steps"] = config.gradient_steps
     summary["gradient_steps_per_second"] = progress.timing["steps"] / seconds
@@ -203,8 +265,8 @@ def _write_outputs(out, config, cells, grid, progress, normalizer, trainer) -> d
     )
     notes = [
         f"Offline: no environment step; {summary['gradient_steps_per_second']:,.0f} gradient "
-        f"steps/s over all {len(cells)} cells. Expert set: D_c's rows at confidence >= 0.5 "
-        f"(mean {summary['offline/num_expert']:.0f} rows per seed)."
+        f"steps/s over all {len(cells)} cells, {seconds:.0f} s of training. Expert set: D_c's "
+        f"rows at confidence >= 0.5 (mean {summary['offline/num_expert']:.0f} rows per seed)."
     ]
     markdown = report.summary_markdown(summary, cells, metrics, title, notes)
     report.write_summary(out, summary, markdown)
@@ -213,3 +275,10 @@ def _write_outputs(out, config, cells, grid, progress, normalizer, trainer) -> d
                        xlabel="M gradient steps per run")  # fmt: skip
     print(markdown)
     return summary
+
+
+def _write_metrics(path, cells, metrics, normalizer, timing) -> None:
+    """metrics.csv by the sweep's writer, each cell with its own program's chunk ends as its
+    wall clock (the programs run one after another)."""
+    per_cell = [timing["chunk_seconds"][timing["group_of_cell"][i]] for i in range(len(cells))]
+    report.write_metrics_csv(path, cells, metrics, normalizer, per_cell)
