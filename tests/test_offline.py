@@ -250,8 +250,7 @@ def test_each_method_beats_bc_on_every_row_on_a_mostly_poor_mixture():
     0.2, so about 200 controller rows are labelled expert. BC on every row copies mostly the
     random torques. 3 seeds x 20,000 gradient steps of small networks (batch 64; DWBC's
     discriminator every 10th step). Measured here, key 0, all four in one program, final
-    returns: BC (all rows) -1249,
-    -1228, -1137; BC (expert rows) -443, -1181, -374; DWBC -681, -1173, -1089; ISW-BC -1022,
+    returns: BC (all rows) -1249, -1228, -1137; BC (expert rows) -443, -1181, -374; DWBC -681, -1173, -1089; ISW-BC -1022,
     -1305, -1142. The bars are on medians (BC on every row: -1228), with room for float
     rounding: BC on the expert rows 300 above it, DWBC and ISW-BC 40 above; and on what each
     discriminator learned: DWBC's d higher on expert rows than on the others, ISW-BC's weight
