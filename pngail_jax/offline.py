@@ -125,6 +125,7 @@ class OfflineSpec:
     dwbc_coef: jax.Array  # DWBC's discriminator and its weighted BC
     iswbc_coef: jax.Array  # ISW-BC's discriminator and its importance-weighted BC
     classifier_coef: jax.Array  # 1: D_u rows with BSC confidence >= threshold are expert too
+    bsc_eps: jax.Array  # BSC's clip (the task's: 0.05 on Walker2d, as the online grid's)
     expert_threshold: jax.Array  # expert rows: confidence >= this
     policy_learning_rate: jax.Array
     discriminator_learning_rate: jax.Array
@@ -137,7 +138,7 @@ class OfflineSpec:
 
     @property
     def classifier(self) -> ClassifierSpec:
-        return ClassifierSpec(bsc_coef=jnp.ones_like(self.classifier_coef), eps=jnp.float32(0.01))
+        return ClassifierSpec(bsc_coef=jnp.ones_like(self.classifier_coef), eps=self.bsc_eps)
 
 
 @struct.dataclass
@@ -464,6 +465,7 @@ class OfflineTrainer:
 
 _DEFAULTS = {field.name: 0.0 for field in dataclasses.fields(OfflineSpec)} | {
     "expert_threshold": 0.5,
+    "bsc_eps": 0.01,
     "policy_learning_rate": 3e-4,
     "discriminator_learning_rate": 3e-4,
     "dwbc_alpha": 7.5,

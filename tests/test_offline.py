@@ -245,16 +245,16 @@ def test_the_program_writes_the_sweeps_outputs_and_refuses_a_second_run(
 
 @pytest.mark.slow
 def test_each_method_beats_bc_on_every_row_on_a_mostly_poor_mixture():
-    """A 1:4 mixture of five episodes of conftest's swing-up controller (confidence 1, returns
-    -240 to 0) and twenty of uniform random torques (confidence 0, about -1,400); label ratio
-    0.2, so about 200 controller rows are labelled expert. BC on every row copies mostly the
-    random torques. 3 seeds x 20,000 gradient steps of small networks (batch 64; DWBC's
-    discriminator every 10th step). Measured here, key 0, all four in one program, final
-    returns: BC (all rows) -1249, -1228, -1137; BC (expert rows) -443, -1181, -374; DWBC -681, -1173, -1089; ISW-BC -1022,
-    -1305, -1142. The bars are on medians (BC on every row: -1228), with room for float
-    rounding: BC on the expert rows 300 above it, DWBC and ISW-BC 40 above; and on what each
-    discriminator learned: DWBC's d higher on expert rows than on the others, ISW-BC's weight
-    on expert rows at least twice the union's mean."""
+    """A 1:4 mixture of five episodes of conftest's swing-up controller (confidence 1, returns -240
+    to 0) and twenty of uniform random torques (confidence 0, about -1,400); label ratio 0.2, so
+    about 200 controller rows are labelled expert. BC on every row copies mostly the random
+    torques. 3 seeds x 20,000 gradient steps of small networks (batch 64; DWBC's discriminator
+    every 10th step). Measured here, key 0, all four in one program, final returns: BC (all
+    rows) -1249, -1228, -1137; BC (expert rows) -443, -1181, -374; DWBC -681, -1173, -1089;
+    ISW-BC -1022, -1305, -1142. The bars are on medians (BC on every row: -1228), with room for
+    float rounding: BC on the expert rows 300 above it, DWBC and ISW-BC 40 above; and on what
+    each discriminator learned: DWBC's d higher on expert rows than on the others, ISW-BC's
+    weight on expert rows at least twice the union's mean."""
     from conftest import _pendulum_demonstrations, swing_up_action
 
     rng = np.random.default_rng(0)

@@ -178,7 +178,9 @@ def _run_group(config: OfflineRunConfig, trainer: OfflineTrainer, cells, normali
     trainer_config = trainer.config
     target = max(1, config.chunk_iterations // trainer_config.eval_every)
     chunk_blocks = blocks_per_chunk(trainer_config.num_evaluations, target)
-    inputs = stack_offline_cells(cells, jax.random.key(config.seed))
+    inputs = stack_offline_cells(
+        cells, jax.random.key(config.seed), bsc_eps=config.run_config.task_bsc_eps
+    )
     methods = ", ".join(dict.fromkeys(cell.method for cell in cells))
     with ticking(f"compiling {methods}"):
         grid = Grid(trainer, inputs, chunk_blocks)
