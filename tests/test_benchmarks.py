@@ -29,6 +29,16 @@ def rows_of(module_name: str, argv: list[str], json_path: Path) -> list[dict]:
     return rows
 
 
+def authors_pendulum_file(directory: Path, num_rows: int) -> Path:
+    """A random file in the authors' Pendulum layout (rows [obs, action / 2]) with its
+    confidence file beside it."""
+    rng = np.random.default_rng(0)
+    mixture = directory / "Pendulum-v1_mixture.npy"
+    np.save(mixture, rng.normal(size=(num_rows, 4)).astype(np.float32))
+    np.save(directory / "Pendulum-v1_mixture_conf.npy", rng.uniform(size=(num_rows, 1)))
+    return mixture
+
+
 def positive(value) -> bool:
     return isinstance(value, (int, float)) and math.isfinite(value) and value > 0
 
@@ -84,10 +94,7 @@ def test_iteration_phases(tmp_path):
 
 
 def test_classifier_throughput(tmp_path):
-    rng = np.random.default_rng(0)  # a file in the authors' layout: rows [obs, action / 2]
-    mixture = tmp_path / "Pendulum-v1_mixture.npy"
-    np.save(mixture, rng.normal(size=(50, 4)).astype(np.float32))
-    np.save(tmp_path / "Pendulum-v1_mixture_conf.npy", rng.uniform(size=(50, 1)))
+    mixture = authors_pendulum_file(tmp_path, 50)
     argv = ["--demos", str(mixture), "--seeds", "2", "--steps", "20", "--batch-sizes", "1"]
     (row,) = rows_of("classifier_throughput", argv, tmp_path / "rows.json")
     assert row["runs"] == 4 and 0 <= row["bsc_mae"] <= 1 and positive(row["run_seconds"])
@@ -109,10 +116,7 @@ def test_solver_accuracy(tmp_path):
 
 
 def test_method_cost(tmp_path):
-    rng = np.random.default_rng(0)  # a file in the authors' layout: rows [obs, action / 2]
-    mixture = tmp_path / "Pendulum-v1_mixture.npy"
-    np.save(mixture, rng.normal(size=(100, 4)).astype(np.float32))
-    np.save(tmp_path / "Pendulum-v1_mixture_conf.npy", rng.uniform(size=(100, 1)))
+    mixture = authors_pendulum_file(tmp_path, 100)
     argv = ["--demos", str(mixture), "--methods", "gail", "--quick", "--num-envs", "4",
             "--unroll-length", "50"]  # fmt: skip
     (row,) = rows_of("method_cost", argv, tmp_path / "rows.json")
@@ -121,10 +125,7 @@ def test_method_cost(tmp_path):
 
 
 def test_offline_throughput(tmp_path):
-    rng = np.random.default_rng(0)  # a file in the authors' layout: rows [obs, action / 2]
-    mixture = tmp_path / "Pendulum-v1_mixture.npy"
-    np.save(mixture, rng.normal(size=(50, 4)).astype(np.float32))
-    np.save(tmp_path / "Pendulum-v1_mixture_conf.npy", rng.uniform(size=(50, 1)))
+    mixture = authors_pendulum_file(tmp_path, 50)
     argv = ["--demos", str(mixture), "--methods", "bc-all,iswbc", "--seeds", "1", "--steps",
             "2", "--iterations", "1", "--batch-size", "4"]  # fmt: skip
     rows = rows_of("offline_throughput", argv, tmp_path / "rows.json")

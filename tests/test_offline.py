@@ -80,6 +80,12 @@ def _cell(inputs, index):
     return jax.tree.map(lambda x: x[index], inputs)
 
 
+def _assert_close(params, other) -> None:
+    """Two policies' parameters equal to float rounding (1e-4 relative)."""
+    for got, want in zip(jax.tree.leaves(params), jax.tree.leaves(other), strict=True):
+        np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-5)
+
+
 def test_expert_set_is_the_labelled_rows_at_confidence_at_least_one_half(demos, grid_run):
     cells, inputs, _, state, metrics, _ = grid_run
     for index, cell in enumerate(cells):
@@ -120,12 +126,7 @@ def test_a_grid_equals_its_cells_run_one_at_a_time(trainer, grid_run):
         np.testing.assert_allclose(
             alone_metrics["eval/return"], metrics["eval/return"][index], rtol=1e-5, atol=1e-3
         )
-        for got, want in zip(
-            jax.tree.leaves(alone_state.policy_params),
-            jax.tree.leaves(_cell(state.policy_params, index)),
-            strict=True,
-        ):
-            np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-5)
+        _assert_close(alone_state.policy_params, _cell(state.policy_params, index))
 
 
 def test_the_same_key_gives_the_same_bits(grid_run):
@@ -148,12 +149,7 @@ def test_a_cell_does_not_depend_on_the_parts_compiled_for_other_methods(demos, g
     bare = OfflineTrainer(dataclasses.replace(TINY, components=()), envs.make("Pendulum-v1"), demos)
     index = next(i for i, c in enumerate(cells) if c.method == "bc-all")
     alone_state, _ = jax.jit(bare.train)(*_cell(inputs, index))
-    for got, want in zip(
-        jax.tree.leaves(alone_state.policy_params),
-        jax.tree.leaves(_cell(state.policy_params, index)),
-        strict=True,
-    ):
-        np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-5)
+    _assert_close(alone_state.policy_params, _cell(state.policy_params, index))
 
 
 def test_each_discriminator_moves_only_in_its_own_cells_and_dwbc_on_schedule(grid_run):
