@@ -27,7 +27,7 @@ LEGACY_MARKS = {
     "make_demos": ("demos.npz", "normalizer.json"),  # normalizer.json: one cut short
     "train_rl": ("policy.json",),
 }
-RESUMABLE = {"sweep", "paper"}
+RESUMABLE = {"sweep", "paper", "offline"}
 
 
 def output_owner(directory: Path) -> str | None:

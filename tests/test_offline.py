@@ -288,3 +288,46 @@ def test_program_groups_compile_each_part_only_for_its_methods():
     assert program_groups(["dwbc", "bc-all", "iswbc", "bc-expert", "dwbc+bsc"]) == [
         ("dwbc",), ("bc-all", "bc-expert"), ("iswbc",), ("dwbc+bsc",)
     ]  # fmt: skip
+
+
+def test_a_run_resumed_from_a_checkpoint_equals_the_uninterrupted_run(demos_path, tmp_path, capsys):
+    """Each program keeps a checkpoint per chunk; a run whose last chunk is lost (its newest
+    checkpoints removed, its outputs not written) resumes from the chunk before to the same
+    evaluations, bit for bit; a resume of another config's run, or of no run, is refused."""
+    import shutil
+
+    from pngail_jax.jobs.errors import RunError
+    from pngail_jax.jobs.offline import load_offline_config, run_offline
+    from pngail_jax.programs import offline as program
+
+    whole = tmp_path / "whole"
+    argv = [
+        "--demos", str(demos_path), "--methods", "bc-all,dwbc", "--seeds", "2",
+        "--gradient-steps", "40", "--steps-per-iteration", "10", "--eval-every", "2",
+        "--chunk-iterations", "2", "--batch-size", "8", "--out", str(whole),
+    ]  # fmt: skip
+    program.main(argv)
+    cut = tmp_path / "cut"
+    shutil.copytree(whole, cut)
+    for group in ("bc-all", "dwbc"):
+        chunks = sorted((cut / "checkpoints" / group).glob("chunk_*"))
+        assert [c.name for c in chunks] == ["chunk_0001", "chunk_0002"]
+        shutil.rmtree(chunks[-1])
+    for name in ("metrics.csv", "summary.json", "summary.md", "curves.png"):
+        (cut / name).unlink()
+    capsys.readouterr()
+    program.main(["--resume", str(cut)])
+    said = capsys.readouterr().out
+    for group in ("bc-all", "dwbc"):  # from the chunk before, not from the start
+        assert f"resumed from {cut / 'checkpoints' / group / 'chunk_0001'}" in said
+
+    def evaluations(run):
+        with (run / "metrics.csv").open() as file:
+            return [(r["method"], r["seed"], r["eval_return"]) for r in csv.DictReader(file)]
+
+    assert evaluations(cut) == evaluations(whole)
+    other = dataclasses.replace(load_offline_config(cut), seeds=3)
+    with pytest.raises(RunError, match="began with another config"):
+        run_offline(other, cut, resume=True)
+    with pytest.raises(SystemExit):
+        program.main(["--resume", str(tmp_path / "nothing")])

@@ -23,12 +23,13 @@ from pngail_jax import report
 from pngail_jax import settings as run_settings
 from pngail_jax.demos import DemonstrationError
 from pngail_jax.grid import Grid, make_cells, nonfinite_cells
-from pngail_jax.integrity import write_json
+from pngail_jax.integrity import IntegrityError, changed_inputs, read_json, write_json
 from pngail_jax.jobs.build import input_files, load_or_make_demos, resolve_normalizer
 from pngail_jax.jobs.chunks import (
     Progress,
     blocks_per_chunk,
     format_seconds,
+    intact_checkpoint,
     run_chunks,
     start,
 )
@@ -112,17 +113,43 @@ class OfflineRunConfig:
         )
 
 
-def run_offline(config: OfflineRunConfig, out: str | Path, overwrite: bool = False) -> dict:
+def load_offline_config(out: str | Path) -> OfflineRunConfig:
+    """The config an offline run in ``out`` began with (its config.json), or RunError."""
+    path = Path(out) / "config.json"
+    try:
+        document = read_json(path, "offline run config")
+        values = dict(document["config"])
+        if document.get("program") != PROGRAM:
+            raise ValueError(f"written by {document.get('program')!r}")
+        for name in ("methods", "hidden_sizes"):
+            values[name] = tuple(values[name])
+        return OfflineRunConfig(**values)
+    except (IntegrityError, KeyError, TypeError, ValueError) as error:
+        raise RunError(
+            f"cannot resume {out}: no offline run's config.json there ({error})"
+        ) from None
+
+
+def run_offline(
+    config: OfflineRunConfig, out: str | Path, overwrite: bool = False, resume: bool = False
+) -> dict:
     """Trains the grid and writes its outputs into ``out``; returns the summary. Raises
     ``RunError`` with one line for a refused output directory or unusable inputs.
+
+    Each program keeps a checkpoint after every chunk (``checkpoints/<its methods>/``); with
+    ``resume`` the run in ``out`` (begun with this ``config``, on the same input files)
+    continues from them to the numbers of an uninterrupted run.
 
     The methods run in one compiled program per set of parts they need
     (``offline.program_groups``: both BCs together, DWBC, ISW-BC): a vmapped program computes
     every compiled part in every cell, and one mixed program ran 3.2 times as long as the
     separate ones together (benchmarks/offline_throughput.py, docs/methods.md)."""
     out = Path(out)
-    with refusals(), claimed(out, PROGRAM, overwrite=overwrite) as claim:
+    with refusals(), claimed(out, PROGRAM, overwrite=overwrite, resume=resume) as claim:
         run_config = config.run_config
+        saved = load_offline_config(out) if resume else None
+        if saved is not None and saved != config:
+            raise RunError(f"cannot resume {out}: it began with another config")
         try:
             env = run_settings.make_env(config.env, run_config.settings)
             demos, demos_path = load_or_make_demos(run_config, None, env)
@@ -131,7 +158,26 @@ def run_offline(config: OfflineRunConfig, out: str | Path, overwrite: bool = Fal
         if demos.confidence is None:
             raise RunError(f"{demos_path}: no confidences, which every offline method reads")
         normalizer, normalizer_source = resolve_normalizer(run_config, demos, env)
-        claim.prepare()
+        inputs = input_files(run_config, demos_path)
+        if resume:
+            recorded = read_json(out / "config.json", "offline run config")["input_files"]
+            changes = changed_inputs(recorded)
+            if changes:
+                raise RunError(f"cannot resume: {'; '.join(changes)}")
+        else:
+            claim.prepare()
+        document = {
+            "program": PROGRAM,
+            "config": _json_config(config),
+            "demonstrations": demos_path,
+            "input_files": inputs,
+            "normalizer": normalizer,
+            "normalizer_source": normalizer_source,
+            "complete": False,
+            "provenance": provenance(program=PROGRAM),
+        }
+        if not resume:  # written first, so that a run cut short can be resumed
+            write_json(out / "config.json", document)
         cells = make_cells(config.methods, config.seeds, (config.label_ratio,),
                            (config.noise_std,))  # fmt: skip
         trainer_config = config.trainer_config(demos.num_rows)
@@ -150,31 +196,35 @@ def run_offline(config: OfflineRunConfig, out: str | Path, overwrite: bool = Fal
                 trainer_config, components=required_components(methods)
             )
             trainer = OfflineTrainer(trainer_config, env, demos)
-            runs.append(_run_group(config, trainer, group, normalizer))
+            checkpoints = out / "checkpoints" / "+".join(methods)
+            runs.append(_run_group(config, trainer, group, normalizer, checkpoints, resume))
         compile_seconds = sum(grid.compile_seconds for grid, _, _ in runs)
         progress = _joined(cells, runs)
         summary = _write_outputs(out, config, cells, progress, normalizer, compile_seconds)
+        if resume:  # as the run began, with this session's machine beside it
+            document = read_json(out / "config.json", "offline run config")
+            document["resumed_provenance"] = provenance(program=PROGRAM)
+        trainer_fields = _json_config(dataclasses.replace(trainer_config, components=()))
         write_json(
             out / "config.json",
             {
-                "program": PROGRAM,
-                "config": _json_config(config),
-                "trainer": _json_config(dataclasses.replace(trainer_config, components=())),
-                "demonstrations": demos_path,
-                "input_files": input_files(run_config, demos_path),
-                "normalizer": normalizer,
-                "normalizer_source": normalizer_source,
+                **document,
+                "trainer": trainer_fields,
+                "complete": True,
                 "wall_seconds": time.perf_counter() - start_time,
-                "provenance": provenance(program=PROGRAM),
+                "train_seconds": progress.timing["seconds"],
             },
         )
     print(f"-> {out}/{{config.json,metrics.csv,summary.md,summary.json,curves.png}}")
     return summary
 
 
-def _run_group(config: OfflineRunConfig, trainer: OfflineTrainer, cells, normalizer):
-    """One program's cells, compiled and run in chunks with a progress line each: (grid,
-    cells, Progress)."""
+def _run_group(
+    config: OfflineRunConfig, trainer: OfflineTrainer, cells, normalizer, checkpoints, resume
+):
+    """One program's cells, compiled and run in chunks with a progress line and a checkpoint
+    (in ``checkpoints``) each, from its last intact checkpoint when ``resume``: (grid, cells,
+    Progress)."""
     trainer_config = trainer.config
     target = max(1, config.chunk_iterations // trainer_config.eval_every)
     chunk_blocks = blocks_per_chunk(trainer_config.num_evaluations, target)
@@ -185,7 +235,7 @@ def _run_group(config: OfflineRunConfig, trainer: OfflineTrainer, cells, normali
     with ticking(f"compiling {methods}"):
         grid = Grid(trainer, inputs, chunk_blocks)
     print(f"{methods}: {len(cells)} cells, compiled in {grid.compile_seconds:.1f} s", flush=True)
-    state, progress = start(grid, None)
+    state, progress = start(grid, intact_checkpoint(checkpoints) if resume else None)
     steps_per_chunk = grid.num_cells * grid.iterations_per_chunk
     steps_per_chunk *= trainer_config.steps_per_iteration
     num_chunks = trainer_config.num_evaluations // chunk_blocks
@@ -204,7 +254,10 @@ def _run_group(config: OfflineRunConfig, trainer: OfflineTrainer, cells, normali
             f"seed {cells[best].seed} {shown[best]:.2f}"
         )
 
-    run_chunks(grid, state, progress, num_chunks, steps_per_chunk=steps_per_chunk, line=line)
+    run_chunks(
+        grid, state, progress, num_chunks, steps_per_chunk=steps_per_chunk, line=line,
+        checkpoints=checkpoints,
+    )  # fmt: skip
     return grid, cells, progress
 
 

@@ -2,6 +2,7 @@
 DWBC and ISW-BC, every method x seed in one compiled program.
 
     python -m experiments.offline --demos data/released/Pendulum-v1_mixture.npy --out runs/offline
+    python -m experiments.offline --resume runs/offline    # a run cut short, from its checkpoints
 
 The data they see is PN-GAIL's: each seed's split labels a ``--label-ratio`` share of the rows
 (D_c); the expert set is D_c's rows at confidence >= 0.5 (``<method>+bsc``: plus D_u's rows a
@@ -15,8 +16,9 @@ from __future__ import annotations
 import argparse
 
 from pngail_jax.jobs.errors import RunError
-from pngail_jax.jobs.offline import OfflineRunConfig, run_offline
+from pngail_jax.jobs.offline import OfflineRunConfig, load_offline_config, run_offline
 from pngail_jax.offline import CLASSIFIED_SUFFIX, OFFLINE_METHOD_NAMES
+from pngail_jax.outputs import output_owner
 from pngail_jax.programs.cli import (
     ENV_HELP,
     ArgumentParser,
@@ -62,12 +64,26 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--chunk-iterations", type=int, default=DEFAULTS.chunk_iterations,
                         help="iterations per compiled chunk (a progress line each)")  # fmt: skip
     parser.add_argument("--batch-size", type=int, default=DEFAULTS.batch_size)
-    parser.add_argument("--out", type=path_argument, required=True, help="output directory")
+    parser.add_argument("--out", type=path_argument, help="output directory (required)")
+    parser.add_argument(
+        "--resume", type=path_argument, metavar="DIR",
+        help="continue the offline run in DIR from its checkpoints, with the config it began "
+        "with (no other flag is read)",
+    )  # fmt: skip
     parser.add_argument(
         "--overwrite", action="store_true", help="replace an earlier offline run in --out"
     )
     add_compile_cache_flags(parser)
     args = parser.parse_args(argv)
+    if args.resume is not None:
+        if args.out is not None and args.out != args.resume:
+            parser.error("--resume DIR continues the run in DIR: drop --out")
+        if output_owner(args.resume) != "offline":
+            parser.error(f"--resume {args.resume}: not an offline run")
+        args.out = args.resume
+        return args
+    if args.out is None:
+        parser.error("--out is required (or --resume DIR)")
     claim_output(parser, args.out, "offline", args.overwrite)
     check_env(parser, args.env)
     try:
@@ -88,6 +104,9 @@ def main(argv=None) -> dict:
     args = parse_args(argv)
     use_compile_cache(args)
     try:
+        if args.resume is not None:
+            config = load_offline_config(args.resume)
+            return run_offline(config, args.resume, resume=True)
         return run_offline(args.config, args.out, overwrite=args.overwrite)
     except RunError as error:
         raise SystemExit(str(error)) from None
