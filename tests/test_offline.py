@@ -331,3 +331,12 @@ def test_a_run_resumed_from_a_checkpoint_equals_the_uninterrupted_run(demos_path
         run_offline(other, cut, resume=True)
     with pytest.raises(SystemExit):
         program.main(["--resume", str(tmp_path / "nothing")])
+
+
+def test_an_authors_file_picks_its_task(tmp_path):
+    """--demos Hopper-v2_mixture.npy alone runs on Hopper-v4, as the sweep's does."""
+    from pngail_jax.programs import offline as program
+
+    argv = ["--demos", str(tmp_path / "Hopper-v2_mixture.npy"), "--out", str(tmp_path / "o")]
+    assert program.parse_args(argv).config.env == "Hopper-v4"
+    assert program.parse_args([*argv, "--env", "Pendulum-v1"]).config.env == "Pendulum-v1"

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 
+from pngail_jax.demos import released_task
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.jobs.offline import OfflineRunConfig, load_offline_config, run_offline
 from pngail_jax.offline import CLASSIFIED_SUFFIX, OFFLINE_METHOD_NAMES
@@ -37,7 +38,11 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser = ArgumentParser(
         "offline", description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
     )
-    parser.add_argument("--env", default=DEFAULTS.env, help=ENV_HELP)
+    parser.add_argument(
+        "--env",
+        help=f"{ENV_HELP} (default: the task of an authors' --demos file, e.g. Hopper-v4 for "
+        f"Hopper-v2_mixture.npy; else {DEFAULTS.env})",
+    )
     parser.add_argument("--demos", help="demonstrations (default: made once and cached)")
     parser.add_argument("--conf", help="their confidence file (default: beside an authors' file)")
     parser.add_argument("--action-scale", type=float, help="multiplies the stored actions")
@@ -85,7 +90,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     if args.out is None:
         parser.error("--out is required (or --resume DIR)")
     claim_output(parser, args.out, "offline", args.overwrite)
-    check_env(parser, args.env)
+    task = released_task(args.demos) if args.demos else None
+    args.env = check_env(parser, args.env or task or DEFAULTS.env)
     try:
         args.config = OfflineRunConfig(
             env=args.env, demos=args.demos, conf=args.conf, action_scale=args.action_scale,
