@@ -231,6 +231,9 @@ def expected_rows(scores, record: dict) -> list[dict]:
         mine = stats.seed_summary(yours)
         low, high = reference["ci95"]
         estimate = mine["iqm"]
+        spread = rerun_spread(seeds, mine["num_seeds"])
+        row["rerun_spread"] = spread
+        row["within_rerun_spread"] = bool(abs(estimate - reference["iqm"]) <= spread)
         if not math.isfinite(estimate):
             verdict, distance = "no finite return", math.nan
         elif low <= estimate <= high:
@@ -242,6 +245,25 @@ def expected_rows(scores, record: dict) -> list[dict]:
         rows.append({**row, "your_iqm": estimate, "your_seeds": mine["num_seeds"],
                      "verdict": verdict, "outside_by": distance})  # fmt: skip
     return rows
+
+
+def rerun_spread(seeds, num_seeds: int, num_draws: int = 2000) -> float:
+    """How far the IQM of a re-run of ``num_seeds`` seeds lands from the record's IQM, as a
+    re-run shows it: the 95th percentile of |IQM(a draw of ``num_seeds`` of the record's seeds,
+    without replacement) - IQM(all of them)| over ``num_draws`` draws (a fixed seed). NaN when
+    the record has no more seeds than the re-run (then no draw differs from it)."""
+    from pngail_jax import stats
+
+    values = np.asarray([v for v in seeds if v is not None and math.isfinite(v)], float)
+    if num_seeds < 1 or values.size <= num_seeds:
+        return math.nan
+    rng = np.random.default_rng(0)
+    whole = stats.iqm(values)
+    shifts = [
+        abs(stats.iqm(rng.choice(values, num_seeds, replace=False)) - whole)
+        for _ in range(num_draws)
+    ]
+    return float(np.percentile(shifts, 95))
 
 
 def expected_markdown(rows: list[dict], record: dict, differences: list[str]) -> str:
@@ -269,6 +291,12 @@ def expected_markdown(rows: list[dict], record: dict, differences: list[str]) ->
         verdict = row["verdict"] + (
             f" by {row['outside_by']:.2f}" if row["verdict"] in ("below", "above") else ""
         )
+        if math.isfinite(row["rerun_spread"]):
+            side = "within" if row["within_rerun_spread"] else "beyond"
+            verdict += (
+                f"; {side} the spread a re-run of {row['your_seeds']} seeds shows "
+                f"(+-{row['rerun_spread']:.2f}, from the record's seeds)"
+            )
         lines.append(
             f"| {row['method']} | {row['your_iqm']:.2f} ({row['your_seeds']}) | {reference} | "
             f"{verdict} |"

@@ -576,3 +576,16 @@ def test_compare_expected_says_where_a_run_lies_against_a_record(finished, tmp_p
         run_records.expected_rows(other, record)
     changed = {**record["config"], "iterations": 8, "log": ["x"]}
     assert run_records.config_differences(changed, record) == ["iterations"]
+    # The spread a re-run shows: 5 of a record's 10 seeds drawn 2,000 times. Seeds 0.0-0.9
+    # (IQM 0.45): a 5-seed re-run's IQM lands within about 0.15 of it.
+    ten = [k / 10 for k in range(10)]
+    spread = run_records.rerun_spread(ten, 5)
+    assert 0.05 < spread < 0.3
+    assert np.isnan(run_records.rerun_spread(ten[:5], 5))  # no draw differs from the record
+    record["final_normalized_return"] = {"gail": ten}
+    near = Scores({"gail": {"Pendulum-v1": np.array([0.3, 0.4, 0.5, 0.6, 0.55])}})
+    far = Scores({"gail": {"Pendulum-v1": np.array([0.9, 0.95, 1.0, 0.97, 0.99])}})
+    assert run_records.expected_rows(near, record)[0]["within_rerun_spread"]
+    assert not run_records.expected_rows(far, record)[0]["within_rerun_spread"]
+    table = run_records.expected_markdown(run_records.expected_rows(far, record), record, [])
+    assert "beyond the spread a re-run of 5 seeds shows" in table
