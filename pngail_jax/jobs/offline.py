@@ -150,20 +150,11 @@ def run_offline(
         saved = load_offline_config(out) if resume else None
         if saved is not None and saved != config:
             raise RunError(f"cannot resume {out}: it began with another config")
-        try:
-            env = run_settings.make_env(config.env, run_config.settings)
-            demos, demos_path = load_or_make_demos(run_config, None, env)
-        except (DemonstrationError, FileNotFoundError, ImportError, ValueError) as error:
-            raise RunError(f"demonstrations: {error}") from None
-        if demos.confidence is None:
-            raise RunError(f"{demos_path}: no confidences, which every offline method reads")
+        env, demos, demos_path = _environment_and_demos(config)
         normalizer, normalizer_source = resolve_normalizer(run_config, demos, env)
         inputs = input_files(run_config, demos_path)
         if resume:
-            recorded = read_json(out / "config.json", "offline run config")["input_files"]
-            changes = changed_inputs(recorded)
-            if changes:
-                raise RunError(f"cannot resume: {'; '.join(changes)}")
+            _check_inputs_unchanged(out)
         else:
             claim.prepare()
         document = {
@@ -217,6 +208,27 @@ def run_offline(
         )
     print(f"-> {out}/{{config.json,metrics.csv,summary.md,summary.json,curves.png}}")
     return summary
+
+
+def _environment_and_demos(config: OfflineRunConfig):
+    """(env, demonstrations, their path), or RunError naming what is wrong with them."""
+    run_config = config.run_config
+    try:
+        env = run_settings.make_env(config.env, run_config.settings)
+        demos, demos_path = load_or_make_demos(run_config, None, env)
+    except (DemonstrationError, FileNotFoundError, ImportError, ValueError) as error:
+        raise RunError(f"demonstrations: {error}") from None
+    if demos.confidence is None:
+        raise RunError(f"{demos_path}: no confidences, which every offline method reads")
+    return env, demos, demos_path
+
+
+def _check_inputs_unchanged(out: Path) -> None:
+    """RunError when an input file the run in ``out`` began with is gone or changed."""
+    recorded = read_json(out / "config.json", "offline run config")["input_files"]
+    changes = changed_inputs(recorded)
+    if changes:
+        raise RunError(f"cannot resume: {'; '.join(changes)}")
 
 
 def _run_group(
