@@ -1,7 +1,9 @@
 """Comparisons across runs and tasks, as rliable defines them (Agarwal et al., 2021).
 
-A score is a seed's final normalised return, (R - random) / (optimal - random), read from a
-sweep run's ``metrics.csv``. ``Scores`` holds them per method (a method label: the method,
+A score is a seed's normalised return, (R - random) / (optimal - random), read from a
+sweep run's ``metrics.csv``: by default the headline figure, its mean over the last
+``report.LATE_SHARE`` of training (``statistic="late_average"``), or its final evaluation
+(``statistic="final"``). ``Scores`` holds them per method (a method label: the method,
 plus its setting when a run has several) and task (the run's environment; runs of one task
 pool their seeds). Over all tasks, for each method:
 
@@ -34,8 +36,13 @@ import numpy as np
 
 from pngail_jax import stats
 from pngail_jax.integrity import IntegrityError, read_json
+from pngail_jax.report import HEADLINE, LATE_LABEL, seed_figures
 
 AGGREGATES = ("iqm", "mean", "median", "optimality_gap")
+STATISTICS = {  # what a score is, as the tables and plots say it
+    "late_average": f"normalised return, mean over the {LATE_LABEL}",
+    "final": "final normalised return (the last evaluation)",
+}
 NUM_RESAMPLES = 2000
 
 
@@ -45,10 +52,12 @@ class CompareError(Exception):
 
 @dataclasses.dataclass
 class Scores:
-    """Final normalised returns: ``values[method][task]`` float[seeds]."""
+    """Normalised scores: ``values[method][task]`` float[seeds], each seed's ``statistic``
+    (a key of ``STATISTICS``)."""
 
     values: dict[str, dict[str, np.ndarray]]
     unfinished: dict[str, str] = dataclasses.field(default_factory=dict)  # run -> how far
+    statistic: str = HEADLINE
 
     @property
     def methods(self) -> list[str]:
@@ -74,7 +83,8 @@ class Scores:
         }
         kept = {m: {t: by[t] for t in shared} for m, by in self.values.items()}
         left_out = {m: tasks for m, tasks in left_out.items() if tasks}
-        return Scores(kept, self.unfinished), left_out  # (unfinished: every run read, named)
+        # (unfinished: every run read, named)
+        return Scores(kept, self.unfinished, self.statistic), left_out
 
     def pooled(self, method: str) -> tuple[np.ndarray, np.ndarray]:
         """float[n] scores and int[n] task labels (index into ``tasks``) of ``method``'s
@@ -88,32 +98,49 @@ class Scores:
         return np.concatenate(values), np.concatenate(labels)
 
 
-def final_scores(run_dir: Path) -> tuple[str, dict[str, np.ndarray]]:
-    """A sweep run's task and each method label's final normalised returns float[seeds]
-    (NaN for a seed that diverged). CompareError when the run has none to read."""
+RUN_PROGRAMS = ("sweep", "offline")  # the programs whose runs compare (and records) read
+
+
+def run_settings(config: dict) -> dict:
+    """A run's settings from its ``config.json``: the file itself for a sweep, its
+    ``config`` part for the offline program (env, methods, seeds, ...)."""
+    return config["config"] if config.get("program") == "offline" else config
+
+
+def run_scores(run_dir: Path, statistic: str = HEADLINE) -> tuple[str, dict[str, np.ndarray]]:
+    """A sweep or offline run's task and each method label's scores float[seeds]
+    (``statistic`` of the normalised evaluations; NaN for a seed that diverged), so the
+    offline family's rows join the online methods' tables. CompareError when the run has
+    none to read."""
     from pngail_jax.outputs import output_owner
 
     run_dir = Path(run_dir)
-    if output_owner(run_dir) != "sweep":
-        raise CompareError(f"{run_dir} holds no sweep run (experiments.sweep writes one)")
+    if output_owner(run_dir) not in RUN_PROGRAMS:
+        raise CompareError(
+            f"{run_dir} holds no sweep or offline run (experiments.sweep or experiments.offline "
+            "writes one)"
+        )
     try:
-        config = read_json(run_dir / "config.json", "run config")
+        config = run_settings(read_json(run_dir / "config.json", "run config"))
         env = config["env"]
     except (OSError, IntegrityError, KeyError, TypeError) as error:
         raise CompareError(f"{run_dir}: no readable config.json ({error})") from None
     path = run_dir / "metrics.csv"
     if not path.exists():
         raise CompareError(f"{run_dir}: no metrics.csv yet (the run has not finished a chunk)")
-    return env, scores_of_metrics(path, config, run_progress_numbers(run_dir))
+    return env, scores_of_metrics(path, config, run_progress_numbers(run_dir), statistic)
 
 
 def scores_of_metrics(
-    path: Path, config: dict, progress: tuple[int, int] | None
+    path: Path, config: dict, progress: tuple[int, int] | None, statistic: str = HEADLINE
 ) -> dict[str, np.ndarray]:
-    """Each method label's final normalised returns float[seeds] in a sweep's metrics file
-    (``metrics.csv``, or a run record's ``metrics.csv.gz``), checked whole against the run's
-    ``config`` and ``progress`` (iterations done and planned, when known). CompareError for a
-    damaged or cut-short file."""
+    """Each method label's scores float[seeds] (``statistic``, a key of ``STATISTICS``, of
+    its normalised evaluations) in a sweep's metrics file (``metrics.csv``, or a run record's
+    ``metrics.csv.gz``), checked whole against the run's ``config`` and ``progress``
+    (iterations done and planned, when known). CompareError for a damaged or cut-short
+    file."""
+    if statistic not in STATISTICS:
+        raise CompareError(f"statistic {statistic!r}: give one of {', '.join(STATISTICS)}")
     from pngail_jax.report import iterations_per_cell, read_evaluations
 
     try:
@@ -137,7 +164,7 @@ def scores_of_metrics(
                 "optimal returns: give --optimal-return to the sweep)"
             )
         label = method if len(settings) == 1 else f"{method} [{setting}]"
-        scores[label] = values[:, -1]
+        scores[label] = seed_figures(values, statistic)
     return scores
 
 
@@ -209,22 +236,22 @@ def _check_distinct(run_dirs: Sequence[Path]) -> None:
             seen_configs[key] = run_dir
 
 
-def load_scores(run_dirs: Sequence[Path]) -> Scores:
-    """The final scores of every run, pooled per task (two runs of one task: their seeds
-    together). Methods keep the order they first appear in. CompareError for a run given
+def load_scores(run_dirs: Sequence[Path], statistic: str = HEADLINE) -> Scores:
+    """The scores (``statistic``) of every run, pooled per task (two runs of one task: their
+    seeds together). Methods keep the order they first appear in. CompareError for a run given
     twice, two runs of the same seeds and config, or a damaged or cut-short metrics.csv."""
     _check_distinct(run_dirs)
     values: dict[str, dict[str, np.ndarray]] = {}
     unfinished = {}
     for run_dir in run_dirs:
-        task, scores = final_scores(run_dir)
+        task, scores = run_scores(run_dir, statistic)
         for method, seeds in scores.items():
             by_task = values.setdefault(method, {})
             by_task[task] = np.concatenate([by_task.get(task, np.empty(0)), seeds])
         progress = run_progress(run_dir)
         if progress is not None:
             unfinished[str(run_dir)] = progress
-    return Scores(values, unfinished)
+    return Scores(values, unfinished, statistic)
 
 
 def run_progress_numbers(run_dir: Path) -> tuple[int, int] | None:
@@ -385,6 +412,7 @@ def compare(scores: Scores, baseline: str, *, seed: int = 0) -> dict:
     scores, left_out = scores.common()
     taus = np.linspace(-0.25, 1.25, 61)
     return {
+        "statistic": scores.statistic,
         "tasks": scores.tasks,
         "left_out": left_out,
         "seeds": {
@@ -416,8 +444,8 @@ def markdown(result: dict) -> str:
     lines = [
         f"# Comparison over {len(result['tasks'])} task(s): {tasks}",
         "",
-        "Final normalised return; 95% stratified bootstrap intervals (seeds resampled within "
-        "each task). Optimality gap: lower is better.",
+        f"Score: {_score_text(result).capitalize()}; 95% stratified bootstrap intervals "
+        "(seeds resampled within each task). Optimality gap: lower is better.",
         "",
         *(
             [f"Left out (not every method ran them): {result['left_out']}.", ""]
@@ -426,7 +454,7 @@ def markdown(result: dict) -> str:
         ),
         *(
             [
-                "**Unfinished runs**, their 'final' the latest evaluation so far: "
+                "**Unfinished runs**, read up to their latest evaluation so far: "
                 + "; ".join(f"{run} ({how})" for run, how in result["unfinished"].items())
                 + ".",
                 "",
@@ -453,13 +481,18 @@ def markdown(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _score_text(result: dict) -> str:
+    """What a score of ``result`` is (older compare.json files hold final returns)."""
+    return STATISTICS[result.get("statistic", "final")]
+
+
 def _estimate(value: dict) -> str:
     low, high = value["ci95"]
     return f"{value['estimate']:.2f} [{low:.2f}, {high:.2f}]"
 
 
 def per_task_markdown(table: dict, baseline: str) -> list[str]:
-    """One table per task: each method's final score (mean ± s.e., IQM with its 95% bootstrap
+    """One table per task: each method's score (mean ± s.e., IQM with its 95% bootstrap
     interval) and the baseline's probability of improvement over it."""
     lines = ["", "## Per task", ""]
     for task, rows in table.items():
@@ -535,7 +568,7 @@ def plot(result: dict, directory: Path) -> list[Path]:
         axis.set_title(name.replace("_", " "))
         axis.set_yticklabels(methods if axis is axes[0] else [])
         axis.grid(axis="x", alpha=0.3)
-    figure.supxlabel("final normalised return (95% stratified bootstrap interval)")
+    figure.supxlabel(f"{_score_text(result)} (95% stratified bootstrap interval)")
     save(figure, "aggregates.png")
 
     figure, axis = plt.subplots(figsize=(7, 4.5))

@@ -185,7 +185,11 @@ DISPLAY_NAMES = {
 
 
 def display_name(name: str) -> str:
-    """The paper's name of a preset (``"pngail-no-bsc"``: ``"PN-GAIL\\BSC"``), else ``name``."""
+    """The paper's name of a preset (``"pngail-no-bsc"``: ``"PN-GAIL\\BSC"``; an offline
+    method's BSC variant ``"dwbc+bsc"``: ``"DWBC + BSC rows"``), else ``name``."""
+    base, plus, rest = name.partition("+")
+    if plus and rest == "bsc" and base in DISPLAY_NAMES:
+        return f"{DISPLAY_NAMES[base]} + BSC rows"
     return DISPLAY_NAMES.get(name, name)
 
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from pngail_jax import stats
 from pngail_jax.integrity import atomic_path, atomic_write_text, write_json
-from pngail_jax.methods import METHOD_NAMES, display_name, reads_confidences
+from pngail_jax.methods import display_name, reads_confidences
 
 CSV_COLUMNS = (
     "method",
@@ -195,15 +195,38 @@ def group_cells(cells) -> tuple[list[str], dict[str, list[int]]]:
     return settings, groups
 
 
-# "late average": the mean over the evaluations in this last share of training, our reading of
-# the paper's Table 4 "average reward after training convergence".
-LATE_SHARE = 0.1
+# The headline figure of a run's final performance, the "late average": a seed's mean
+# evaluation return over this last share of training. Chosen by measured re-run agreement
+# (docs/sweep.md, "Which statistic a re-run does not overturn": two disjoint halves of a
+# 10-seed grid order the methods alike at Kendall tau 0.68 under it, 0.48 under the final
+# evaluation); also our reading of the paper's Table 4 "average reward after training
+# convergence". The final evaluation stays beside it as a column.
+LATE_SHARE = 0.2
+HEADLINE = "late_average"  # the summary's, compare's and the records' leading statistic
+LATE_LABEL = f"last {LATE_SHARE:.0%} of training"  # what tables call it
 
 
 def late_evaluations(num_evaluations: int) -> int:
     """How many of ``num_evaluations`` (evenly spaced) evaluations make the last
     ``LATE_SHARE`` of training: ``ceil(LATE_SHARE * num_evaluations)``, at least 1."""
     return max(1, math.ceil(LATE_SHARE * num_evaluations - 1e-9))
+
+
+def late_average(evaluations: np.ndarray) -> np.ndarray:
+    """float[seeds] from float[seeds, evaluations] (every column evaluated, oldest first):
+    each seed's mean over its last ``late_evaluations`` evaluations (NaN stays NaN)."""
+    evaluations = np.asarray(evaluations, np.float64)
+    return evaluations[:, evaluations.shape[1] - late_evaluations(evaluations.shape[1]) :].mean(1)
+
+
+def seed_figures(evaluations: np.ndarray, statistic: str) -> np.ndarray:
+    """float[seeds]: each seed's ``statistic`` of float[seeds, evaluations]: ``late_average``
+    (the headline) or ``final`` (the last evaluation)."""
+    if statistic == "final":
+        return np.asarray(evaluations, np.float64)[:, -1]
+    if statistic == "late_average":
+        return late_average(evaluations)
+    raise ValueError(f"statistic {statistic!r}: give late_average or final")
 
 
 def _per_cell(cells, metrics, normalizer, excluded):
@@ -245,8 +268,10 @@ def summarize(
     a seed's labels apart). Cells in ``excluded`` (diverged,
     ``pngail_jax.grid.nonfinite_cells``) and non-finite returns are left out of every
     statistic and of ``num_seeds``. With PN-GAIL in the grid: the probability that a PN-GAIL
-    seed's final return beats a baseline seed's, per baseline, with its 95% interval; with
-    ``baseline`` (a method), the probability that each other method's seed beats its seed.
+    seed's headline figure (``HEADLINE``: its mean over the last ``LATE_SHARE`` of training)
+    beats a baseline seed's, per baseline, with its 95% interval, and the same on the final
+    evaluation (``probability_of_improvement_final``); with ``baseline`` (a method), the
+    probability that each other method's seed beats its seed.
     """
     excluded = set(excluded)
     values = _per_cell(cells, metrics, normalizer, excluded)
@@ -257,8 +282,12 @@ def summarize(
     }
     return {
         "null_means": NULL_MEANS,
+        "headline": {"statistic": HEADLINE, "late_share": LATE_SHARE},
         "methods": methods,
         "probability_of_improvement": _improvement_over_baselines(
+            cells, settings, values[f"{HEADLINE}_return"], baseline
+        ),
+        "probability_of_improvement_final": _improvement_over_baselines(
             cells, settings, values["final_return"], baseline
         ),
         "improvement": {"over": baseline} if baseline else {"of": "pngail"},
@@ -302,8 +331,9 @@ def _method_row(cells, indices, values, metrics, excluded) -> dict:
 
 def _improvement_over_baselines(cells, settings, final, baseline: str | None = None) -> dict:
     """``{label: {"estimate", "ci95"}}`` per setting (rliable's probability of improvement):
-    without ``baseline``, P(a PN-GAIL seed's final return beats a seed of the labelled
-    method); with it, P(a seed of the labelled method beats a ``baseline`` seed)."""
+    without ``baseline``, P(a PN-GAIL seed's figure in ``final`` (per cell) beats a seed of
+    the labelled method); with it, P(a seed of the labelled method beats a ``baseline``
+    seed)."""
     result = {}
     anchor = baseline or "pngail"
     for setting in settings:
@@ -363,10 +393,11 @@ def summary_markdown(summary, cells, metrics, title: str, notes: Sequence[str] =
     kind, digits = ("normalised return", 2) if normalised else ("return", 1)
     suffix = "_normalized_return" if normalised else "_return"
     header = (
-        f"| method | seeds | final return: mean ± s.e. | final {kind}: IQM [95% CI] | "
+        f"| method | seeds | {LATE_LABEL}, {kind}: IQM [95% CI] | {LATE_LABEL}, {kind}: "
+        f"mean ± s.e. | final {kind}: IQM [95% CI] | "
         + (f"final {kind}: mean ± s.e. | " if normalised else "")
-        + f"last 10% of training, {kind}: IQM [95% CI] | all of training, {kind}: "
-        "IQM [95% CI] | confidence MAE on D_u |"
+        + f"final return: mean ± s.e. | all of training, {kind}: IQM [95% CI] | "
+        "confidence MAE on D_u |"
     )
     lines = [f"# {title}", "", header, "|---" + "|---:" * (header.count("|") - 2) + "|"]
     for label, row in summary["methods"].items():
@@ -379,18 +410,17 @@ def summary_markdown(summary, cells, metrics, title: str, notes: Sequence[str] =
         columns = [
             display_label(label),
             str(row["num_seeds"]),
-            _mean_se(row, "final_return", 1),
+            _interval(row, f"late_average{suffix}", digits),
+            _mean_se(row, f"late_average{suffix}", digits),
             _interval(row, f"final{suffix}", digits),
             *([_mean_se(row, "final_normalized_return", 2)] if normalised else []),
-            _interval(row, f"late_average{suffix}", digits),
+            _mean_se(row, "final_return", 1),
             _interval(row, f"average{suffix}", digits),
             mae_text,
         ]
         lines.append("| " + " | ".join(columns) + " |")
     lines += ["", _table_note(normalised)]
-    lines += _improvement_lines(
-        summary.get("probability_of_improvement", {}), summary.get("improvement", {}).get("over")
-    )
+    lines += _improvement_lines(summary)
     lines += _per_seed_lines(summary)
     throughput = summary["train_env_steps_per_second"]
     lines += [  # an offline grid takes no environment step: its notes give its throughput
@@ -409,9 +439,10 @@ def summary_markdown(summary, cells, metrics, title: str, notes: Sequence[str] =
 def _table_note(normalised: bool) -> str:
     """What summary.md's main table's columns and spreads are."""
     return (
-        "Final return: deterministic (mean-action) evaluation at the last iteration; last 10% "
-        "of training: the mean of a seed's evaluations in the last tenth of training (our "
-        "reading of the paper's Table 4 'average reward after training convergence'); all of "
+        f"The {LATE_LABEL} (the headline figure, first): the mean of a seed's "
+        "deterministic (mean-action) evaluations in that share of training, the figure two "
+        "re-runs agree on best (our reading, too, of the paper's Table 4 'average reward after "
+        "training convergence'); final: the evaluation at the last iteration; all of "
         "training: the mean of every evaluation of a seed, from the first iteration on. Over "
         "seeds: interquartile mean with a 95% stratified-bootstrap interval (2,000 "
         "resamples), and mean ± standard error (s.e., sample std / sqrt(n)); n = 1: one seed, "
@@ -428,31 +459,42 @@ def _table_note(normalised: bool) -> str:
     )
 
 
-def _improvement_lines(improvement: dict, baseline: str | None = None) -> list[str]:
+def _improvement_lines(summary: dict) -> list[str]:
     """summary.md's table of PN-GAIL's probability of improvement over each baseline (or of
-    each method's over ``baseline``)."""
+    each method's over the run's baseline), on the headline figure and on the final
+    evaluation."""
+    improvement = summary.get("probability_of_improvement", {})
     if not improvement:
         return []
+    final = summary.get("probability_of_improvement_final", {})
+    baseline = summary.get("improvement", {}).get("over")
+    figure = f"mean return over the {LATE_LABEL}"
     if baseline:
-        sentence = f"P(a seed's final return > a {display_name(baseline)} seed's)"
-        header = f"| method | P(method > {display_name(baseline)}) | 95% CI |"
+        sentence = f"P(a seed's {figure} > a {display_name(baseline)} seed's)"
+        first = f"| method | P(method > {display_name(baseline)}) | 95% CI |"
     else:
-        sentence = "P(a PN-GAIL seed's final return > a baseline seed's)"
-        header = "| over | P(PN-GAIL > baseline) | 95% CI |"
+        sentence = f"P(a PN-GAIL seed's {figure} > a baseline seed's)"
+        first = "| over | P(PN-GAIL > baseline) | 95% CI |"
     lines = [
         "",
-        f"Probability of improvement: {sentence}, 95% bootstrap interval.",
+        f"Probability of improvement: {sentence}, 95% bootstrap interval; beside it the same "
+        "on the final evaluation. An interval holding 0.5 is no ranking: more seeds decide.",
         "",
-        header,
-        "|---|---:|---:|",
+        first + " final evaluation: P | 95% CI |",
+        "|---|---:|---:|---:|---:|",
     ]
     for label, value in improvement.items():
-        low, high = value["ci95"]
-        if min(value.get("seeds", (2, 2))) == 1:  # one seed a side: a single comparison
-            interval, estimate = "no interval", f"{value['estimate']:.2f} (n = 1)"
-        else:
-            interval, estimate = f"[{low:.2f}, {high:.2f}]", f"{value['estimate']:.2f}"
-        lines.append(f"| {display_label(label)} | {estimate} | {interval} |")
+        columns = [display_label(label)]
+        for entry in (value, final.get(label)):
+            if entry is None:
+                columns += ["n/a", "n/a"]
+            elif min(entry.get("seeds", (2, 2))) == 1:  # one seed a side: a single comparison
+                columns += [f"{entry['estimate']:.2f} (n = 1)", "no interval"]
+            else:
+                low, high = entry["ci95"]
+                holds = " (holds 0.5)" if low <= 0.5 <= high else ""
+                columns += [f"{entry['estimate']:.2f}", f"[{low:.2f}, {high:.2f}]{holds}"]
+        lines.append("| " + " | ".join(columns) + " |")
     return lines
 
 
@@ -469,7 +511,7 @@ def _per_seed_lines(summary: dict) -> list[str]:
         "",
         "Per seed:",
         "",
-        "| method | seed | final return | normalised | last-10% average | normalised | "
+        f"| method | seed | final return | normalised | {LATE_LABEL} | normalised | "
         "average over training | normalised |",
         "|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
@@ -500,171 +542,3 @@ def write_summary(directory: Path, summary: dict, markdown: str) -> None:
     """summary.json (non-finite numbers as null) and summary.md, each written atomically."""
     write_json(Path(directory) / "summary.json", json_safe(summary))
     atomic_write_text(Path(directory) / "summary.md", markdown)
-
-
-def plot_curves(
-    path: Path,
-    cells,
-    metrics,
-    normalizer,
-    title: str,
-    excluded=(),
-    xlabel: str = "M environment steps per run",
-) -> None:
-    """Normalised evaluation return vs environment steps (``metrics["env_steps"]``; the
-    offline family passes its gradient steps there, with its ``xlabel``): the mean over seeds
-    with its 95% bootstrap interval per method (one panel per setting), like the paper's
-    Fig. 2. Falls back to raw returns without a normaliser. Cells in ``excluded`` (diverged)
-    are left out, as from the summary."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    returns = np.asarray(metrics["eval/return"], np.float64)
-    values = normalize(returns, normalizer) if normalizer is not None else returns
-    evaluated = ~np.isnan(returns).all(axis=0)
-    settings = list(dict.fromkeys(cell.setting for cell in cells))
-    methods = list(dict.fromkeys(cell.method for cell in cells))
-    excluded = set(excluded)
-    colors = dict(zip(methods, plt.get_cmap("tab10").colors * 2, strict=False))
-    figure, axes = plt.subplots(
-        1, len(settings), figsize=(7 * len(settings), 4.8), squeeze=False, sharey=True
-    )
-    for axis, setting in zip(axes[0], settings, strict=True):
-        for method in methods:
-            rows = [
-                i
-                for i, c in enumerate(cells)
-                if c.method == method and c.setting == setting and i not in excluded
-            ]
-            if not rows:
-                continue
-            steps = np.asarray(metrics["env_steps"])[rows[0], evaluated] / 1e6
-            curve = values[rows][:, evaluated]
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)
-                mean = np.nanmean(curve, axis=0)
-            low, high = np.array([stats.bootstrap_ci(column, np.mean) for column in curve.T]).T
-            style = line_style(method)
-            axis.plot(
-                steps, mean, color=colors[method], lw=1.8, ls=style, label=display_name(method)
-            )
-            axis.fill_between(steps, low, high, color=colors[method], alpha=0.12, lw=0)
-        if normalizer is not None:
-            axis.axhline(1.0, color="grey", ls="--", lw=0.8)
-            axis.axhline(0.0, color="grey", ls=":", lw=0.8)
-        axis.set(
-            xlabel=xlabel,
-            ylabel="normalised return" if normalizer is not None else "return",
-            title=setting if len(settings) > 1 else None,
-        )
-        axis.grid(alpha=0.3)
-    axes[0][-1].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9)
-    figure.suptitle(f"{title}\nmean over seeds; shaded: 95% bootstrap interval of the mean")
-    figure.tight_layout()
-    with atomic_path(path) as temporary:
-        figure.savefig(temporary, dpi=120, bbox_inches="tight")  # the legend is outside
-    plt.close(figure)
-
-
-# diagnostics.png's panels: (metric, title), read from the metrics every trainer records.
-DIAGNOSTICS = (
-    ("disc/acc_agent", "discriminator accuracy on agent rows"),
-    ("disc/acc_demo", "discriminator accuracy on demonstration rows"),
-    ("train/reward", "mean policy reward (the update's)"),
-    ("rollout/mean_abs_action", "policy's mean |action|"),
-    ("rollout/beyond_bounds", "share of action entries beyond the bounds"),
-)
-
-
-def plot_diagnostics(path: Path, cells, metrics, title: str, excluded=()) -> bool:
-    """What the discriminator and the policy do, per iteration, against environment steps:
-    one panel per ``DIAGNOSTICS`` metric the run recorded, the mean over seeds of each
-    method (and setting) smoothed over a fiftieth of the run. A discriminator that
-    saturates (accuracy on agent rows near 1, reward near 0) or a policy drifting past its
-    action bounds shows here without reading ``metrics.csv``. Returns False, writing
-    nothing, when the run recorded none of them."""
-    panels = [(name, label) for name, label in DIAGNOSTICS if name in metrics]
-    if not panels:
-        return False
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    groups = list(dict.fromkeys((cell.method, cell.setting) for cell in cells))
-    colors = dict(zip(groups, plt.get_cmap("tab10").colors * 4, strict=False))
-    steps = np.asarray(metrics["env_steps"], np.float64)[0] / 1e6
-    window = max(1, steps.size // 50)
-    columns = min(len(panels), 3)
-    rows_of_panels = -(-(len(panels) + 1) // columns)  # and a slot for the legend
-    figure, axes = plt.subplots(
-        rows_of_panels, columns, figsize=(4.6 * columns, 3.4 * rows_of_panels), squeeze=False
-    )
-    axes = axes.ravel()
-    for axis, (name, label) in zip(axes, panels, strict=False):
-        _diagnostic_panel(axis, name, label, cells, metrics, steps, window, colors, excluded)
-    handles, labels = axes[0].get_legend_handles_labels()
-    for axis in axes[len(panels) :]:
-        axis.axis("off")
-    axes[len(panels)].legend(handles, labels, loc="center", fontsize=9)
-    smoothing = f"; moving average over {window} iterations" if window > 1 else ""
-    figure.suptitle(f"{title}: diagnostics\nmean over seeds{smoothing}")
-    figure.tight_layout()
-    with atomic_path(path) as temporary:
-        figure.savefig(temporary, dpi=110, bbox_inches="tight")
-    plt.close(figure)
-    return True
-
-
-def _diagnostic_panel(axis, name, label, cells, metrics, steps, window, colors, excluded):
-    """One panel of ``plot_diagnostics``: metric ``name``, each method's (and setting's) mean
-    over its seeds, smoothed over ``window`` iterations."""
-    values = np.asarray(metrics[name], np.float64)
-    several_settings = len({cell.setting for cell in cells}) > 1
-    for method, setting in colors:
-        rows = [
-            i
-            for i, c in enumerate(cells)
-            if (c.method, c.setting) == (method, setting) and i not in set(excluded)
-        ]
-        if not rows:
-            continue
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            curve = _moving_average(np.nanmean(values[rows], axis=0), window)
-        shown = display_name(method) + (f" ({setting})" if several_settings else "")
-        axis.plot(
-            steps, curve, color=colors[(method, setting)], lw=1.4, ls=line_style(method),
-            label=shown,
-        )  # fmt: skip
-    axis.set(xlabel="M environment steps per run", title=label)
-    if name == "train/reward" and np.nanmin(values, initial=0.0) < -1:
-        # A logit reward (-z, down to about -7) beside rewards in [0, 1]: a scale that is
-        # linear within +-1 and logarithmic beyond keeps both readable.
-        axis.set_yscale("symlog", linthresh=1.0)
-    axis.title.set_fontsize(9)
-    axis.grid(alpha=0.3)
-
-
-def _moving_average(values: np.ndarray, window: int) -> np.ndarray:
-    """The trailing mean of the last ``window`` values at each index (fewer at the start);
-    NaN entries are skipped."""
-    if window == 1:
-        return values
-    finite = np.isfinite(values)
-    sums = np.cumsum(np.where(finite, values, 0.0))
-    counts = np.cumsum(finite)
-    sums[window:] = sums[window:] - sums[:-window].copy()
-    counts[window:] = counts[window:] - counts[:-window].copy()
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(counts > 0, sums / np.maximum(counts, 1), np.nan)
-
-
-def line_style(method: str) -> str:
-    """Dashed for PN-GAIL's ablations, dotted for methods beyond the paper's seven, so that
-    curves stay apart where their colours and bands overlap."""
-    if method.startswith("pngail-no-"):
-        return "--"
-    return "-" if method in METHOD_NAMES else ":"

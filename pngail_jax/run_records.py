@@ -5,14 +5,15 @@ A record is a folder (``records/<name>/``) made from a sweep run's folder:
 - ``record.json``: the name, the command, the commit, the machine (CPU model, devices,
   library versions, ``XLA_FLAGS``), the run's config (``config.json`` without its
   provenance), how far it got, its training and compile seconds, the digest of the metrics
-  file, and each method's final normalised return per seed;
+  file, and each method's normalised returns per seed under both statistics: the headline
+  (the mean over the last ``late_share`` of training) and the final evaluation;
 - ``metrics.csv.gz``: the run's ``metrics.csv``, every cell and iteration (the evaluations
   and the diagnostics columns), gzipped.
 
 No checkpoints, policies or plots: a 12-cell run of 5,000 iterations is about 2 MB.
 ``check_record`` reads a record back and verifies it: the metrics file against its digest,
 whole against the config (every cell, every iteration the record says the run reached),
-and the final returns recomputed from it against those the record states.
+and both statistics recomputed from it against those the record states.
 """
 
 from __future__ import annotations
@@ -24,10 +25,18 @@ from pathlib import Path
 
 import numpy as np
 
-from pngail_jax.compare import CompareError, run_progress_numbers, scores_of_metrics
+from pngail_jax.compare import (
+    RUN_PROGRAMS,
+    STATISTICS,
+    CompareError,
+    run_progress_numbers,
+    run_settings,
+    scores_of_metrics,
+)
 from pngail_jax.integrity import IntegrityError, atomic_path, file_digest, read_json, write_json
+from pngail_jax.report import LATE_SHARE
 
-FORMAT = 1
+FORMAT = 2  # 2: both statistics per seed (1 held the final evaluation only)
 RECORD_FILE = "record.json"
 METRICS_FILE = "metrics.csv.gz"
 MACHINE_KEYS = (
@@ -41,8 +50,8 @@ class RecordError(Exception):
     file and the problem)."""
 
 
-def _final_returns(scores: dict[str, np.ndarray]) -> dict[str, list[float | None]]:
-    """Per method label, its seeds' final normalised returns (None for a diverged seed)."""
+def _per_seed(scores: dict[str, np.ndarray]) -> dict[str, list[float | None]]:
+    """Per method label, its seeds' scores (None for a diverged seed)."""
     return {
         label: [float(v) if np.isfinite(v) else None for v in values]
         for label, values in scores.items()
@@ -65,18 +74,22 @@ def write_record(run_dir: Path, name: str, records: Path = Path("records")) -> P
     """Records the sweep run in ``run_dir`` as ``records/<name>/`` and checks it. A record of
     that name already there is replaced only if it records the same run (same config and
     commit); anything else in the way is refused. Returns the record's folder."""
-    from pngail_jax.compare import final_scores
+    from pngail_jax.compare import run_scores
     from pngail_jax.outputs import output_owner
 
     run_dir = Path(run_dir)
     if not name or "/" in name or name.startswith("."):
         raise RecordError(f"record name {name!r}: give a plain folder name, e.g. hopper-cpu")
-    if output_owner(run_dir) != "sweep":
-        raise RecordError(f"{run_dir} holds no sweep run (experiments.sweep writes one)")
+    owner = output_owner(run_dir)
+    if owner not in RUN_PROGRAMS:
+        raise RecordError(
+            f"{run_dir} holds no sweep or offline run (experiments.sweep or experiments.offline "
+            "writes one)"
+        )
     try:
         config = read_json(run_dir / "config.json", "run config")
         summary = read_json(run_dir / "summary.json", "run summary")
-        _, scores = final_scores(run_dir)
+        scores = {name: run_scores(run_dir, name)[1] for name in STATISTICS}
     except FileNotFoundError as error:
         raise RecordError(f"{run_dir}: {Path(error.filename).name} is missing") from None
     except (OSError, IntegrityError, CompareError) as error:
@@ -86,17 +99,18 @@ def write_record(run_dir: Path, name: str, records: Path = Path("records")) -> P
     record = {
         "format": FORMAT,
         "name": name,
-        "program": "experiments.sweep",
+        "program": f"experiments.{owner}",
         "command": provenance.get("command_line"),
         "commit": provenance.get("git_commit"),
         "machine": {key: provenance.get(key) for key in MACHINE_KEYS},
         "config": {key: value for key, value in config.items() if key != "provenance"},
         "complete": summary.get("complete") is not False,
         "iterations_done": progress[0] if progress else None,
-        "iterations": progress[1] if progress else config.get("iterations"),
+        "iterations": progress[1] if progress else run_settings(config).get("iterations"),
         "training_seconds": _training_seconds(run_dir / "metrics.csv"),
         "compile_seconds": summary.get("compile_seconds"),
-        "final_normalized_return": _final_returns(scores),
+        "late_share": LATE_SHARE,
+        **{_key(name): _per_seed(values) for name, values in scores.items()},
     }
     folder = Path(records) / name
     _check_replaceable(folder, record)
@@ -161,21 +175,32 @@ def check_record(folder: Path) -> dict:
         raise RecordError(f"{metrics} differs from what the record wrote (size or SHA-256)")
     done, planned = record.get("iterations_done"), record.get("iterations")
     progress = (done, planned) if isinstance(done, int) and isinstance(planned, int) else None
-    try:
-        scores = scores_of_metrics(metrics, record["config"], progress)
-    except CompareError as error:
-        raise RecordError(str(error)) from None
-    stated = record.get("final_normalized_return")
-    if _final_returns(scores) != stated:
+    if record.get("late_share") != LATE_SHARE:
         raise RecordError(
-            f"{folder / RECORD_FILE}: its final returns differ from those of {METRICS_FILE}"
+            f"{folder / RECORD_FILE}: its late average is over the last "
+            f"{record.get('late_share')} of training, this version's over {LATE_SHARE}: "
+            "record the run again"
         )
+    for name in STATISTICS:
+        try:
+            scores = scores_of_metrics(metrics, run_settings(record["config"]), progress, name)
+        except CompareError as error:
+            raise RecordError(str(error)) from None
+        if _per_seed(scores) != record.get(_key(name)):
+            raise RecordError(
+                f"{folder / RECORD_FILE}: its {_key(name)} differs from that of {METRICS_FILE}"
+            )
     return record
+
+
+def _key(statistic: str) -> str:
+    """record.json's key of a statistic's per-seed scores."""
+    return f"{statistic}_normalized_return"
 
 
 def describe(record: dict) -> str:
     """One paragraph for the terminal: what the record holds."""
-    finals = record["final_normalized_return"]
+    finals = record[_key("final")]
     cells = sum(len(values) for values in finals.values())
     how_far = (
         "complete"
@@ -183,7 +208,7 @@ def describe(record: dict) -> str:
         else f"{record['iterations_done']:,} of {record['iterations']:,} iterations"
     )
     return (
-        f"{record['name']}: {record['config'].get('env')}, {len(finals)} methods, "
+        f"{record['name']}: {run_settings(record['config']).get('env')}, {len(finals)} methods, "
         f"{cells} runs, {how_far}; commit {str(record['commit'])[:10]}, "
         f"{record['machine'].get('cpu_model') or 'CPU not recorded'}; "
         f"metrics {record['metrics']['bytes']:,} bytes"
@@ -204,19 +229,19 @@ def config_differences(config: dict, record: dict) -> list[str]:
 
 
 def expected_rows(scores, record: dict) -> list[dict]:
-    """Per method of the record: is the IQM of your seeds' final normalised returns
-    (``scores``, a ``compare.Scores``) inside the record's 95% bootstrap interval of its IQM
-    over seeds, and by how much is it outside. RecordError when your runs hold no run of the
-    record's task."""
+    """Per method of the record: is the IQM of your seeds' scores (``scores``, a
+    ``compare.Scores``, under its statistic) inside the record's 95% bootstrap interval of its
+    IQM over seeds under the same statistic, and by how much is it outside. RecordError when
+    your runs hold no run of the record's task."""
     from pngail_jax import stats
 
-    task = record["config"].get("env")
+    task = run_settings(record["config"]).get("env")
     if task not in scores.tasks:
         raise RecordError(
             f"the record {record['name']} is of {task}; your runs are of {', '.join(scores.tasks)}"
         )
     rows = []
-    for method, seeds in record["final_normalized_return"].items():
+    for method, seeds in record[_key(scores.statistic)].items():
         reference = stats.seed_summary([math.nan if v is None else v for v in seeds])
         row = {
             "method": method,
@@ -266,15 +291,19 @@ def rerun_spread(seeds, num_seeds: int, num_draws: int = 2000) -> float:
     return float(np.percentile(shifts, 95))
 
 
-def expected_markdown(rows: list[dict], record: dict, differences: list[str]) -> str:
-    """The ``--expected`` table: your IQM against the record's interval, per method."""
+def expected_markdown(
+    rows: list[dict], record: dict, differences: list[str], statistic: str
+) -> str:
+    """The ``--expected`` table: your IQM against the record's interval, per method, both
+    under ``statistic`` (a key of ``compare.STATISTICS``)."""
+
     lines = [
-        f"## Against the record {record['name']} ({record['config'].get('env')}, commit "
-        f"{str(record['commit'])[:10]})",
+        f"## Against the record {record['name']} "
+        f"({run_settings(record['config']).get('env')}, commit {str(record['commit'])[:10]})",
         "",
-        "Final normalised return: the IQM of your seeds against the record's IQM and its 95% "
-        "bootstrap interval over its seeds. Outside it is a difference to look at, not proof "
-        "of one: a run on another machine is another draw (docs/sweep.md, what is "
+        f"Score: {STATISTICS[statistic]}. The IQM of your seeds against the record's IQM and "
+        "its 95% bootstrap interval over its seeds. Outside it is a difference to look at, not "
+        "proof of one: a run on another machine is another draw (docs/sweep.md, what is "
         "reproducible).",
         "",
     ]
@@ -301,4 +330,59 @@ def expected_markdown(rows: list[dict], record: dict, differences: list[str]) ->
             f"| {row['method']} | {row['your_iqm']:.2f} ({row['your_seeds']}) | {reference} | "
             f"{verdict} |"
         )
+    return "\n".join(lines) + "\n"
+
+
+def record_table(record: dict, baseline: str | None = None) -> str:
+    """A results table made from a checked record (``check_record``'s dictionary): per
+    method, the headline (the normalised return over the last ``late_share`` of training)
+    and the final evaluation, each as mean ± s.e. and IQM [95% bootstrap CI] over seeds, and
+    under both the probability of improvement (an interval holding 0.5 says so): PN-GAIL's
+    over each method when the record has PN-GAIL, or with ``baseline`` each method's over it.
+    The docs' tables between ``<!-- record-table NAME [baseline=METHOD] -->`` markers are
+    this text, and a test keeps them so (``experiments.record --docs`` rewrites them)."""
+    from pngail_jax import stats
+    from pngail_jax.methods import display_name
+
+    late, final = record[_key("late_average")], record[_key("final")]
+    share = f"last {record['late_share']:.0%} of training"
+    anchor = baseline or "pngail"
+    if baseline is not None and baseline not in late:
+        raise RecordError(f"record {record['name']} has no method {baseline!r}: {list(late)}")
+
+    def values(seeds):
+        return np.asarray([math.nan if v is None else v for v in seeds], float)
+
+    def summary(seeds) -> tuple[str, str]:
+        row = stats.seed_summary(values(seeds))
+        low, high = row["ci95"]
+        return f"{row['mean']:.2f} ± {row['se']:.2f}", f"{row['iqm']:.2f} [{low:.2f}, {high:.2f}]"
+
+    def improvement(statistic, method) -> str:
+        ours, theirs = values(statistic[anchor]), values(statistic[method])
+        if baseline is not None:
+            ours, theirs = theirs, ours
+        low, high = stats.probability_of_improvement_ci(ours, theirs)
+        holds = ", holds 0.5" if low <= 0.5 <= high else ""
+        return (
+            f"{stats.probability_of_improvement(ours, theirs):.2f} [{low:.2f}, {high:.2f}]{holds}"
+        )
+
+    compared = anchor in late
+    pair = f"method > {display_name(baseline)}" if baseline else f"{display_name(anchor)} > method"
+    lines = [
+        f"| method | seeds | {share}: mean ± s.e. | {share}: IQM [95% CI] | final: mean ± s.e. "
+        "| final: IQM [95% CI] |" + (f" P({pair}), {share} | P, final |" if compared else ""),
+        "|---|---:|---:|---:|---:|---:|" + ("---:|---:|" if compared else ""),
+    ]
+    for method in late:
+        seeds = int(np.isfinite(values(late[method])).sum())
+        cells = [display_name(method), str(seeds), *summary(late[method]), *summary(final[method])]
+        if compared:
+            cells += (
+                ["-", "-"]
+                if method == anchor
+                else [improvement(late, method), improvement(final, method)]
+            )
+        lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

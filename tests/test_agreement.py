@@ -32,7 +32,8 @@ def test_late_means_agree_where_the_final_evaluation_does_not(tmp_path, capsys):
                            "--json", str(tmp_path / "a.json")])  # fmt: skip
     by_name = {row["statistic"]: row for row in rows}
     assert set(by_name) == {
-        "final evaluation", "mean of the last 5", "last 10% (1 evaluations)", "all of training"
+        "final evaluation", "mean of the last 5", "last 20% of training, the headline (2 "
+        "evaluations)", "all of training"
     }  # fmt: skip
     assert by_name["mean of the last 5"]["same_best"] == 1.0
     assert by_name["mean of the last 5"]["kendall_tau"] == 1.0

@@ -95,6 +95,35 @@ def fake_run(directory, env, finals):
     return directory
 
 
+def test_a_score_is_the_late_average_unless_the_final_evaluation_is_asked_for(tmp_path):
+    """Ten evaluations a seed: the default score is the mean of the last 2 (the last 20% of
+    training), --statistic final the last one; compare.md and compare.json say which."""
+    prepare_output(tmp_path / "r", "sweep")
+    (tmp_path / "r" / "config.json").write_text(json.dumps({"env": "t"}))
+    rng = np.random.default_rng(3)
+    normalised = rng.uniform(0, 1, (4, 10))  # a seeds 0-1, b seeds 0-1
+    cells = [Cell(m, seed) for m in ("a", "b") for seed in range(2)]
+    returns = normalised * 1000 - 1000
+    metrics = {name: np.zeros_like(returns) for name in ("disc/acc_agent", "disc/acc_demo",
+               "train/reward", "trpo/kl", "train/episode_return")}  # fmt: skip
+    steps = np.tile(np.arange(1, 11) * 5000, (4, 1))
+    metrics |= {"eval/return": returns, "env_steps": steps}
+    write_metrics_csv(tmp_path / "r" / "metrics.csv", cells, metrics, (-1000.0, 0.0))
+    late = compare.load_scores([tmp_path / "r"])
+    assert late.statistic == "late_average"
+    np.testing.assert_allclose(late.values["b"]["t"], normalised[2:, -2:].mean(1), atol=1e-5)
+    final = compare.load_scores([tmp_path / "r"], "final")
+    np.testing.assert_allclose(final.values["b"]["t"], normalised[2:, -1], atol=1e-5)
+    out = program.main([str(tmp_path / "r"), "--statistic", "final", "--out",
+                        str(tmp_path / "c")])  # fmt: skip
+    assert json.loads((out / "compare.json").read_text())["statistic"] == "final"
+    assert "Score: Final normalised return (the last evaluation)" in (
+        (out / "compare.md").read_text()
+    )
+    with pytest.raises(compare.CompareError, match="statistic 'best'"):
+        compare.load_scores([tmp_path / "r"], "best")
+
+
 def test_the_program_reads_runs_and_writes_its_page(tmp_path, capsys):
     one = fake_run(tmp_path / "one", "t1", {"a": A["t1"], "b": B["t1"]})
     two = fake_run(tmp_path / "two", "t2", {"a": A["t2"], "b": B["t2"]})
@@ -110,7 +139,7 @@ def test_the_program_reads_runs_and_writes_its_page(tmp_path, capsys):
     for name in ("compare.md", "aggregates.png", "profiles.png", "improvement.png"):
         assert (out / name).stat().st_size > 0, name
     assert "P(method > b)" in capsys.readouterr().out
-    with pytest.raises(SystemExit, match="holds no sweep run"):
+    with pytest.raises(SystemExit, match="holds no sweep or offline run"):
         program.main([str(out), "--out", str(tmp_path / "d")])
     with pytest.raises(SystemExit):
         program.main([str(one), "--out", str(one)])
@@ -127,7 +156,7 @@ def test_the_program_reads_runs_and_writes_its_page(tmp_path, capsys):
     assert json.loads((out / "compare.json").read_text())["unfinished"] == {
         str(two): "1 of 500 iterations"
     }
-    assert f"**Unfinished runs**, their 'final' the latest evaluation so far: {two} (1 of " in (
+    assert f"**Unfinished runs**, read up to their latest evaluation so far: {two} (1 of " in (
         (out / "compare.md").read_text()
     )
     (two / "summary.json").write_text(json.dumps({"complete": False, "iterations_done": 2}))

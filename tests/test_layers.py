@@ -34,7 +34,7 @@ LAYERS = [
     (
         "trainers",
         (
-            "adversarial", "grid", "train", "run_config", "report", "tracking", "compare",
+            "adversarial", "grid", "train", "run_config", "report", "plots", "tracking", "compare",
             "run_records", "offline",
         ),
     ),

@@ -237,6 +237,20 @@ def test_the_program_writes_the_sweeps_outputs_and_refuses_a_second_run(
     with pytest.raises(SystemExit):
         program.parse_args(argv)
     assert "already holds a run of experiments.offline" in capsys.readouterr().err
+    # Its rows join the online methods' tables: compare reads it, a record keeps it.
+    from pngail_jax import compare, run_records
+
+    scores = compare.load_scores([out])
+    evaluated = [
+        float(r["normalized_return"]) for r in rows if r["method"] == "dwbc" and r["eval_return"]
+    ]  # seed 0 at iterations 2 and 4, then seed 1: the late 20% of 2 evaluations is the last
+    assert scores.values["dwbc"][scores.tasks[0]].tolist() == pytest.approx(
+        evaluated[1::2], abs=1e-5
+    )
+    folder = run_records.write_record(out, "tiny-offline", tmp_path / "records")
+    record = run_records.check_record(folder)
+    assert record["program"] == "experiments.offline" and record["complete"]
+    assert "BC (all rows)" in run_records.record_table(record, "bc-all")
 
 
 @pytest.mark.slow

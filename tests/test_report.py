@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from pngail_jax import report, stats
+from pngail_jax import plots, report, stats
 from pngail_jax.grid import make_cells, nonfinite_cells
 
 NORMALIZER = (-1200.0, -200.0)
@@ -91,7 +91,7 @@ def test_summary_groups_by_method_and_setting_and_drops_diverged_cells(tmp_path)
         rtol=1e-4,
     )
 
-    report.plot_curves(tmp_path / "curves.png", cells, metrics, NORMALIZER, "test")
+    plots.plot_curves(tmp_path / "curves.png", cells, metrics, NORMALIZER, "test")
     assert (tmp_path / "curves.png").stat().st_size > 10_000
     markdown = report.summary_markdown(summary, cells, metrics, "test")
     # per method and setting, PN-GAIL's improvement over each baseline, and per seed
@@ -141,25 +141,38 @@ def test_a_method_whose_seeds_all_diverge_is_null_with_a_reason(tmp_path):
     assert written["probability_of_improvement"]["gail"]["estimate"] is None
 
 
-def test_late_average_is_the_mean_of_the_last_tenth_of_the_evaluations():
-    """Two conventions under their own names: the average over all of training and over its
-    last 10% (ceil of a tenth of the evaluations): 3 of 30, 5 of 50, 1 of 5, 2 of 11."""
-    assert [report.late_evaluations(n) for n in (30, 50, 5, 11, 1)] == [3, 5, 1, 2, 1]
+def test_late_average_is_the_mean_of_the_last_fifth_of_the_evaluations():
+    """The headline (the last 20% of training: ceil of a fifth of the evaluations, 6 of 30,
+    10 of 50, 1 of 5, 3 of 11) beside the average over all of training, each under its own
+    name; the probability of improvement is the headline's, the final evaluation's beside it."""
+    assert [report.late_evaluations(n) for n in (30, 50, 5, 11, 1)] == [6, 10, 1, 3, 1]
     cells = make_cells(["gail", "pngail"], 2)
     metrics = synthetic_metrics(cells, num_iterations=300, eval_every=10)
     summary = report.summarize(cells, metrics, NORMALIZER, 1000.0, 2.0)
+    assert summary["headline"] == {"statistic": "late_average", "late_share": 0.2}
     evaluations = metrics["eval/return"][:, 9::10]  # iterations 10, 20, ..., 300
     assert evaluations.shape == (4, 30) and np.isfinite(evaluations).all()
     for index, seed in enumerate(summary["methods"]["pngail"]["per_seed"]):
         row = 2 + index
-        np.testing.assert_allclose(seed["late_average_return"], evaluations[row, -3:].mean())
+        np.testing.assert_allclose(seed["late_average_return"], evaluations[row, -6:].mean())
         np.testing.assert_allclose(seed["average_return"], evaluations[row].mean())
         np.testing.assert_allclose(
-            seed["late_average_normalized_return"], (evaluations[row, -3:].mean() + 1200) / 1000
+            seed["late_average_normalized_return"], (evaluations[row, -6:].mean() + 1200) / 1000
         )
+    np.testing.assert_allclose(report.late_average(evaluations), evaluations[:, -6:].mean(1))
+    late, final = evaluations[:, -6:].mean(1), evaluations[:, -1]
+    assert summary["probability_of_improvement"]["gail"]["estimate"] == (
+        stats.probability_of_improvement(late[2:], late[:2])
+    )
+    assert summary["probability_of_improvement_final"]["gail"]["estimate"] == (
+        stats.probability_of_improvement(final[2:], final[:2])
+    )
     markdown = report.summary_markdown(summary, cells, metrics, "t")
-    assert "last 10% of training, normalised return" in markdown
-    assert "all of training, normalised return" in markdown
+    header = markdown.splitlines()[2]
+    assert header.startswith("| method | seeds | last 20% of training, normalised return: IQM")
+    assert "all of training, normalised return" in header
+    assert "mean return over the last 20% of training > a baseline seed's" in markdown
+    assert "| over | P(PN-GAIL > baseline) | 95% CI | final evaluation: P | 95% CI |" in markdown
 
 
 def test_seeds_puts_a_methods_seeds_side_by_side_with_their_training(tmp_path, capsys):
@@ -171,15 +184,15 @@ def test_seeds_puts_a_methods_seeds_side_by_side_with_their_training(tmp_path, c
     report.write_metrics_csv(tmp_path / "metrics.csv", cells, metrics, NORMALIZER)
     report.write_summary(tmp_path / ".", summary, "")
     table = seeds.main([str(tmp_path), "--method", "pngail", "--share", "0.25"])
-    finals = [row["final_normalized_return"] for row in table]
-    assert finals == sorted(finals, reverse=True) and len(table) == 3  # best seed first
+    lates = [row["late_average_normalized_return"] for row in table]
+    assert lates == sorted(lates, reverse=True) and len(table) == 3  # best seed first
     row = next(r for r in table if r["seed"] == 1)  # cell 4: pngail seed 1
     np.testing.assert_allclose(row["kl_late"], metrics["trpo/kl"][4, -5:].mean(), rtol=1e-5)
     np.testing.assert_allclose(
         row["disc_acc_agent_all"], metrics["disc/acc_agent"][4].mean(), rtol=1e-4
     )
     np.testing.assert_allclose(row["confidence_mae"], metrics["confidence/mae"][4], rtol=1e-6)
-    assert "| seed | final |" in capsys.readouterr().out
+    assert "| seed | last 20% of training | final |" in capsys.readouterr().out
     with pytest.raises(SystemExit, match="no rows of method 'bc'"):
         seeds.main([str(tmp_path), "--method", "bc"])
     # Two settings: each one's numbers from its own rows and summary entry, exactly.
@@ -258,8 +271,8 @@ def test_moving_average_against_numpy():
     for window in (1, 3, 7):
         expected = [np.nanmean(values[max(0, i - window + 1) : i + 1]) for i in range(23)]
         expected = np.where(np.isnan(values) & (window == 1), np.nan, expected)
-        np.testing.assert_allclose(report._moving_average(values, window), expected, 1e-12)
-    np.testing.assert_array_equal(report._moving_average(np.full(4, np.nan), 2), np.nan)
+        np.testing.assert_allclose(plots._moving_average(values, window), expected, 1e-12)
+    np.testing.assert_array_equal(plots._moving_average(np.full(4, np.nan), 2), np.nan)
 
 
 def test_diagnostics_plot_needs_the_metrics_it_draws(tmp_path):
@@ -267,11 +280,11 @@ def test_diagnostics_plot_needs_the_metrics_it_draws(tmp_path):
 
     cells = make_cells(["gail", "pngail"], num_seeds=2)
     metrics = {"env_steps": np.tile(np.arange(1, 61) * 5000, (4, 1))}
-    assert not report.plot_diagnostics(tmp_path / "d.png", cells, metrics, "test")
+    assert not plots.plot_diagnostics(tmp_path / "d.png", cells, metrics, "test")
     assert not (tmp_path / "d.png").exists()
     rng = np.random.default_rng(0)
-    metrics.update({name: rng.uniform(size=(4, 60)) for name, _ in report.DIAGNOSTICS[:3]})
-    assert report.plot_diagnostics(tmp_path / "d.png", cells, metrics, "test", excluded=[1])
+    metrics.update({name: rng.uniform(size=(4, 60)) for name, _ in plots.DIAGNOSTICS[:3]})
+    assert plots.plot_diagnostics(tmp_path / "d.png", cells, metrics, "test", excluded=[1])
     assert (tmp_path / "d.png").stat().st_size > 10_000
 
 
@@ -288,7 +301,7 @@ def test_one_seed_a_method_gives_a_single_comparison_not_an_interval():
         if line.startswith("| GAIL |") and "no interval" in line
     )
     estimate = summary["probability_of_improvement"]["gail"]["estimate"]
-    assert row == f"| GAIL | {estimate:.2f} (n = 1) | no interval |"
+    assert row.startswith(f"| GAIL | {estimate:.2f} (n = 1) | no interval |")
 
 
 def test_summary_tables_name_methods_as_the_paper_does():

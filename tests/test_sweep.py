@@ -487,7 +487,8 @@ def test_a_signal_during_a_chunk_stops_the_sweep_once_that_chunk_is_saved(
 
 def test_a_record_keeps_the_run_small_and_checks_itself(finished, tmp_path, capsys):
     """experiments.record writes config, command, commit, machine and the gzipped metrics,
-    reads them back, and recomputes the final returns; --check finds each kind of damage."""
+    reads them back, and recomputes both statistics (the late average, the headline, and the
+    final evaluation); --check finds each kind of damage."""
     import gzip
 
     from pngail_jax import run_records
@@ -504,11 +505,13 @@ def test_a_record_keeps_the_run_small_and_checks_itself(finished, tmp_path, caps
     assert record["machine"]["cpu_model"] and record["complete"] is True
     assert record["iterations_done"] == record["iterations"] == 4
     summary = json.loads((finished / "summary.json").read_text())
-    for method, values in record["final_normalized_return"].items():
-        # metrics.csv keeps 6 significant digits; the summary, the full float.
-        assert len(values) == 2 and np.mean(values) == pytest.approx(
-            summary["methods"][method]["final_normalized_return_mean"], rel=1e-5, abs=1e-6
-        )
+    assert record["late_share"] == 0.2 and record["format"] == 2
+    for key in ("final_normalized_return", "late_average_normalized_return"):
+        for method, values in record[key].items():
+            # metrics.csv keeps 6 significant digits; the summary, the full float.
+            assert len(values) == 2 and np.mean(values) == pytest.approx(
+                summary["methods"][method][f"{key}_mean"], rel=1e-5, abs=1e-6
+            )
     with gzip.open(folder / "metrics.csv.gz", "rt") as file:
         assert file.read() == (finished / "metrics.csv").read_text()
     assert "ok  tiny: Pendulum-v1, 2 methods, 4 runs, complete" in (
@@ -528,11 +531,15 @@ def test_a_record_keeps_the_run_small_and_checks_itself(finished, tmp_path, caps
     with pytest.raises(SystemExit, match="metrics.csv.gz differs from what the record wrote"):
         program.main(["--check", str(folder)])
     (folder / "metrics.csv.gz").write_bytes(good)
-    edited = json.loads(json.dumps(record))
-    first = next(iter(edited["final_normalized_return"]))
-    edited["final_normalized_return"][first][0] += 0.5
-    (folder / "record.json").write_text(json.dumps(edited))
-    with pytest.raises(SystemExit, match="its final returns differ from those of metrics.csv"):
+    for key in ("final_normalized_return", "late_average_normalized_return"):
+        edited = json.loads(json.dumps(record))
+        first = next(iter(edited[key]))
+        edited[key][first][0] += 0.5
+        (folder / "record.json").write_text(json.dumps(edited))
+        with pytest.raises(SystemExit, match=f"its {key} differs from that of metrics.csv"):
+            program.main(["--check", str(folder)])
+    (folder / "record.json").write_text(json.dumps({**record, "late_share": 0.1}))
+    with pytest.raises(SystemExit, match="last 0.1 of training, this version's over 0.2"):
         program.main(["--check", str(folder)])
     text = (finished / "metrics.csv").read_text().splitlines(keepends=True)
     cut = gzip.compress("".join(text[:-4]).encode(), mtime=0)
@@ -541,7 +548,7 @@ def test_a_record_keeps_the_run_small_and_checks_itself(finished, tmp_path, caps
     (folder / "record.json").write_text(json.dumps(record))
     with pytest.raises(run_records.RecordError, match="is cut short"):
         run_records.check_record(folder)
-    with pytest.raises(SystemExit, match="holds no sweep run"):
+    with pytest.raises(SystemExit, match="holds no sweep or offline run"):
         program.main([str(tmp_path), "--name", "x", "--records", str(tmp_path / "r")])
 
 
@@ -562,7 +569,7 @@ def test_compare_expected_says_where_a_run_lies_against_a_record(finished, tmp_p
     assert [row["verdict"] for row in expected["rows"]] == ["within", "within"]
     assert "## Against the record r (Pendulum-v1" in (out / "compare.md").read_text()
     record = run_records.check_record(folder)
-    record["final_normalized_return"] = {"gail": [0.4, 0.5, 0.6], "pngail": [0.8, 0.9, 1.0]}
+    record["late_average_normalized_return"] = {"gail": [0.4, 0.5, 0.6], "pngail": [0.8, 0.9, 1.0]}
     scores = Scores({"gail": {"Pendulum-v1": np.array([0.1, 0.2, 0.15])}})
     rows = run_records.expected_rows(scores, record)
     assert rows[0]["verdict"] == "below" and rows[0]["outside_by"] == pytest.approx(
@@ -582,10 +589,18 @@ def test_compare_expected_says_where_a_run_lies_against_a_record(finished, tmp_p
     spread = run_records.rerun_spread(ten, 5)
     assert 0.05 < spread < 0.3
     assert np.isnan(run_records.rerun_spread(ten[:5], 5))  # no draw differs from the record
-    record["final_normalized_return"] = {"gail": ten}
+    record["late_average_normalized_return"] = {"gail": ten}
     near = Scores({"gail": {"Pendulum-v1": np.array([0.3, 0.4, 0.5, 0.6, 0.55])}})
     far = Scores({"gail": {"Pendulum-v1": np.array([0.9, 0.95, 1.0, 0.97, 0.99])}})
     assert run_records.expected_rows(near, record)[0]["within_rerun_spread"]
     assert not run_records.expected_rows(far, record)[0]["within_rerun_spread"]
-    table = run_records.expected_markdown(run_records.expected_rows(far, record), record, [])
+    rows = run_records.expected_rows(far, record)
+    table = run_records.expected_markdown(rows, record, [], "late_average")
     assert "beyond the spread a re-run of 5 seeds shows" in table
+    assert "Score: normalised return, mean over the last 20% of training." in table
+    # --statistic final reads the record's final evaluations, not its late averages
+    record["final_normalized_return"] = {"gail": [0.9, 1.0, 0.95, 0.97, 0.99, 0.98]}
+    assert (
+        run_records.expected_rows(Scores(far.values, statistic="final"), record)[0]["verdict"]
+        == "within"
+    )

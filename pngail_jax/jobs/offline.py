@@ -19,7 +19,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from pngail_jax import report
+from pngail_jax import plots, report
 from pngail_jax import settings as run_settings
 from pngail_jax.demos import DemonstrationError
 from pngail_jax.grid import Grid, make_cells, nonfinite_cells
@@ -338,7 +338,7 @@ def _write_outputs(out, config, cells, progress, normalizer, compile_seconds) ->
     markdown = report.summary_markdown(summary, cells, metrics, title, notes)
     report.write_summary(out, summary, markdown)
     gradient = {**metrics, "env_steps": progress.metrics["gradient_steps"]}
-    report.plot_curves(out / "curves.png", cells, gradient, normalizer, title, excluded,
+    plots.plot_curves(out / "curves.png", cells, gradient, normalizer, title, excluded,
                        xlabel="M gradient steps per run")  # fmt: skip
     print(markdown)
     return summary

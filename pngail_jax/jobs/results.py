@@ -10,7 +10,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from pngail_jax import report
+from pngail_jax import plots, report
 from pngail_jax.checkpoint import save_trpo_policies
 from pngail_jax.grid import nonfinite_cells
 from pngail_jax.integrity import read_json
@@ -43,10 +43,12 @@ class RunResult:
     def files(self) -> dict[str, Path]:
         return {name: self.out / file for name, file in OUTPUT_FILES.items()}
 
-    def table(self, metric: str = "final_return") -> list[dict]:
-        """One row per method (and setting) of ``metric`` across seeds: ``final_return``,
-        ``average_return`` (all of training), ``late_average_return`` (its last 10%), or
-        their ``*_normalized_return`` forms. Each row: ``group``, ``mean``, ``se`` (standard
+    def table(self, metric: str = f"{report.HEADLINE}_normalized_return") -> list[dict]:
+        """One row per method (and setting) of ``metric`` across seeds: by default the
+        headline, ``late_average_normalized_return`` (the mean over the last
+        ``report.LATE_SHARE`` of training, normalised); ``final_return`` (the last
+        evaluation), ``average_return`` (all of training), ``late_average_return``, or their
+        ``*_normalized_return`` forms. Each row: ``group``, ``mean``, ``se`` (standard
         error), ``iqm`` and ``ci95`` (its 95% bootstrap interval), ``seeds``."""
         rows = []
         for group, row in self.summary["methods"].items():
@@ -79,8 +81,8 @@ def write_outputs(out: Path, run: BuiltRun, progress: Progress) -> str:
     report.write_metrics_csv(out / "metrics.csv", cells, metrics, run.normalizer, known)
     title = title_of(config, len(cells))
     diverged = nonfinite_cells(progress.metrics, config.settings.eval_every)
-    report.plot_curves(out / "curves.png", cells, metrics, run.normalizer, title, diverged)
-    report.plot_diagnostics(out / "diagnostics.png", cells, metrics, title, diverged)
+    plots.plot_curves(out / "curves.png", cells, metrics, run.normalizer, title, diverged)
+    plots.plot_diagnostics(out / "diagnostics.png", cells, metrics, title, diverged)
     done = progress.iterations_done(run.grid)
     summary = {
         "complete": done == config.iterations,

@@ -20,7 +20,7 @@ import numpy as np
 
 from pngail_jax.integrity import write_json
 from pngail_jax.programs.cli import ArgumentParser, HelpFormatter, path_argument
-from pngail_jax.report import late_evaluations, read_evaluations
+from pngail_jax.report import LATE_LABEL, late_average, late_evaluations, read_evaluations
 from pngail_jax.stats import split_half_agreement
 
 
@@ -48,14 +48,15 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def statistics_of(evaluations: np.ndarray, lasts) -> dict[str, np.ndarray]:
     """Per seed float[S], from its evaluations float[S, E]: the mean of the last K for each
-    K in ``lasts`` (K = 1: the final evaluation), the last 10% (the summary's), all."""
-    late = late_evaluations(evaluations.shape[1])
+    K in ``lasts`` (K = 1: the final evaluation), the headline (the last ``LATE_SHARE`` of
+    training, the summary's), all."""
+    late = late_evaluations(evaluations.shape[1])  # = report.late_average's
     values = {
         ("final evaluation" if k == 1 else f"mean of the last {k}"): evaluations[:, -k:].mean(1)
         for k in lasts
         if k <= evaluations.shape[1]
     }
-    values[f"last 10% ({late} evaluations)"] = evaluations[:, -late:].mean(1)
+    values[f"{LATE_LABEL}, the headline ({late} evaluations)"] = late_average(evaluations)
     values["all of training"] = evaluations.mean(1)
     return values
 

@@ -4,8 +4,10 @@ profiles and probabilities of improvement, with stratified bootstrap intervals.
     python -m experiments.compare runs/pendulum runs/hopper runs/halfcheetah
     python -m experiments.compare runs/a runs/b --baseline gail --out runs/compare-ab
 
-Reads each run's final normalised returns (``metrics.csv``; runs of one task pool their
-seeds), and writes to ``--out``: ``compare.json``, ``compare.md`` (the tables: the
+Reads each run's normalised returns (``metrics.csv`` of a sweep or an offline run; runs of
+one task pool their seeds): a seed's score is its mean over the last 20% of training (the
+headline, which two re-runs agree on best), or with ``--statistic final`` its last
+evaluation. Writes to ``--out``: ``compare.json``, ``compare.md`` (the tables: the
 aggregates, then each task on its own) and ``aggregates.png``, ``profiles.png``,
 ``improvement.png``. The definitions:
 ``pngail_jax.compare`` (rliable's, Agarwal et al. 2021).
@@ -17,7 +19,7 @@ import argparse
 import time
 from pathlib import Path
 
-from pngail_jax import compare, run_records
+from pngail_jax import compare, report, run_records
 from pngail_jax.integrity import atomic_write_text
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.outputs import claimed
@@ -45,6 +47,12 @@ def parse_args(argv=None) -> argparse.Namespace:
         "--overwrite", action="store_true", help="replace a comparison already in --out"
     )
     parser.add_argument("--seed", type=int, default=0, help="the bootstrap's seed")
+    parser.add_argument(
+        "--statistic", choices=sorted(compare.STATISTICS), default=report.HEADLINE,
+        help="a seed's score: late_average, its mean normalised return over the last "
+        f"{report.LATE_SHARE * 100:.0f}%% of training (the default, the figure re-runs agree on "
+        "best), or final, its last evaluation",
+    )  # fmt: skip
     parser.add_argument(
         "--expected", type=path_argument, metavar="RECORD",
         help="a kept run record (records/<name>, experiments.record): per method, is your "
@@ -74,7 +82,7 @@ def main(argv=None) -> Path:
 
 def write_comparison(args, claim) -> None:
     """The comparison of ``args.runs`` into the claimed ``args.out``."""
-    scores = compare.load_scores(args.runs)
+    scores = compare.load_scores(args.runs, args.statistic)
     baseline = args.baseline or ("pngail" if "pngail" in scores.methods else scores.methods[0])
     result = compare.compare(scores, baseline, seed=args.seed)
     expected, expected_text = _against_record(args, scores)
@@ -102,6 +110,6 @@ def _against_record(args, scores) -> tuple[dict, str]:
     rows = run_records.expected_rows(scores, record)
     config = read_json(args.runs[0] / "config.json", "run config")
     differences = run_records.config_differences(config, record)
-    text = "\n" + run_records.expected_markdown(rows, record, differences)
+    text = "\n" + run_records.expected_markdown(rows, record, differences, scores.statistic)
     info = {"record": str(args.expected), "config_differences": differences, "rows": rows}
     return {"expected": info}, text

@@ -2,17 +2,23 @@
 
     python -m experiments.record runs/hopper-cpu --name hopper-cpu   # -> records/hopper-cpu/
     python -m experiments.record --check records/hopper-cpu records/pendulum-1000
+    python -m experiments.record --docs          # rewrite the docs' tables from their records
 
 A record (``pngail_jax.run_records``) holds the run's config, command, commit, machine,
 training seconds, each method's final normalised returns per seed, and its metrics.csv
 gzipped (every cell and iteration): what a results table in the docs rests on, without
 checkpoints, policies or plots. Writing one checks it; ``--check`` verifies kept ones (the
 metrics file against its digest, whole against the config, the final returns recomputed).
+A table in README.md or docs/ between ``<!-- record-table NAME -->`` and
+``<!-- /record-table -->`` is ``run_records.record_table`` of ``records/NAME`` (with
+``baseline=METHOD`` after the name: each method's probability of improvement over it): ``--docs``
+writes them, and tests/test_docs_tables.py fails when one differs from its record.
 """
 
 from __future__ import annotations
 
 import argparse
+import re
 from pathlib import Path
 
 from pngail_jax import run_records
@@ -23,7 +29,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser = ArgumentParser(
         "record", description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
     )
-    parser.add_argument("paths", nargs="+", type=path_argument, metavar="RUN_DIR",
+    parser.add_argument("paths", nargs="*", type=path_argument, metavar="RUN_DIR",
                         help="a sweep run to record; with --check, records to verify")  # fmt: skip
     parser.add_argument("--name", help="the record's folder name under --records")
     parser.add_argument(
@@ -31,17 +37,75 @@ def parse_args(argv=None) -> argparse.Namespace:
         help="where records are kept (default records/; experiments.paper's runs go to results/)",
     )  # fmt: skip
     parser.add_argument("--check", action="store_true", help="verify records instead")
+    parser.add_argument(
+        "--docs", action="store_true",
+        help="rewrite every <!-- record-table NAME --> table of README.md and docs/*.md from "
+        "its record (checked first)",
+    )  # fmt: skip
     args = parser.parse_args(argv)
+    if args.docs:
+        if args.paths or args.name or args.check:
+            parser.error("--docs takes no run, --name or --check")
+        return args
     if not args.check and (len(args.paths) != 1 or not args.name):
         parser.error("record one run at a time: RUN_DIR --name NAME (or --check RECORD ...)")
+    if args.check and not args.paths:
+        parser.error("--check needs the records to verify: --check records/NAME ...")
     if args.check and args.name:
         parser.error("--check verifies records; --name is for writing one")
     return args
 
 
+MARKED = re.compile(
+    r"(<!-- record-table (?P<name>[\w.-]+)(?: baseline=(?P<baseline>[\w.+-]+))? -->\n)"
+    r"(?P<table>.*?)(?P<end><!-- /record-table -->)",
+    re.S,
+)
+
+
+def doc_files(root: Path = Path(".")) -> list[Path]:
+    """The documents whose tables may rest on records: README.md and docs/*.md."""
+    return [root / "README.md", *sorted((root / "docs").glob("*.md"))]
+
+
+def marked_tables(path: Path, records: Path = Path("records")) -> list[tuple[str, str, str]]:
+    """(record name, the table in ``path``, the table its record gives) for each marked
+    table of ``path``; RecordError for a record missing or failing its check."""
+    found = []
+    for match in MARKED.finditer(path.read_text()):
+        record = run_records.check_record(records / match["name"])
+        expected = run_records.record_table(record, match["baseline"])
+        found.append((match["name"], match["table"], expected))
+    return found
+
+
+def rewrite_docs(root: Path = Path("."), records: Path = Path("records")) -> list[Path]:
+    """Every marked table of ``doc_files`` rewritten from its record; returns the files
+    changed."""
+    changed = []
+    for path in doc_files(root):
+        text = path.read_text()
+
+        def table(match):
+            record = run_records.check_record(records / match["name"])
+            return match[1] + run_records.record_table(record, match["baseline"]) + match["end"]
+
+        new = MARKED.sub(table, text)
+        if new != text:
+            path.write_text(new)
+            changed.append(path)
+    return changed
+
+
 def main(argv=None) -> list[Path]:
     args = parse_args(argv)
     try:
+        if args.docs:
+            changed = rewrite_docs(records=args.records)
+            print(
+                "rewrote " + (", ".join(map(str, changed)) if changed else "nothing (all current)")
+            )
+            return changed
         if args.check:
             for folder in args.paths:
                 print(f"ok  {run_records.describe(run_records.check_record(folder))}")

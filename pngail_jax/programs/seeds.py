@@ -23,6 +23,7 @@ import numpy as np
 
 from pngail_jax.integrity import IntegrityError, read_json, write_json
 from pngail_jax.programs.cli import ArgumentParser, HelpFormatter, path_argument
+from pngail_jax.report import LATE_LABEL, LATE_SHARE
 
 TRAINING_COLUMNS = ("disc_acc_agent", "disc_acc_demo", "mean_reward", "kl")
 
@@ -40,7 +41,7 @@ def parse_args(argv=None):
     parser.add_argument(
         "--share",
         type=float,
-        default=0.1,
+        default=LATE_SHARE,
         help="the last share of the iterations that 'late' columns average over",
     )
     parser.add_argument("--json", type=path_argument, help="also write the table here")
@@ -78,8 +79,9 @@ def read_training(path: Path, method: str, setting: str | None) -> tuple[str, di
     }
 
 
-def seed_table(run: Path, method: str, setting: str | None = None, share: float = 0.1):
-    """One dict per seed, sorted by final normalised return (best first)."""
+def seed_table(run: Path, method: str, setting: str | None = None, share: float = LATE_SHARE):
+    """One dict per seed, sorted by its normalised return over the last ``LATE_SHARE`` of
+    training (best first)."""
     setting, training = read_training(run / "metrics.csv", method, setting)
     try:
         summary = read_json(run / "summary.json", "run summary")
@@ -108,7 +110,7 @@ def seed_table(run: Path, method: str, setting: str | None = None, share: float 
             row[f"{name}_late"] = float(np.nanmean(values[-late:]))
             row[f"{name}_all"] = float(np.nanmean(values))
         table.append(row)
-    table.sort(key=lambda r: -np.nan_to_num(r["final_normalized_return"], nan=-np.inf))
+    table.sort(key=lambda r: -np.nan_to_num(r["late_average_normalized_return"], nan=-np.inf))
     return setting, table
 
 
@@ -117,17 +119,17 @@ def markdown(method: str, setting: str, table: list[dict], share: float) -> str:
         return "n/a" if value is None or not math.isfinite(value) else f"{value:.{digits}f}"
 
     lines = [
-        f"{method} ({setting}), seeds by final normalised return; 'late': the last "
-        f"{share:.0%} of the iterations",
+        f"{method} ({setting}), seeds by their normalised return over the {LATE_LABEL} "
+        f"(the headline figure); 'late' diagnostics: the last {share:.0%} of the iterations",
         "",
-        "| seed | final | last-10% avg | classifier MAE | RMSE | D acc. agent (late / all) | "
+        f"| seed | {LATE_LABEL} | final | classifier MAE | RMSE | D acc. agent (late / all) | "
         "D acc. demo (late / all) | mean reward (late) | KL (late / all) |",
         "|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for row in table:
         lines.append(
-            f"| {row['seed']} | {number(row['final_normalized_return'])} | "
-            f"{number(row['late_average_normalized_return'])} | "
+            f"| {row['seed']} | {number(row['late_average_normalized_return'])} | "
+            f"{number(row['final_normalized_return'])} | "
             f"{number(row['confidence_mae'], 3)} | {number(row['confidence_rmse'], 3)} | "
             f"{number(row['disc_acc_agent_late'])} / {number(row['disc_acc_agent_all'])} | "
             f"{number(row['disc_acc_demo_late'])} / {number(row['disc_acc_demo_all'])} | "
