@@ -28,6 +28,39 @@ LEGACY_MARKS = {
     "train_rl": ("policy.json",),
 }
 RESUMABLE = {"sweep", "paper", "offline"}
+# What each program's run writes at the top of its directory (fnmatch patterns): all that
+# --overwrite removes; a run folder holding anything else is not overwritten (its owner's
+# tests check that every name a real run writes is listed here).
+_LOGS = ("tensorboard", "wandb")
+OWNED = {
+    "sweep": ("config.json", ".config.sealed.json", "metrics.csv", "curves.png",
+              "diagnostics.png", "summary.md", "summary.json", "policies", "checkpoints",
+              *_LOGS),
+    "offline": ("config.json", ".config.sealed.json", "metrics.csv", "curves.png",
+                "summary.md", "summary.json", "checkpoints", *_LOGS),
+    "train_rl": ("config.json", ".config.sealed.json", "metrics.csv", "learning_curve.png",
+                 "policy.json", "policy_params", "digests.json", "checkpoints"),
+    "make_demos": ("demos.npz", "normalizer.json", "checkpoints"),
+    "compare_settings": ("comparison.json", "comparison.md", "comparison.png",
+                         "reference*", "table*", "mid-fast", "wide-fast"),  # + its arms' runs
+    "paper": ("paper.json", ".paper.sealed.json", "grids", "demos", "timings.json",
+              "adopted.json", "README.md", "results.json", "*.png"),
+    "paper-page": ("README.md", "results.json", "*.png"),
+    "compare": ("compare.json", "compare.md", "*.png"),
+}  # fmt: skip
+
+
+def unaccounted(directory: Path, program: str) -> list[str]:
+    """The names at the top of ``directory`` that a run of ``program`` does not write (its
+    ``OWNED`` list; the marker and the lock are every program's), sorted."""
+    from fnmatch import fnmatch
+
+    patterns = (*OWNED.get(program, ()), MARKER, LOCK)
+    return sorted(
+        path.name
+        for path in Path(directory).iterdir()
+        if not any(fnmatch(path.name, pattern) for pattern in patterns)
+    )
 
 
 def output_owner(directory: Path) -> str | None:
@@ -82,7 +115,17 @@ def output_refusal(
         return None
     if owner == program:
         if overwrite:
-            return None
+            foreign = unaccounted(directory, program)
+            if not foreign:
+                return None
+            shown = ", ".join(foreign[:5]) + (
+                f" and {len(foreign) - 5} more" if len(foreign) > 5 else ""
+            )
+            return (
+                f"{flag} {directory} holds a run of experiments.{program} and files it did not "
+                f"make ({shown}): --overwrite replaces only its own; move those, or choose "
+                f"another {flag}"
+            )
         resume = f"--resume {directory} to continue it, " if program in RESUMABLE else ""
         return (
             f"{flag} {directory} already holds a run of experiments.{program}: {resume}pass "
@@ -99,14 +142,16 @@ def output_refusal(
 
 def prepare_output(directory: Path, program: str, overwrite: bool = False) -> None:
     """Creates ``directory`` and marks it as ``program``'s run; with ``overwrite``, first
-    empties it, which ``claim_output`` allowed only for a run of ``program``."""
+    removes what a run of ``program`` writes there (``OWNED``), and nothing else:
+    ``claim_output`` allowed it only for a run of ``program`` holding nothing more."""
     import json
     import shutil
 
     directory = Path(directory)
     if overwrite and directory.exists() and output_owner(directory) == program:
+        keep = set(unaccounted(directory, program)) | {LOCK}  # the lock: this process's
         for path in directory.iterdir():
-            if path.name == LOCK:  # the lock of the process doing this
+            if path.name in keep:
                 continue
             shutil.rmtree(path) if path.is_dir() and not path.is_symlink() else path.unlink()
     directory.mkdir(parents=True, exist_ok=True)

@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from pngail_jax import compare
+from pngail_jax import compare, outputs
 from pngail_jax.compare import Scores
 from pngail_jax.grid import Cell
 from pngail_jax.outputs import prepare_output
@@ -138,6 +138,7 @@ def test_the_program_reads_runs_and_writes_its_page(tmp_path, capsys):
     )
     for name in ("compare.md", "aggregates.png", "profiles.png", "improvement.png"):
         assert (out / name).stat().st_size > 0, name
+    assert outputs.unaccounted(out, "compare") == []  # --overwrite knows all it wrote
     assert "P(method > b)" in capsys.readouterr().out
     with pytest.raises(SystemExit, match="holds no sweep or offline run"):
         program.main([str(out), "--out", str(tmp_path / "d")])

@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from pngail_jax import outputs
 from pngail_jax.jobs import compare_settings as job
 from pngail_jax.jobs.train_rl import TrainRLConfig
 from pngail_jax.programs import train_rl
@@ -93,6 +94,8 @@ def test_the_job_trains_evaluates_and_reuses_a_finished_arm(tmp_path, capsys):
     assert arm["trpo"] == {"num_envs": 25, "unroll_length": 200, "normalize_observations": False}
     assert arm["not_worse_than_baseline"] is True  # the baseline itself
     assert (tmp_path / "cmp" / "table" / "policy.json").exists()
+    assert outputs.unaccounted(tmp_path / "cmp", "compare_settings") == []
+    assert all(outputs.unaccounted(tmp_path / "cmp" / arm, "train_rl") == [] for arm in ("table",))
     again = job.compare_settings(config, tmp_path / "cmp", overwrite=True)
     assert "table: finished run in" in capsys.readouterr().out
     assert again["arms"]["table"]["final_return"] == arm["final_return"]  # same keys, same policies

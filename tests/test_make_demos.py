@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import pngail_jax
-from pngail_jax import envs
+from pngail_jax import envs, outputs
 from pngail_jax.demos import load_demonstrations
 from pngail_jax.demos.generate import normalized_return, rollout_episodes
 from pngail_jax.programs import make_demos
@@ -83,6 +83,7 @@ def test_make_demos_tiny_mujoco_task(tmp_path):
     flags += "--num-eval-episodes 1 --measure-episodes 1 --num-trajectories 3 --ratio 1:2"
     flags += " --learner ppo"  # the metadata names the learner that trained the policies
     path = make_demos.main(["--env", "Hopper-v4", "--out", str(tmp_path), *flags.split()])
+    assert outputs.unaccounted(tmp_path, "make_demos") == []  # --overwrite knows all it wrote
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # 2 iterations may not beat the random policy
         demos = load_demonstrations(path)

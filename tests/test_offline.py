@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from pngail_jax import envs
+from pngail_jax import envs, outputs
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import Demonstrations, make_split
 from pngail_jax.grid import make_cells
@@ -225,6 +225,7 @@ def test_the_program_writes_the_sweeps_outputs_and_refuses_a_second_run(
         "curves.png",
     }
     assert list(summary["methods"]) == ["bc-all", "dwbc", "bc-expert"]  # two programs
+    assert outputs.unaccounted(out, "offline") == []  # --overwrite knows all it wrote
     assert summary["gradient_steps"] == 40
     assert "bc-expert" in summary["probability_of_improvement"]
     with (out / "metrics.csv").open() as file:

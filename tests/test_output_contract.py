@@ -5,6 +5,7 @@ and nothing is written."""
 
 import argparse
 import json
+from fnmatch import fnmatch
 
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -68,14 +69,18 @@ def test_the_decision_over_any_contents_and_flags(
     empty = not exists or not (names or marker)
     owner = output_owner(directory) if exists else None
     marker_alone = not names and marker == program  # left by a start that failed: empty
-    allowed = empty or marker_alone or (owner == program and overwrite)
+    foreign = [n for n in names if not any(fnmatch(n, p) for p in outputs.OWNED[program])]
+    allowed = empty or marker_alone or (owner == program and overwrite and not foreign)
     try:
         claim_output(Parser(), directory, program, overwrite)
         assert allowed, (names, marker, program, overwrite)
     except Refused as refusal:
         assert not allowed
         message = str(refusal)
-        if owner == program:
+        if owner == program and overwrite:  # its run, and files it never writes
+            assert "--overwrite replaces only its own" in message
+            assert all(name in message for name in foreign)
+        elif owner == program:
             assert "pass --overwrite to replace it" in message
         elif owner is not None:
             assert f"it holds a run of experiments.{owner}" in message
@@ -93,6 +98,11 @@ def test_a_marker_wins_over_legacy_files_and_prepare_marks_and_empties_only_its_
     (run / "checkpoints").mkdir()
     prepare_output(run, "sweep", overwrite=True)  # its own run: emptied, marked again
     assert sorted(p.name for p in run.iterdir()) == [MARKER]
+    (run / "summary.md").write_text("old")
+    (run / "my-notes.txt").write_text("mine")  # a user's file: never removed
+    (run / "plots").mkdir()
+    prepare_output(run, "sweep", overwrite=True)
+    assert sorted(p.name for p in run.iterdir()) == [MARKER, "my-notes.txt", "plots"]
     theirs = tmp_path / "theirs"
     theirs.mkdir()
     (theirs / "keep.txt").write_text("mine")
@@ -145,6 +155,14 @@ def test_each_program_refuses_a_directory_it_did_not_make(tmp_path, capsys):
         capsys.readouterr().err
     )
     assert sweep.parse_args(["--out", str(finished_sweep), "--overwrite"]).out == finished_sweep
+    (finished_sweep / "notes.txt").write_text("the user's")  # --overwrite would not remove it
+    (finished_sweep / "my-plots").mkdir()
+    with pytest.raises(SystemExit):
+        sweep.parse_args(["--out", str(finished_sweep), "--overwrite"])
+    assert "holds a run of experiments.sweep and files it did not make (my-plots, notes.txt)" in (
+        capsys.readouterr().err
+    )
+    assert (finished_sweep / "notes.txt").read_text() == "the user's"
     paper_run = tmp_path / "paper-run"
     prepare_output(paper_run, "paper")
     with pytest.raises(SystemExit):

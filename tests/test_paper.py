@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from conftest import sigterm_to_self
 
+from pngail_jax import outputs
 from pngail_jax.demos import Demonstrations
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.methods import display_name
@@ -142,6 +143,7 @@ def test_a_tiny_fig2_run_writes_the_page_with_every_method_resumes_and_adopts(
     assert final["seeds"] == 2 and len(final["ci95"]) == 2
     summary = json.loads((out / "grids" / "Pendulum-v1-main" / "summary.json").read_text())
     assert summary["complete"] and sorted(summary["methods"]) == sorted(paper.SEVEN_METHODS)
+    assert outputs.unaccounted(out, "paper") == []  # --overwrite knows all it wrote
     # The same run again is refused; --resume keeps the finished grid and rewrites the page.
     with pytest.raises(SystemExit):
         paper.parse_args(argv)
@@ -164,6 +166,7 @@ def assert_a_page_so_far_shows_what_ran(out, text, capsys):
     before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
     page = paper.main(["--page", str(out), "--out", str(out.parent / "page")]).read_text()
     assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+    assert outputs.unaccounted(out.parent / "page", "paper-page") == []
 
     def rows(page_text):
         return [line for line in page_text.splitlines() if line.startswith("| Pendulum-v1 |")]
@@ -241,6 +244,12 @@ def assert_a_sweep_of_the_grid_is_adopted(out, text, monkeypatch):
     assert json.loads((out / "results.json").read_text())["adopted"]["Pendulum-v1-main"]
     # The same adoption again is a no-op.
     assert paper.main(["--resume", str(out), "--adopt", str(sweep)]).read_text() == adopted
+    # A plan's own grid adopted into the plan being overwritten: refused, nothing deleted.
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    argv = ["--preset", "test", "--only", "fig2", "--envs", "Pendulum-v1", "--out", str(out)]
+    with pytest.raises(SystemExit, match="lies inside --out .*, which --overwrite empties first"):
+        paper.main([*argv, "--overwrite", "--adopt", str(copied)])
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
 
 
 def test_the_page_warns_of_a_made_expert_worse_than_random_and_the_plan_has_an_eta(

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from conftest import metrics_numbers, sigterm_to_self, tiny_sweep_args
 
+from pngail_jax import outputs
 from pngail_jax.demos import save_npz
 from pngail_jax.jobs import build as build_job
 from pngail_jax.jobs import chunks, record
@@ -50,6 +51,7 @@ def test_sweep_writes_every_output(finished, tmp_path):
     out = finished
     for name in ("config.json", "metrics.csv", "curves.png", "summary.md", "summary.json"):
         assert (out / name).stat().st_size > 0, name
+    assert outputs.unaccounted(out, "sweep") == []  # --overwrite knows all it wrote
     rows = read_csv(out / "metrics.csv")
     assert len(rows) == 2 * 2 * 4  # methods x seeds x iterations
     assert list(rows[0]) == list(sweep_columns())

@@ -8,6 +8,7 @@ import pytest
 from conftest import sigterm_to_self
 
 import pngail_jax
+from pngail_jax import outputs
 from pngail_jax.networks import GaussianPolicy
 from pngail_jax.programs import train_rl
 
@@ -39,6 +40,7 @@ def run_dir(tmp_path_factory):
 def test_outputs_are_written(run_dir):
     for name in ("config.json", "metrics.csv", "learning_curve.png", "policy.json"):
         assert (run_dir / name).stat().st_size > 0, name
+    assert outputs.unaccounted(run_dir, "train_rl") == []  # --overwrite knows all it wrote
     lines = (run_dir / "metrics.csv").read_text().splitlines()
     assert lines[0].startswith("seed,iteration,env_steps,eval/return")
     assert len(lines) == 1 + 2 * 4

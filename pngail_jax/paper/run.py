@@ -68,6 +68,12 @@ def run_paper(
     None: its paper.json's); ``adopt``: finished sweep folders to keep as the plan's grids
     they match (``paper.adopt``). Returns the page's path. Raises ``RunError`` with one line."""
     out = Path(out)
+    inside = [d for d in map(Path, adopt) if d.resolve().is_relative_to(out.resolve())]
+    if overwrite and not resume and inside:  # it would be deleted before it is adopted
+        raise RunError(
+            f"--adopt {inside[0]} lies inside --out {out}, which --overwrite empties first: "
+            "copy or move it out of there, or give another --out"
+        )
     with refusals(), claimed(out, PROGRAM, overwrite=overwrite, resume=resume) as claim:
         if resume:
             options = saved_options(out)
