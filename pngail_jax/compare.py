@@ -25,7 +25,6 @@ and the baseline's probability of improvement over it there.
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import json
 import math
@@ -36,18 +35,20 @@ import numpy as np
 
 from pngail_jax import stats
 from pngail_jax.integrity import IntegrityError, read_json
-from pngail_jax.report import HEADLINE, LATE_LABEL, seed_figures
+from pngail_jax.report import HEADLINE
+from pngail_jax.runs import (
+    STATISTICS,
+    RunReadError,
+    run_progress,
+    run_scores,
+    verify_run,
+)
 
 AGGREGATES = ("iqm", "mean", "median", "optimality_gap")
-STATISTICS = {  # what a score is, as the tables and plots say it
-    "late_average": f"normalised return, mean over the {LATE_LABEL}",
-    "final": "final normalised return (the last evaluation)",
-}
 NUM_RESAMPLES = 2000
 
 
-class CompareError(Exception):
-    """A run that cannot be compared (the message names it and why)."""
+CompareError = RunReadError  # the name programs catch
 
 
 @dataclasses.dataclass
@@ -58,6 +59,7 @@ class Scores:
     values: dict[str, dict[str, np.ndarray]]
     unfinished: dict[str, str] = dataclasses.field(default_factory=dict)  # run -> how far
     statistic: str = HEADLINE
+    notes: list[str] = dataclasses.field(default_factory=list)  # what verify_run let through
 
     @property
     def methods(self) -> list[str]:
@@ -84,7 +86,7 @@ class Scores:
         kept = {m: {t: by[t] for t in shared} for m, by in self.values.items()}
         left_out = {m: tasks for m, tasks in left_out.items() if tasks}
         # (unfinished: every run read, named)
-        return Scores(kept, self.unfinished, self.statistic), left_out
+        return Scores(kept, self.unfinished, self.statistic, self.notes), left_out
 
     def pooled(self, method: str) -> tuple[np.ndarray, np.ndarray]:
         """float[n] scores and int[n] task labels (index into ``tasks``) of ``method``'s
@@ -96,107 +98,6 @@ class Scores:
             values.append(finite)
             labels.append(np.full(finite.size, tasks.index(task)))
         return np.concatenate(values), np.concatenate(labels)
-
-
-RUN_PROGRAMS = ("sweep", "offline")  # the programs whose runs compare (and records) read
-
-
-def run_settings(config: dict) -> dict:
-    """A run's settings from its ``config.json``: the file itself for a sweep, its
-    ``config`` part for the offline program (env, methods, seeds, ...)."""
-    return config["config"] if config.get("program") == "offline" else config
-
-
-def run_scores(run_dir: Path, statistic: str = HEADLINE) -> tuple[str, dict[str, np.ndarray]]:
-    """A sweep or offline run's task and each method label's scores float[seeds]
-    (``statistic`` of the normalised evaluations; NaN for a seed that diverged), so the
-    offline family's rows join the online methods' tables. CompareError when the run has
-    none to read."""
-    from pngail_jax.outputs import output_owner
-
-    run_dir = Path(run_dir)
-    if output_owner(run_dir) not in RUN_PROGRAMS:
-        raise CompareError(
-            f"{run_dir} holds no sweep or offline run (experiments.sweep or experiments.offline "
-            "writes one)"
-        )
-    try:
-        config = run_settings(read_json(run_dir / "config.json", "run config"))
-        env = config["env"]
-    except (OSError, IntegrityError, KeyError, TypeError) as error:
-        raise CompareError(f"{run_dir}: no readable config.json ({error})") from None
-    path = run_dir / "metrics.csv"
-    if not path.exists():
-        raise CompareError(f"{run_dir}: no metrics.csv yet (the run has not finished a chunk)")
-    return env, scores_of_metrics(path, config, run_progress_numbers(run_dir), statistic)
-
-
-def scores_of_metrics(
-    path: Path, config: dict, progress: tuple[int, int] | None, statistic: str = HEADLINE
-) -> dict[str, np.ndarray]:
-    """Each method label's scores float[seeds] (``statistic``, a key of ``STATISTICS``, of
-    its normalised evaluations) in a sweep's metrics file (``metrics.csv``, or a run record's
-    ``metrics.csv.gz``), checked whole against the run's ``config`` and ``progress``
-    (iterations done and planned, when known). CompareError for a damaged or cut-short
-    file."""
-    if statistic not in STATISTICS:
-        raise CompareError(f"statistic {statistic!r}: give one of {', '.join(STATISTICS)}")
-    from pngail_jax.report import iterations_per_cell, read_evaluations
-
-    try:
-        _check_whole(path, iterations_per_cell(path), progress, config)
-        groups = read_evaluations(
-            path, "normalized_return", evaluated_by="eval_return", group_by=("method", "setting")
-        )
-    except (KeyError, ValueError, TypeError, EOFError, OSError, csv.Error) as error:
-        reason = f"no column {error}" if isinstance(error, KeyError) else str(error)
-        raise CompareError(
-            f"{path} is damaged: not a metrics.csv as the sweep writes it ({reason})"
-        ) from None
-    if not groups:
-        raise CompareError(f"{path}: no evaluated iteration")
-    settings = {setting for _, setting in groups}
-    scores = {}
-    for (method, setting), (_, values) in groups.items():
-        if np.isnan(values).all():
-            raise CompareError(
-                f"{path}: {method} has no normalised return (the run knows no random and "
-                "optimal returns: give --optimal-return to the sweep)"
-            )
-        label = method if len(settings) == 1 else f"{method} [{setting}]"
-        scores[label] = seed_figures(values, statistic)
-    return scores
-
-
-def _check_whole(path: Path, reached: dict, progress: tuple[int, int] | None, config: dict) -> None:
-    """CompareError when ``metrics.csv`` ends before the run did: a cell of the config
-    missing (``config``'s methods x seeds, in every setting the file has), cells that stop at
-    different iterations (a file cut within a cell), or all of them before the iteration its
-    summary.json says the run reached (``progress``: iterations done and planned)."""
-    if not reached:
-        raise CompareError(f"{path}: no rows")
-    methods, seeds = config.get("methods"), config.get("seeds")
-    if isinstance(methods, list) and isinstance(seeds, int):
-        settings = {setting for _, setting, _ in reached}
-        for method in methods:
-            found = sum(1 for cell in reached if cell[0] == method)
-            if found < seeds * len(settings):
-                raise CompareError(
-                    f"{path} is cut short: it holds {found} of the {seeds * len(settings)} "
-                    f"runs of {method} that config.json asks for"
-                )
-    lowest, highest = min(reached.values()), max(reached.values())
-    if lowest != highest:
-        short = next(cell for cell, last in reached.items() if last == lowest)
-        raise CompareError(
-            f"{path} is cut short: {short[0]} seed {short[2]} ends at iteration {lowest}, "
-            f"other cells at {highest}"
-        )
-    if progress is not None and highest < progress[0]:
-        raise CompareError(
-            f"{path} is cut short: it ends at iteration {highest}, and summary.json says the "
-            f"run reached {progress[0]}"
-        )
 
 
 def _same_run_key(run_dir: Path) -> str | None:
@@ -236,14 +137,23 @@ def _check_distinct(run_dirs: Sequence[Path]) -> None:
             seen_configs[key] = run_dir
 
 
-def load_scores(run_dirs: Sequence[Path], statistic: str = HEADLINE) -> Scores:
+def load_scores(
+    run_dirs: Sequence[Path], statistic: str = HEADLINE, *, allow_unsealed: bool = False
+) -> Scores:
     """The scores (``statistic``) of every run, pooled per task (two runs of one task: their
     seeds together). Methods keep the order they first appear in. CompareError for a run given
-    twice, two runs of the same seeds and config, or a damaged or cut-short metrics.csv."""
+    twice, two runs of the same seeds and config, or one that fails ``runs.verify_run`` (its
+    seal missing, unless ``allow_unsealed``, or not matching its config; a damaged or
+    cut-short metrics.csv; a summary.json that disagrees with it). Input files are not
+    checked: a comparison reads results, not data. Notes of what was let through are in the
+    returned ``Scores.notes``."""
     _check_distinct(run_dirs)
     values: dict[str, dict[str, np.ndarray]] = {}
-    unfinished = {}
+    unfinished, notes = {}, []
     for run_dir in run_dirs:
+        notes += verify_run(
+            Path(run_dir), str(run_dir), allow_unsealed=allow_unsealed, check_inputs=False
+        )
         task, scores = run_scores(run_dir, statistic)
         for method, seeds in scores.items():
             by_task = values.setdefault(method, {})
@@ -251,39 +161,7 @@ def load_scores(run_dirs: Sequence[Path], statistic: str = HEADLINE) -> Scores:
         progress = run_progress(run_dir)
         if progress is not None:
             unfinished[str(run_dir)] = progress
-    return Scores(values, unfinished, statistic)
-
-
-def run_progress_numbers(run_dir: Path) -> tuple[int, int] | None:
-    """(iterations done, planned) from a run's summary.json, None where it does not say."""
-    try:
-        summary = read_json(Path(run_dir) / "summary.json", "run summary")
-    except (OSError, IntegrityError):
-        return None
-    if not isinstance(summary, dict):
-        return None
-    planned = summary.get("iterations")
-    done = planned if summary.get("complete") is True else summary.get("iterations_done")
-    if isinstance(done, int) and isinstance(planned, int):
-        return done, planned
-    return None
-
-
-def run_progress(run_dir: Path) -> str | None:
-    """None for a finished run (or one whose summary.json is missing: nothing says it is not),
-    else how far it got ("200 of 500 iterations") from its summary.json, written each chunk."""
-    try:
-        summary = read_json(Path(run_dir) / "summary.json", "run summary")
-    except FileNotFoundError:
-        return None
-    except (OSError, IntegrityError):
-        return "unknown: its summary.json is unreadable"
-    if not isinstance(summary, dict) or summary.get("complete") is not False:
-        return None  # complete, or a run from before summaries said (nothing says it is not)
-    done, planned = summary.get("iterations_done"), summary.get("iterations")
-    if isinstance(done, int) and isinstance(planned, int):
-        return f"{done:,} of {planned:,} iterations"
-    return "unfinished"
+    return Scores(values, unfinished, statistic, notes)
 
 
 # -- aggregates: statistic(samples float[R, n], labels int[n]) -> float[R] ------------------
@@ -435,6 +313,7 @@ def compare(scores: Scores, baseline: str, *, seed: int = 0) -> dict:
         },
         "per_task": tasks,
         "unfinished": scores.unfinished,
+        "notes": scores.notes,
     }
 
 
@@ -462,6 +341,11 @@ def markdown(result: dict) -> str:
             if result.get("unfinished")
             else []
         ),
+        *(
+            [f"**Checks let through**: {'; '.join(result['notes'])}.", ""]
+            if result.get("notes")
+            else []
+        ),  # fmt: skip
         "| method | seeds | IQM | mean | median | optimality gap |",
         "|---|---:|---:|---:|---:|---:|",
     ]

@@ -25,16 +25,16 @@ from pathlib import Path
 
 import numpy as np
 
-from pngail_jax.compare import (
+from pngail_jax.integrity import IntegrityError, atomic_path, file_digest, read_json, write_json
+from pngail_jax.report import LATE_SHARE
+from pngail_jax.runs import (
     RUN_PROGRAMS,
     STATISTICS,
-    CompareError,
+    RunReadError,
     run_progress_numbers,
     run_settings,
     scores_of_metrics,
 )
-from pngail_jax.integrity import IntegrityError, atomic_path, file_digest, read_json, write_json
-from pngail_jax.report import LATE_SHARE
 
 FORMAT = 2  # 2: both statistics per seed (1 held the final evaluation only)
 RECORD_FILE = "record.json"
@@ -70,12 +70,16 @@ def _training_seconds(metrics_path: Path) -> float | None:
     return max(seconds) if seconds else None
 
 
-def write_record(run_dir: Path, name: str, records: Path = Path("records")) -> Path:
-    """Records the sweep run in ``run_dir`` as ``records/<name>/`` and checks it. A record of
+def write_record(
+    run_dir: Path, name: str, records: Path = Path("records"), *, allow_unsealed: bool = False
+) -> Path:
+    """Records the sweep or offline run in ``run_dir`` as ``records/<name>/`` and checks it,
+    once ``runs.verify_run`` trusts the run (its seal, unless ``allow_unsealed``; metrics.csv
+    whole and agreeing with summary.json; its input files are not looked at). A record of
     that name already there is replaced only if it records the same run (same config and
     commit); anything else in the way is refused. Returns the record's folder."""
-    from pngail_jax.compare import run_scores
     from pngail_jax.outputs import output_owner
+    from pngail_jax.runs import run_scores, verify_run
 
     run_dir = Path(run_dir)
     if not name or "/" in name or name.startswith("."):
@@ -87,12 +91,15 @@ def write_record(run_dir: Path, name: str, records: Path = Path("records")) -> P
             "writes one)"
         )
     try:
+        for note in verify_run(run_dir, str(run_dir), allow_unsealed=allow_unsealed,
+                               check_inputs=False):  # fmt: skip
+            print(f"note: {note}")
         config = read_json(run_dir / "config.json", "run config")
         summary = read_json(run_dir / "summary.json", "run summary")
         scores = {name: run_scores(run_dir, name)[1] for name in STATISTICS}
     except FileNotFoundError as error:
         raise RecordError(f"{run_dir}: {Path(error.filename).name} is missing") from None
-    except (OSError, IntegrityError, CompareError) as error:
+    except (OSError, IntegrityError, RunReadError) as error:
         raise RecordError(str(error)) from None
     provenance = config.get("provenance", {})
     progress = run_progress_numbers(run_dir)
@@ -184,7 +191,7 @@ def check_record(folder: Path) -> dict:
     for name in STATISTICS:
         try:
             scores = scores_of_metrics(metrics, run_settings(record["config"]), progress, name)
-        except CompareError as error:
+        except RunReadError as error:
             raise RecordError(str(error)) from None
         if _per_seed(scores) != record.get(_key(name)):
             raise RecordError(

@@ -35,10 +35,8 @@ from pngail_jax.jobs.record import (  # noqa: F401
     SavedRun,
     already_complete,
     check_inputs,
-    check_seal,
     drop_stale_outputs,
     load_saved,
-    sealed_part,
     write_config,
 )
 from pngail_jax.jobs.results import (  # noqa: F401
@@ -49,6 +47,7 @@ from pngail_jax.jobs.results import (  # noqa: F401
 )
 from pngail_jax.jobs.seeds import train_seeds  # noqa: F401
 from pngail_jax.jobs.sweep import PROGRAM, configure_devices, run  # noqa: F401
+from pngail_jax.runs import sealed_part  # noqa: F401
 
 warnings.warn(
     "pngail_jax.runner is now pngail_jax.jobs (run, RunResult, RunError: from pngail_jax); "

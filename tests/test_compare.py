@@ -9,9 +9,11 @@ import pytest
 from pngail_jax import compare, outputs
 from pngail_jax.compare import Scores
 from pngail_jax.grid import Cell
+from pngail_jax.integrity import CONFIG_SEAL, seal
 from pngail_jax.outputs import prepare_output
 from pngail_jax.programs import compare as program
 from pngail_jax.report import write_metrics_csv
+from pngail_jax.runs import sealed_part
 
 A = {"t1": np.array([0.1, 0.5, 0.9]), "t2": np.array([0.2, 1.4])}
 B = {"t1": np.array([0.0, 0.3, 0.6]), "t2": np.array([0.5, 0.7])}
@@ -81,11 +83,18 @@ def test_a_task_where_a_method_has_no_finite_score_is_left_out():
     assert np.isnan(empty["fraction"][0])
 
 
+def sealed_config(directory, document):
+    """config.json and the seal a run writes with it."""
+    (directory / "config.json").write_text(json.dumps(document))
+    seal(directory / CONFIG_SEAL, sealed_part(document))
+
+
 def fake_run(directory, env, finals):
-    """A sweep run's files: config.json, and metrics.csv with one evaluated iteration per
-    method whose normalised returns are ``finals[method]`` (random -1000, optimal 0)."""
+    """A sweep run's files: config.json (sealed), and metrics.csv with one evaluated
+    iteration per method whose normalised returns are ``finals[method]`` (random -1000,
+    optimal 0)."""
     prepare_output(directory, "sweep")
-    (directory / "config.json").write_text(json.dumps({"env": env}))
+    sealed_config(directory, {"env": env})
     cells = [Cell(m, seed) for m, values in finals.items() for seed in range(len(values))]
     returns = np.array([[v * 1000 - 1000] for values in finals.values() for v in values])
     metrics = {name: np.zeros_like(returns) for name in ("disc/acc_agent", "disc/acc_demo",
@@ -99,7 +108,7 @@ def test_a_score_is_the_late_average_unless_the_final_evaluation_is_asked_for(tm
     """Ten evaluations a seed: the default score is the mean of the last 2 (the last 20% of
     training), --statistic final the last one; compare.md and compare.json say which."""
     prepare_output(tmp_path / "r", "sweep")
-    (tmp_path / "r" / "config.json").write_text(json.dumps({"env": "t"}))
+    sealed_config(tmp_path / "r", {"env": "t"})
     rng = np.random.default_rng(3)
     normalised = rng.uniform(0, 1, (4, 10))  # a seeds 0-1, b seeds 0-1
     cells = [Cell(m, seed) for m in ("a", "b") for seed in range(2)]
@@ -191,7 +200,7 @@ def long_fake_run(directory, env="t1", iterations=3, seed=0):
     fake_run(directory, env, {"a": [0.5, 0.6], "b": [0.2, 0.3]})
     config = {"env": env, "methods": ["a", "b"], "seeds": 2, "seed": seed,
               "iterations": iterations, "provenance": {"host": str(directory)}}  # fmt: skip
-    (directory / "config.json").write_text(json.dumps(config))
+    sealed_config(directory, config)
     cells = [Cell(m, s) for m in ("a", "b") for s in range(2)]
     returns = np.tile(np.array([[-500.0], [-400.0], [-800.0], [-700.0]]), (1, iterations))
     metrics = {name: np.zeros_like(returns) for name in ("disc/acc_agent", "disc/acc_demo",

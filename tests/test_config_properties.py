@@ -370,6 +370,10 @@ def test_compare_settings_refuses_a_file_and_finished_work(tmp_path, capsys):
     assert "already holds a run of experiments.compare_settings: pass --overwrite" in (
         capsys.readouterr().err
     )
+    with pytest.raises(SystemExit):  # the test's own file there: not the program's to remove
+        compare_settings.parse_args([*flags, str(tmp_path), "--overwrite"])
+    assert "and files it did not make (file)" in capsys.readouterr().err
+    file.unlink()
     assert compare_settings.parse_args([*flags, str(tmp_path), "--overwrite"]).overwrite
     with pytest.raises(SystemExit):
         compare_settings.parse_args([*flags, str(tmp_path / "new"), "--arms", "table,table"])

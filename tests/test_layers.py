@@ -35,7 +35,7 @@ LAYERS = [
         "trainers",
         (
             "adversarial", "grid", "train", "run_config", "report", "plots", "tracking", "compare",
-            "run_records", "offline",
+            "run_records", "offline", "runs",
         ),
     ),
     ("jobs", ("jobs", "jobs.*", "runner")),

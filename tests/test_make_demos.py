@@ -119,6 +119,10 @@ def test_bad_output_directories_fail_before_any_training(tmp_path, capsys):
         make_demos.parse_args(["--out", str(tmp_path)])
     err = capsys.readouterr().err
     assert "already holds a run of experiments.make_demos: pass --overwrite" in err
+    with pytest.raises(SystemExit):  # the test's own file there: not the program's to remove
+        make_demos.parse_args(["--out", str(tmp_path), "--overwrite"])
+    assert "and files it did not make (file)" in capsys.readouterr().err
+    file.unlink()
     assert make_demos.parse_args(["--out", str(tmp_path), "--overwrite"]).overwrite
     assert make_demos.parse_args(["--out", str(tmp_path / "new" / "dir")]).out.name == "dir"
 

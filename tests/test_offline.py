@@ -4,6 +4,7 @@ its grid compiles for other methods, the discriminator schedules, and bad config
 
 import csv
 import dataclasses
+import json
 
 import jax
 import jax.numpy as jnp
@@ -252,6 +253,12 @@ def test_the_program_writes_the_sweeps_outputs_and_refuses_a_second_run(
     record = run_records.check_record(folder)
     assert record["program"] == "experiments.offline" and record["complete"]
     assert "BC (all rows)" in run_records.record_table(record, "bc-all")
+    # Sealed as the sweep is: a config.json edited by hand is not resumed under its label.
+    document = json.loads((out / "config.json").read_text())
+    document["config"]["gradient_steps"] = 80
+    (out / "config.json").write_text(json.dumps(document))
+    with pytest.raises(SystemExit, match="config.json was changed since the run began"):
+        program.main(["--resume", str(out)])
 
 
 @pytest.mark.slow

@@ -9,9 +9,11 @@ from conftest import sigterm_to_self
 
 from pngail_jax import outputs
 from pngail_jax.demos import Demonstrations
+from pngail_jax.integrity import CONFIG_SEAL, seal
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.methods import display_name
 from pngail_jax.programs import paper
+from pngail_jax.runs import sealed_part
 
 
 def test_fig2_and_fig3_share_one_grid_per_task_and_each_figure_has_its_grids():
@@ -234,7 +236,11 @@ def assert_a_sweep_of_the_grid_is_adopted(out, text, monkeypatch):
     shutil.copytree(sweep, other)
     config = json.loads((other / "config.json").read_text())
     (other / "config.json").write_text(json.dumps({**config, "seeds": 3}))
-    with pytest.raises(SystemExit, match="seeds 3, the plan's 2 .the plan so far is kept: --r"):
+    with pytest.raises(SystemExit, match=r"config.json was changed since the run began \(seeds"):
+        paper.main(["--resume", str(out), "--adopt", str(other)])  # edited by hand: refused
+    (other / "config.json").write_text(json.dumps({**config, "seed": 7}))  # another base seed
+    seal(other / CONFIG_SEAL, sealed_part({**config, "seed": 7}))  # as its run sealed it
+    with pytest.raises(SystemExit, match="seed 7, the plan's 0 .the plan so far is kept: --r"):
         paper.main(["--resume", str(out), "--adopt", str(other)])
     adopted = paper.main(["--resume", str(out), "--adopt", str(sweep)]).read_text()
     copied = out / "grids" / "Pendulum-v1-main"

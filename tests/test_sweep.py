@@ -13,9 +13,12 @@ from conftest import metrics_numbers, sigterm_to_self, tiny_sweep_args
 
 from pngail_jax import outputs
 from pngail_jax.demos import save_npz
+from pngail_jax.integrity import sealed_differences
 from pngail_jax.jobs import build as build_job
 from pngail_jax.jobs import chunks, record
+from pngail_jax.outputs import MARKER
 from pngail_jax.programs import sweep
+from pngail_jax.runs import sealed_part
 
 SUMMARY_KEYS = {  # the fields of every earlier summary.json, and the new interval ones
     "final_return_mean",
@@ -365,7 +368,7 @@ def test_a_hand_edited_config_is_refused_naming_the_field(finished, tmp_path, fi
     assert named in str(error.value)
     original = json.loads((finished / "config.json").read_text())
     original["provenance"]["git_commit"] = "edited"  # where it ran is not sealed
-    record.check_seal(out, original)  # no refusal
+    assert sealed_differences(out / record.SEAL, sealed_part(original)) == []
 
 
 def test_a_damaged_seal_is_refused(finished, tmp_path):
@@ -374,8 +377,11 @@ def test_a_damaged_seal_is_refused(finished, tmp_path):
     seal.write_text(seal.read_text().replace("0.2", "0.3"))
     with pytest.raises(SystemExit, match=r"\.config\.sealed\.json: damaged"):
         sweep.main(["--resume", str(out)])
-    seal.unlink()  # a run that carries the marker was sealed: a missing seal is refused
+    seal.unlink()  # a copy without its dot-files, or a run from before seals: refused
     with pytest.raises(SystemExit, match=r"its seal \.config\.sealed\.json is missing"):
+        sweep.main(["--resume", str(out)])
+    (out / MARKER).unlink()  # a run from before the marker too: the same
+    with pytest.raises(SystemExit, match="pass --allow-unsealed to go on unchecked"):
         sweep.main(["--resume", str(out)])
 
 
@@ -606,3 +612,46 @@ def test_compare_expected_says_where_a_run_lies_against_a_record(finished, tmp_p
         run_records.expected_rows(Scores(far.values, statistic="final"), record)[0]["verdict"]
         == "within"
     )
+
+
+def test_every_program_that_reads_a_run_verifies_it_the_same_way(finished, tmp_path, capsys):
+    """resume, compare and record trust a run only as runs.verify_run does: a summary.json
+    edited by hand, a config.json edited by hand and a run copied without its seal are each
+    refused in one line naming the file; --allow-unsealed goes on and says what it skipped."""
+    from pngail_jax.programs import compare as compare_program
+    from pngail_jax.programs import record as record_program
+
+    copy = copy_run(finished, tmp_path)
+
+    def refused(program, argv):
+        with pytest.raises(SystemExit) as stop:
+            program.main(argv)
+        assert "Traceback" not in str(stop.value.code)
+        return str(stop.value.code)
+
+    compare_argv = [str(copy), "--out", str(tmp_path / "cmp")]
+    record_argv = [str(copy), "--name", "r", "--records", str(tmp_path / "records")]
+    summary = json.loads((copy / "summary.json").read_text())
+    edited = json.loads(json.dumps(summary))
+    edited["methods"]["gail"]["per_seed"][1]["final_return"] += 100.0
+    (copy / "summary.json").write_text(json.dumps(edited))
+    for program, argv in ((compare_program, compare_argv), (record_program, record_argv),
+                          (sweep, ["--resume", str(copy)])):  # fmt: skip
+        assert "summary.json says gail seed 1 ended at" in refused(program, argv)
+    (copy / "summary.json").write_text(json.dumps(summary))
+    config = json.loads((copy / "config.json").read_text())
+    (copy / "config.json").write_text(json.dumps({**config, "iterations": 40}))
+    for program, argv in ((compare_program, compare_argv), (record_program, record_argv)):
+        assert "config.json was changed since the run began (iterations" in refused(program, argv)
+    (copy / "config.json").write_text(json.dumps(config))
+    (copy / record.SEAL).unlink()  # copied without its dot-files
+    for program, argv in ((compare_program, compare_argv), (record_program, record_argv),
+                          (sweep, ["--resume", str(copy)])):  # fmt: skip
+        assert "its seal .config.sealed.json is missing" in refused(program, argv)
+    out = compare_program.main([*compare_argv, "--allow-unsealed"])
+    assert "**Checks let through**" in (out / "compare.md").read_text()
+    record_program.main([*record_argv, "--allow-unsealed"])
+    sweep.main(["--resume", str(copy), "--allow-unsealed"])
+    printed = capsys.readouterr().out
+    assert "no seal, config.json unchecked (--allow-unsealed)" in printed
+    assert "the run is already complete; nothing to do" in printed

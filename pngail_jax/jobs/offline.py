@@ -23,7 +23,7 @@ from pngail_jax import plots, report
 from pngail_jax import settings as run_settings
 from pngail_jax.demos import DemonstrationError
 from pngail_jax.grid import Grid, make_cells, nonfinite_cells
-from pngail_jax.integrity import IntegrityError, changed_inputs, read_json, write_json
+from pngail_jax.integrity import CONFIG_SEAL, IntegrityError, read_json, seal, write_json
 from pngail_jax.jobs.build import input_files, load_or_make_demos, resolve_normalizer
 from pngail_jax.jobs.chunks import (
     Progress,
@@ -44,6 +44,7 @@ from pngail_jax.offline import (
 )
 from pngail_jax.outputs import claimed
 from pngail_jax.run_config import RunConfig, provenance
+from pngail_jax.runs import UntrustedRun, sealed_part, verify_run
 from pngail_jax.tracking import ticking
 
 PROGRAM = "offline"
@@ -147,15 +148,18 @@ def run_offline(
     out = Path(out)
     with refusals(), claimed(out, PROGRAM, overwrite=overwrite, resume=resume) as claim:
         run_config = config.run_config
+        if resume:  # the seal, the input files, metrics.csv against summary.json
+            try:
+                verify_run(out, f"cannot resume {out}")
+            except UntrustedRun as error:
+                raise RunError(str(error)) from None
         saved = load_offline_config(out) if resume else None
         if saved is not None and saved != config:
             raise RunError(f"cannot resume {out}: it began with another config")
         env, demos, demos_path = _environment_and_demos(config)
         normalizer, normalizer_source = resolve_normalizer(run_config, demos, env)
         inputs = input_files(run_config, demos_path)
-        if resume:
-            _check_inputs_unchanged(out)
-        else:
+        if not resume:
             claim.prepare()
         document = {
             "program": PROGRAM,
@@ -167,7 +171,8 @@ def run_offline(
             "complete": False,
             "provenance": provenance(program=PROGRAM),
         }
-        if not resume:  # written first, so that a run cut short can be resumed
+        if not resume:  # written first (sealed first), so that a run cut short can resume
+            seal(out / CONFIG_SEAL, sealed_part(document))
             write_json(out / "config.json", document)
         cells = make_cells(config.methods, config.seeds, (config.label_ratio,),
                            (config.noise_std,))  # fmt: skip
@@ -221,14 +226,6 @@ def _environment_and_demos(config: OfflineRunConfig):
     if demos.confidence is None:
         raise RunError(f"{demos_path}: no confidences, which every offline method reads")
     return env, demos, demos_path
-
-
-def _check_inputs_unchanged(out: Path) -> None:
-    """RunError when an input file the run in ``out`` began with is gone or changed."""
-    recorded = read_json(out / "config.json", "offline run config")["input_files"]
-    changes = changed_inputs(recorded)
-    if changes:
-        raise RunError(f"cannot resume: {'; '.join(changes)}")
 
 
 def _run_group(

@@ -20,14 +20,13 @@ from pngail_jax.integrity import (
     changed_inputs,
     read_json,
     seal,
-    sealed_differences,
     write_json,
 )
 from pngail_jax.jobs.build import BuiltRun, input_files
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.methods import preset_record
-from pngail_jax.outputs import MARKER
 from pngail_jax.run_config import RunConfig, provenance, upgrade_saved_config
+from pngail_jax.runs import sealed_part
 from pngail_jax.validation import ConfigError
 
 
@@ -47,45 +46,27 @@ class SavedRun:
 SEAL = CONFIG_SEAL
 
 
-def sealed_part(document: dict) -> dict:
-    """What config.json's seal covers: everything but provenance (where it ran)."""
-    return {key: value for key, value in document.items() if key != "provenance"}
+def load_saved(directory: Path, allow_unsealed: bool = False) -> SavedRun:
+    """The run in ``directory`` to resume, once ``runs.verify_run`` trusts it (its seal,
+    unless ``allow_unsealed``; metrics.csv whole and agreeing with summary.json; its
+    policies; its input files are checked after the claim, ``check_inputs``), with its
+    methods as they were recorded. RunError with one line otherwise."""
+    from pngail_jax.runs import UntrustedRun, verify_run
 
-
-def check_seal(directory: Path, document: dict) -> None:
-    """Refuses a config.json that differs from the seal written when the run began, naming
-    each changed field; a run from before seals exists goes on with a note."""
-    try:
-        changes = sealed_differences(directory / SEAL, sealed_part(document))
-    except IntegrityError as error:
-        raise RunError(f"--resume {directory}: {error}") from None
-    if changes is None:
-        if (directory / MARKER).exists():  # made by a version that seals: the seal was removed
-            raise RunError(
-                f"--resume {directory}: its seal {SEAL} is missing, so config.json cannot be "
-                "checked; restore it, or start a new run"
-            )
-        print(f"note: {directory}/config.json has no seal (an older version made the run)")
-    elif changes:
-        raise RunError(
-            f"--resume {directory}: config.json was changed since the run began ("
-            + "; ".join(changes[:5])
-            + (f"; and {len(changes) - 5} more" if len(changes) > 5 else "")
-            + "): a run keeps what it began with; restore the file, or start a new run from "
-            "it with --config"
-        )
-
-
-def load_saved(directory: Path) -> SavedRun:
     path = directory / "config.json"
     if not path.exists():
         raise RunError(f"--resume {directory}: no config.json there")
     try:
         raw = read_json(path, "run config")
+        notes = verify_run(
+            directory, f"--resume {directory}", allow_unsealed=allow_unsealed, check_inputs=False
+        )
     except IntegrityError as error:
         raise RunError(f"--resume {directory}: {error}") from None
-    if isinstance(raw, dict):
-        check_seal(directory, raw)
+    except UntrustedRun as error:
+        raise RunError(str(error)) from None
+    for note in notes:
+        print(f"note: {note}")
     try:
         data = upgrade_saved_config(raw)
         _register_recorded_methods(data)

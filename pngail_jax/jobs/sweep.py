@@ -72,6 +72,7 @@ def run(
     resume: bool = False,
     overwrite: bool = False,
     allow_changed_inputs: bool = False,
+    allow_unsealed: bool = False,
     command: Sequence[str] | None = None,
     saved: record.SavedRun | None = None,
 ) -> RunResult | None:
@@ -84,11 +85,12 @@ def run(
     ``overwrite``: replace a finished or unfinished run of the sweep in ``out``.
     ``allow_changed_inputs``: resume although a demonstration file changed since the run
     began (``config.demos`` None: they are made once and cached, ``build.load_or_make_demos``).
+    ``allow_unsealed``: resume a run whose config seal is missing, its config unchecked.
     ``command``: the command line recorded in ``config.json`` (default: this process's).
     Raises ``RunError`` naming the problem (before any computation where it can be seen then).
     """
     out = Path(out)
-    config, saved = _config_to_run(config, out, resume, saved)
+    config, saved = _config_to_run(config, out, resume, saved, allow_unsealed)
     _warn_on_devices(config)
     writer = jax.process_index() == 0
     steps = _Steps(config, out, saved, writer, overwrite, allow_changed_inputs, command)
@@ -98,10 +100,10 @@ def run(
         return steps.run(claim)
 
 
-def _config_to_run(config, out: Path, resume: bool, saved):
+def _config_to_run(config, out: Path, resume: bool, saved, allow_unsealed: bool = False):
     """The config a run trains (a resumed run's own) and its saved record (None if new)."""
     if resume:
-        saved = saved or record.load_saved(out)
+        saved = saved or record.load_saved(out, allow_unsealed)
         given = None if config is None else record.comparable(record.as_saved(config, saved))
         if given is not None and given != record.comparable(saved.config):
             raise RunError(

@@ -25,7 +25,12 @@ ADOPT_IGNORES = ("chunk_iterations", "log", "preset_name")
 ADOPTED_FILE = "adopted.json"
 
 
-def adopt_grids(directories: Iterable[Path], configs: Mapping[str, RunConfig], out: Path) -> dict:
+def adopt_grids(
+    directories: Iterable[Path],
+    configs: Mapping[str, RunConfig],
+    out: Path,
+    allow_unsealed: bool = False,
+) -> dict:
     """Copies each sweep of ``directories`` into ``out/grids/<name>`` of the planned grid
     (``configs``: name -> the ``RunConfig`` the plan would run) whose config it matches.
     Returns ``{name: {"from": directory, "commit": ...}}`` of every adoption so far (kept in
@@ -34,7 +39,7 @@ def adopt_grids(directories: Iterable[Path], configs: Mapping[str, RunConfig], o
     record = read_adopted(out)
     for directory in directories:
         source = str(Path(directory).absolute())
-        saved = finished_sweep(Path(directory))
+        saved = finished_sweep(Path(directory), allow_unsealed)
         name = matching_grid(Path(directory), saved, configs)
         target = out / "grids" / name
         if record.get(name, {}).get("from") == source and target.exists():
@@ -66,8 +71,12 @@ def read_adopted(out: Path) -> dict:
         raise RunError(f"{path}: {error}") from None
 
 
-def finished_sweep(directory: Path) -> dict:
-    """``directory``'s config.json, if it is a complete sweep; else ``RunError``."""
+def finished_sweep(directory: Path, allow_unsealed: bool = False) -> dict:
+    """``directory``'s config.json, if it is a complete sweep that ``runs.verify_run`` trusts
+    (its seal, unless ``allow_unsealed``; its input files; metrics.csv whole and agreeing with
+    summary.json; its policies' digests); else ``RunError``."""
+    from pngail_jax.runs import UntrustedRun, verify_run
+
     try:
         saved = read_json(directory / "config.json", "sweep config")
         summary = read_json(directory / "summary.json", "sweep summary")
@@ -83,6 +92,11 @@ def finished_sweep(directory: Path) -> dict:
             f"--adopt {directory}: not finished ({done} of {total} iterations); "
             f"finish it first with python -m experiments.sweep --resume {directory}"
         )
+    try:
+        for note in verify_run(directory, f"--adopt {directory}", allow_unsealed=allow_unsealed):
+            print(f"note: {note}")
+    except UntrustedRun as error:
+        raise RunError(str(error)) from None
     return saved
 
 

@@ -61,7 +61,13 @@ def paper_options(
 
 
 def run_paper(
-    options: dict | None, out, *, resume: bool = False, overwrite: bool = False, adopt=()
+    options: dict | None,
+    out,
+    *,
+    resume: bool = False,
+    overwrite: bool = False,
+    adopt=(),
+    allow_unsealed: bool = False,
 ):
     """Runs the plan of ``options`` (``paper_options``) into ``out`` (new, empty, or with
     ``overwrite`` a paper run), or with ``resume`` continues the plan in ``out`` (``options``
@@ -85,7 +91,7 @@ def run_paper(
         else:
             check_paper_inputs(out, options, released)
         for directory in adopt:  # before any demonstrations are made: a typo fails at once
-            finished_sweep(Path(directory))
+            finished_sweep(Path(directory), allow_unsealed)
         figures, grids = plan(options["only"], options["envs"], set(released))
         if not figures:
             raise RunError(
@@ -111,7 +117,7 @@ def run_paper(
         command = shlex.split(options["command"])
         configs = planned_configs(grids, demos, budget, physics, learner)
         try:
-            adopted = adopt_grids(adopt, configs, out)
+            adopted = adopt_grids(adopt, configs, out, allow_unsealed)
         except RunError as error:
             kept = f"(the plan so far is kept: --resume {out} continues it)"
             raise RunError(f"{error} {kept}") from None
@@ -143,6 +149,15 @@ def page_so_far(plan_dir, out, *, overwrite: bool = False) -> Path:
     progress = {name: state for name, state in progress.items() if state != "complete"}
     if len(progress) == len(grids) and all(state is None for state in progress.values()):
         raise RunError(f"--page {plan_dir}: no grid of the plan has outputs yet")
+    from pngail_jax.runs import UntrustedRun, verify_run
+
+    for name in grids:  # the page shows only numbers the plan's runs wrote
+        if progress.get(name, "complete") is not None:
+            try:
+                verify_run(plan_dir / "grids" / name, f"--page {plan_dir}: its grid {name}",
+                           check_inputs=False)  # fmt: skip
+            except UntrustedRun as error:
+                raise RunError(str(error)) from None
     try:
         timings, adopted = (
             read_json(plan_dir / name, name) if (plan_dir / name).exists() else {}

@@ -54,6 +54,11 @@ def parse_args(argv=None) -> argparse.Namespace:
         "best), or final, its last evaluation",
     )  # fmt: skip
     parser.add_argument(
+        "--allow-unsealed", action="store_true",
+        help="compare runs without their config seal (copied without their dot-files, or "
+        "made before seals), their config.json unchecked; compare.md says so",
+    )  # fmt: skip
+    parser.add_argument(
         "--expected", type=path_argument, metavar="RECORD",
         help="a kept run record (records/<name>, experiments.record): per method, is your "
         "runs' IQM inside the record's 95%% interval over seeds, and how far outside",
@@ -82,7 +87,7 @@ def main(argv=None) -> Path:
 
 def write_comparison(args, claim) -> None:
     """The comparison of ``args.runs`` into the claimed ``args.out``."""
-    scores = compare.load_scores(args.runs, args.statistic)
+    scores = compare.load_scores(args.runs, args.statistic, allow_unsealed=args.allow_unsealed)
     baseline = args.baseline or ("pngail" if "pngail" in scores.methods else scores.methods[0])
     result = compare.compare(scores, baseline, seed=args.seed)
     expected, expected_text = _against_record(args, scores)

@@ -139,6 +139,12 @@ def add_run_folder_flags(parser: argparse.ArgumentParser) -> None:
         "config it is (up to --chunk-iterations), instead of running that grid again; with "
         "--resume too (default: none)",
     )
+    parser.add_argument(
+        "--allow-unsealed",
+        action="store_true",
+        help="adopt a sweep without its config seal (copied without its dot-files, or made "
+        "before seals), its config.json unchecked",
+    )
     parser.add_argument("--out", type=path_argument, help="default results/paper-<timestamp>")
     parser.add_argument("--resume", type=path_argument, metavar="DIR", help="continue a run in DIR")
     parser.add_argument(
@@ -267,7 +273,12 @@ def main(argv=None) -> Path:
     try:
         with signals_stop_at_a_checkpoint():
             return run_paper(
-                options, out, resume=resume, overwrite=args.overwrite, adopt=args.adopt or ()
+                options,
+                out,
+                resume=resume,
+                overwrite=args.overwrite,
+                adopt=args.adopt or (),
+                allow_unsealed=args.allow_unsealed,
             )
     except RunError as error:  # a grid's or a demonstration making's refusal, one line
         raise SystemExit(str(error)) from None

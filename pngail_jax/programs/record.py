@@ -38,6 +38,11 @@ def parse_args(argv=None) -> argparse.Namespace:
     )  # fmt: skip
     parser.add_argument("--check", action="store_true", help="verify records instead")
     parser.add_argument(
+        "--allow-unsealed", action="store_true",
+        help="record a run without its config seal (copied without its dot-files, or made "
+        "before seals), its config.json unchecked",
+    )  # fmt: skip
+    parser.add_argument(
         "--docs", action="store_true",
         help="rewrite every <!-- record-table NAME --> table of README.md and docs/*.md from "
         "its record (checked first)",
@@ -110,7 +115,9 @@ def main(argv=None) -> list[Path]:
             for folder in args.paths:
                 print(f"ok  {run_records.describe(run_records.check_record(folder))}")
             return list(args.paths)
-        folder = run_records.write_record(args.paths[0], args.name, args.records)
+        folder = run_records.write_record(
+            args.paths[0], args.name, args.records, allow_unsealed=args.allow_unsealed
+        )
     except run_records.RecordError as error:
         raise SystemExit(str(error)) from None
     print(f"wrote {folder}/{{record.json,metrics.csv.gz}} and checked it")

@@ -53,6 +53,7 @@ SMOKE = RunConfig.preset("smoke")
 RESUME_FLAGS = (
     "--resume",
     "--allow-changed-inputs",
+    "--allow-unsealed",
     "--coordinator",
     "--num-processes",
     "--process-id",
@@ -135,6 +136,12 @@ def _add_output_flags(add) -> None:
         help="with --resume: go on although a demonstration, confidence or cache file differs "
         "from the one the run began with (the run then mixes two data sets) (default: refuse)",
     )
+    add(
+        "--allow-unsealed",
+        action="store_true",
+        help="with --resume: go on with a run whose config seal is missing (copied without "
+        "its dot-files, or made before seals), its config.json unchecked (default: refuse)",
+    )
 
 
 def _add_multihost_flags(parser) -> None:
@@ -163,6 +170,8 @@ def parse_args(argv=None) -> Invocation:
         parser.error("--coordinator, --num-processes and --process-id go together")
     if args.allow_changed_inputs and args.resume is None:
         parser.error("--allow-changed-inputs goes with --resume DIR")
+    if args.allow_unsealed and args.resume is None:
+        parser.error("--allow-unsealed goes with --resume DIR")
     if args.resume is not None:
         flags = [a.split("=")[0] for a in argv if a.startswith("--")]
         if any(flag not in RESUME_FLAGS for flag in flags):
@@ -242,7 +251,11 @@ def start(invocation: Invocation) -> tuple[RunConfig, record.SavedRun | None]:
 
     Returns the config and the saved run (None for a new one).
     """
-    saved = record.load_saved(invocation.out) if invocation.resume else None
+    saved = (
+        record.load_saved(invocation.out, invocation.args.allow_unsealed)
+        if invocation.resume
+        else None
+    )
     config = saved.config if saved else invocation.config
     cpu_devices = config.cpu_devices
     if saved and cpu_devices is None and saved.platform == "cpu":

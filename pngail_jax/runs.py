@@ -1,0 +1,309 @@
+"""Reading a run folder (a sweep's or the offline program's) and deciding whether to trust
+it: its settings, how far it got, each seed's score under a statistic from its metrics.csv
+(checked whole), and ``verify_run``, the one check every program makes before it trusts an
+earlier run (resume, adopt, compare, the paper's page, records): the config's seal, the input
+files' digests, metrics.csv whole and agreeing with summary.json, the policies' digests.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+
+import numpy as np
+
+from pngail_jax.integrity import IntegrityError, read_json
+from pngail_jax.report import HEADLINE, LATE_LABEL, seed_figures
+
+
+class RunReadError(Exception):
+    """A run folder or metrics file that cannot be read as a run (the message names it)."""
+
+
+STATISTICS = {  # what a score is, as the tables and plots say it
+    "late_average": f"normalised return, mean over the {LATE_LABEL}",
+    "final": "final normalised return (the last evaluation)",
+}
+RUN_PROGRAMS = ("sweep", "offline")  # the programs whose runs compare (and records) read
+
+
+def run_settings(config: dict) -> dict:
+    """A run's settings from its ``config.json``: the file itself for a sweep, its
+    ``config`` part for the offline program (env, methods, seeds, ...)."""
+    return config["config"] if config.get("program") == "offline" else config
+
+
+def run_scores(run_dir: Path, statistic: str = HEADLINE) -> tuple[str, dict[str, np.ndarray]]:
+    """A sweep or offline run's task and each method label's scores float[seeds]
+    (``statistic`` of the normalised evaluations; NaN for a seed that diverged), so the
+    offline family's rows join the online methods' tables. RunReadError when the run has
+    none to read."""
+    from pngail_jax.outputs import output_owner
+
+    run_dir = Path(run_dir)
+    if output_owner(run_dir) not in RUN_PROGRAMS:
+        raise RunReadError(
+            f"{run_dir} holds no sweep or offline run (experiments.sweep or experiments.offline "
+            "writes one)"
+        )
+    try:
+        config = run_settings(read_json(run_dir / "config.json", "run config"))
+        env = config["env"]
+    except (OSError, IntegrityError, KeyError, TypeError) as error:
+        raise RunReadError(f"{run_dir}: no readable config.json ({error})") from None
+    path = run_dir / "metrics.csv"
+    if not path.exists():
+        raise RunReadError(f"{run_dir}: no metrics.csv yet (the run has not finished a chunk)")
+    return env, scores_of_metrics(path, config, run_progress_numbers(run_dir), statistic)
+
+
+def scores_of_metrics(
+    path: Path, config: dict, progress: tuple[int, int] | None, statistic: str = HEADLINE
+) -> dict[str, np.ndarray]:
+    """Each method label's scores float[seeds] (``statistic``, a key of ``STATISTICS``, of
+    its normalised evaluations) in a sweep's metrics file (``metrics.csv``, or a run record's
+    ``metrics.csv.gz``), checked whole against the run's ``config`` and ``progress``
+    (iterations done and planned, when known). RunReadError for a damaged or cut-short
+    file."""
+    if statistic not in STATISTICS:
+        raise RunReadError(f"statistic {statistic!r}: give one of {', '.join(STATISTICS)}")
+    from pngail_jax.report import iterations_per_cell, read_evaluations
+
+    try:
+        _check_whole(path, iterations_per_cell(path), progress, config)
+        groups = read_evaluations(
+            path, "normalized_return", evaluated_by="eval_return", group_by=("method", "setting")
+        )
+    except UNREADABLE as error:
+        raise damaged(path, error) from None
+    if not groups:
+        raise RunReadError(f"{path}: no evaluated iteration")
+    settings = {setting for _, setting in groups}
+    scores = {}
+    for (method, setting), (_, values) in groups.items():
+        if np.isnan(values).all():
+            raise RunReadError(
+                f"{path}: {method} has no normalised return (the run knows no random and "
+                "optimal returns: give --optimal-return to the sweep)"
+            )
+        label = method if len(settings) == 1 else f"{method} [{setting}]"
+        scores[label] = seed_figures(values, statistic)
+    return scores
+
+
+UNREADABLE = (KeyError, ValueError, TypeError, EOFError, OSError, csv.Error)
+
+
+def damaged(path: Path, error: Exception, kind: type = RunReadError) -> Exception:
+    """The one-line error of a metrics file that does not parse (``UNREADABLE``)."""
+    reason = f"no column {error}" if isinstance(error, KeyError) else str(error)
+    return kind(f"{path} is damaged: not a metrics.csv as the sweep writes it ({reason})")
+
+
+def _check_whole(path: Path, reached: dict, progress: tuple[int, int] | None, config: dict) -> None:
+    """RunReadError when ``metrics.csv`` ends before the run did: a cell of the config
+    missing (``config``'s methods x seeds, in every setting the file has), cells that stop at
+    different iterations (a file cut within a cell), or all of them before the iteration its
+    summary.json says the run reached (``progress``: iterations done and planned)."""
+    if not reached:
+        raise RunReadError(f"{path}: no rows")
+    methods, seeds = config.get("methods"), config.get("seeds")
+    if isinstance(methods, list) and isinstance(seeds, int):
+        settings = {setting for _, setting, _ in reached}
+        for method in methods:
+            found = sum(1 for cell in reached if cell[0] == method)
+            if found < seeds * len(settings):
+                raise RunReadError(
+                    f"{path} is cut short: it holds {found} of the {seeds * len(settings)} "
+                    f"runs of {method} that config.json asks for"
+                )
+    lowest, highest = min(reached.values()), max(reached.values())
+    if lowest != highest:
+        short = next(cell for cell, last in reached.items() if last == lowest)
+        raise RunReadError(
+            f"{path} is cut short: {short[0]} seed {short[2]} ends at iteration {lowest}, "
+            f"other cells at {highest}"
+        )
+    if progress is not None and highest < progress[0]:
+        raise RunReadError(
+            f"{path} is cut short: it ends at iteration {highest}, and summary.json says the "
+            f"run reached {progress[0]}"
+        )
+
+
+def run_progress_numbers(run_dir: Path) -> tuple[int, int] | None:
+    """(iterations done, planned) from a run's summary.json, None where it does not say."""
+    try:
+        summary = read_json(Path(run_dir) / "summary.json", "run summary")
+    except (OSError, IntegrityError):
+        return None
+    if not isinstance(summary, dict):
+        return None
+    planned = summary.get("iterations")
+    done = planned if summary.get("complete") is True else summary.get("iterations_done")
+    if isinstance(done, int) and isinstance(planned, int):
+        return done, planned
+    return None
+
+
+def run_progress(run_dir: Path) -> str | None:
+    """None for a finished run (or one whose summary.json is missing: nothing says it is not),
+    else how far it got ("200 of 500 iterations") from its summary.json, written each chunk."""
+    try:
+        summary = read_json(Path(run_dir) / "summary.json", "run summary")
+    except FileNotFoundError:
+        return None
+    except (OSError, IntegrityError):
+        return "unknown: its summary.json is unreadable"
+    if not isinstance(summary, dict) or summary.get("complete") is not False:
+        return None  # complete, or a run from before summaries said (nothing says it is not)
+    done, planned = summary.get("iterations_done"), summary.get("iterations")
+    if isinstance(done, int) and isinstance(planned, int):
+        return f"{done:,} of {planned:,} iterations"
+    return "unfinished"
+
+
+# What an offline run's seal covers: config.json's parts fixed when the run began (it adds
+# the trainer's fields, its seconds and "complete" when it ends).
+OFFLINE_SEALED = ("program", "config", "demonstrations", "input_files", "normalizer",
+                  "normalizer_source")  # fmt: skip
+
+
+class UntrustedRun(RunReadError):
+    """A run folder that fails a check a program makes before it trusts it (the message
+    names the file and the problem)."""
+
+
+def sealed_part(document: dict) -> dict:
+    """What a run's config seal covers: a sweep's config.json but its provenance (where it
+    ran); an offline run's ``OFFLINE_SEALED`` parts."""
+    if document.get("program") == "offline":
+        return {key: document[key] for key in OFFLINE_SEALED if key in document}
+    return {key: value for key, value in document.items() if key != "provenance"}
+
+
+def recorded_inputs(document: dict) -> dict:
+    """The input files' records (``integrity.file_record``) a run's config.json holds."""
+    if document.get("program") == "offline":
+        return document.get("input_files") or {}
+    return (document.get("resolved") or {}).get("inputs") or {}
+
+
+def verify_run(
+    directory: Path,
+    who: str,
+    *,
+    allow_unsealed: bool = False,
+    check_inputs: bool = True,
+) -> list[str]:
+    """The one check every program makes before it trusts a sweep or offline run in
+    ``directory``, each failure an ``UntrustedRun`` whose message starts with ``who`` (the
+    flag and folder, e.g. ``"--adopt runs/a"``):
+
+    - its config.json equals the seal written when the run began (``allow_unsealed``: a run
+      without its seal goes on, its config unchecked, said in the notes returned);
+    - its input files are those it began with (``check_inputs`` False: not looked at, for a
+      reader of results such as compare, or a caller that checks them itself, as the sweep's
+      resume with its ``--allow-changed-inputs``);
+    - its metrics.csv is whole (every cell of the config, each to the iteration its
+      summary.json says) and gives the final returns its summary.json states, seed by seed;
+    - its policies (a finished sweep's) match their digests.
+
+    Returns the notes of what was let through."""
+    from pngail_jax.integrity import (
+        CONFIG_SEAL,
+        changed_inputs,
+        sealed_differences,
+        verify_manifest,
+    )
+    from pngail_jax.outputs import output_owner
+
+    directory = Path(directory)
+    notes = []
+    if output_owner(directory) not in RUN_PROGRAMS:
+        raise UntrustedRun(f"{who}: holds no sweep or offline run")
+    try:
+        document = read_json(directory / "config.json", "run config")
+        if not isinstance(document, dict):
+            raise IntegrityError("not a JSON object")
+        changes = sealed_differences(directory / CONFIG_SEAL, sealed_part(document))
+    except FileNotFoundError:
+        raise UntrustedRun(f"{who}: no config.json there") from None
+    except (OSError, IntegrityError) as error:
+        raise UntrustedRun(f"{who}: {error}") from None
+    if changes is None and not allow_unsealed:
+        raise UntrustedRun(
+            f"{who}: its seal {CONFIG_SEAL} is missing (a copy without its dot-files, or a run "
+            "from before seals), so its config.json cannot be checked against what the run "
+            "began with; restore the seal, or pass --allow-unsealed to go on unchecked"
+        )
+    if changes is None:
+        notes.append(f"{who}: no seal, config.json unchecked (--allow-unsealed)")
+    elif changes:
+        raise UntrustedRun(
+            f"{who}: config.json was changed since the run began ({'; '.join(changes[:3])}"
+            + (f"; and {len(changes) - 3} more" if len(changes) > 3 else "")
+            + "): a run keeps what it began with; restore the file"
+        )
+    inputs = changed_inputs(recorded_inputs(document)) if check_inputs else []
+    if inputs:
+        raise UntrustedRun(
+            f"{who}: {'; '.join(inputs)}: its numbers come from other data than the files "
+            "there now; restore them"
+        )
+    _check_metrics_agree_with_summary(directory, document, who)
+    for policy in sorted((directory / "policies").glob("**/digests.json")):
+        try:
+            verify_manifest(policy.parent)
+        except IntegrityError as error:
+            raise UntrustedRun(f"{who}: {error}") from None
+    return notes
+
+
+def _check_metrics_agree_with_summary(directory: Path, document: dict, who: str) -> None:
+    """UntrustedRun unless metrics.csv is whole (every cell of the config, each to the
+    iteration summary.json says), and each seed's final return in summary.json is its
+    evaluation at that iteration in metrics.csv (6 significant digits there; a diverged seed,
+    null in the summary, is not compared). A summary behind metrics.csv (a stop between the
+    two writes of a chunk) is not compared: the next chunk writes both again."""
+    from pngail_jax.report import iterations_per_cell, read_evaluations
+
+    metrics, summary_path = directory / "metrics.csv", directory / "summary.json"
+    if not metrics.exists():
+        return  # no chunk finished yet, or outputs a resume writes again: nothing to agree
+    progress = run_progress_numbers(directory)
+    try:
+        summary = read_json(summary_path, "run summary") if summary_path.exists() else None
+    except (OSError, IntegrityError) as error:
+        raise UntrustedRun(f"{who}: {error}") from None
+    try:
+        reached = iterations_per_cell(metrics)
+        finals = read_evaluations(metrics, "eval_return", group_by=("method", "setting"))
+    except UNREADABLE as error:
+        raise damaged(metrics, error, UntrustedRun) from None
+    try:
+        _check_whole(metrics, reached, progress, run_settings(document))
+    except RunReadError as error:
+        raise UntrustedRun(str(error)) from None
+    done = max(reached.values()) if reached else None
+    if not isinstance(summary, dict) or "methods" not in summary:
+        return  # none, or cut to its progress fields: nothing stated to compare
+    if progress is None or done != progress[0]:
+        return
+    settings = {setting for _, setting in finals}
+    for (method, setting), (_, values) in finals.items():
+        label = method if len(settings) == 1 else f"{method} [{setting}]"
+        row = summary.get("methods", {}).get(label)
+        if row is None:
+            raise UntrustedRun(f"{who}: summary.json has no {label}, which metrics.csv has")
+        for index, seed in enumerate(row.get("per_seed", [])):
+            stated = seed.get("final_return")
+            written = values[index, -1] if index < len(values) else math.nan
+            if stated is None or not math.isfinite(written):
+                continue
+            if not math.isclose(stated, written, rel_tol=1e-5, abs_tol=1e-6):
+                raise UntrustedRun(
+                    f"{who}: summary.json says {label} seed {seed.get('seed')} ended at "
+                    f"{stated:.6g}, metrics.csv at {written:.6g}: one of them was edited"
+                )
