@@ -7,10 +7,14 @@ expert rows, BC on every row, DWBC and ISW-BC train in one ``jit(vmap)`` grid:
 
     L_pi = expert_bc_coef mean_E[nll] + union_bc_coef mean_U[nll]
          + dwbc_coef (alpha mean_E[nll] - mean_E[w_E nll] + mean_O[w_O nll])
-         + iswbc_coef mean_U[w(x) nll] + policy_weight_decay / 2 ||theta||^2
+         + iswbc_coef mean_U[w(x) nll]
+         + ilid_coef (mean_{E+S}[d / (1 - d) nll] + mean_S[nll])
+         + policy_weight_decay / 2 ||theta||^2
 
-with E a batch of the expert rows, O of the other rows, U of every row (docs/methods.md,
-"Offline methods"; the losses in ``offline_losses``). The data they see is what PN-GAIL sees:
+with E a batch of the expert rows, O of the other rows, U of every row, S of the rows ILID
+selects (other rows whose next K states reach an expert-like state; ILID's two
+discriminators train before the policy, in ``init``) (docs/methods.md, "Offline methods";
+the losses in ``offline_losses``). The data they see is what PN-GAIL sees:
 each seed's split of the demonstrations into a labelled share D_c (``label_ratio``) and the
 unlabelled rest D_u. The expert set is D_c's rows at confidence >= ``expert_threshold``, plus,
 where ``classifier_coef`` is 1, D_u's rows whose BSC-predicted confidence reaches it.
@@ -37,7 +41,7 @@ from pngail_jax.confidence import (
     confidence_errors,
     train_classifier,
 )
-from pngail_jax.demos import Demonstrations, make_split
+from pngail_jax.demos import Demonstrations, make_split, successor_rows
 from pngail_jax.fitting import squared_norm, tree_where
 from pngail_jax.methods import stack
 from pngail_jax.networks import (
@@ -47,8 +51,11 @@ from pngail_jax.networks import (
     gaussian_log_density,
 )
 from pngail_jax.offline_losses import (
+    clipped_probability,
     dwbc_discriminator_loss,
     dwbc_policy_loss,
+    ilid_discriminator_loss,
+    ilid_selection,
     iswbc_discriminator_loss,
     iswbc_log_odds,
     iswbc_weights,
@@ -60,7 +67,7 @@ from pngail_jax.rl.rollout import evaluate
 from pngail_jax.rl.train import ObservationNormalizer
 
 # The parts a grid compiles only when one of its methods needs them.
-COMPONENTS = ("dwbc", "iswbc", "classifier")
+COMPONENTS = ("dwbc", "iswbc", "ilid", "classifier")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -78,6 +85,9 @@ class OfflineConfig:
     dwbc_branch_size: int = 128
     dwbc_hidden_size: int = 256
     iswbc_hidden_sizes: tuple[int, ...] = (256, 256)
+    ilid_hidden_sizes: tuple[int, ...] = (256, 256)  # both ILID discriminators (its codebase)
+    ilid_rollback: int = 20  # K: a row is selected if one of its next K states is expert-like
+    ilid_discriminator_steps: int = 100_000  # each ILID discriminator, before the policy
     classifier: ClassifierConfig = ClassifierConfig()
     components: tuple[str, ...] = ()  # of COMPONENTS; ``required_components(methods)``
 
@@ -85,6 +95,7 @@ class OfflineConfig:
         for name in (
             "num_iterations", "steps_per_iteration", "eval_every", "num_eval_episodes",
             "batch_size", "dwbc_discriminator_every", "dwbc_branch_size", "dwbc_hidden_size",
+            "ilid_rollback", "ilid_discriminator_steps",
         ):  # fmt: skip
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
@@ -134,6 +145,10 @@ class OfflineSpec:
     dwbc_eta: jax.Array
     iswbc_penalty_coef: jax.Array  # the one-centred gradient penalty's weight
     iswbc_cutoff: jax.Array  # weights below it count 0 (the codebase: 0, none cut)
+    ilid_coef: jax.Array  # ILID's selected rows and its importance-weighted BC
+    ilid_bar: jax.Array  # a state is expert-like when the state discriminator's d >= this
+    ilid_discriminator_learning_rate: jax.Array
+    ilid_discriminator_weight_decay: jax.Array  # coupled L2, as torch's Adam weight_decay
     num_gradient_steps: jax.Array  # the policy stops learning after these many steps
 
     @property
@@ -172,6 +187,9 @@ class OfflineState:
     dwbc_optimizer_state: optax.OptState | None = None
     iswbc_params: dict | None = None
     iswbc_optimizer_state: optax.OptState | None = None
+    ilid_selected_probability: jax.Array | None = None  # float32[M]: uniform over S
+    ilid_union_probability: jax.Array | None = None  # float32[M]: uniform over E and S
+    ilid_weight: jax.Array | None = None  # float32[M]: d / (1 - d) of the (s, a) discriminator
 
 
 def _uniform_over(mask: jax.Array) -> jax.Array:
@@ -206,6 +224,17 @@ class OfflineTrainer:
         self.policy = GaussianPolicy(env.action_size, config.hidden_sizes)
         self.dwbc = LogDensityDiscriminator(config.dwbc_branch_size, config.dwbc_hidden_size)
         self.iswbc = LogitDiscriminator(config.iswbc_hidden_sizes)
+        self.ilid = LogitDiscriminator(config.ilid_hidden_sizes)  # on states, or on (s, a)
+        if "ilid" in config.components:
+            if demos.trajectory_ids is None:
+                raise ValueError(
+                    "ILID selects rows by the states they lead to, so it needs trajectories: "
+                    "these demonstrations have no trajectory ids (the authors' MuJoCo files' "
+                    "rows are shuffled); use a made set or the authors' Pendulum file"
+                )
+            self._successors = jnp.asarray(
+                successor_rows(demos.trajectory_ids, config.ilid_rollback)
+            )
         self.optimizer = optax.scale_by_adam()
         # Actions as the environment applies them (clipped to its bounds), as the online
         # methods' behaviour cloning and discriminators see them.
@@ -242,6 +271,13 @@ class OfflineTrainer:
         if "iswbc" in self.config.components:
             params = self.iswbc.init(iswbc_key, inputs[0])
             fields |= {"iswbc_params": params, "iswbc_optimizer_state": self.optimizer.init(params)}
+        ilid_metrics = {}
+        if "ilid" in self.config.components:
+            ilid_key = jax.random.fold_in(iswbc_key, 1)  # the other methods' keys stay as they were
+            ilid_fields, ilid_metrics = self._ilid_selection(
+                spec, split, expert, normalizer, ilid_key
+            )
+            fields |= ilid_fields
         state = OfflineState(
             policy_params=policy_params,
             policy_optimizer_state=self.optimizer.init(policy_params),
@@ -260,6 +296,7 @@ class OfflineTrainer:
             "offline/expert_true_confidence": jnp.sum(jnp.where(expert, split.true_confidence, 0))
             / jnp.maximum(num_expert, 1),
             **{f"confidence/{name}": value for name, value in errors.items()},
+            **ilid_metrics,
         }
         return state, metrics
 
@@ -288,14 +325,99 @@ class OfflineTrainer:
             lambda e, n: jnp.where(spec.classifier_coef > 0, e, n), errors, nan
         )
 
+    # -- ILID's selection, before the policy learns ------------------------------------------
+
+    def _ilid_selection(self, spec: OfflineSpec, split, expert, normalizer, key):
+        """ILID's two phases, as its codebase runs them before the policy: a state
+        discriminator of the expert rows' states against the other rows' states; the other
+        rows whose next K states include one it puts at or above ``ilid_bar`` (S); a
+        state-action discriminator of the expert rows against E and S together, whose
+        d / (1 - d) weights the policy's BC on E and S. Returns the state's ILID fields and
+        the metrics of the selection (``ilid/num_selected``, ``ilid/selected_true_confidence``:
+        how good the selected rows are by the confidences nobody read)."""
+        size = self.env.observation_size
+        state_key, pair_key = jax.random.split(key)
+        inputs = self._inputs[split.indices]
+        split_inputs = jnp.concatenate([normalizer(inputs[:, :size]), inputs[:, size:]], -1)
+        observations = normalizer(self._inputs[:, :size])  # every row's state, the split's or not
+        other = ~expert
+        state_params, state_loss = self._ilid_discriminator(
+            spec, split_inputs[:, :size], expert, other, state_key
+        )
+        d_states = clipped_probability(self.ilid.apply(state_params, observations))
+        selected = other & ilid_selection(
+            d_states >= spec.ilid_bar, self._successors[split.indices]
+        )
+        union = expert | selected
+        pair_params, pair_loss = self._ilid_discriminator(
+            spec, split_inputs, expert, union, pair_key
+        )
+        d_pairs = clipped_probability(self.ilid.apply(pair_params, split_inputs))
+        num_selected = selected.sum()
+        fields = {  # nothing selected: the selected-rows term clones the expert rows instead
+            "ilid_selected_probability": jnp.where(
+                selected.any(), _uniform_over(selected), _uniform_over(expert)
+            ),
+            "ilid_union_probability": _uniform_over(union),
+            "ilid_weight": jax.lax.stop_gradient(d_pairs / (1 - d_pairs)),
+        }
+        metrics = {
+            "ilid/num_selected": num_selected.astype(jnp.float32),
+            "ilid/selected_true_confidence": jnp.sum(jnp.where(selected, split.true_confidence, 0))
+            / jnp.maximum(num_selected, 1),
+            "ilid/state_disc_loss": state_loss,
+            "ilid/pair_disc_loss": pair_loss,
+        }
+        return fields, metrics
+
+    def _ilid_discriminator(self, spec: OfflineSpec, rows, positive, negative, key):
+        """An ILID discriminator on ``rows`` float[M, D] (normalised states, or states and
+        actions), trained ``ilid_discriminator_steps`` Adam steps with coupled weight decay on
+        batches drawn from the ``positive`` and ``negative`` rows (bool[M]); its parameters and
+        its last loss."""
+        init_key, loop_key = jax.random.split(key)
+        params = self.ilid.init(init_key, rows[0])
+        optimizer_state = self.optimizer.init(params)
+        p_positive, p_negative = _uniform_over(positive), _uniform_over(negative)
+        batch = self.config.batch_size
+
+        def step(index, carry):
+            params, optimizer_state, _ = carry
+            positive_key, negative_key = jax.random.split(jax.random.fold_in(loop_key, index))
+            pos = rows[jax.random.choice(positive_key, rows.shape[0], (batch,), p=p_positive)]
+            neg = rows[jax.random.choice(negative_key, rows.shape[0], (batch,), p=p_negative)]
+
+            def loss_fn(params):
+                d_pos = clipped_probability(self.ilid.apply(params, pos))
+                d_neg = clipped_probability(self.ilid.apply(params, neg))
+                loss, _ = ilid_discriminator_loss(d_pos, d_neg)
+                return loss + 0.5 * spec.ilid_discriminator_weight_decay * squared_norm(params)
+
+            loss, grads = jax.value_and_grad(loss_fn)(params)
+            params, optimizer_state = self._adam_step(
+                params, optimizer_state, grads, spec.ilid_discriminator_learning_rate
+            )
+            return params, optimizer_state, loss
+
+        params, _, loss = jax.lax.fori_loop(
+            0, self.config.ilid_discriminator_steps, step,
+            (params, optimizer_state, jnp.zeros((), jnp.float32)),
+        )  # fmt: skip
+        return params, loss
+
     # -- one gradient step --------------------------------------------------------------------
 
     def _batch(self, state: OfflineState, probability, key) -> jax.Array:
         """float[B, O + A]: rows drawn with replacement, observations normalised."""
+        return self._batch_rows(state, probability, key)[1]
+
+    def _batch_rows(self, state: OfflineState, probability, key):
+        """(int[B] the split rows drawn with replacement, float[B, O + A] their inputs with
+        observations normalised)."""
         rows = jax.random.choice(key, self.num_demos, (self.config.batch_size,), p=probability)
         inputs = self._inputs[state.demo_rows[rows]]
         size = self.env.observation_size
-        return jnp.concatenate([state.normalizer(inputs[:, :size]), inputs[:, size:]], -1)
+        return rows, jnp.concatenate([state.normalizer(inputs[:, :size]), inputs[:, size:]], -1)
 
     def _log_density(self, params, batch) -> jax.Array:
         """float[B, A]: the policy's per-dimension log-density of the batch's actions."""
@@ -308,7 +430,9 @@ class OfflineTrainer:
         at their current parameters (their outputs fixed for the policy), the policy's loss;
         then each Adam step (DWBC's discriminator on every ``dwbc_discriminator_every``-th
         step only). The policy stops once ``spec.num_gradient_steps`` are taken."""
-        key, expert_key, other_key, union_key, penalty_key = jax.random.split(state.key, 5)
+        key, expert_key, other_key, union_key, penalty_key, ilid_key = jax.random.split(
+            state.key, 6
+        )
         expert = self._batch(state, state.expert_probability, expert_key)
         other = self._batch(state, state.other_probability, other_key)
         union = self._batch(state, jnp.full(self.num_demos, 1.0 / self.num_demos), union_key)
@@ -323,6 +447,11 @@ class OfflineTrainer:
             fields |= iswbc_fields
             metrics |= iswbc_metrics
             fixed["iswbc_weights"] = weights
+        if "ilid" in self.config.components:
+            selected_key, union_key_ilid = jax.random.split(ilid_key)
+            selected = self._batch(state, state.ilid_selected_probability, selected_key)
+            rows, ilid_union = self._batch_rows(state, state.ilid_union_probability, union_key_ilid)
+            fixed["ilid"] = (selected, ilid_union, state.ilid_weight[rows])
 
         def policy_loss(params):
             nll_expert = -self._log_density(params, expert).sum(-1)
@@ -342,6 +471,14 @@ class OfflineTrainer:
                 )
                 loss += spec.iswbc_coef * iswbc
                 terms |= iswbc_terms
+            if "ilid" in fixed:  # its codebase: mean_{E+S}[w nll] + mean_S[nll]
+                selected, ilid_union, weights = fixed["ilid"]
+                nll_selected = -self._log_density(params, selected).sum(-1)
+                nll_ilid_union = -self._log_density(params, ilid_union).sum(-1)
+                weighted, _ = weighted_nll(nll_ilid_union, weights)
+                loss += spec.ilid_coef * (weighted + nll_selected.mean())
+                terms |= {"ilid/weighted_nll": weighted, "ilid/nll_selected": nll_selected.mean(),
+                          "ilid/mean_weight": weights.mean()}  # fmt: skip
             loss += 0.5 * spec.policy_weight_decay * squared_norm(params)
             return loss, {**terms, "policy/loss": loss}
 
@@ -471,6 +608,9 @@ _DEFAULTS = {field.name: 0.0 for field in dataclasses.fields(OfflineSpec)} | {
     "dwbc_alpha": 7.5,
     "dwbc_eta": 0.5,
     "iswbc_penalty_coef": 1.0,
+    "ilid_bar": 0.4,
+    "ilid_discriminator_learning_rate": 1e-5,
+    "ilid_discriminator_weight_decay": 5e-3,
     "num_gradient_steps": float(2**31 - 1),  # every step the grid runs
 }
 
@@ -485,8 +625,14 @@ OFFLINE_PRESETS: dict[str, tuple[str, dict, tuple[str, ...]]] = {
         "policy_weight_decay": 5e-3}, ("dwbc",)),
     "iswbc": ("ISW-BC: BC on every row weighted by D / (1 - D), D expert vs union", {
         "iswbc_coef": 1.0}, ("iswbc",)),
+    "ilid": ("ILID: rows leading to expert-like states, weighted BC (needs trajectories)", {
+        "ilid_coef": 1.0, "policy_learning_rate": 1e-4, "policy_weight_decay": 5e-3},
+        ("ilid",)),
 }  # fmt: skip
 OFFLINE_METHOD_NAMES = tuple(OFFLINE_PRESETS)
+# What experiments.offline runs by default: every method that reads rows alone (ILID needs
+# trajectories, which the authors' MuJoCo files do not keep: --methods ...,ilid adds it).
+DEFAULT_OFFLINE_METHODS = ("bc-expert", "bc-all", "dwbc", "iswbc")
 # A method's variant with the BSC-classified D_u rows in its expert set: "<name>+bsc".
 CLASSIFIED_SUFFIX = "+bsc"
 

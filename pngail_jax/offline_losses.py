@@ -104,3 +104,36 @@ def weighted_nll(nll: jax.Array, weights: jax.Array, cutoff: jax.Array = 0.0):
     weights = jax.lax.stop_gradient(jnp.where(weights >= cutoff, weights, 0.0))
     loss = jnp.mean(weights * nll)
     return loss, {"iswbc/policy_loss": loss, "iswbc/mean_weight": jnp.mean(weights)}
+
+
+# -- ILID (Yue et al., 2024): select behaviours by the states they lead to -----------------------
+
+# ILID's discriminators output sigmoid(logit) clipped to [0.1, 0.9] (as DWBC's, "for a fair
+# comparison" in its codebase).
+ILID_CLIP = (0.1, 0.9)
+
+
+def clipped_probability(logits: jax.Array) -> jax.Array:
+    """ILID's discriminator output: sigmoid(logit) clipped to [0.1, 0.9], float[...]."""
+    return jnp.clip(jax.nn.sigmoid(logits), *ILID_CLIP)
+
+
+def ilid_discriminator_loss(d_positive: jax.Array, d_negative: jax.Array):
+    """The logistic loss of both ILID discriminators, d float[B] each (positive = 1):
+    mean_i [-log d_P,i - log(1 - d_N,i)]. The state discriminator's positives are the expert
+    rows' states and its negatives the other rows'; the state-action one's, the expert rows
+    against the union of the expert and the selected rows."""
+    chex.assert_equal_shape([d_positive, d_negative])
+    loss = jnp.mean(-jnp.log(d_positive) - jnp.log1p(-d_negative))
+    return loss, {"ilid/disc_loss": loss}
+
+
+def ilid_selection(expert_like: jax.Array, successors: jax.Array) -> jax.Array:
+    """bool[M]: ILID's selected behaviours. ``expert_like`` bool[N] says which rows' states
+    the state discriminator puts at or above the bar; ``successors`` int[M, K] holds, per
+    candidate row, the rows of the K states after it in its trajectory (k = 1..K, -1 past
+    the trajectory's end). A row is selected when any of those K states is expert-like: its
+    action leads, within K steps, to where the expert goes (the codebase's "rollback")."""
+    present = successors >= 0
+    reached = jnp.where(present, expert_like[jnp.maximum(successors, 0)], False)
+    return reached.any(axis=-1)

@@ -36,8 +36,11 @@ TINY = OfflineConfig(
     dwbc_branch_size=8,
     dwbc_hidden_size=16,
     iswbc_hidden_sizes=(16,),
+    ilid_hidden_sizes=(16,),
+    ilid_rollback=3,
+    ilid_discriminator_steps=10,
     classifier=ClassifierConfig(num_steps=20),
-    components=("dwbc", "iswbc", "classifier"),
+    components=("dwbc", "iswbc", "ilid", "classifier"),
 )
 METHODS = (*OFFLINE_METHOD_NAMES, "dwbc+bsc")
 
@@ -49,6 +52,7 @@ def demos():
         observations=rng.normal(size=(200, 3)).astype(np.float32),
         actions=rng.uniform(-2, 2, size=(200, 1)).astype(np.float32),
         confidence=np.repeat([1.0, 0.2, 0.7, 0.0], 50).astype(np.float32),
+        trajectory_ids=np.repeat(np.arange(10), 20),
         metadata={"env": "Pendulum-v1"},
     )
 
@@ -122,7 +126,8 @@ def test_a_grid_equals_its_cells_run_one_at_a_time(trainer, grid_run):
     final policy to float rounding (1e-5 relative)."""
     cells, inputs, _, state, metrics, _ = grid_run
     train = jax.jit(trainer.train)
-    for index in (0, 2, 3, 4):
+    ilid = next(i for i, c in enumerate(cells) if c.method == "ilid")
+    for index in (0, 2, 3, 4, ilid):
         alone_state, alone_metrics = train(*_cell(inputs, index))
         np.testing.assert_allclose(
             alone_metrics["eval/return"], metrics["eval/return"][index], rtol=1e-5, atol=1e-3
@@ -179,6 +184,7 @@ def test_num_gradient_steps_stops_a_methods_policy(grid_run):
 def test_required_components_and_unknown_methods():
     assert required_components(["bc-all", "bc-expert"]) == ()
     assert required_components(["iswbc", "dwbc+bsc"]) == ("dwbc", "iswbc", "classifier")
+    assert required_components(["ilid+bsc", "bc-all"]) == ("ilid", "classifier")
     with pytest.raises(ValueError, match="unknown offline method 'gail'"):
         required_components(["gail"])
 
@@ -188,7 +194,8 @@ def test_required_components_and_unknown_methods():
     [
         ("num_iterations", 3, "multiple of eval_every"),
         ("batch_size", 0, "batch_size must be a positive integer"),
-        ("components", ("ilid",), "components must be distinct names"),
+        ("components", ("gail",), "components must be distinct names"),
+        ("ilid_rollback", 0, "ilid_rollback must be a positive integer"),
         ("num_demos", 1, "num_demos must be an integer >= 2"),
     ],
 )
@@ -201,6 +208,31 @@ def test_demonstrations_without_confidences_are_refused(demos):
     bare = dataclasses.replace(demos, confidence=None)
     with pytest.raises(ValueError, match="need confidences"):
         OfflineTrainer(TINY, envs.make("Pendulum-v1"), bare)
+    shuffled = dataclasses.replace(demos, trajectory_ids=None)  # as the authors' MuJoCo files
+    with pytest.raises(ValueError, match="ILID selects rows by the states they lead to"):
+        OfflineTrainer(TINY, envs.make("Pendulum-v1"), shuffled)
+
+
+def test_ilid_selects_other_rows_that_lead_to_expert_like_states(demos, grid_run):
+    """ILID's cells: the selected rows are other (not expert) rows, each with an expert-like
+    state among its next K = 3 in its trajectory by the state discriminator it trained; the
+    weighted set is the expert rows and those; the weights d / (1 - d) lie in [1/9, 9]."""
+    cells, inputs, start, _, metrics, _ = grid_run
+    for index, cell in enumerate(cells):
+        if cell.method != "ilid":
+            continue
+        expert = np.asarray(start.expert_probability[index]) > 0
+        selected = np.asarray(start.ilid_selected_probability[index]) > 0
+        union = np.asarray(start.ilid_union_probability[index]) > 0
+        assert metrics["ilid/num_selected"][index] == selected.sum() > 0
+        assert not (selected & expert).any()
+        np.testing.assert_array_equal(union, expert | selected)
+        weights = np.asarray(start.ilid_weight[index])
+        assert (weights >= 1 / 9 - 1e-6).all() and (weights <= 9 + 1e-5).all()
+        rows = np.asarray(start.demo_rows[index])[selected]
+        ids = demos.trajectory_ids
+        for row in rows:  # each selected row has a successor in its own trajectory
+            assert row + 1 < len(ids) and ids[row + 1] == ids[row]
 
 
 def test_the_program_writes_the_sweeps_outputs_and_refuses_a_second_run(
@@ -269,10 +301,12 @@ def test_each_method_beats_bc_on_every_row_on_a_mostly_poor_mixture():
     torques. 3 seeds x 20,000 gradient steps of small networks (batch 64; DWBC's discriminator
     every 10th step). Measured here, key 0, all four in one program, final returns: BC (all
     rows) -1249, -1228, -1137; BC (expert rows) -443, -1181, -374; DWBC -681, -1173, -1089;
-    ISW-BC -1022, -1305, -1142. The bars are on medians (BC on every row: -1228), with room for
-    float rounding: BC on the expert rows 300 above it, DWBC and ISW-BC 40 above; and on what
-    each discriminator learned: DWBC's d higher on expert rows than on the others, ISW-BC's
-    weight on expert rows at least twice the union's mean."""
+    ISW-BC -1022, -1305, -1142; ILID (its own program, its discriminators 2,000 steps at 3e-4
+    instead of its codebase's 100,000 at 1e-5) -1020, -1153, -1055. The bars are on medians (BC
+    on every row: -1228), with room for float rounding: BC on the expert rows 300 above it,
+    DWBC, ISW-BC and ILID 40 above; and on what each discriminator learned: DWBC's d higher on
+    expert rows than on the others, ISW-BC's weight on expert rows at least twice the union's
+    mean, ILID's selected rows richer in controller rows than those it chose from."""
     from conftest import _pendulum_demonstrations, swing_up_action
 
     rng = np.random.default_rng(0)
@@ -284,7 +318,7 @@ def test_each_method_beats_bc_on_every_row_on_a_mostly_poor_mixture():
     config = OfflineConfig(
         num_iterations=20, steps_per_iteration=1000, eval_every=5, num_eval_episodes=8,
         batch_size=64, dwbc_discriminator_every=10, dwbc_branch_size=32, dwbc_hidden_size=64,
-        iswbc_hidden_sizes=(64, 64),
+        iswbc_hidden_sizes=(64, 64), ilid_hidden_sizes=(64, 64), ilid_discriminator_steps=2000,
     )  # fmt: skip
     final, metrics = {}, {}
     for methods in program_groups(OFFLINE_METHOD_NAMES):  # one program each, as the job runs
@@ -292,16 +326,25 @@ def test_each_method_beats_bc_on_every_row_on_a_mostly_poor_mixture():
         trainer = OfflineTrainer(
             dataclasses.replace(config, components=components), envs.make("Pendulum-v1"), demos
         )
-        inputs = stack_offline_cells(make_cells(methods, 3), jax.random.key(0))
+        inputs = stack_offline_cells(  # ILID's discriminators: 2,000 steps at 3e-4 here
+            make_cells(methods, 3), jax.random.key(0), ilid_discriminator_learning_rate=3e-4
+        )
         _, group = jax.jit(jax.vmap(trainer.train))(*inputs)
         returns = np.asarray(group["eval/return"])[:, -1].reshape(len(methods), 3)
         final |= dict(zip(methods, returns, strict=True))
-        metrics |= {name: np.asarray(values)[:, -1] for name, values in group.items()
-                    if name.startswith(("dwbc/", "iswbc/"))}  # fmt: skip
+        metrics |= {  # per iteration: the last; the selection's (at the start): as is
+            name: np.asarray(values)[..., -1] if np.ndim(values) == 2 else np.asarray(values)
+            for name, values in group.items()
+            if name.startswith(("dwbc/", "iswbc/", "ilid/"))
+        }
     median = {name: np.median(values) for name, values in final.items()}
     assert median["bc-expert"] > median["bc-all"] + 300, final
     assert median["dwbc"] > median["bc-all"] + 40, final
     assert median["iswbc"] > median["bc-all"] + 40, final
+    assert median["ilid"] > median["bc-all"] + 40, final
+    # ILID's selection is richer in controller rows than the other rows it picks from
+    # (800 of about 4,800, 0.17): measured 0.54-0.56.
+    assert (metrics["ilid/selected_true_confidence"] > 0.3).all()
     assert (metrics["dwbc/mean_d_expert"] > metrics["dwbc/mean_d_other"] + 0.3).all()
     assert (metrics["iswbc/weight_expert"] > 2 * metrics["iswbc/mean_weight"]).all()
 

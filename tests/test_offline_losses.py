@@ -145,3 +145,69 @@ def test_iswbc_weights_at_the_optimal_discriminator_are_the_density_ratio():
     ratio = p_expert[:3] / p_union[:3]
     np.testing.assert_allclose(weights[:3], ratio, rtol=2e-2)
     assert weights[3] < 0.05  # never an expert cell: the optimum is c -> -inf
+
+
+# -- ILID -----------------------------------------------------------------------------------
+
+
+def _authors_selection(expert_like_next, expert_like, trajectory_ends, rollback):
+    """ILID's codebase's selection, as it computes it on a whole buffer in time order: start
+    from the rows whose next state is expert-like, then for k = 0..K-1 clear the first k + 1
+    positions of every trajectory in the current-state mask and OR it in shifted by k + 1."""
+    mask = expert_like_next.copy()
+    for k in range(rollback):
+        index = expert_like.copy()
+        start = 0
+        for end in trajectory_ends:
+            index[start : min(end, start + k + 1)] = False
+            start = end
+        mask[: -(k + 1)] |= index[k + 1 :]
+    return mask
+
+
+@pytest.mark.parametrize("rollback", [1, 3, 20])
+def test_ilid_selection_is_its_codebases_rollback_on_random_trajectories(rollback):
+    """A row is selected when one of the next K states of its own trajectory is expert-like:
+    the successor table and ``ilid_selection`` against the codebase's shifted masks, on
+    trajectories of random lengths (the last row of each has no next state in the file, so
+    its "next state" there is the next trajectory's first, which the codebase reads; rows
+    whose K successors all lie within the trajectory are compared)."""
+    from pngail_jax.demos import successor_rows
+
+    lengths = RNG.integers(1, 30, size=12)
+    ids = np.repeat(np.arange(12), lengths)
+    expert_like = RNG.uniform(size=ids.size) < 0.15
+    successors = successor_rows(ids, rollback)
+    ours = np.asarray(losses.ilid_selection(jnp.asarray(expert_like), jnp.asarray(successors)))
+    ends = np.cumsum(lengths)
+    next_expert_like = np.r_[expert_like[1:], False]  # row t's next state is row t + 1
+    theirs = _authors_selection(next_expert_like, expert_like, ends, rollback)
+    position = np.arange(ids.size) - np.repeat(ends - lengths, lengths)
+    within = position + rollback < np.repeat(lengths, lengths)  # all K successors inside
+    np.testing.assert_array_equal(ours[within], theirs[within])
+    # And directly from the definition, for every row.
+    for row in range(ids.size):
+        after = [
+            r for r in range(row + 1, row + rollback + 1) if r < ids.size and ids[r] == ids[row]
+        ]
+        assert ours[row] == any(expert_like[r] for r in after)
+
+
+def test_successor_rows_refuse_trajectories_that_are_not_contiguous():
+    from pngail_jax.demos import successor_rows
+
+    np.testing.assert_array_equal(
+        successor_rows(np.array([0, 0, 0, 1, 1]), 2), [[1, 2], [2, -1], [-1, -1], [4, -1], [-1, -1]]
+    )
+    with pytest.raises(ValueError, match="each trajectory's rows together"):
+        successor_rows(np.array([0, 1, 0]), 2)
+
+
+def test_ilid_discriminator_loss_and_its_clipped_output_against_numpy():
+    logits_p, logits_n = RNG.normal(0, 3, 64), RNG.normal(0, 3, 64)
+    d_p = np.clip(_sigmoid(logits_p), 0.1, 0.9)
+    d_n = np.clip(_sigmoid(logits_n), 0.1, 0.9)
+    np.testing.assert_allclose(losses.clipped_probability(jnp.asarray(logits_p)), d_p, rtol=1e-6)
+    loss, metrics = losses.ilid_discriminator_loss(jnp.asarray(d_p), jnp.asarray(d_n))
+    np.testing.assert_allclose(loss, np.mean(-np.log(d_p) - np.log(1 - d_n)), rtol=1e-5)
+    assert metrics["ilid/disc_loss"] == loss

@@ -18,7 +18,7 @@ from pngail_jax.demos.released import (
     released_confidence_path,
     released_task,
 )
-from pngail_jax.demos.splits import Split, cut_mixture, make_split
+from pngail_jax.demos.splits import Split, cut_mixture, make_split, successor_rows
 from pngail_jax.demos.types import ACTION_BOUND_MULTIPLE, DemonstrationError, Demonstrations
 
 __all__ = [
@@ -35,6 +35,7 @@ __all__ = [
     "load_npz",
     "load_released",
     "make_split",
+    "successor_rows",
     "released_confidence_path",
     "released_task",
     "save_npz",

@@ -1,6 +1,7 @@
 """The vmappable split of a grid cell: labelled rows (D_c) and unlabelled rows (D_u) drawn
 from a key, with their confidences (noised when the cell asks), as traced
-arrays; and ``cut_mixture``, a smaller mixture cut from a made set."""
+arrays; ``cut_mixture``, a smaller mixture cut from a made set; ``successor_rows``, the rows
+of the next states of each row's trajectory."""
 
 from __future__ import annotations
 
@@ -94,3 +95,21 @@ def cut_mixture(
             "source": f"{name}, cut from the made set",
         },
     )
+
+
+def successor_rows(trajectory_ids: np.ndarray, rollback: int) -> np.ndarray:
+    """int32[N, K]: per row, the rows of the next K states of its trajectory (k = 1..K; -1
+    past its end), the rows in time order within each trajectory. ValueError when a
+    trajectory's rows are not one contiguous run (then no row's successor is known)."""
+    ids = np.asarray(trajectory_ids)
+    starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
+    if len(starts) != len(np.unique(ids)):
+        raise ValueError(
+            "ILID needs each trajectory's rows together and in time order; these "
+            "trajectory ids come back after other trajectories' rows"
+        )
+    rows = np.arange(len(ids))[:, None] + np.arange(1, rollback + 1)[None, :]
+    inside = rows < len(ids)
+    same = np.zeros_like(inside)
+    same[inside] = ids[rows[inside]] == np.broadcast_to(ids[:, None], rows.shape)[inside]
+    return np.where(same, rows, -1).astype(np.int32)

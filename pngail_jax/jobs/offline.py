@@ -35,7 +35,7 @@ from pngail_jax.jobs.chunks import (
 )
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.offline import (
-    OFFLINE_METHOD_NAMES,
+    DEFAULT_OFFLINE_METHODS,
     OfflineConfig,
     OfflineTrainer,
     program_groups,
@@ -58,7 +58,7 @@ class OfflineRunConfig:
     demos: str | None = None  # None: made once and cached, as the sweep's
     conf: str | None = None
     action_scale: float | None = None
-    methods: tuple[str, ...] = OFFLINE_METHOD_NAMES
+    methods: tuple[str, ...] = DEFAULT_OFFLINE_METHODS
     seeds: int = 5
     seed: int = 0
     label_ratio: float = 0.2
@@ -225,6 +225,12 @@ def _environment_and_demos(config: OfflineRunConfig):
         raise RunError(f"demonstrations: {error}") from None
     if demos.confidence is None:
         raise RunError(f"{demos_path}: no confidences, which every offline method reads")
+    if "ilid" in required_components(config.methods) and demos.trajectory_ids is None:
+        raise RunError(
+            f"{demos_path}: no trajectories (its rows carry no trajectory ids), and ILID selects "
+            "rows by the states they lead to: drop ilid from --methods, or use a made set or "
+            "the authors' Pendulum file"
+        )
     return env, demos, demos_path
 
 

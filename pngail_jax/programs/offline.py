@@ -18,7 +18,7 @@ import argparse
 from pngail_jax.demos import released_task
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.jobs.offline import OfflineRunConfig, load_offline_config, run_offline
-from pngail_jax.offline import CLASSIFIED_SUFFIX, OFFLINE_METHOD_NAMES
+from pngail_jax.offline import CLASSIFIED_SUFFIX, DEFAULT_OFFLINE_METHODS, OFFLINE_METHOD_NAMES
 from pngail_jax.outputs import output_owner
 from pngail_jax.programs.cli import (
     ENV_HELP,
@@ -48,8 +48,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--action-scale", type=float, help="multiplies the stored actions")
     parser.add_argument(
         "--methods",
-        default=",".join(OFFLINE_METHOD_NAMES),
-        help=f"comma-separated, of {', '.join(OFFLINE_METHOD_NAMES)}, each also as "
+        default=",".join(DEFAULT_OFFLINE_METHODS),
+        help=f"comma-separated, of {', '.join(OFFLINE_METHOD_NAMES)} (ilid needs trajectories: a "
+        "made set or the authors' Pendulum file), each also as "
         f"<name>{CLASSIFIED_SUFFIX}",
     )
     parser.add_argument("--seeds", type=int, default=DEFAULTS.seeds)
