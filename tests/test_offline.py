@@ -241,13 +241,21 @@ def test_the_program_writes_the_sweeps_outputs_and_refuses_a_second_run(
     """experiments.offline end to end on a tiny grid: config.json, metrics.csv (no
     environment step), summary.json with each method's probability of beating BC on every
     row, curves.png; a second run into the same folder is refused."""
+    from pngail_jax.demos import load_npz, save_npz
     from pngail_jax.programs import offline as program
 
+    with pytest.raises(SystemExit, match="no trajectories .its rows carry no trajectory ids"):
+        program.main(["--demos", str(demos_path), "--methods", "ilid", "--out",
+                      str(tmp_path / "refused")])  # fmt: skip
+    with_trajectories = tmp_path / "trajectories.npz"  # the same rows, in 5 trajectories
+    save_npz(with_trajectories, dataclasses.replace(
+        load_npz(demos_path), trajectory_ids=np.repeat(np.arange(5), 20)))  # fmt: skip
     out = tmp_path / "offline"
     argv = [
-        "--demos", str(demos_path), "--methods", "bc-all,dwbc,bc-expert", "--seeds", "2",
-        "--gradient-steps", "40", "--steps-per-iteration", "10", "--eval-every", "2",
-        "--chunk-iterations", "2", "--batch-size", "8", "--out", str(out),
+        "--demos", str(with_trajectories), "--methods", "bc-all,dwbc,bc-expert,ilid",
+        "--seeds", "2", "--gradient-steps", "40", "--steps-per-iteration", "10",
+        "--eval-every", "2", "--chunk-iterations", "2", "--batch-size", "8",
+        "--ilid-discriminator-steps", "5", "--out", str(out),
     ]  # fmt: skip
     summary = program.main(argv)
     assert {p.name for p in out.iterdir()} >= {
@@ -257,17 +265,18 @@ def test_the_program_writes_the_sweeps_outputs_and_refuses_a_second_run(
         "summary.md",
         "curves.png",
     }
-    assert list(summary["methods"]) == ["bc-all", "dwbc", "bc-expert"]  # two programs
+    assert list(summary["methods"]) == ["bc-all", "dwbc", "bc-expert", "ilid"]  # three programs
+    assert "ILID's two discriminators, 5 steps each" in capsys.readouterr().out
     assert outputs.unaccounted(out, "offline") == []  # --overwrite knows all it wrote
     assert summary["gradient_steps"] == 40
     assert "bc-expert" in summary["probability_of_improvement"]
     with (out / "metrics.csv").open() as file:
         rows = list(csv.DictReader(file))
-    assert len(rows) == 3 * 2 * 4  # 3 methods x 2 seeds x 4 iterations
-    assert [row["method"] for row in rows[::8]] == ["bc-all", "dwbc", "bc-expert"]
+    assert len(rows) == 4 * 2 * 4  # 4 methods x 2 seeds x 4 iterations
+    assert [row["method"] for row in rows[::8]] == ["bc-all", "dwbc", "bc-expert", "ilid"]
     assert {row["env_steps"] for row in rows} == {"0"}  # no environment step taken
     assert all(row["wall_seconds"] for row in rows)
-    assert sum(bool(row["normalized_return"]) for row in rows) == 3 * 2 * 2  # 2 evaluations
+    assert sum(bool(row["normalized_return"]) for row in rows) == 4 * 2 * 2  # 2 evaluations
     with pytest.raises(SystemExit):
         program.parse_args(argv)
     assert "already holds a run of experiments.offline" in capsys.readouterr().err

@@ -70,13 +70,14 @@ class OfflineRunConfig:
     batch_size: int = 256
     num_eval_episodes: int | None = None  # None: the task's (RunSettings)
     hidden_sizes: tuple[int, ...] = (100, 100)
+    ilid_discriminator_steps: int = 100_000  # each of ILID's two, before its policy (codebase's)
 
     def __post_init__(self):
         if not self.methods or len(set(self.methods)) != len(self.methods):
             raise ValueError(f"methods must be distinct and not empty, got {self.methods!r}")
         required_components(self.methods)  # unknown names: one line naming them
         for name in ("seeds", "gradient_steps", "steps_per_iteration", "eval_every",
-                     "chunk_iterations", "batch_size"):  # fmt: skip
+                     "chunk_iterations", "batch_size", "ilid_discriminator_steps"):  # fmt: skip
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
@@ -110,6 +111,7 @@ class OfflineRunConfig:
             hidden_sizes=self.hidden_sizes,
             num_demos=run_config.task_num_demos(num_rows),
             classifier=run_config.adversarial_config(num_rows).classifier,
+            ilid_discriminator_steps=self.ilid_discriminator_steps,
             components=required_components(self.methods),
         )
 
@@ -250,7 +252,13 @@ def _run_group(
     with ticking(f"compiling {methods}"):
         grid = Grid(trainer, inputs, chunk_blocks)
     print(f"{methods}: {len(cells)} cells, compiled in {grid.compile_seconds:.1f} s", flush=True)
-    state, progress = start(grid, intact_checkpoint(checkpoints) if resume else None)
+    checkpoint = intact_checkpoint(checkpoints) if resume else None
+    if "ilid" in trainer_config.components and checkpoint is None:  # minutes, before step 1
+        steps = trainer_config.ilid_discriminator_steps
+        with ticking(f"{methods}: ILID's two discriminators, {steps:,} steps each"):
+            state, progress = start(grid, checkpoint)
+    else:
+        state, progress = start(grid, checkpoint)
     steps_per_chunk = grid.num_cells * grid.iterations_per_chunk
     steps_per_chunk *= trainer_config.steps_per_iteration
     num_chunks = trainer_config.num_evaluations // chunk_blocks

@@ -70,6 +70,11 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--chunk-iterations", type=int, default=DEFAULTS.chunk_iterations,
                         help="iterations per compiled chunk (a progress line each)")  # fmt: skip
     parser.add_argument("--batch-size", type=int, default=DEFAULTS.batch_size)
+    parser.add_argument(
+        "--ilid-discriminator-steps", type=int, default=DEFAULTS.ilid_discriminator_steps,
+        help="Adam steps of each of ILID's two discriminators, before its policy learns "
+        "(its codebase's: 100,000)",
+    )  # fmt: skip
     parser.add_argument("--out", type=path_argument, help="output directory (required)")
     parser.add_argument(
         "--resume", type=path_argument, metavar="DIR",
@@ -101,6 +106,7 @@ def parse_args(argv=None) -> argparse.Namespace:
             noise_std=args.noise_std, gradient_steps=args.gradient_steps,
             steps_per_iteration=args.steps_per_iteration, eval_every=args.eval_every,
             chunk_iterations=args.chunk_iterations, batch_size=args.batch_size,
+            ilid_discriminator_steps=args.ilid_discriminator_steps,
         )  # fmt: skip
     except ValueError as error:
         parser.error(str(error))
