@@ -71,6 +71,7 @@ class OfflineRunConfig:
     num_eval_episodes: int | None = None  # None: the task's (RunSettings)
     hidden_sizes: tuple[int, ...] = (100, 100)
     ilid_discriminator_steps: int = 100_000  # each of ILID's two, before its policy (codebase's)
+    ilid_discriminator_learning_rate: float = 1e-5  # its codebase's Adam step size
 
     def __post_init__(self):
         if not self.methods or len(set(self.methods)) != len(self.methods):
@@ -89,6 +90,11 @@ class OfflineRunConfig:
             )
         if not 0 < self.label_ratio < 1:
             raise ValueError(f"label_ratio must lie in (0, 1), got {self.label_ratio!r}")
+        if not 0 < self.ilid_discriminator_learning_rate < 1:
+            raise ValueError(
+                "ilid_discriminator_learning_rate must lie in (0, 1), got "
+                f"{self.ilid_discriminator_learning_rate!r}"
+            )
 
     @property
     def run_config(self) -> RunConfig:
@@ -246,8 +252,9 @@ def _run_group(
     target = max(1, config.chunk_iterations // trainer_config.eval_every)
     chunk_blocks = blocks_per_chunk(trainer_config.num_evaluations, target)
     inputs = stack_offline_cells(
-        cells, jax.random.key(config.seed), bsc_eps=config.run_config.task_bsc_eps
-    )
+        cells, jax.random.key(config.seed), bsc_eps=config.run_config.task_bsc_eps,
+        ilid_discriminator_learning_rate=config.ilid_discriminator_learning_rate,
+    )  # fmt: skip
     methods = ", ".join(dict.fromkeys(cell.method for cell in cells))
     with ticking(f"compiling {methods}"):
         grid = Grid(trainer, inputs, chunk_blocks)
