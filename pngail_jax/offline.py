@@ -333,8 +333,9 @@ class OfflineTrainer:
         rows whose next K states include one it puts at or above ``ilid_bar`` (S); a
         state-action discriminator of the expert rows against E and S together, whose
         d / (1 - d) weights the policy's BC on E and S. Returns the state's ILID fields and
-        the metrics of the selection (``ilid/num_selected``, ``ilid/selected_true_confidence``:
-        how good the selected rows are by the confidences nobody read)."""
+        the metrics of the selection (``ilid/num_selected`` of ``ilid/num_other``, and
+        ``ilid/selected_true_confidence`` against ``ilid/other_true_confidence``: how good
+        the selected rows are, by the confidences nobody read, against those it chose from)."""
         size = self.env.observation_size
         state_key, pair_key = jax.random.split(key)
         inputs = self._inputs[split.indices]
@@ -365,6 +366,9 @@ class OfflineTrainer:
             "ilid/num_selected": num_selected.astype(jnp.float32),
             "ilid/selected_true_confidence": jnp.sum(jnp.where(selected, split.true_confidence, 0))
             / jnp.maximum(num_selected, 1),
+            "ilid/num_other": other.sum().astype(jnp.float32),  # what it selected from
+            "ilid/other_true_confidence": jnp.sum(jnp.where(other, split.true_confidence, 0))
+            / jnp.maximum(other.sum(), 1),
             "ilid/state_disc_loss": state_loss,
             "ilid/pair_disc_loss": pair_loss,
         }

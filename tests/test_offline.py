@@ -267,6 +267,9 @@ def test_the_program_writes_the_sweeps_outputs_and_refuses_a_second_run(
     }
     assert list(summary["methods"]) == ["bc-all", "dwbc", "bc-expert", "ilid"]  # three programs
     assert "ILID's two discriminators, 5 steps each" in capsys.readouterr().out
+    assert set(summary["ilid"]) == {"num_selected", "num_other", "selected_true_confidence",
+                                    "other_true_confidence"}  # fmt: skip
+    assert "ILID's selection: a mean" in (out / "summary.md").read_text()
     assert outputs.unaccounted(out, "offline") == []  # --overwrite knows all it wrote
     assert summary["gradient_steps"] == 40
     assert "bc-expert" in summary["probability_of_improvement"]

@@ -353,6 +353,23 @@ def _write_outputs(out, config, cells, progress, normalizer, compile_seconds) ->
         f"steps/s over all {len(cells)} cells, {seconds:.0f} s of training. Expert set: D_c's "
         f"rows at confidence >= 0.5 (mean {summary['offline/num_expert']:.0f} rows per seed)."
     ]
+    if "ilid/num_selected" in progress.init_metrics:
+        ilid = {
+            name.removeprefix("ilid/"): float(np.nanmean(progress.init_metrics[name]))
+            for name in (
+                "ilid/num_selected",
+                "ilid/num_other",
+                "ilid/selected_true_confidence",
+                "ilid/other_true_confidence",
+            )  # fmt: skip
+        }
+        summary["ilid"] = ilid
+        notes.append(
+            f"ILID's selection: a mean {ilid['num_selected']:.0f} of {ilid['num_other']:.0f} "
+            "other rows per seed; their mean true confidence (which nothing read) "
+            f"{ilid['selected_true_confidence']:.2f}, against {ilid['other_true_confidence']:.2f} "
+            "for the rows it chose from."
+        )
     markdown = report.summary_markdown(summary, cells, metrics, title, notes)
     report.write_summary(out, summary, markdown)
     gradient = {**metrics, "env_steps": progress.metrics["gradient_steps"]}
