@@ -247,6 +247,19 @@ def invoked_as(program: str) -> list[str]:
     return [name] if name.startswith("pngail-") else ["python", "-m", f"experiments.{program}"]
 
 
+def add_allow_unsealed(add, what: str) -> None:
+    """``--allow-unsealed`` through ``add`` (a parser's or group's ``add_argument``): go on
+    with ``what`` although its config seal is missing, its config unchecked and said so
+    (``runs.verify_run``); every program that reads an earlier run offers it alike."""
+    add(
+        "--allow-unsealed",
+        action="store_true",
+        help=f"{what} without its config seal (a copy made without its dot-files, or a run "
+        "from before seals), its config.json unchecked, which the output says (default: "
+        "refuse)",
+    )
+
+
 def add_compile_cache_flags(parser) -> None:
     """``--compile-cache DIR`` and ``--no-compile-cache``; ``use_compile_cache`` applies them."""
     from pngail_jax.compilation import CACHE_ENVIRONMENT_VARIABLE

@@ -26,6 +26,7 @@ from pngail_jax.outputs import claimed
 from pngail_jax.programs.cli import (
     ArgumentParser,
     HelpFormatter,
+    add_allow_unsealed,
     claim_output,
     path_argument,
 )
@@ -53,11 +54,7 @@ def parse_args(argv=None) -> argparse.Namespace:
         f"{report.LATE_SHARE * 100:.0f}%% of training (the default, the figure re-runs agree on "
         "best), or final, its last evaluation",
     )  # fmt: skip
-    parser.add_argument(
-        "--allow-unsealed", action="store_true",
-        help="compare runs without their config seal (copied without their dot-files, or "
-        "made before seals), their config.json unchecked; compare.md says so",
-    )  # fmt: skip
+    add_allow_unsealed(parser.add_argument, "compare a run")
     parser.add_argument(
         "--expected", type=path_argument, metavar="RECORD",
         help="a kept run record (records/<name>, experiments.record): per method, is your "

@@ -53,6 +53,7 @@ from pngail_jax.paper.run import (
 from pngail_jax.programs.cli import (
     ArgumentParser,
     HelpFormatter,
+    add_allow_unsealed,
     add_compile_cache_flags,
     claim_output,
     current_spellings,
@@ -139,12 +140,7 @@ def add_run_folder_flags(parser: argparse.ArgumentParser) -> None:
         "config it is (up to --chunk-iterations), instead of running that grid again; with "
         "--resume too (default: none)",
     )
-    parser.add_argument(
-        "--allow-unsealed",
-        action="store_true",
-        help="adopt a sweep without its config seal (copied without its dot-files, or made "
-        "before seals), its config.json unchecked",
-    )
+    add_allow_unsealed(parser.add_argument, "--adopt a sweep")
     parser.add_argument("--out", type=path_argument, help="default results/paper-<timestamp>")
     parser.add_argument("--resume", type=path_argument, metavar="DIR", help="continue a run in DIR")
     parser.add_argument(

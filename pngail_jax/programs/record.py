@@ -22,7 +22,12 @@ import re
 from pathlib import Path
 
 from pngail_jax import run_records
-from pngail_jax.programs.cli import ArgumentParser, HelpFormatter, path_argument
+from pngail_jax.programs.cli import (
+    ArgumentParser,
+    HelpFormatter,
+    add_allow_unsealed,
+    path_argument,
+)
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -37,11 +42,7 @@ def parse_args(argv=None) -> argparse.Namespace:
         help="where records are kept (default records/; experiments.paper's runs go to results/)",
     )  # fmt: skip
     parser.add_argument("--check", action="store_true", help="verify records instead")
-    parser.add_argument(
-        "--allow-unsealed", action="store_true",
-        help="record a run without its config seal (copied without its dot-files, or made "
-        "before seals), its config.json unchecked",
-    )  # fmt: skip
+    add_allow_unsealed(parser.add_argument, "record a run")
     parser.add_argument(
         "--docs", action="store_true",
         help="rewrite every <!-- record-table NAME --> table of README.md and docs/*.md from "

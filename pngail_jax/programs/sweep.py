@@ -36,6 +36,7 @@ from pngail_jax.programs.cli import (
     ENV_HELP,
     ArgumentParser,
     HelpFormatter,
+    add_allow_unsealed,
     add_compile_cache_flags,
     check_env,
     claim_output,
@@ -136,12 +137,7 @@ def _add_output_flags(add) -> None:
         help="with --resume: go on although a demonstration, confidence or cache file differs "
         "from the one the run began with (the run then mixes two data sets) (default: refuse)",
     )
-    add(
-        "--allow-unsealed",
-        action="store_true",
-        help="with --resume: go on with a run whose config seal is missing (copied without "
-        "its dot-files, or made before seals), its config.json unchecked (default: refuse)",
-    )
+    add_allow_unsealed(add, "with --resume: continue a run")
 
 
 def _add_multihost_flags(parser) -> None:
