@@ -164,9 +164,12 @@ def grid_complete(directory: Path) -> bool:
         return False
 
 
-def run_grid(grid: GridSpec, directory: Path, config, command: list[str]) -> bool:
+def run_grid(
+    grid: GridSpec, directory: Path, config, command: list[str], allow_unsealed: bool = False
+) -> bool:
     """Runs (or resumes) one grid with ``pngail_jax.jobs.sweep.run``, or keeps a complete one
-    (returns True then). A refusal raises ``RunError``."""
+    (returns True then). ``allow_unsealed``: resume a grid whose config seal is missing. A
+    refusal raises ``RunError``."""
     if grid_complete(directory):
         print(f"\n== {grid.name}: done, kept ({directory})", flush=True)
         return True
@@ -175,7 +178,8 @@ def run_grid(grid: GridSpec, directory: Path, config, command: list[str]) -> boo
         print(f"\n== {grid.name}: resuming {directory}", flush=True)
     else:
         print(f"\n== {grid.name}: {grid.demos.description}", flush=True)
-    run(None if resume else config, directory, resume=resume, command=command)
+    run(None if resume else config, directory, resume=resume, command=command,
+        allow_unsealed=allow_unsealed)  # fmt: skip
     return False
 
 
@@ -194,7 +198,9 @@ def planned_configs(grids, demos, budget: Budget, physics, learner: str = "trpo"
     return configs
 
 
-def run_grids(grids, configs: dict, out: Path, command: list[str]) -> dict:
+def run_grids(
+    grids, configs: dict, out: Path, command: list[str], allow_unsealed: bool = False
+) -> dict:
     """Runs (or resumes, or keeps) every grid with its config (``planned_configs``); each
     grid's wall-clock seconds over all calls, interrupted ones included, kept in
     ``out/timings.json``. ``command``: the plan's, recorded in each grid's config."""
@@ -209,7 +215,7 @@ def run_grids(grids, configs: dict, out: Path, command: list[str]) -> dict:
         print(f"\n== grid {index + 1} of {len(grids)}{plan_eta(ran, len(grids) - index)}")
         start, kept = time.perf_counter(), False
         try:
-            kept = run_grid(grid, out / "grids" / name, configs[name], command)
+            kept = run_grid(grid, out / "grids" / name, configs[name], command, allow_unsealed)
         finally:  # an interrupted call (Ctrl-C, SIGTERM) counts its time too
             if not kept:
                 ran.append(time.perf_counter() - start)

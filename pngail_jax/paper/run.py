@@ -72,7 +72,8 @@ def run_paper(
     """Runs the plan of ``options`` (``paper_options``) into ``out`` (new, empty, or with
     ``overwrite`` a paper run), or with ``resume`` continues the plan in ``out`` (``options``
     None: its paper.json's); ``adopt``: finished sweep folders to keep as the plan's grids
-    they match (``paper.adopt``). Returns the page's path. Raises ``RunError`` with one line."""
+    they match (``paper.adopt``); ``allow_unsealed``: adopt sweeps, and resume grids, whose
+    config seal is missing. Returns the page's path. Raises ``RunError`` with one line."""
     out = Path(out)
     inside = [d for d in map(Path, adopt) if d.resolve().is_relative_to(out.resolve())]
     if overwrite and not resume and inside:  # it would be deleted before it is adopted
@@ -121,7 +122,7 @@ def run_paper(
         except RunError as error:
             kept = f"(the plan so far is kept: --resume {out} continues it)"
             raise RunError(f"{error} {kept}") from None
-        timings = run_grids(grids, configs, out, command)
+        timings = run_grids(grids, configs, out, command, allow_unsealed)
         page = write_page(out, options, figures, grids, timings, adopted)
     print(f"\nwrote {page}")
     return page

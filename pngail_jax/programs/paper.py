@@ -140,7 +140,7 @@ def add_run_folder_flags(parser: argparse.ArgumentParser) -> None:
         "config it is (up to --chunk-iterations), instead of running that grid again; with "
         "--resume too (default: none)",
     )
-    add_allow_unsealed(parser.add_argument, "--adopt a sweep")
+    add_allow_unsealed(parser.add_argument, "--adopt a sweep, or resume a plan's grid,")
     parser.add_argument("--out", type=path_argument, help="default results/paper-<timestamp>")
     parser.add_argument("--resume", type=path_argument, metavar="DIR", help="continue a run in DIR")
     parser.add_argument(
