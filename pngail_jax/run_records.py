@@ -162,7 +162,7 @@ def _check_replaceable(folder: Path, record: dict) -> None:
 def check_record(folder: Path) -> dict:
     """Verifies the record in ``folder`` and returns its ``record.json``: the metrics file is
     the one recorded (size and SHA-256), whole (every cell of the config, to the iteration the
-    record says), and gives the final returns the record states. RecordError otherwise."""
+    record says), and gives both statistics the record states. RecordError otherwise."""
     folder = Path(folder)
     try:
         record = read_json(folder / RECORD_FILE, "run record")
