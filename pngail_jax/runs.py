@@ -211,18 +211,33 @@ def verify_run(
     - its policies (a finished sweep's) match their digests.
 
     Returns the notes of what was let through."""
-    from pngail_jax.integrity import (
-        CONFIG_SEAL,
-        changed_inputs,
-        sealed_differences,
-        verify_manifest,
-    )
+    from pngail_jax.integrity import changed_inputs, verify_manifest
     from pngail_jax.outputs import output_owner
 
     directory = Path(directory)
-    notes = []
     if output_owner(directory) not in RUN_PROGRAMS:
         raise UntrustedRun(f"{who}: holds no sweep or offline run")
+    document, notes = _sealed_config(directory, who, allow_unsealed)
+    inputs = changed_inputs(recorded_inputs(document)) if check_inputs else []
+    if inputs:
+        raise UntrustedRun(
+            f"{who}: {'; '.join(inputs)}: its numbers come from other data than the files "
+            "there now; restore them"
+        )
+    _check_metrics_agree_with_summary(directory, document, who)
+    for policy in sorted((directory / "policies").glob("**/digests.json")):
+        try:
+            verify_manifest(policy.parent)
+        except IntegrityError as error:
+            raise UntrustedRun(f"{who}: {error}") from None
+    return notes
+
+
+def _sealed_config(directory: Path, who: str, allow_unsealed: bool) -> tuple[dict, list[str]]:
+    """The run's config.json once it equals its seal (or, with ``allow_unsealed``, has none:
+    then a note says so), and the notes; else ``UntrustedRun`` naming what differs."""
+    from pngail_jax.integrity import CONFIG_SEAL, sealed_differences
+
     try:
         document = read_json(directory / "config.json", "run config")
         if not isinstance(document, dict):
@@ -238,27 +253,14 @@ def verify_run(
             "from before seals), so its config.json cannot be checked against what the run "
             "began with; restore the seal, or pass --allow-unsealed to go on unchecked"
         )
-    if changes is None:
-        notes.append(f"{who}: no seal, config.json unchecked (--allow-unsealed)")
-    elif changes:
+    if changes:
         raise UntrustedRun(
             f"{who}: config.json was changed since the run began ({'; '.join(changes[:3])}"
             + (f"; and {len(changes) - 3} more" if len(changes) > 3 else "")
             + "): a run keeps what it began with; restore the file"
         )
-    inputs = changed_inputs(recorded_inputs(document)) if check_inputs else []
-    if inputs:
-        raise UntrustedRun(
-            f"{who}: {'; '.join(inputs)}: its numbers come from other data than the files "
-            "there now; restore them"
-        )
-    _check_metrics_agree_with_summary(directory, document, who)
-    for policy in sorted((directory / "policies").glob("**/digests.json")):
-        try:
-            verify_manifest(policy.parent)
-        except IntegrityError as error:
-            raise UntrustedRun(f"{who}: {error}") from None
-    return notes
+    unsealed = [f"{who}: no seal, config.json unchecked (--allow-unsealed)"]
+    return document, unsealed if changes is None else []
 
 
 def _check_metrics_agree_with_summary(directory: Path, document: dict, who: str) -> None:

@@ -156,32 +156,22 @@ def run_offline(
     out = Path(out)
     with refusals(), claimed(out, PROGRAM, overwrite=overwrite, resume=resume) as claim:
         run_config = config.run_config
-        if resume:  # the seal, the input files, metrics.csv against summary.json
-            try:
-                verify_run(out, f"cannot resume {out}")
-            except UntrustedRun as error:
-                raise RunError(str(error)) from None
-        saved = load_offline_config(out) if resume else None
-        if saved is not None and saved != config:
-            raise RunError(f"cannot resume {out}: it began with another config")
+        if resume:
+            _check_resumable(out, config)
         env, demos, demos_path = _environment_and_demos(config)
         normalizer, normalizer_source = resolve_normalizer(run_config, demos, env)
-        inputs = input_files(run_config, demos_path)
-        if not resume:
-            claim.prepare()
         document = {
             "program": PROGRAM,
             "config": _json_config(config),
             "demonstrations": demos_path,
-            "input_files": inputs,
+            "input_files": input_files(run_config, demos_path),
             "normalizer": normalizer,
             "normalizer_source": normalizer_source,
             "complete": False,
             "provenance": provenance(program=PROGRAM),
         }
-        if not resume:  # written first (sealed first), so that a run cut short can resume
-            seal(out / CONFIG_SEAL, sealed_part(document))
-            write_json(out / "config.json", document)
+        if not resume:
+            _begin(claim, out, document)
         cells = make_cells(config.methods, config.seeds, (config.label_ratio,),
                            (config.noise_std,))  # fmt: skip
         trainer_config = config.trainer_config(demos.num_rows)
@@ -193,15 +183,11 @@ def run_offline(
             flush=True,
         )
         start_time = time.perf_counter()
-        runs = []
-        for methods in program_groups(config.methods):
-            group = [cell for cell in cells if cell.method in methods]
-            trainer_config = dataclasses.replace(
-                trainer_config, components=required_components(methods)
-            )
-            trainer = OfflineTrainer(trainer_config, env, demos)
-            checkpoints = out / "checkpoints" / "+".join(methods)
-            runs.append(_run_group(config, trainer, group, normalizer, checkpoints, resume))
+        runs = [
+            _run_group(config, OfflineTrainer(trainer, env, demos), group, normalizer,
+                       out / "checkpoints" / "+".join(methods), resume)
+            for methods, trainer, group in _programs(config, trainer_config, cells)
+        ]  # fmt: skip
         compile_seconds = sum(grid.compile_seconds for grid, _, _ in runs)
         progress = _joined(cells, runs)
         summary = _write_outputs(out, config, cells, progress, normalizer, compile_seconds)
@@ -221,6 +207,34 @@ def run_offline(
         )
     print(f"-> {out}/{{config.json,metrics.csv,summary.md,summary.json,curves.png}}")
     return summary
+
+
+def _programs(config: OfflineRunConfig, trainer_config: OfflineConfig, cells):
+    """(methods, trainer config, cells) of each program the grid runs as (``program_groups``:
+    one per set of compiled parts)."""
+    for methods in program_groups(config.methods):
+        components = required_components(methods)
+        group = [cell for cell in cells if cell.method in methods]
+        yield methods, dataclasses.replace(trainer_config, components=components), group
+
+
+def _begin(claim, out: Path, document: dict) -> None:
+    """A new run's folder: claimed, its config sealed and written first, so that a run cut
+    short can resume (and a config.json never exists without its seal)."""
+    claim.prepare()
+    seal(out / CONFIG_SEAL, sealed_part(document))
+    write_json(out / "config.json", document)
+
+
+def _check_resumable(out: Path, config: OfflineRunConfig) -> None:
+    """RunError unless the run in ``out`` is one to continue with ``config``: trusted by
+    ``runs.verify_run`` (its seal, input files, metrics against summary) and begun with it."""
+    try:
+        verify_run(out, f"cannot resume {out}")
+    except UntrustedRun as error:
+        raise RunError(str(error)) from None
+    if load_offline_config(out) != config:
+        raise RunError(f"cannot resume {out}: it began with another config")
 
 
 def _environment_and_demos(config: OfflineRunConfig):

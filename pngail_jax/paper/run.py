@@ -75,12 +75,8 @@ def run_paper(
     they match (``paper.adopt``); ``allow_unsealed``: adopt sweeps, and resume grids, whose
     config seal is missing. Returns the page's path. Raises ``RunError`` with one line."""
     out = Path(out)
-    inside = [d for d in map(Path, adopt) if d.resolve().is_relative_to(out.resolve())]
-    if overwrite and not resume and inside:  # it would be deleted before it is adopted
-        raise RunError(
-            f"--adopt {inside[0]} lies inside --out {out}, which --overwrite empties first: "
-            "copy or move it out of there, or give another --out"
-        )
+    if overwrite and not resume:
+        _refuse_adopting_from_inside(out, adopt)
     with refusals(), claimed(out, PROGRAM, overwrite=overwrite, resume=resume) as claim:
         if resume:
             options = saved_options(out)
@@ -184,6 +180,17 @@ def page_so_far(plan_dir, out, *, overwrite: bool = False) -> Path:
 
 
 PAGE_PROGRAM = "paper-page"
+
+
+def _refuse_adopting_from_inside(out: Path, adopt) -> None:
+    """RunError for an ``--adopt`` folder inside ``out``, which ``--overwrite`` would empty
+    before adopting it."""
+    inside = [d for d in map(Path, adopt) if d.resolve().is_relative_to(out.resolve())]
+    if inside:
+        raise RunError(
+            f"--adopt {inside[0]} lies inside --out {out}, which --overwrite empties first: "
+            "copy or move it out of there, or give another --out"
+        )
 
 
 def grid_progress(directory: Path):

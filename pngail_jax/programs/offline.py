@@ -34,7 +34,8 @@ from pngail_jax.programs.cli import (
 DEFAULTS = OfflineRunConfig()
 
 
-def parse_args(argv=None) -> argparse.Namespace:
+def build_parser() -> ArgumentParser:
+    """The program's flags (``parse_args`` checks them)."""
     parser = ArgumentParser(
         "offline", description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
     )
@@ -92,6 +93,12 @@ def parse_args(argv=None) -> argparse.Namespace:
         "--overwrite", action="store_true", help="replace an earlier offline run in --out"
     )
     add_compile_cache_flags(parser)
+    return parser
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    """The checked flags of ``argv``: a resumed run's folder, or a new run's config."""
+    parser = build_parser()
     args = parser.parse_args(argv)
     if args.resume is not None:
         if args.out is not None and args.out != args.resume:
