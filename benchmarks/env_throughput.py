@@ -43,7 +43,7 @@ def configurations(env_names, quick: bool, on_gpu: bool, fast_solver_only: bool)
         widths = QUICK_MUJOCO_WIDTHS if quick else (GPU_WIDTHS if on_gpu else CPU_WIDTHS)
         if name in envs.GYM_TASKS:
             # gymnasium's tasks keep gymnasium's solver; one row per engine.
-            for physics in envs.PHYSICS:
+            for physics in envs.available_physics():
                 yield name, f"gymnasium's, physics {physics}", {"physics": physics}, widths
             continue
         if name == "Ant":
@@ -154,6 +154,8 @@ def main(argv=None) -> None:
     for name, solver, options, widths in configurations(
         names, args.quick, on_gpu, args.fast_solver_only
     ):
+        if options.get("physics") == "warp":  # Warp's contact buffer: the widest batch
+            options = {**options, "warp_batch": max(widths_override or widths)}
         env = envs.make(name, **options)
         for width in widths_override or widths:
             key, measure_key = jax.random.split(key)

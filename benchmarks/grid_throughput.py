@@ -165,13 +165,15 @@ def load_demos(path: Path | None, env_name: str, env) -> tuple[Demonstrations, s
     return demos, f"SYNTHETIC: {SYNTHETIC_ROWS} random rows ({reason})"
 
 
-def full_episode_trpo(env_name: str, settings, train) -> TRPO | None:
+def full_episode_trpo(env_name: str, settings, train, cells: int) -> TRPO | None:
     """``train``'s TRPO on the task without early termination; None where it never ends one."""
     if env_name not in TERMINATING_TASKS:
         return None
     options = dict(settings.env_options)
     if env_name in envs.GYM_TASKS:
         options["physics"] = settings.physics
+        if settings.physics == "warp":
+            options["warp_batch"] = cells * max(settings.num_envs, settings.num_eval_episodes)
     env = envs.make(env_name, terminate_when_unhealthy=False, **options)
     return TRPO(train.config.trpo, env)
 
@@ -253,7 +255,7 @@ def compile_worker(args, devices) -> None:
     """Builds the grid of ``args.compile_worker`` cells as ``measure_grid`` does, with the
     compilation cache in ``args.cache_dir``, and prints its compile seconds and cache hits."""
     enable_compilation_cache(args.cache_dir)
-    env = run_settings.make_env(args.env, args.run_settings)
+    env = run_settings.make_env(args.env, args.run_settings, cells=args.compile_worker)
     demos, _ = load_demos(args.demos, args.env, env)
     train = make_grid_train(args, env, demos)
     methods, seeds = grid_layout(args.compile_worker)
@@ -342,7 +344,7 @@ def make_grid_train(args, env, demos):
 def measure_rows(args, env, demos, devices, common: dict) -> list[dict]:
     settings = args.run_settings
     train = make_grid_train(args, env, demos)
-    full_trpo = full_episode_trpo(args.env, settings, train)
+    full_trpo = full_episode_trpo(args.env, settings, train, max(args.sizes))
     key, rows = jax.random.key(args.seed), []
     for size in args.sizes:
         width = settings.num_envs * size
@@ -526,7 +528,7 @@ def parse_args(argv=None) -> argparse.Namespace:
 def measure_environment(args, devices) -> list[dict]:
     """Builds the task and its demonstrations and measures every grid size."""
     settings = args.run_settings
-    env = run_settings.make_env(args.env, settings)
+    env = run_settings.make_env(args.env, settings, cells=max(args.sizes))
     demos, demos_note = load_demos(args.demos, args.env, env)
     print(
         f"device {context()['device']} x{len(devices)} used, jax {jax.__version__}; "

@@ -146,7 +146,7 @@ class RunSettings:
 
 REFERENCE_SETTINGS = RunSettings()
 
-PHYSICS_NAMES = {"c": "MuJoCo C engine (float64)", "mjx": "MJX"}
+PHYSICS_NAMES = {"c": "MuJoCo C engine (float64)", "mjx": "MJX", "warp": "MJX on MuJoCo Warp"}
 
 # The MuJoCo tasks: the reference's 25 envs x 200 steps, the fast MJX solver (1 Newton / 4
 # line-search iterations, Brax's own setting for Ant), and 10 evaluation episodes every 50
@@ -194,12 +194,15 @@ def settings_for(env_name: str, **overrides) -> RunSettings:
     return ENV_SETTINGS.get(env_name, REFERENCE_SETTINGS).replace(**overrides)
 
 
-def make_env(env_name: str, settings: RunSettings) -> envs.Env:
+def make_env(env_name: str, settings: RunSettings, cells: int = 1) -> envs.Env:
     """``envs.make(env_name)`` with the settings' solver caps (Pendulum takes none) and, for
-    gymnasium's MuJoCo tasks, their physics engine."""
+    gymnasium's MuJoCo tasks, their physics engine; on MuJoCo Warp, sized for ``cells`` runs
+    stepped together (``warp_batch``: each cell's training or evaluation envs, the wider)."""
     options = dict(settings.env_options)
     if env_name in envs.GYM_TASKS:
         options["physics"] = settings.physics
+        if settings.physics == "warp":
+            options["warp_batch"] = cells * max(settings.num_envs, settings.num_eval_episodes)
     elif settings.physics is not None:
         raise ValueError(
             f"RunSettings.physics: only gymnasium's MuJoCo tasks have a choice of engine, "

@@ -52,6 +52,7 @@ def test_gail_learns_pendulum_from_the_optimal_trajectory():
     assert np.isfinite(np.asarray(metrics["disc/loss"])).all()
 
 
+@pytest.mark.heavy
 @pytest.mark.slow
 def test_gail_learns_pendulum_from_a_controllers_trajectory():
     """The same learning test on a file-free trajectory, so it runs everywhere (CI has no
@@ -72,6 +73,7 @@ def test_gail_learns_pendulum_from_a_controllers_trajectory():
     assert np.median(final) > -600, final
 
 
+@pytest.mark.heavy
 @pytest.mark.slow
 def test_methods_that_read_confidences_learn_from_a_mixture_gail_cannot():
     """PN-GAIL and 2IWIL on a 1:4 mixture of a swing-up controller's episode (confidence 1)

@@ -83,6 +83,7 @@ def key(seed):
     return jax.random.key(seed)
 
 
+@pytest.mark.heavy
 @pytest.mark.slow
 def test_a_grid_of_the_appendix_methods_equals_its_cells_run_alone():
     trainer = trainer_for(METHODS)
@@ -109,6 +110,7 @@ def test_a_grid_of_the_appendix_methods_equals_its_cells_run_alone():
         assert moved == (cell.method not in ("bc", "bc-weighted")), cell.method
 
 
+@pytest.mark.heavy
 @pytest.mark.slow
 def test_the_appendix_methods_train_under_ppo():
     """The learner is one static choice under every method: the appendix methods' phases
@@ -145,6 +147,7 @@ def ranked_problem(num_trajectories=4, steps=20):
     )
 
 
+@pytest.mark.heavy
 @pytest.mark.slow
 def test_cail_learns_confidences_that_rank_trajectories_of_known_quality():
     """CAIL as its codebase runs it (10 rounds of lookahead, a step of 0.1 on beta and an Adam

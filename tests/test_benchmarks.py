@@ -107,6 +107,7 @@ def test_physics_agreement(tmp_path):
     assert row["physics"] == "c" and abs(row["return_difference"]) < 1e-6
 
 
+@pytest.mark.heavy
 def test_solver_accuracy(tmp_path):
     argv = ["--envs", "Hopper", "--num-envs", "2", "--steps", "10"]
     rows = rows_of("solver_accuracy", argv, tmp_path / "rows.json")

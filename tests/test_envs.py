@@ -143,26 +143,31 @@ class TestPendulum(EnvContract):
     env_name = "Pendulum-v1"
 
 
+@pytest.mark.heavy
 class TestAnt(EnvContract):
     env_name = "Ant"
     options = MJX_OPTIONS
 
 
+@pytest.mark.heavy
 class TestHalfCheetah(EnvContract):
     env_name = "HalfCheetah"
     options = MJX_OPTIONS
 
 
+@pytest.mark.heavy
 class TestHopper(EnvContract):
     env_name = "Hopper"
     options = MJX_OPTIONS
 
 
+@pytest.mark.heavy
 class TestWalker2d(EnvContract):
     env_name = "Walker2d"
     options = MJX_OPTIONS
 
 
+@pytest.mark.heavy
 class TestSwimmer(EnvContract):
     env_name = "Swimmer"
     options = MJX_OPTIONS

@@ -130,6 +130,7 @@ def sharded_vs_unsharded() -> dict:
     }
 
 
+@pytest.mark.heavy
 @pytest.mark.slow
 def test_sharded_over_four_devices_matches_one_device():
     from conftest import run_in_subprocess
@@ -359,6 +360,7 @@ def multihost_worker(process_id: int, port: int) -> dict:
     }
 
 
+@pytest.mark.heavy
 @pytest.mark.slow
 def test_two_processes_match_one():
     import json

@@ -156,6 +156,7 @@ def _hopper_grid_setup():
     return AdversarialTrainer(config, env, demos), small_grid_inputs()
 
 
+@pytest.mark.heavy
 @pytest.mark.slow
 def test_c_engine_grid_cells_equal_single_runs():
     """The callback under jit(vmap) over cells: the grid's first chunk equals each cell run
@@ -177,12 +178,17 @@ def test_c_engine_grid_cells_equal_single_runs():
             assert_close_across_programs(np.asarray(one[name])[:1], first[name][index], name)
 
 
+@pytest.mark.heavy
 @pytest.mark.slow
 def test_c_engine_sweep_resumed_after_a_kill_equals_the_uninterrupted_run(tmp_path):
-    """The sweep on Hopper-v4's C engine: chunks, checkpoints and --resume as on any task.
+    sweep_resumes_bit_exactly(tmp_path, "c")
+
+
+def sweep_resumes_bit_exactly(tmp_path, physics: str):
+    """The sweep on Hopper-v4 on ``physics``: chunks, checkpoints and --resume as on any task.
     A copy of a finished run cut back to its first checkpoint (what a kill after it leaves;
     tests/test_sweep.py kills a run for real) resumes to the same metrics, bit for bit;
-    config.json records the engine, and a resume keeps it."""
+    config.json records the engine, and a resume keeps it. Returns the uninterrupted run."""
     from pngail_jax.demos import Demonstrations, save_npz
     from pngail_jax.jobs import record
     from pngail_jax.programs import sweep
@@ -220,19 +226,21 @@ def test_c_engine_sweep_resumed_after_a_kill_equals_the_uninterrupted_run(tmp_pa
             "2",
             "--classifier-steps",
             "20",
+            "--physics",
+            physics,
             "--out",
             str(whole),
         ]  # fmt: skip
     )
     saved = json.loads((whole / "config.json").read_text())
-    assert saved["env"] == "Hopper-v4" and saved["resolved"]["physics"] == "c"
+    assert saved["env"] == "Hopper-v4" and saved["resolved"]["physics"] == physics
     killed = tmp_path / "killed"
     shutil.copytree(whole, killed)
     shutil.rmtree(killed / "checkpoints" / "chunk_0002")
     shutil.rmtree(killed / "policies")
     for name in ("metrics.csv", "summary.json", "summary.md", "curves.png"):
         (killed / name).unlink()
-    assert record.load_saved(killed).config.settings.physics == "c"
+    assert record.load_saved(killed).config.settings.physics == physics
     sweep.main(["--resume", str(killed)])
     assert metrics_numbers(killed / "metrics.csv") == metrics_numbers(whole / "metrics.csv")
     resumed, uninterrupted = (
@@ -240,8 +248,10 @@ def test_c_engine_sweep_resumed_after_a_kill_equals_the_uninterrupted_run(tmp_pa
     )
     for name in uninterrupted.files:
         np.testing.assert_array_equal(resumed[name], uninterrupted[name], err_msg=name)
+    return whole
 
 
+@pytest.mark.heavy
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["Hopper-v4"])
 def test_the_mjx_path_follows_gymnasium_over_50_steps(name):
@@ -259,3 +269,22 @@ def test_the_mjx_path_follows_gymnasium_over_50_steps(name):
     np.testing.assert_allclose(our_obs, obs, rtol=0, atol=1e-4)
     np.testing.assert_allclose(our_rewards, rewards, rtol=0, atol=1e-4)
     np.testing.assert_array_equal(our_terminated, terminated)
+    _check_reset_needs_no_forward_pass(env, qpos, qvel, actions[0].astype(np.float32))
+
+
+def _check_reset_needs_no_forward_pass(env, qpos, qvel, action):
+    """A reset leaves MJX's derived fields to the next step (which starts with a forward
+    pass): stepping from it equals, bit for bit, stepping from data a forward pass filled."""
+    step = jax.jit(env.step)
+    state = jax.jit(env.reset)(jax.random.key(0))
+    obs, internal = jax.jit(env.state_at)(qpos, qvel)
+    bare = state.replace(obs=obs, internal=internal)
+    full_data = jax.jit(env._mjx.forward)(env._mjx_model, internal.data)
+    assert not np.array_equal(full_data.xpos, internal.data.xpos)  # the forward pass did work
+    full = bare.replace(internal=internal.replace(data=full_data))
+    a, b = step(bare, action), step(full, action)
+    np.testing.assert_array_equal(a.obs, b.obs)
+    np.testing.assert_array_equal(a.reward, b.reward)
+    leaves = zip(jax.tree.leaves(a.internal), jax.tree.leaves(b.internal), strict=True)
+    for leaf_a, leaf_b in leaves:
+        np.testing.assert_array_equal(leaf_a, leaf_b)

@@ -305,6 +305,7 @@ def test_the_program_writes_the_sweeps_outputs_and_refuses_a_second_run(
         program.main(["--resume", str(out)])
 
 
+@pytest.mark.heavy
 @pytest.mark.slow
 def test_each_method_beats_bc_on_every_row_on_a_mostly_poor_mixture():
     """A 1:4 mixture of five episodes of conftest's swing-up controller (confidence 1, returns -240

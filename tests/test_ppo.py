@@ -274,6 +274,7 @@ def test_train_rl_with_ppo_writes_its_columns_and_a_loadable_policy(tmp_path):
 # -- learning --------------------------------------------------------------------------------
 
 
+@pytest.mark.heavy
 @pytest.mark.slow
 def test_ppo_learns_pendulum_on_the_true_reward(pendulum):
     """10 envs x 200 steps, 50 iterations (100,000 steps), learning rate 1e-3, the other

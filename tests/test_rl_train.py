@@ -106,6 +106,7 @@ def test_bad_configuration_is_a_clear_error():
         TRPOHyperparams.create(gamma=1.5)
 
 
+@pytest.mark.heavy
 @pytest.mark.slow
 def test_learns_pendulum_with_reference_defaults(pendulum):
     """Reference defaults (5,000 steps per iteration, max KL 0.01, ...), 100 iterations.

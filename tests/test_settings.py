@@ -101,6 +101,7 @@ def test_describe_names_shape_solver_and_evaluation():
     assert "10 episodes every 25 iterations" in text
 
 
+@pytest.mark.heavy
 @pytest.mark.slow
 def test_hopper_learns_with_the_table_settings():
     """TRPO on Hopper's true reward with the table's row (25 envs x 200 steps, fast solver),

@@ -54,6 +54,7 @@ def test_observation_and_spaces_match_gymnasium(swimmer):
     assert env.dt == pytest.approx(reference.unwrapped.dt)
 
 
+@pytest.mark.heavy
 def test_single_transitions_match(swimmer):
     """Transitions along a real trajectory, actions up to 1.5x the bounds (MuJoCo clamps)."""
     _, step, state_at = swimmer
@@ -94,6 +95,7 @@ def x64_trajectory_errors() -> dict:
     }
 
 
+@pytest.mark.heavy
 @pytest.mark.slow
 def test_whole_trajectory_matches_under_x64():
     """200 steps from one state in float64: MJX and C MuJoCo agree to ~1e-13 here."""

@@ -25,7 +25,7 @@ from typing import Any
 
 from pngail_jax.envs.autoreset import AutoReset, AutoResetState
 from pngail_jax.envs.base import Env, EnvState, check_positive_int
-from pngail_jax.envs.gym_mujoco import PHYSICS, TASKS, default_physics
+from pngail_jax.envs.gym_mujoco import PHYSICS, TASKS, available_physics, default_physics
 from pngail_jax.envs.mjx_tasks import BRAX_TASKS, FAST_SOLVER, from_brax
 
 __all__ = [
@@ -33,6 +33,7 @@ __all__ = [
     "FAST_SOLVER",
     "GYM_TASKS",
     "PHYSICS",
+    "available_physics",
     "AutoReset",
     "AutoResetState",
     "Env",
@@ -64,9 +65,10 @@ def make(name: str, **options) -> Env:
 
     Built-in options: ``max_episode_steps`` for every env; ``g`` for Pendulum-v1;
     ``solver_iterations`` and ``ls_iterations`` (solver overrides, see ``FAST_SOLVER``) for
-    the MuJoCo tasks; ``physics`` (``"c"``, ``"mjx"``, None: from the platform) and
-    ``num_threads`` for gymnasium's; any Brax environment keyword for Brax's. Building a MuJoCo
-    task loads the model (a second or two); compiling its step takes 10-60 s on a CPU.
+    the MuJoCo tasks; ``physics`` (``"c"``, ``"mjx"``, ``"warp"``, None: from the platform),
+    ``num_threads`` (C engine) and ``warp_batch`` (Warp) for gymnasium's; any Brax
+    environment keyword for Brax's. Building a MuJoCo task loads the model (a second or
+    two); compiling its step takes 10-60 s on a CPU.
 
     Options are checked before anything is built: ``max_episode_steps``, ``solver_iterations``
     and ``ls_iterations`` must be positive integers and ``g`` a finite number > 0, else a

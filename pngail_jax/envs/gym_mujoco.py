@@ -20,7 +20,12 @@ One task, two physics engines (``physics=``):
   ``mujoco.rollout`` is not used because it does not return the solver's warm start: without
   it HalfCheetah-v4 drifted from gymnasium by 16 (largest position or velocity difference)
   within one episode.
-- ``"mjx"``: MJX, in JAX's float width, for accelerators.
+- ``"mjx"``: MJX (its JAX implementation), in JAX's float width, for accelerators.
+- ``"warp"``: MJX on MuJoCo Warp (``impl="warp"``), float32 kernels on an NVIDIA GPU or,
+  for development, on the CPU; an optional extra (``pip install "pngail-jax[warp]"``).
+  Warp keeps its contact and constraint buffers shared by the whole batch, sized for
+  ``WARP_CONTACTS_PER_ENV`` contacts and ``WARP_CONSTRAINTS_PER_ENV`` constraint rows per env
+  (``warp_batch``: the envs stepped together).
 - ``None`` (default): ``"c"`` when JAX's default backend is the CPU, else ``"mjx"``.
 
 Observations, rewards and terminations are written once (``TaskSpec``, ``outcome``) against
@@ -46,7 +51,8 @@ from flax import struct
 from pngail_jax.envs.base import Env, float_dtype
 from pngail_jax.envs.mjx_tasks import check_options, gymnasium_asset, import_mjx
 
-PHYSICS = ("c", "mjx")
+PHYSICS = ("c", "mjx", "warp")
+WARP_EXTRA = 'pip install "pngail-jax[warp]"'
 
 
 # Task functions act on the last axis, so the C engine's host code runs them on a whole batch.
@@ -237,8 +243,13 @@ class GymMujocoTask(Env):
       max_episode_steps: time limit, a positive integer (1000, gymnasium's).
       solver_iterations, ls_iterations: solver caps, positive integers; None keeps the model's
         (gymnasium's). Any other value departs from gymnasium.
-      physics: ``"c"``, ``"mjx"`` or None (from the platform, ``default_physics``).
+      physics: ``"c"``, ``"mjx"``, ``"warp"`` or None (from the platform,
+        ``default_physics``).
       num_threads: threads of the C engine (default: the CPUs this process may use).
+      warp_batch: on ``"warp"``, the most envs stepped together (every env of every cell
+        of a grid, or of its evaluation): Warp's contact buffer is shared by the whole
+        batch and sized for that many (default ``WARP_DEFAULT_BATCH``). A step that
+        overflows it returns NaN observations and rewards, never quietly wrong ones.
       terminate_when_unhealthy: gymnasium's option of that name: False never terminates and
         pays the healthy reward only on healthy steps (for measuring full-length episodes).
     """
@@ -252,16 +263,23 @@ class GymMujocoTask(Env):
         physics: str | None = None,
         num_threads: int | None = None,
         terminate_when_unhealthy: bool = True,
+        warp_batch: int | None = None,
     ):
         max_episode_steps, solver = check_options(
             name, max_episode_steps, solver_iterations, ls_iterations
         )
         self.physics = check_physics(name, physics)
         _check_engine_options(name, num_threads, terminate_when_unhealthy)
+        self.warp_batch = _check_warp_batch(name, self.physics, warp_batch)
         self.terminate_when_unhealthy = terminate_when_unhealthy
         import mujoco
 
         self.spec = TASKS[name]
+        if self.physics == "warp" and self.spec.reads_contact_forces:
+            raise ValueError(
+                f"{name} observes contact forces, which MJX computes on its JAX implementation "
+                "only (rne_postconstraint): physics 'warp' cannot run it; use 'mjx' or 'c'"
+            )
         model = mujoco.MjModel.from_xml_path(gymnasium_asset(self.spec.xml))
         for field, value in solver.items():
             setattr(model.opt, field, value)
@@ -291,9 +309,13 @@ class GymMujocoTask(Env):
         if self.physics == "c":
             self._engine = _CEngine(model, self, num_threads)
         else:
-            mjx = import_mjx()
-            self._mjx = mjx
-            self._mjx_model = mjx.put_model(model)
+            self._mjx = import_mjx()
+            self._mj_model = model
+            self._mjx_model = self._mjx.put_model(
+                model, impl="warp" if self.physics == "warp" else "jax"
+            )
+            if self.physics == "warp":
+                self._warp = _WarpBuffers(self._mjx, model, self.warp_batch)
 
     def __repr__(self) -> str:
         return super().__repr__()[:-1] + f", physics={self.physics!r})"
@@ -316,7 +338,8 @@ class GymMujocoTask(Env):
 
     def state_at(self, qpos: jax.Array, qvel: jax.Array) -> tuple[jax.Array, Any]:
         """``(obs, internal)`` of an episode starting at ``qpos``, ``qvel``, as gymnasium's
-        ``reset`` leaves it after ``set_state`` (time 0, no solver warm start)."""
+        ``reset`` leaves it after ``set_state`` (time 0, no solver warm start). On MJX the
+        data holds ``qpos`` and ``qvel``; its derived fields are computed by the next step."""
         qpos = jnp.asarray(qpos, float_dtype())
         qvel = jnp.asarray(qvel, float_dtype())
         # The contact forces are 0 at a reset: gymnasium's reset computes none (mj_forward).
@@ -328,13 +351,21 @@ class GymMujocoTask(Env):
         if self.physics == "c":
             internal = CState(bits=self._engine.initial_bits(qpos, qvel))
         else:
-            data = self._mjx.make_data(self._mjx_model)
+            data = self._make_data()
+            # No forward pass here: a step starts with one, computed from qpos and qvel
+            # alone (the warm start is 0 after a reset), so the data's derived fields would
+            # be recomputed before anything reads them. Leaving it out is bit-identical and
+            # keeps one copy of the physics out of every program that auto-resets.
             data = data.replace(
                 qpos=qpos.astype(data.qpos.dtype), qvel=qvel.astype(data.qvel.dtype)
             )
-            data = self._mjx.forward(self._mjx_model, data)
             internal = MjxState(data=data, x=qpos[0])
         return obs, internal
+
+    def _make_data(self):
+        if self.physics == "warp":
+            return self._warp.strip(self._warp.template)
+        return self._mjx.make_data(self._mjx_model)
 
     def _reset(self, key):
         return self.state_at(*self.initial_qpos_qvel(key))
@@ -347,6 +378,8 @@ class GymMujocoTask(Env):
             bits, obs, reward, terminated = self._engine.step(internal.bits, action)
             return obs, reward, terminated, CState(bits=bits)
         data = internal.data.replace(ctrl=action.astype(internal.data.ctrl.dtype))
+        if self.physics == "warp":
+            data = self._warp.restore(data)
         data = jax.lax.fori_loop(
             0, self.spec.frame_skip, lambda _, d: self._mjx.step(self._mjx_model, d), data
         )
@@ -366,6 +399,11 @@ class GymMujocoTask(Env):
         obs, reward, terminated = outcome(
             jnp, self.spec, self.terminate_when_unhealthy, self.dt, step
         )
+        if self.physics == "warp":
+            # A full buffer dropped contacts: say so, as NaN, never as a quietly wrong step.
+            lost = data._impl.overflow != 0
+            obs, reward = jnp.where(lost, jnp.nan, obs), jnp.where(lost, jnp.nan, reward)
+            data = self._warp.strip(data)
         return obs, reward.astype(dtype), terminated, MjxState(data=data, x=x_after)
 
 
@@ -374,6 +412,74 @@ def _available_cpus() -> int:
     if hasattr(os, "sched_getaffinity"):
         return len(os.sched_getaffinity(0))
     return os.cpu_count() or 1
+
+
+WARP_DEFAULT_BATCH = 1024
+
+
+def available_physics() -> tuple[str, ...]:
+    """``PHYSICS`` less ``"warp"`` where MuJoCo Warp (the optional extra) is not installed."""
+    import importlib.util
+
+    warp = all(importlib.util.find_spec(name) for name in ("warp", "mujoco_warp"))
+    return PHYSICS if warp else tuple(p for p in PHYSICS if p != "warp")
+
+
+def _check_warp_batch(name: str, physics: str, warp_batch: Any) -> int | None:
+    """The checked ``warp_batch`` (None off Warp), or a ValueError naming the problem; also
+    refuses ``"warp"`` where MuJoCo Warp is not installed."""
+    if physics != "warp":
+        if warp_batch is not None:
+            raise ValueError(f"{name}: warp_batch is an option of physics='warp' only")
+        return None
+    try:
+        import mujoco_warp  # noqa: F401
+        import warp
+    except ImportError:
+        raise ValueError(
+            f"{name}: physics 'warp' needs MuJoCo Warp, an optional extra: {WARP_EXTRA}"
+        ) from None
+    warp.config.log_level = 30  # logging.WARNING: no banner, no line per kernel module loaded
+    if warp_batch is None:
+        return WARP_DEFAULT_BATCH
+    if isinstance(warp_batch, bool) or not isinstance(warp_batch, int) or warp_batch < 1:
+        raise ValueError(f"{name}: warp_batch must be a positive integer, got {warp_batch!r}")
+    return warp_batch
+
+
+class _WarpBuffers:
+    """The buffers MuJoCo Warp shares across a batch (contacts, collision counters), kept out
+    of the env state.
+
+    Under ``vmap`` MJX's Warp implementation wants them unbatched (one contact buffer for every
+    env stepped together), but a state carried through a grid's nested ``vmap``s comes back
+    batched on each axis. Each step refills them from scratch (collision detection resets the
+    counters and rewrites the contacts), so the state carries empty placeholders and a step
+    starts from the constant buffers, sized for ``batch`` envs at Warp's own capacity for one.
+    """
+
+    def __init__(self, mjx, model, batch: int):
+        import dataclasses as dc
+
+        from mujoco.mjx.warp import types as warp_types
+
+        per_env = int(mjx.make_data(model, impl="warp")._impl.naconmax)
+        self.template = mjx.make_data(model, impl="warp", naconmax=batch * per_env)
+        batched = warp_types._BATCH_DIM["Data"]
+        impl = self.template._impl
+        self._shared = {
+            field.name: getattr(impl, field.name)
+            for field in dc.fields(impl)
+            if not batched.get(field.name, True) and hasattr(getattr(impl, field.name), "shape")
+        }
+        self._empty = dict.fromkeys(self._shared)  # None: no leaf in the carried state
+        self._replace = dc.replace
+
+    def strip(self, data):
+        return data.replace(_impl=self._replace(data._impl, **self._empty))
+
+    def restore(self, data):
+        return data.replace(_impl=self._replace(data._impl, **self._shared))
 
 
 def _check_engine_options(name: str, num_threads: Any, terminate_when_unhealthy: Any) -> None:

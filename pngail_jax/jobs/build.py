@@ -168,8 +168,11 @@ def build(config: RunConfig, saved=None) -> BuiltRun:
     """Environment, demonstrations, trainer and the compiled grid of ``config`` (``saved``, a
     resumed run's ``record.SavedRun``: its demonstrations from the path it began with, its
     normaliser)."""
+    cells = make_cells(
+        config.methods, config.seeds, config.label_ratios, config.noise_stds, config.grid_axes
+    )
     try:
-        env = run_settings.make_env(config.env, config.settings)
+        env = run_settings.make_env(config.env, config.settings, cells=len(cells))
     except ValueError as error:  # e.g. a custom factory that raised or returned no Env
         raise RunError(f"environment: {error}") from None
     try:
@@ -183,9 +186,6 @@ def build(config: RunConfig, saved=None) -> BuiltRun:
     except DemonstrationError as error:
         raise RunError(f"{demos_path}: {error}") from None
     check_split_sizes(config.label_ratios, trainer.num_demos)
-    cells = make_cells(
-        config.methods, config.seeds, config.label_ratios, config.noise_stds, config.grid_axes
-    )
     inputs = stack_cells(
         cells, jax.random.key(config.seed), {"bsc_eps": config.task_bsc_eps},
         learner=config.learner,

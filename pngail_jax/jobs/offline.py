@@ -241,7 +241,8 @@ def _environment_and_demos(config: OfflineRunConfig):
     """(env, demonstrations, their path), or RunError naming what is wrong with them."""
     run_config = config.run_config
     try:
-        env = run_settings.make_env(config.env, run_config.settings)
+        cells = len(config.methods) * config.seeds
+        env = run_settings.make_env(config.env, run_config.settings, cells=cells)
         demos, demos_path = load_or_make_demos(run_config, None, env)
     except (DemonstrationError, FileNotFoundError, ImportError, ValueError) as error:
         raise RunError(f"demonstrations: {error}") from None

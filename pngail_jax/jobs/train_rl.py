@@ -148,7 +148,7 @@ def train_rl(
     out = Path(out)
     with refusals(), claimed(out, PROGRAM, overwrite=overwrite, resume=resume) as claim:
         try:
-            env = run_settings.make_env(config.env, config.settings)
+            env = run_settings.make_env(config.env, config.settings, cells=config.seeds)
         except ValueError as error:  # e.g. a custom factory that raised or returned no Env
             raise RunError(f"environment: {error}") from None
         document = config.document(command)

@@ -173,7 +173,8 @@ SETTINGS_FLAGS = (
     FieldFlag(
         "settings.physics",
         "physics engine of gymnasium's MuJoCo tasks (Hopper-v4, ...): MuJoCo's C engine "
-        "(float64, threaded; fastest on a CPU) or MJX (accelerators) (default: c on a CPU, mjx "
+        "(float64, threaded; fastest on a CPU), MJX (accelerators) or MJX on MuJoCo Warp "
+        '(NVIDIA GPUs; the extra pip install "pngail-jax[warp]") (default: c on a CPU, mjx '
         "on a GPU or TPU)",
         choices=envs.PHYSICS,
     ),
