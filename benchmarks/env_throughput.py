@@ -33,8 +33,9 @@ QUICK_PENDULUM_WIDTHS = (1, 16, 256)
 QUICK_MUJOCO_WIDTHS = (16,)
 
 
-def configurations(env_names, quick: bool, on_gpu: bool, fast_solver_only: bool):
-    """Yields (env_name, solver_label, make_options, widths)."""
+def configurations(env_names, quick: bool, on_gpu: bool, fast_solver_only: bool, physics=None):
+    """Yields (env_name, solver_label, make_options, widths); ``physics``: the engines of
+    gymnasium's tasks to measure (default: every one installed)."""
     for name in env_names:
         if name == "Pendulum-v1":
             widths = QUICK_PENDULUM_WIDTHS if quick else (GPU_WIDTHS if on_gpu else CPU_WIDTHS)
@@ -43,8 +44,8 @@ def configurations(env_names, quick: bool, on_gpu: bool, fast_solver_only: bool)
         widths = QUICK_MUJOCO_WIDTHS if quick else (GPU_WIDTHS if on_gpu else CPU_WIDTHS)
         if name in envs.GYM_TASKS:
             # gymnasium's tasks keep gymnasium's solver; one row per engine.
-            for physics in envs.available_physics():
-                yield name, f"gymnasium's, physics {physics}", {"physics": physics}, widths
+            for engine in physics or envs.available_physics():
+                yield name, f"gymnasium's, physics {engine}", {"physics": engine}, widths
             continue
         if name == "Ant":
             # Brax's own Ant already runs the fast setting (Newton, 1 / 4 iterations).
@@ -133,6 +134,12 @@ def main(argv=None) -> None:
         default=None,
         help="comma-separated widths overriding the defaults for every env",
     )
+    parser.add_argument(
+        "--physics",
+        default=None,
+        help="comma-separated engines of gymnasium's tasks (default: every one installed: "
+        f"{', '.join(envs.available_physics())})",
+    )
     parser.add_argument("--out", type=Path, default=Path("results/env_throughput"))
     parser.add_argument("--json", type=Path, default=None, help="also write the rows here")
     parser.add_argument("--seed", type=int, default=0)
@@ -151,8 +158,17 @@ def main(argv=None) -> None:
     key = jax.random.key(args.seed)
     rows = []
     print(f"device {context()['device']}, jax {jax.__version__}", flush=True)
+    physics = None
+    if args.physics:
+        physics = [engine.strip() for engine in args.physics.split(",") if engine.strip()]
+        bad = sorted(set(physics) - set(envs.available_physics()))
+        if bad or not physics:
+            parser.error(
+                f"--physics: comma-separated engines among {', '.join(envs.available_physics())}"
+                f" (installed), got {args.physics!r}"
+            )
     for name, solver, options, widths in configurations(
-        names, args.quick, on_gpu, args.fast_solver_only
+        names, args.quick, on_gpu, args.fast_solver_only, physics
     ):
         if options.get("physics") == "warp":  # Warp's contact buffer: the widest batch
             options = {**options, "warp_batch": max(widths_override or widths)}

@@ -133,3 +133,23 @@ def test_offline_throughput(tmp_path):
     assert [row["methods"] for row in rows] == ["bc-all,iswbc", "bc-all", "iswbc"]
     assert all(positive(row["steps_per_second_per_cell"]) for row in rows)
     assert positive(rows[0]["over_separate_ratio"])
+
+
+@pytest.mark.heavy  # compiles MJX Hopper twice (its env-only scan and a one-cell grid)
+def test_gpu_check_dry_run_measures_every_step(tmp_path):
+    """The prepared GPU check at its tiny size: every step of its plan ran (Pendulum's grid
+    with the paper-budget estimate, env-only and training per installed GPU engine)."""
+    module = __import__("gpu_check")
+    rows = module.main(["--tiny", "--minutes", "15", "--json", str(tmp_path / "rows.json")])
+    assert json.loads((tmp_path / "rows.json").read_text()) == rows
+    assert all(row["status"] == "ok" for row in rows), [row["status"] for row in rows]
+    steps = [(row["step"], row["engine"]) for row in rows]
+    engines = module.gpu_engines()
+    assert steps[0] == ("pendulum paper grid", "-") and rows[0]["paper_grid_seconds"] > 0
+    for engine in engines:
+        assert ("env only", engine) in steps and ("training", engine) in steps
+    training = [row for row in rows if row["step"] == "training"]
+    assert all(positive(row["steps_per_second_with_eval"]) for row in training)
+    assert "the paper's grid" in module.table(rows)
+    skipped = module.run_step(module.plan(tiny=True)[0], 0.0, tmp_path)
+    assert skipped[0]["status"] == "skipped: no time left"

@@ -45,7 +45,7 @@ BAD_OPTIONS = [
         for name in MUJOCO_TASKS
         for option, value in (("solver_iterations", 0), ("ls_iterations", 1.5))
     ],
-    ("Hopper-v4", {"physics": "gpu"}, "Hopper-v4: physics must be one of c, mjx, got 'gpu'"),
+    ("Hopper-v4", {"physics": "gpu"}, "Hopper-v4: physics must be one of c, mjx, warp, got 'gpu'"),
     ("Ant-v4", {"num_threads": 0}, "Ant-v4: num_threads must be a positive integer, got 0"),
     ("Ant-v4", {"num_threads": True}, "num_threads must be a positive integer, got True"),
     (

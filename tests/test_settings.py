@@ -129,7 +129,7 @@ def test_physics_setting_reaches_gymnasium_tasks_only():
     assert RunConfig(env="Hopper-v4", settings=RunSettings(physics="mjx")).settings.physics
     with pytest.raises(ValueError, match="RunSettings.physics: only gymnasium's MuJoCo tasks"):
         RunConfig(env="Hopper", settings=RunSettings(physics="c"))
-    with pytest.raises(ValueError, match="RunSettings.physics must be one of c, mjx"):
+    with pytest.raises(ValueError, match="RunSettings.physics must be one of c, mjx, warp"):
         RunSettings(physics="C")
     env = settings.make_env("Swimmer-v4", settings_for("Swimmer-v4"))
     assert env.physics == envs.default_physics() == "c"  # the tests run on a CPU

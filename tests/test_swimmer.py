@@ -54,7 +54,6 @@ def test_observation_and_spaces_match_gymnasium(swimmer):
     assert env.dt == pytest.approx(reference.unwrapped.dt)
 
 
-@pytest.mark.heavy
 def test_single_transitions_match(swimmer):
     """Transitions along a real trajectory, actions up to 1.5x the bounds (MuJoCo clamps)."""
     _, step, state_at = swimmer

@@ -239,10 +239,9 @@ def _check_resumable(out: Path, config: OfflineRunConfig) -> None:
 
 def _environment_and_demos(config: OfflineRunConfig):
     """(env, demonstrations, their path), or RunError naming what is wrong with them."""
-    run_config = config.run_config
+    run_config, cells = config.run_config, len(config.methods) * config.seeds
     try:
-        cells = len(config.methods) * config.seeds
-        env = run_settings.make_env(config.env, run_config.settings, cells=cells)
+        env = run_settings.make_env(config.env, run_config.settings, cells)
         demos, demos_path = load_or_make_demos(run_config, None, env)
     except (DemonstrationError, FileNotFoundError, ImportError, ValueError) as error:
         raise RunError(f"demonstrations: {error}") from None
