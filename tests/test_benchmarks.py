@@ -136,7 +136,7 @@ def test_offline_throughput(tmp_path):
 
 
 @pytest.mark.heavy  # compiles MJX Hopper twice (its env-only scan and a one-cell grid)
-def test_gpu_check_dry_run_measures_every_step(tmp_path):
+def test_gpu_check(tmp_path):
     """The prepared GPU check at its tiny size: every step of its plan ran (Pendulum's grid
     with the paper-budget estimate, env-only and training per installed GPU engine)."""
     module = __import__("gpu_check")
