@@ -10,7 +10,7 @@ import csv
 import gzip
 import math
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -102,9 +102,8 @@ def write_metrics_csv(path: Path, cells, metrics, normalizer, chunk_seconds=()) 
     # A grid's further axes (grid_axes) get a column each, after label_ratio and noise.
     axes = list(dict.fromkeys(field for cell in cells for field, _ in cell.axes))
     columns = {column: _metric_of(column, metrics) for column in _METRIC_OF_COLUMN}
-    with atomic_path(path) as temporary, temporary.open("w", newline="") as file:
-        writer = csv.writer(file)
-        writer.writerow([*CSV_COLUMNS[:5], *axes, *CSV_COLUMNS[5:]])
+
+    def rows():
         for index, cell in enumerate(cells):
             axis_values = dict(cell.axes)
             wall = wall_clock(chunk_seconds[index])
@@ -119,21 +118,44 @@ def write_metrics_csv(path: Path, cells, metrics, normalizer, chunk_seconds=()) 
                 values["iteration"] = str(iteration + 1)
                 values["label_ratio"] = f"{cell.label_ratio:g}"
                 values["noise"] = f"{cell.noise_std:g}"
-                writer.writerow(
+                yield (
                     [cell.method, cell.seed, cell.setting]
                     + [values[column] for column in CSV_COLUMNS[3:5]]
                     + [f"{axis_values[field]:g}" for field in axes]
                     + [values[column] for column in CSV_COLUMNS[5:]]
                 )
 
+    _write_csv(path, [*CSV_COLUMNS[:5], *axes, *CSV_COLUMNS[5:]], rows())
 
-def open_metrics(path: Path):
-    """A metrics file opened for reading as text: ``metrics.csv``, or ``metrics.csv.gz`` (a run
-    record's, ``pngail_jax.run_records``)."""
+
+def write_seed_metrics_csv(path: Path, metrics, columns: Sequence[str]) -> None:
+    """``train_rl``'s metrics.csv: one row per seed and iteration, the metrics ``columns``
+    under their own names (a learner on the true reward has no methods or settings)."""
+    num_seeds, num_iterations = metrics["env_steps"].shape
+    rows = (
+        [seed, iteration + 1, *(f"{metrics[name][seed, iteration]:.6g}" for name in columns)]
+        for seed in range(num_seeds)
+        for iteration in range(num_iterations)
+    )
+    _write_csv(path, ["seed", "iteration", *columns], rows)
+
+
+def _write_csv(path: Path, header: Sequence[str], rows) -> None:
+    """The library's one writer of metrics files: ``header`` then ``rows``, atomically."""
+    with atomic_path(path) as temporary, temporary.open("w", newline="") as file:
+        writer = csv.writer(file)
+        writer.writerow(header)
+        writer.writerows(rows)
+
+
+def metrics_rows(path: Path) -> Iterator[dict[str, str]]:
+    """Every row of a metrics file as a dict of its columns: ``metrics.csv`` (the sweep's,
+    the offline program's or ``train_rl``'s), or ``metrics.csv.gz`` (a run record's,
+    ``pngail_jax.run_records``). The library's one reader of metrics files."""
     path = Path(path)
-    if path.suffix == ".gz":
-        return gzip.open(path, "rt", newline="")
-    return path.open(newline="")
+    opened = gzip.open(path, "rt", newline="") if path.suffix == ".gz" else path.open(newline="")
+    with opened as file:
+        yield from csv.DictReader(file)
 
 
 def read_evaluations(
@@ -148,17 +170,14 @@ def read_evaluations(
     evaluated_by = evaluated_by or value
     rows: dict[tuple, dict[int, dict[int, float]]] = {}
     steps: dict[int, int] = {}
-    with open_metrics(path) as file:
-        for row in csv.DictReader(file):
-            marker = row[evaluated_by]
-            if marker == "" or math.isnan(float(marker)):
-                continue
-            group = tuple(row[column] for column in group_by)
-            number = float(row[value]) if row[value] else math.nan
-            rows.setdefault(group, {}).setdefault(int(row["seed"]), {})[int(row["iteration"])] = (
-                number
-            )
-            steps[int(row["iteration"])] = int(float(row["env_steps"]))
+    for row in metrics_rows(path):
+        marker = row[evaluated_by]
+        if marker == "" or math.isnan(float(marker)):
+            continue
+        group = tuple(row[column] for column in group_by)
+        number = float(row[value]) if row[value] else math.nan
+        rows.setdefault(group, {}).setdefault(int(row["seed"]), {})[int(row["iteration"])] = number
+        steps[int(row["iteration"])] = int(float(row["env_steps"]))
     evaluations = {}
     for group, seeds in rows.items():
         iterations = sorted({i for evaluated in seeds.values() for i in evaluated})
@@ -174,10 +193,9 @@ def iterations_per_cell(path: Path) -> dict[tuple[str, str, int], int]:
     The sweep writes every cell to the same iteration, so cells that differ mean a file cut
     short."""
     reached: dict[tuple[str, str, int], int] = {}
-    with open_metrics(path) as file:
-        for row in csv.DictReader(file):
-            cell = (row["method"], row["setting"], int(row["seed"]))
-            reached[cell] = max(reached.get(cell, 0), int(row["iteration"]))
+    for row in metrics_rows(path):
+        cell = (row["method"], row["setting"], int(row["seed"]))
+        reached[cell] = max(reached.get(cell, 0), int(row["iteration"]))
     return reached
 
 

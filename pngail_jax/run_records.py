@@ -59,13 +59,10 @@ def _per_seed(scores: dict[str, np.ndarray]) -> dict[str, list[float | None]]:
 
 def _training_seconds(metrics_path: Path) -> float | None:
     """The run's training seconds so far: the largest ``wall_seconds`` of its metrics file."""
-    import csv
+    from pngail_jax.report import metrics_rows
 
-    from pngail_jax.report import open_metrics
-
-    with open_metrics(metrics_path) as file:
-        rows = csv.DictReader(file)
-        seconds = [float(row["wall_seconds"]) for row in rows if row.get("wall_seconds")]
+    rows = metrics_rows(metrics_path)
+    seconds = [float(row["wall_seconds"]) for row in rows if row.get("wall_seconds")]
     return max(seconds) if seconds else None
 
 

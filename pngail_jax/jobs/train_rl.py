@@ -11,7 +11,6 @@ loads without this code.
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import json
 import shutil
@@ -40,6 +39,7 @@ from pngail_jax.jobs.chunks import nanmean
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.jobs.seeds import train_seeds
 from pngail_jax.outputs import claimed, output_owner
+from pngail_jax.report import write_seed_metrics_csv
 from pngail_jax.rl import PPOConfig, TRPOHyperparams, TRPOTrainer
 from pngail_jax.rl.learners import LEARNERS, learner_hyperparams, make_learner
 
@@ -205,7 +205,7 @@ def _train(config: TrainRLConfig, env, out: Path) -> None:
     start = time.perf_counter()
     state, metrics = train_seeds(trainer, hyperparams, keys, checkpoints=out / "checkpoints")
     final_returns = metrics["eval/return"][:, -1]
-    write_metrics_csv(out / "metrics.csv", metrics, METRIC_COLUMNS[config.learner])
+    write_seed_metrics_csv(out / "metrics.csv", metrics, METRIC_COLUMNS[config.learner])
     plot_learning_curve(
         out / "learning_curve.png", metrics, f"{learner} on {config.env} ({config.seeds} seeds)"
     )
@@ -220,19 +220,6 @@ def _train(config: TrainRLConfig, env, out: Path) -> None:
         f"[{', '.join(f'{r:.1f}' for r in final_returns)}] (mean {final_returns.mean():.1f}); "
         f"wrote {out}/{{config.json,metrics.csv,learning_curve.png,policy.json}}"
     )
-
-
-def write_metrics_csv(
-    path: Path, metrics: dict[str, np.ndarray], columns: Sequence[str] = METRIC_COLUMNS["trpo"]
-) -> None:
-    num_seeds, num_iterations = metrics["env_steps"].shape
-    with atomic_path(path) as temporary, temporary.open("w", newline="") as file:
-        writer = csv.writer(file)
-        writer.writerow(["seed", "iteration", *columns])
-        for seed in range(num_seeds):
-            for iteration in range(num_iterations):
-                values = [metrics[name][seed, iteration] for name in columns]
-                writer.writerow([seed, iteration + 1, *(f"{v:.6g}" for v in values)])
 
 
 def plot_learning_curve(path: Path, metrics: dict[str, np.ndarray], title: str) -> None:

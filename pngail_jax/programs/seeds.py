@@ -14,7 +14,6 @@ so a split between good and bad seeds reads from the top down. Reads ``metrics.c
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 from pathlib import Path
@@ -23,7 +22,7 @@ import numpy as np
 
 from pngail_jax.integrity import IntegrityError, read_json, write_json
 from pngail_jax.programs.cli import ArgumentParser, HelpFormatter, path_argument
-from pngail_jax.report import LATE_LABEL, LATE_SHARE
+from pngail_jax.report import LATE_LABEL, LATE_SHARE, metrics_rows
 
 TRAINING_COLUMNS = ("disc_acc_agent", "disc_acc_demo", "mean_reward", "kl")
 
@@ -57,14 +56,13 @@ def parse_args(argv=None):
 def read_training(path: Path, method: str, setting: str | None) -> tuple[str, dict]:
     """(setting, {seed: {column: float[iterations]}}) of one method from metrics.csv."""
     rows: dict[str, dict[int, dict[str, list[float]]]] = {}
-    with path.open() as file:
-        for row in csv.DictReader(file):
-            if row["method"] != method:
-                continue
-            columns = rows.setdefault(row["setting"], {}).setdefault(int(row["seed"]), {})
-            for name in TRAINING_COLUMNS:
-                value = row.get(name, "")
-                columns.setdefault(name, []).append(float(value) if value else math.nan)
+    for row in metrics_rows(path):
+        if row["method"] != method:
+            continue
+        columns = rows.setdefault(row["setting"], {}).setdefault(int(row["seed"]), {})
+        for name in TRAINING_COLUMNS:
+            value = row.get(name, "")
+            columns.setdefault(name, []).append(float(value) if value else math.nan)
     if not rows:
         raise SystemExit(f"{path}: no rows of method {method!r}")
     if setting is None:
