@@ -397,7 +397,7 @@ def per_task_markdown(table: dict, baseline: str) -> list[str]:
     return lines
 
 
-def write_json(path: Path, result: dict) -> None:
+def write_result_json(path: Path, result: dict) -> None:
     """``result`` as JSON, an undefined number (NaN) as null."""
     from pngail_jax.integrity import write_json as write
 

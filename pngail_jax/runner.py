@@ -45,8 +45,8 @@ from pngail_jax.jobs.results import (  # noqa: F401
     export_policies,
     write_outputs,
 )
-from pngail_jax.jobs.seeds import train_seeds  # noqa: F401
 from pngail_jax.jobs.sweep import PROGRAM, configure_devices, run  # noqa: F401
+from pngail_jax.jobs.train_seeds import train_seeds  # noqa: F401
 from pngail_jax.runs import sealed_part  # noqa: F401
 
 warnings.warn(

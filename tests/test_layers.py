@@ -46,7 +46,7 @@ LAYERS = [
 
 # The jobs in their dependency order: each imports only those before it.
 JOB_ORDER = [
-    "errors", "classify", "chunks", "seeds", "make_demos", "train_rl", "compare_settings",
+    "errors", "classify", "chunks", "train_seeds", "make_demos", "train_rl", "compare_settings",
     "build", "record", "results", "sweep", "offline",
 ]  # fmt: skip
 LONGEST_MODULE = 700

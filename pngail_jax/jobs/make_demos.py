@@ -41,7 +41,7 @@ from pngail_jax.demos.npz import save_npz
 from pngail_jax.demos.types import Demonstrations
 from pngail_jax.integrity import atomic_path, atomic_write_text
 from pngail_jax.jobs.errors import RunError, refusals
-from pngail_jax.jobs.seeds import train_seeds
+from pngail_jax.jobs.train_seeds import train_seeds
 from pngail_jax.outputs import Claim, claimed
 from pngail_jax.rl import TRPOTrainer
 from pngail_jax.rl.learners import LEARNERS, learner_hyperparams, make_learner
@@ -157,7 +157,7 @@ def make_claimed(config: MakeDemosConfig, claim: Claim) -> Path:
     start = time.perf_counter()
     snapshots = train_candidates(config, env, out)
     print("2/3 measuring random and optimal returns", flush=True)
-    episodes = Episodes(env, config.trpo_config)
+    episodes = CheckpointEpisodes(env, config.trpo_config)
     picked = pick_policies(config, env, snapshots, episodes)
     demos = roll_out_mixture(config, env, picked, episodes)
     path = write_outputs(out, demos, {k: demos.metadata[k] for k in NORMALIZER_KEYS})
@@ -208,7 +208,7 @@ def _keys(config: MakeDemosConfig):
     return jax.random.split(jax.random.key(config.seed), 3)
 
 
-class Episodes:
+class CheckpointEpisodes:
     """Deterministic episodes of any checkpoint, one compiled program for all of them (the
     parameters are arguments, not constants)."""
 
@@ -230,7 +230,7 @@ class Episodes:
 
 
 def pick_policies(
-    config: MakeDemosConfig, env, snapshots: list[Checkpoint], episodes: Episodes
+    config: MakeDemosConfig, env, snapshots: list[Checkpoint], episodes: CheckpointEpisodes
 ) -> Picked:
     """The best checkpoint (optimal), the earlier one nearest ``intermediate_target``, and
     the random, optimal and intermediate returns measured on fresh episodes."""
@@ -268,7 +268,7 @@ def pick_policies(
 
 
 def roll_out_mixture(
-    config: MakeDemosConfig, env, picked: Picked, episodes: Episodes
+    config: MakeDemosConfig, env, picked: Picked, episodes: CheckpointEpisodes
 ) -> Demonstrations:
     """``num_trajectories`` deterministic episodes of the two policies at ``ratio`` (the
     optimal ones first), each labelled with its clipped normalised return."""

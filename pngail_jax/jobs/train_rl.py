@@ -37,7 +37,7 @@ from pngail_jax.integrity import (
 )
 from pngail_jax.jobs.chunks import nanmean
 from pngail_jax.jobs.errors import RunError, refusals
-from pngail_jax.jobs.seeds import train_seeds
+from pngail_jax.jobs.train_seeds import train_seeds
 from pngail_jax.outputs import claimed, output_owner
 from pngail_jax.report import write_seed_metrics_csv
 from pngail_jax.rl import PPOConfig, TRPOHyperparams, TRPOTrainer

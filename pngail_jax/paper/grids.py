@@ -70,7 +70,7 @@ def demo_paths(
         if not full.exists():
             print(f"\n== demonstrations for {task}: making them into {directory}", flush=True)
             config = demo_config(task, budget, counts, physics, learner)
-            make_demonstrations(config, directory)
+            make_plan_demonstrations(config, directory)
         source = load_npz(full)
         for demo_set, (optimal, intermediate) in counts.items():
             path = directory / f"{demo_set.name}.npz"
@@ -104,7 +104,7 @@ def demo_config(
     )
 
 
-def make_demonstrations(config, directory: Path) -> None:
+def make_plan_demonstrations(config, directory: Path) -> None:
     """``pngail_jax.jobs.make_demos.make_demonstrations`` into the plan's own ``directory`` (a
     making cut short there is replaced)."""
     make_demos.make_demonstrations(config, directory, overwrite=True)

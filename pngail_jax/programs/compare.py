@@ -89,7 +89,7 @@ def write_comparison(args, claim) -> None:
     result = compare.compare(scores, baseline, seed=args.seed)
     expected, expected_text = _against_record(args, scores)
     claim.prepare()
-    compare.write_json(
+    compare.write_result_json(
         args.out / "compare.json",
         {**result, "runs": [str(r) for r in args.runs], **expected},
     )
