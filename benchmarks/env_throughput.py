@@ -112,7 +112,20 @@ def plot(rows: list[dict], path: Path) -> None:
     plt.close(figure)
 
 
-def main(argv=None) -> None:
+def _physics(parser, text: str | None) -> list[str] | None:
+    """The engines ``--physics`` lists (None: every one installed), or a parser error."""
+    if not text:
+        return None
+    physics = [engine.strip() for engine in text.split(",") if engine.strip()]
+    if not physics or set(physics) - set(envs.available_physics()):
+        parser.error(
+            f"--physics: comma-separated engines among {', '.join(envs.available_physics())}"
+            f" (installed), got {text!r}"
+        )
+    return physics
+
+
+def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument(
         "--envs",
@@ -143,6 +156,11 @@ def main(argv=None) -> None:
     parser.add_argument("--out", type=Path, default=Path("results/env_throughput"))
     parser.add_argument("--json", type=Path, default=None, help="also write the rows here")
     parser.add_argument("--seed", type=int, default=0)
+    return parser
+
+
+def main(argv=None) -> None:
+    parser = _parser()
     args = parser.parse_args(argv)
 
     names = [name.strip() for name in args.envs.split(",") if name.strip()]
@@ -158,15 +176,7 @@ def main(argv=None) -> None:
     key = jax.random.key(args.seed)
     rows = []
     print(f"device {context()['device']}, jax {jax.__version__}", flush=True)
-    physics = None
-    if args.physics:
-        physics = [engine.strip() for engine in args.physics.split(",") if engine.strip()]
-        bad = sorted(set(physics) - set(envs.available_physics()))
-        if bad or not physics:
-            parser.error(
-                f"--physics: comma-separated engines among {', '.join(envs.available_physics())}"
-                f" (installed), got {args.physics!r}"
-            )
+    physics = _physics(parser, args.physics)
     for name, solver, options, widths in configurations(
         names, args.quick, on_gpu, args.fast_solver_only, physics
     ):

@@ -203,35 +203,11 @@ def sweep_resumes_bit_exactly(tmp_path, physics: str):
     save_npz(tmp_path / "demos.npz", demos)
     whole = tmp_path / "whole"
     sweep.main(
-        [
-            "--env",
-            "Hopper-v4",
-            "--demos",
-            str(tmp_path / "demos.npz"),
-            "--methods",
-            "gail,pngail",
-            "--seeds",
-            "1",
-            "--iterations",
-            "4",
-            "--eval-every",
-            "1",
-            "--chunk-iterations",
-            "2",
-            "--num-envs",
-            "4",
-            "--unroll-length",
-            "20",
-            "--num-eval-episodes",
-            "2",
-            "--classifier-steps",
-            "20",
-            "--physics",
-            physics,
-            "--out",
-            str(whole),
-        ]  # fmt: skip
-    )
+        ["--env", "Hopper-v4", "--demos", str(tmp_path / "demos.npz"), "--methods", "gail,pngail",
+         "--seeds", "1", "--iterations", "4", "--eval-every", "1", "--chunk-iterations", "2",
+         "--num-envs", "4", "--unroll-length", "20", "--num-eval-episodes", "2",
+         "--classifier-steps", "20", "--physics", physics, "--out", str(whole)]
+    )  # fmt: skip
     saved = json.loads((whole / "config.json").read_text())
     assert saved["env"] == "Hopper-v4" and saved["resolved"]["physics"] == physics
     killed = tmp_path / "killed"

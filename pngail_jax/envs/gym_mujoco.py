@@ -275,11 +275,6 @@ class GymMujocoTask(Env):
         import mujoco
 
         self.spec = TASKS[name]
-        if self.physics == "warp" and self.spec.reads_contact_forces:
-            raise ValueError(
-                f"{name} observes contact forces, which MJX computes on its JAX implementation "
-                "only (rne_postconstraint): physics 'warp' cannot run it; use 'mjx' or 'c'"
-            )
         model = mujoco.MjModel.from_xml_path(gymnasium_asset(self.spec.xml))
         for field, value in solver.items():
             setattr(model.opt, field, value)
@@ -427,11 +422,17 @@ def available_physics() -> tuple[str, ...]:
 
 def _check_warp_batch(name: str, physics: str, warp_batch: Any) -> int | None:
     """The checked ``warp_batch`` (None off Warp), or a ValueError naming the problem; also
-    refuses ``"warp"`` where MuJoCo Warp is not installed."""
+    refuses ``"warp"`` where MuJoCo Warp is not installed or the task observes contact
+    forces."""
     if physics != "warp":
         if warp_batch is not None:
             raise ValueError(f"{name}: warp_batch is an option of physics='warp' only")
         return None
+    if TASKS[name].reads_contact_forces:
+        raise ValueError(
+            f"{name} observes contact forces, which MJX computes on its JAX implementation "
+            "only (rne_postconstraint): physics 'warp' cannot run it; use 'mjx' or 'c'"
+        )
     try:
         import mujoco_warp  # noqa: F401
         import warp
