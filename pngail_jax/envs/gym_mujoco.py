@@ -1,4 +1,4 @@
-"""gymnasium's MuJoCo tasks (-v4 and -v5), exactly, on MuJoCo's C engine or on MJX.
+"""gymnasium's MuJoCo tasks (-v4 and -v5), exactly, on MuJoCo's C engine, on MJX or on MJX's Warp.
 
 ``Hopper-v4``, ``HalfCheetah-v4``, ``Walker2d-v4``, ``Swimmer-v4`` and ``Ant-v4`` are
 gymnasium's tasks of those names: the same model files (read from the installed gymnasium),
@@ -8,7 +8,7 @@ available to the paper's gym -v2 tasks (mujoco-py), which used the same model fi
 gymnasium's current versions (those of Minari's MuJoCo datasets), with their own model file,
 healthy reward and contact forces where they have them.
 
-One task, two physics engines (``physics=``):
+One task, three physics engines (``physics=``):
 
 - ``"c"``: MuJoCo's own C engine in float64, as gymnasium runs it. The physics state travels
   through JAX as the float64 bytes of MuJoCo's state vector (time, positions, velocities and
@@ -23,9 +23,8 @@ One task, two physics engines (``physics=``):
 - ``"mjx"``: MJX (its JAX implementation), in JAX's float width, for accelerators.
 - ``"warp"``: MJX on MuJoCo Warp (``impl="warp"``), float32 kernels on an NVIDIA GPU or,
   for development, on the CPU; an optional extra (``pip install "pngail-jax[warp]"``).
-  Warp keeps its contact and constraint buffers shared by the whole batch, sized for
-  ``WARP_CONTACTS_PER_ENV`` contacts and ``WARP_CONSTRAINTS_PER_ENV`` constraint rows per env
-  (``warp_batch``: the envs stepped together).
+  Warp keeps one contact buffer for the whole batch, sized at Warp's own capacity for one
+  env times ``warp_batch`` (the most envs stepped together); an overflow gives NaN.
 - ``None`` (default): ``"c"`` when JAX's default backend is the CPU, else ``"mjx"``.
 
 Observations, rewards and terminations are written once (``TaskSpec``, ``outcome``) against
@@ -455,7 +454,7 @@ class _WarpBuffers:
     Under ``vmap`` MJX's Warp implementation wants them unbatched (one contact buffer for every
     env stepped together), but a state carried through a grid's nested ``vmap``s comes back
     batched on each axis. Each step refills them from scratch (collision detection resets the
-    counters and rewrites the contacts), so the state carries empty placeholders and a step
+    counters and rewrites the contacts), so the state carries None in their place and a step
     starts from the constant buffers, sized for ``batch`` envs at Warp's own capacity for one.
     """
 

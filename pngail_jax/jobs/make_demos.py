@@ -150,7 +150,9 @@ def make_claimed(config: MakeDemosConfig, claim: Claim) -> Path:
     """``make_demonstrations`` into a directory already claimed (``claim``)."""
     out = claim.directory
     try:
-        env = run_settings.make_env(config.env, config.settings)
+        # Sized for Warp's widest batch: the seeds' training, or the episodes rolled at once.
+        widest = max(config.seeds, config.measure_episodes, config.num_trajectories)
+        env = run_settings.make_env(config.env, config.settings, cells=widest)
     except ValueError as error:  # e.g. a custom factory that raised or returned no Env
         raise RunError(f"environment: {error}") from None
     claim.prepare()  # an old run kept until here
