@@ -459,8 +459,6 @@ class _WarpBuffers:
     """
 
     def __init__(self, mjx, model, batch: int):
-        import dataclasses as dc
-
         from mujoco.mjx.warp import types as warp_types
 
         per_env = int(mjx.make_data(model, impl="warp")._impl.naconmax)
@@ -469,17 +467,16 @@ class _WarpBuffers:
         impl = self.template._impl
         self._shared = {
             field.name: getattr(impl, field.name)
-            for field in dc.fields(impl)
+            for field in dataclasses.fields(impl)
             if not batched.get(field.name, True) and hasattr(getattr(impl, field.name), "shape")
         }
         self._empty = dict.fromkeys(self._shared)  # None: no leaf in the carried state
-        self._replace = dc.replace
 
     def strip(self, data):
-        return data.replace(_impl=self._replace(data._impl, **self._empty))
+        return data.replace(_impl=dataclasses.replace(data._impl, **self._empty))
 
     def restore(self, data):
-        return data.replace(_impl=self._replace(data._impl, **self._shared))
+        return data.replace(_impl=dataclasses.replace(data._impl, **self._shared))
 
 
 def _check_engine_options(name: str, num_threads: Any, terminate_when_unhealthy: Any) -> None:

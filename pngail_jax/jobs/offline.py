@@ -191,22 +191,21 @@ def run_offline(
         compile_seconds = sum(grid.compile_seconds for grid, _, _ in runs)
         progress = _joined(cells, runs)
         summary = _write_outputs(out, config, cells, progress, normalizer, compile_seconds)
-        if resume:  # as the run began, with this session's machine beside it
-            document = read_json(out / "config.json", "offline run config")
-            document["resumed_provenance"] = provenance(program=PROGRAM)
-        trainer_fields = _json_config(dataclasses.replace(trainer_config, components=()))
-        write_json(
-            out / "config.json",
-            {
-                **document,
-                "trainer": trainer_fields,
-                "complete": True,
-                "wall_seconds": time.perf_counter() - start_time,
-                "train_seconds": progress.timing["seconds"],
-            },
-        )
+        _complete(out, document, trainer_config, progress, start_time, resume)
     print(f"-> {out}/{{config.json,metrics.csv,summary.md,summary.json,curves.png}}")
     return summary
+
+
+def _complete(out: Path, document, trainer_config, progress, start_time, resume) -> None:
+    """config.json marked complete, with the trainer's fields and the run's seconds (a resumed
+    run keeps the document it began with, this session's machine beside it)."""
+    if resume:
+        document = read_json(out / "config.json", "offline run config")
+        document["resumed_provenance"] = provenance(program=PROGRAM)
+    trainer = _json_config(dataclasses.replace(trainer_config, components=()))
+    seconds = {"wall_seconds": time.perf_counter() - start_time,
+               "train_seconds": progress.timing["seconds"]}  # fmt: skip
+    write_json(out / "config.json", {**document, "trainer": trainer, "complete": True, **seconds})
 
 
 def _programs(config: OfflineRunConfig, trainer_config: OfflineConfig, cells):

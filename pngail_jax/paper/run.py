@@ -60,6 +60,20 @@ def paper_options(
     }
 
 
+def _plan_or_refuse(options: dict, released) -> tuple:
+    """``plan``'s figures and grids for the options, or RunError when no figure asked for has
+    a panel on the tasks asked for."""
+    figures, grids = plan(options["only"], options["envs"], set(released))
+    if not figures:
+        raise RunError(
+            f"none of {', '.join(options['only'])} has a panel on "
+            f"{', '.join(options['envs'])} (Fig. 4: Ant, Hopper, Pendulum-v1; Fig. 5 / "
+            "Table 4: Pendulum-v1, Ant; Fig. 6 and 7: Pendulum-v1; Fig. 8 and 10: Ant; "
+            "Fig. 9: Ant, Pendulum-v1)"
+        )
+    return figures, grids
+
+
 def run_paper(
     options: dict | None,
     out,
@@ -89,14 +103,7 @@ def run_paper(
             check_paper_inputs(out, options, released)
         for directory in adopt:  # before any demonstrations are made: a typo fails at once
             finished_sweep(Path(directory), allow_unsealed)
-        figures, grids = plan(options["only"], options["envs"], set(released))
-        if not figures:
-            raise RunError(
-                f"none of {', '.join(options['only'])} has a panel on "
-                f"{', '.join(options['envs'])} (Fig. 4: Ant, Hopper, Pendulum-v1; Fig. 5 / "
-                "Table 4: Pendulum-v1, Ant; Fig. 6 and 7: Pendulum-v1; Fig. 8 and 10: Ant; "
-                "Fig. 9: Ant, Pendulum-v1)"
-            )
+        figures, grids = _plan_or_refuse(options, released)
         if not resume:
             claim.prepare()
             write_json(out / "paper.json", options)
