@@ -71,6 +71,7 @@ from pngail_jax import envs
 from pngail_jax.adversarial import AdversarialConfig, AdversarialHyperparams, AdversarialTrainer
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import Demonstrations
+from pngail_jax.fitting import adam_step
 from pngail_jax.methods import method_spec, stack
 from pngail_jax.rl.gae import generalized_advantages
 from pngail_jax.rl.train import TRPO
@@ -179,20 +180,20 @@ class Phases:
         return self.trainer.init(hyperparams, spec, key)[0]
 
     def importance_weights(self, state) -> jax.Array:
-        """WGAIL's w on every split row (``AdversarialTrainer._importance_weights``)."""
-        return self.trainer._importance_weights(state)
+        """WGAIL's w on every split row (``AdversarialTrainer.importance_weights``)."""
+        return self.trainer.importance_weights(state)
 
     def discriminator_step(self, hyperparams, spec, state, transitions):
         """The trainer's discriminator batch, gradient and Adam step, and the policy's reward
         float[T, N] from the discriminator before the step: (params, rewards)."""
         trainer = self.trainer
         key = jax.random.fold_in(state.key, 0)
-        batch = trainer._discriminator_batch(state, transitions, key)
-        grads, _, logits_agent = trainer._discriminator_gradient(
+        batch = trainer.discriminator_batch(state, transitions, key)
+        grads, _, logits_agent = trainer.discriminator_gradient(
             spec, state, batch, state.importance_weights
         )
-        rewards, _, _ = trainer._policy_rewards(spec, state, transitions, batch, logits_agent, key)
-        params, _ = trainer._adam_step(
+        rewards, _, _ = trainer.policy_rewards(spec, state, transitions, batch, logits_agent, key)
+        params, _ = adam_step(
             state.discriminator_params,
             state.discriminator_optimizer_state,
             grads,
@@ -270,7 +271,7 @@ class Phases:
 
     def iteration(self, hyperparams, spec, state):
         """``AdversarialTrainer._iteration`` itself."""
-        return self.trainer._iteration(hyperparams, spec, state)
+        return self.trainer.iteration(hyperparams, spec, state)
 
 
 class PhaseTimer:

@@ -33,14 +33,15 @@ import optax
 from flax import struct
 
 from pngail_jax import cail, envs, firl, ranking
-from pngail_jax.bc import BCConfig, cloned_actions, train_bc, train_deterministic_bc
+from pngail_jax.bc import BCConfig, CloningPhase
 from pngail_jax.confidence import ClassifierConfig, confidence_errors, train_classifier
 from pngail_jax.demos import DemonstrationError, Demonstrations, make_split
 from pngail_jax.firl import FirlState
-from pngail_jax.fitting import tree_where
+from pngail_jax.fitting import adam_step
 from pngail_jax.losses import ConfidenceStats, discriminator_loss, policy_reward
 from pngail_jax.methods import PHASES, MethodSpec, required_phases, resolve
-from pngail_jax.networks import ClampedStateReward, Discriminator, ResidualDiscriminator
+from pngail_jax.networks import Discriminator
+from pngail_jax.phase import PhaseContext, PhaseSet
 from pngail_jax.rl.learners import check_learner, learner_hyperparams, make_learner
 from pngail_jax.rl.ppo import PPOConfig, PPOHyperparams, PPOState
 from pngail_jax.rl.train import TRPOConfig, TRPOHyperparams, TRPOState, run_evaluated_blocks
@@ -204,7 +205,7 @@ class AdversarialTrainer:
         self.optimizer = optax.scale_by_adam()
         # One action space on both sides of every learned comparison with the agent (the
         # discriminator, WGAIL's weights, BC, CAIL's rankings): the action the environment
-        # applies. The agent's actions are clipped to the bounds in ``_iteration``, the
+        # applies. The agent's actions are clipped to the bounds in ``iteration``, the
         # demonstrations' here (the authors' MuJoCo files store unclipped policy actions, and
         # a discriminator could otherwise tell them apart by |a| > 1 alone). The confidence
         # classifier compares demonstrations only with each other and reads the file's rows,
@@ -225,35 +226,17 @@ class AdversarialTrainer:
         self.num_allowed = int(demos.labelled.sum()) if has_mask else demos.num_rows
         # Whole trajectories ranked by their given confidence (T-REX, CAIL), when the set has
         # trajectory ids; each row's trajectory index.
-        self.trajectories = self._row_trajectory = None
+        self.trajectories = row_trajectory = None
         if demos.trajectory_ids is not None and self.has_confidence:
-            self.trajectories, self._row_trajectory = ranking.trajectories_of(
+            self.trajectories, row_trajectory = ranking.trajectories_of(
                 applied.observations, applied.actions, demos.trajectory_ids, demos.confidence
             )
-        # The rewards learned from rankings, by the phase that fits them.
-        self.ranking_rewards = {
-            "demo_rankings": ranking.RankingReward(config.ranking.hidden_sizes),
-            "noise_rankings": ranking.RankingReward(config.drex.ranking.hidden_sizes),
-        }
-        self._init_firl(config.firl, demos)
-
-    def _init_firl(self, config: firl.FirlConfig, demos: Demonstrations) -> None:
-        """f-IRL's networks, optimisers and the source of its demonstration segments: the
-        set's trajectories when it has trajectory ids, else (None) consecutive split rows."""
-        self.firl_discriminator = ResidualDiscriminator(
-            config.discriminator_hidden_size, config.discriminator_residual_blocks,
-            config.clamp_magnitude,
+        context = PhaseContext(
+            env, self.trpo, self.discriminator, self._demo_inputs, self._action_bounds,
+            num_demos, config.trpo.num_envs, config.trpo.unroll_length,
+            self.trajectories, row_trajectory,
         )  # fmt: skip
-        self.firl_reward = ClampedStateReward(config.reward_hidden_sizes, config.clamp_magnitude)
-        self.firl_discriminator_optimizer = firl.adam_with_l2(
-            config.discriminator_learning_rate, config.discriminator_weight_decay
-        )
-        self.firl_reward_optimizer = firl.adam_with_l2(
-            config.reward_learning_rate, config.reward_weight_decay
-        )
-        self._firl_segments = None
-        if "firl" in self.config.phases and demos.trajectory_ids is not None:
-            self._firl_segments = firl.SegmentSource.of_trajectories(demos.trajectory_ids)
+        self.phases = PhaseSet(context, _make_phases(config, demos.trajectory_ids))
 
     @property
     def demo_inputs(self) -> jax.Array:
@@ -352,7 +335,7 @@ class AdversarialTrainer:
         # Keys of the appendix phases come from fold_in, so the split above (and every number
         # of the seven methods) is the same whichever phases a grid compiles.
         ranked = self._ranked_trajectories(hyperparams.label_ratio, jax.random.fold_in(key, 2))
-        phase_state, trpo_state = self._init_phases(
+        phase_state, trpo_state = self.phases.init(
             spec, inputs, confidence, trpo_state, jax.random.fold_in(key, 1), ranked
         )
         state = TrainState(
@@ -408,96 +391,13 @@ class AdversarialTrainer:
         return confidence, mean_labelled
 
     def _ranked_trajectories(self, label_ratio, key):
-        """bool[K]: a share ``label_ratio`` of the demonstration trajectories (rounded, at
-        least 2), drawn per seed, whose ranking T-REX and CAIL may see: the same label
-        information as the ``label_ratio`` of rows PN-GAIL's D_c holds. None when no compiled
-        phase ranks demonstrations."""
+        """bool[K]: the demonstration trajectories whose ranking T-REX and CAIL may see
+        (``ranking.ranked_trajectories``); None when no compiled phase ranks them."""
         if self.trajectories is None or not {"demo_rankings", "cail"} & set(self.config.phases):
             return None
-        num = self.trajectories.lengths.shape[0]
-        num_ranked = jnp.maximum(jnp.round(label_ratio * num), 2)
-        position = jax.random.permutation(key, num)
-        return jnp.zeros(num, bool).at[position].set(jnp.arange(num) < num_ranked)
+        return ranking.ranked_trajectories(self.trajectories, label_ratio, key)
 
-    def _init_phases(self, spec, inputs, confidence, trpo_state, key, ranked=None):
-        """The appendix phases this trainer compiles: behaviour cloning of the TRPO policy,
-        reward learning from rankings (T-REX's on the ``ranked`` demonstration trajectories,
-        D-REX's on its own cloned policy's noisy rollouts), f-IRL's and CAIL's initial state.
-        Returns (TrainState fields, trpo_state)."""
-        phases, config = self.config.phases, self.config
-        bc_key, noise_key, reward_key, firl_key = jax.random.split(key, 4)
-        size = self.env.observation_size
-        fields = {}
-        normalizer = trpo_state.normalizer
-        bc_params = None
-        if "bc" in phases:
-            weights = 1 + spec.bc_weighted_coef * (confidence - 1)
-            bc_params, _ = train_bc(
-                config.bc,
-                lambda params, obs: self.trpo.policy.apply(params, normalizer(obs)),
-                trpo_state.policy_params,
-                inputs[:, :size],
-                inputs[:, size:],
-                weights,
-                bc_key,
-            )
-            trpo_state = trpo_state.replace(
-                policy_params=tree_where(spec.bc_init_coef > 0, bc_params, trpo_state.policy_params)
-            )
-        trex_key, drex_key = jax.random.split(reward_key)
-        rewards = {}
-        if "demo_rankings" in phases:  # T-REX: the demonstrations, ranked by confidence
-            rewards["demo_rankings"], _ = ranking.train_ranking_reward(
-                config.ranking, self.trajectories, trex_key, eligible=ranked
-            )
-        if "noise_rankings" in phases:  # D-REX: noisy rollouts of its own cloned policy
-            rewards["noise_rankings"], _ = ranking.train_ranking_reward(
-                config.drex.ranking, self._drex_rollouts(inputs, noise_key), drex_key
-            )
-        if rewards:
-            fields["ranking_reward_params"] = rewards
-        if "firl" in phases:
-            reward_key, disc_key = jax.random.split(firl_key)
-            reward = self.firl_reward.init(reward_key, jnp.zeros((size,)))
-            disc = self.firl_discriminator.init(disc_key, jnp.zeros((size,)))
-            fields["firl"] = FirlState(
-                reward, self.firl_reward_optimizer.init(reward),
-                disc, self.firl_discriminator_optimizer.init(disc),
-            )  # fmt: skip
-        if "cail" in phases:
-            fields["cail_confidence"] = jnp.ones(self.num_demos)
-        return fields, trpo_state
-
-    def _drex_rollouts(self, inputs, key) -> ranking.Trajectories:
-        """D-REX's ranked trajectories: its deterministic policy cloned from the split's
-        ``inputs`` float[M, O + A] (not the TRPO policy of ``bc``), rolled out at each noise
-        level of ``config.drex``."""
-        size, drex = self.env.observation_size, self.config.drex
-        low, high = self._action_bounds
-        bc_key, rollout_key = jax.random.split(key)
-        params, _ = train_deterministic_bc(
-            drex.bc, inputs[:, :size], inputs[:, size:], low, high, bc_key
-        )
-
-        def act(obs):
-            return cloned_actions(drex.bc, params, obs, low, high)
-
-        return ranking.noisy_rollouts(self.env, act, drex, rollout_key)
-
-    def _ranking_reward(self, spec: MethodSpec, params: dict, observations) -> jax.Array:
-        """The learned r(s) float[B] a cell reads: D-REX's ensemble mean where
-        ``spec.noise_rankings_coef`` is 1, T-REX's where it is 0 (in a grid with both, every
-        cell has both and weighs them by its spec)."""
-        weight = {
-            "demo_rankings": 1 - spec.noise_rankings_coef,
-            "noise_rankings": spec.noise_rankings_coef,
-        }
-        return sum(
-            weight[phase] * self.ranking_rewards[phase].ensemble(phase_params, observations)
-            for phase, phase_params in params.items()
-        )
-
-    def _importance_weights(self, state: TrainState) -> jax.Array:
+    def importance_weights(self, state: TrainState) -> jax.Array:
         """WGAIL's w = [exp(-z) pi(a|s)]^(1/2) on every split row; no gradient flows."""
         inputs = self._demo_inputs[state.demo_rows]
         logits = self.discriminator.apply(state.discriminator_params, inputs)
@@ -505,43 +405,31 @@ class AdversarialTrainer:
         log_prob = self.trpo.log_prob(state.trpo, inputs[:, :size], inputs[:, size:])
         return jnp.exp(0.5 * (log_prob - logits))
 
-    def _iteration(self, hyperparams: AdversarialHyperparams, spec: MethodSpec, state: TrainState):
+    def iteration(self, hyperparams: AdversarialHyperparams, spec: MethodSpec, state: TrainState):
         """One iteration, as named steps: rollout; WGAIL's weights (refreshed on schedule);
         the discriminator's batch and gradient; the policy's reward from the discriminator
-        (and the learned rewards) before any step; the discriminator's Adam step (CAIL's
-        rounds instead, in its cells); TRPO's update (a cloned policy kept, in BC's cells)."""
-        phases = self.config.phases
+        (and the phases' learned rewards) before any step; the discriminator's Adam step (CAIL's
+        rounds instead, in its cells); the learner's update (a cloned policy kept, in BC's
+        cells)."""
         trpo_state, transitions = self.trpo.rollout(state.trpo)
         weights = self._refreshed_weights(state)
         key, batch_key = jax.random.split(state.key)
-        batch = self._discriminator_batch(state, transitions, batch_key)
-        grads, disc_metrics, logits_agent = self._discriminator_gradient(
-            spec, state, batch, weights
-        )
-        rewards, phase_fields, phase_metrics = self._policy_rewards(
+        batch = self.discriminator_batch(state, transitions, batch_key)
+        grads, disc_metrics, logits_agent = self.discriminator_gradient(spec, state, batch, weights)
+        rewards, phase_fields, phase_metrics = self.policy_rewards(
             spec, state, transitions, batch, logits_agent, batch_key
         )
-        disc_params, disc_optimizer_state = self._adam_step(
+        stepped = adam_step(
             state.discriminator_params,
             state.discriminator_optimizer_state,
             grads,
             hyperparams.discriminator_learning_rate,
         )
-        if "cail" in phases:  # CAIL's cells take the discriminator of its rounds instead
-            (cail_params, cail_optimizer_state, beta), cail_metrics = cail.iteration_rounds(
-                self, spec, state, batch.agent_inputs, jax.random.fold_in(batch_key, 1)
-            )
-            use = spec.cail_coef > 0
-            disc_params = tree_where(use, cail_params, disc_params)
-            disc_optimizer_state = tree_where(use, cail_optimizer_state, disc_optimizer_state)
-            disc_metrics["disc/loss"] = jnp.where(
-                use, cail_metrics["cail/disc_loss"], disc_metrics["disc/loss"]
-            )
-            phase_fields["cail_confidence"] = beta
-            phase_metrics = {**phase_metrics, **cail_metrics}
+        (disc_params, disc_optimizer_state, disc_metrics), more_fields, more_metrics = (
+            self.phases.discriminator_step(spec, state, batch, batch_key, (*stepped, disc_metrics))
+        )
         updated, trpo_metrics = self.trpo.update(hyperparams.trpo, trpo_state, transitions, rewards)
-        if "bc" in phases:
-            updated = _keep_cloned_policy(spec, self.trpo.LEARNED_FIELDS, trpo_state, updated)
+        updated = self.phases.after_update(spec, trpo_state, updated)
         state = state.replace(
             trpo=updated,
             discriminator_params=disc_params,
@@ -550,8 +438,9 @@ class AdversarialTrainer:
             iteration=state.iteration + 1,
             key=key,
             **phase_fields,
+            **more_fields,
         )
-        metrics = {**trpo_metrics, **disc_metrics, **phase_metrics}
+        metrics = {**trpo_metrics, **disc_metrics, **phase_metrics, **more_metrics}
         return state, {**metrics, "env_steps": updated.env_steps}
 
     def _refreshed_weights(self, state: TrainState) -> jax.Array:
@@ -563,9 +452,9 @@ class AdversarialTrainer:
             & (state.iteration % config.wgail_refresh_every == 0)
             & (state.iteration <= config.wgail_refresh_until)
         )
-        return jnp.where(refresh, self._importance_weights(state), state.importance_weights)
+        return jnp.where(refresh, self.importance_weights(state), state.importance_weights)
 
-    def _discriminator_batch(self, state: TrainState, transitions, key) -> DiscriminatorBatch:
+    def discriminator_batch(self, state: TrainState, transitions, key) -> DiscriminatorBatch:
         """The rollout's rows (actions clipped to the bounds, as the demonstrations') and as
         many split rows drawn with replacement."""
         trpo_config = self.config.trpo
@@ -578,7 +467,7 @@ class AdversarialTrainer:
             agent_obs, agent_inputs, rows, self._demo_inputs[state.demo_rows[rows]]
         )
 
-    def _discriminator_gradient(self, spec, state: TrainState, batch, weights):
+    def discriminator_gradient(self, spec, state: TrainState, batch, weights):
         """The gradient of the method's discriminator loss at the current parameters, its
         metrics, and the agent rows' logits (the policy's reward reads them)."""
 
@@ -624,51 +513,24 @@ class AdversarialTrainer:
         gradients = jax.vmap(jax.grad(logit))(points)
         return jnp.mean(jnp.sum(gradients**2, axis=-1))
 
-    def _policy_rewards(self, spec, state: TrainState, transitions, batch, logits_agent, key):
-        """The reward float[T, N] TRPO learns from: the adversarial one from the discriminator
-        before this iteration's step, plus the learned rewards of the method's phases (f-IRL's
-        after its own update on this rollout, in its order). Returns the reward, the phase's
-        new state fields and its metrics."""
-        trpo_config, phases = self.config.trpo, self.config.phases
+    def policy_rewards(self, spec, state: TrainState, transitions, batch, logits_agent, key):
+        """The reward float[T, N] the learner learns from: the adversarial one from the
+        discriminator before this iteration's step, plus the compiled phases' learned rewards
+        (f-IRL's after its own update on this rollout). Returns the reward, the phases' new
+        state fields and their metrics."""
         rewards = policy_reward(logits_agent, spec.logit_reward_coef)
-        if phases:  # every method whose reward is not (only) adversarial has a phase
+        if self.phases:  # every method whose reward is not (only) adversarial has a phase
             rewards = spec.adversarial_reward_coef * rewards
-        phase_fields, phase_metrics = {}, {}
-        if state.ranking_reward_params is not None:
-            rewards += spec.ranking_reward_coef * self._ranking_reward(
-                spec, state.ranking_reward_params, batch.agent_obs
-            )
-        if "firl" in phases:
-            phase_fields["firl"], phase_metrics = firl.outer_step(
-                self, spec, state, transitions.obs, jax.random.fold_in(key, 2)
-            )
-            rewards += spec.firl_coef * self.firl_reward.apply(
-                phase_fields["firl"].reward_params, batch.agent_obs
-            )
-        rewards = rewards.reshape(trpo_config.unroll_length, trpo_config.num_envs)
-        return rewards, phase_fields, phase_metrics
-
-    def _adam_step(self, params, optimizer_state, grads, learning_rate):
-        """One Adam step (``scale_by_adam``, then ``-learning_rate``): (params, state)."""
-        updates, optimizer_state = self.optimizer.update(grads, optimizer_state)
-        step = jax.tree.map(lambda u: -learning_rate * u, updates)
-        return optax.apply_updates(params, step), optimizer_state
-
-    def cail_trajectory_confidence(self, state: TrainState) -> jax.Array:
-        """float[K]: CAIL's mean beta over each demonstration trajectory's rows in the split
-        (NaN for a trajectory with no row in it)."""
-        trajectory = self._row_trajectory[state.demo_rows]
-        num = self.trajectories.lengths.shape[0]
-        total = jax.ops.segment_sum(state.cail_confidence, trajectory, num)
-        count = jax.ops.segment_sum(jnp.ones_like(state.cail_confidence), trajectory, num)
-        return jnp.where(count > 0, total / jnp.maximum(count, 1), jnp.nan)
+        rewards, fields, metrics = self.phases.reward(spec, state, transitions, batch, rewards, key)
+        shape = (self.config.trpo.unroll_length, self.config.trpo.num_envs)
+        return rewards.reshape(shape), fields, metrics
 
     def run_blocks(
         self, hyperparams: AdversarialHyperparams, spec: MethodSpec, state: TrainState, num_blocks
     ):
         return run_evaluated_blocks(
             self.trpo,
-            functools.partial(self._iteration, hyperparams, spec),
+            functools.partial(self.iteration, hyperparams, spec),
             state,
             self.policy_state,
             state.eval_keys,
@@ -686,14 +548,16 @@ class AdversarialTrainer:
         return state.trpo
 
 
-def _keep_cloned_policy(spec: MethodSpec, learned_fields, before, updated):
-    """A cloned policy that no RL moves (BC's cells, ``policy_update_coef`` 0) stays as it
-    was: the learner's ``learned_fields`` from ``before``, the rest (counters, keys, the
-    envs) from ``updated``."""
-    frozen = spec.policy_update_coef == 0
-    return updated.replace(
-        **{
-            name: tree_where(frozen, getattr(before, name), getattr(updated, name))
-            for name in learned_fields
-        }
-    )
+def _make_phases(config: AdversarialConfig, trajectory_ids) -> tuple:
+    """The appendix baselines' phases ``config.phases`` names, in their order."""
+    names, phases = config.phases, []
+    if "bc" in names:
+        phases.append(CloningPhase(config.bc))
+    rankings = tuple(name for name in ("demo_rankings", "noise_rankings") if name in names)
+    if rankings:
+        phases.append(ranking.RankingPhase(rankings, config.ranking, config.drex))
+    if "firl" in names:
+        phases.append(firl.FirlPhase(config.firl, trajectory_ids))
+    if "cail" in names:
+        phases.append(cail.CailPhase(config.cail))
+    return tuple(phases)

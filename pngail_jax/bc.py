@@ -5,6 +5,8 @@
 - D-REX's cloned policy, which only makes D-REX's noisy rollouts: a separate deterministic
   ReLU network fitted by mean squared error, as the CAIL codebase's ``DREX.train_bc``
   (``train_deterministic_bc``).
+
+``CloningPhase`` is the first kind's phase in the adversarial trainer.
 """
 
 from __future__ import annotations
@@ -15,8 +17,9 @@ import chex
 import jax
 import jax.numpy as jnp
 
-from pngail_jax.fitting import fit_with_adam, squared_norm
+from pngail_jax.fitting import fit_with_adam, squared_norm, tree_where
 from pngail_jax.networks import DeterministicPolicy, gaussian_log_prob
+from pngail_jax.phase import Phase, PhaseContext
 
 
 @dataclasses.dataclass(frozen=True)
@@ -119,3 +122,42 @@ def train_deterministic_bc(
 
     keys = jax.random.split(train_key, config.num_steps)
     return fit_with_adam(loss_fn, params, config.learning_rate, keys)
+
+
+class CloningPhase(Phase):
+    """Behaviour cloning in the adversarial trainer: the learner's policy cloned from the
+    split's rows (each weighted by 1 + ``spec.bc_weighted_coef`` (r - 1)) starts the cells
+    with ``spec.bc_init_coef`` 1; in cells with ``spec.policy_update_coef`` 0 no RL moves it."""
+
+    names = ("bc",)
+
+    def __init__(self, config: BCConfig):
+        self.config = config
+
+    def init(self, context: PhaseContext, spec, inputs, confidence, learner_state, keys, ranked):
+        size, policy = context.env.observation_size, context.learner.policy
+        normalizer = learner_state.normalizer
+        weights = 1 + spec.bc_weighted_coef * (confidence - 1)
+        bc_params, _ = train_bc(
+            self.config,
+            lambda params, obs: policy.apply(params, normalizer(obs)),
+            learner_state.policy_params,
+            inputs[:, :size],
+            inputs[:, size:],
+            weights,
+            keys.bc,
+        )
+        policy_params = tree_where(spec.bc_init_coef > 0, bc_params, learner_state.policy_params)
+        return {}, learner_state.replace(policy_params=policy_params)
+
+    def after_update(self, context: PhaseContext, spec, before, updated):
+        """A cloned policy that no RL moves (``policy_update_coef`` 0) stays as it was: the
+        learner's learned fields from ``before``, the rest (counters, keys, the envs) from
+        ``updated``."""
+        frozen = spec.policy_update_coef == 0
+        return updated.replace(
+            **{
+                name: tree_where(frozen, getattr(before, name), getattr(updated, name))
+                for name in context.learner.LEARNED_FIELDS
+            }
+        )

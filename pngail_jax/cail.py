@@ -17,8 +17,8 @@ discriminator. Each iteration runs ``CAILConfig.num_rounds`` rounds of:
    held fixed (optionally only when that step's gradient agrees with the ranking loss's, see
    ``pretrain_iterations``).
 
-Everything here is pure and jittable; ``pngail_jax.adversarial`` calls it inside the
-one-program grid.
+Everything here is pure and jittable; ``CailPhase`` is its phase in the adversarial trainer's
+one-program grid (``pngail_jax.phase``).
 """
 
 from __future__ import annotations
@@ -29,8 +29,9 @@ import chex
 import jax
 import jax.numpy as jnp
 
-from pngail_jax.fitting import gradients_agree, tree_where
+from pngail_jax.fitting import adam_step, gradients_agree, tree_where
 from pngail_jax.losses import policy_reward
+from pngail_jax.phase import Phase, PhaseContext
 
 # The codebase's smoothing of the hinge where two returns differ by less than this.
 SMOOTHING = 1e-5
@@ -118,29 +119,26 @@ def trajectory_returns(reward_of, features: jax.Array, valid: jax.Array) -> jax.
     return jnp.sum(jnp.where(valid, reward_of(features), 0.0), axis=1)
 
 
-def iteration_rounds(trainer, spec, state, agent_inputs, key):
-    """CAIL's ``num_rounds`` rounds in an iteration of ``trainer`` (an
-    ``AdversarialTrainer``): per round,
+def iteration_rounds(context: PhaseContext, config: CAILConfig, spec, state, agent_inputs, key):
+    """CAIL's ``num_rounds`` rounds in an iteration of the adversarial trainer: per round,
     the lookahead, the outer step on beta, and one Adam step of the discriminator on a
-    fresh batch. agent_inputs float[N, O + A] is this iteration's rollout. Returns
-    ``((discriminator params, its Adam state, beta float[M]), metrics)``, the metrics
-    averaged over the rounds."""
-    config, trajectories = trainer.config.cail, trainer.trajectories
+    fresh batch. agent_inputs float[N, O + A] is this iteration's rollout; ``state`` the
+    trainer's state before the iteration. Returns ``((discriminator params, its Adam state,
+    beta float[M]), metrics)``, the metrics averaged over the rounds."""
+    trajectories, discriminator = context.trajectories, context.discriminator
     features = jnp.concatenate([trajectories.observations, trajectories.actions], axis=-1)
     valid = trajectories.valid
     ranked = state.ranked_trajectories.astype(jnp.float32)
     num_agent = agent_inputs.shape[0]
 
     def batch_loss(params, beta, agent_rows, demo_rows):
-        logits_agent = trainer.discriminator.apply(params, agent_inputs[agent_rows])
-        logits_demo = trainer.discriminator.apply(
-            params, trainer._demo_inputs[state.demo_rows[demo_rows]]
-        )
+        logits_agent = discriminator.apply(params, agent_inputs[agent_rows])
+        logits_demo = discriminator.apply(params, context.demo_inputs[state.demo_rows[demo_rows]])
         return inner_loss(logits_agent, logits_demo, beta[demo_rows])
 
     def ranking_loss(params, index):
         returns = trajectory_returns(
-            lambda x: policy_reward(trainer.discriminator.apply(params, x)),
+            lambda x: policy_reward(discriminator.apply(params, x)),
             features[index],
             valid[index],
         )
@@ -155,7 +153,7 @@ def iteration_rounds(trainer, spec, state, agent_inputs, key):
             index_key, ranked.shape[0], (config.num_trajectories,), p=ranked / ranked.sum()
         )
         rows = lambda k, n: jax.random.randint(k, (config.batch_size,), 0, n)  # noqa: E731
-        agent_rows, demo_rows = rows(agent_key, num_agent), rows(demo_key, trainer.num_demos)
+        agent_rows, demo_rows = rows(agent_key, num_agent), rows(demo_key, context.num_demos)
         beta = renormalize(beta, config.beta_max)
 
         def outer_loss(beta):
@@ -167,9 +165,9 @@ def iteration_rounds(trainer, spec, state, agent_inputs, key):
 
         beta_grads, metrics = jax.grad(outer_loss, has_aux=True)(beta)
         beta = renormalize(beta - spec.cail_learning_rate * beta_grads, config.beta_max)
-        step_rows = rows(step_agent_key, num_agent), rows(step_demo_key, trainer.num_demos)
+        step_rows = rows(step_agent_key, num_agent), rows(step_demo_key, context.num_demos)
         loss, grads = jax.value_and_grad(batch_loss)(params, beta, *step_rows)
-        new_params, new_optimizer_state = trainer._adam_step(
+        new_params, new_optimizer_state = adam_step(
             params, optimizer_state, grads, config.discriminator_learning_rate
         )
         skipped = jnp.zeros(())
@@ -192,3 +190,44 @@ def iteration_rounds(trainer, spec, state, agent_inputs, key):
     metrics["cail/skipped_steps"] *= config.num_rounds  # a count per iteration
     beta = carry[2]
     return carry, {**metrics, "cail/beta_std": beta.std(), "cail/beta_max": beta.max()}
+
+
+class CailPhase(Phase):
+    """CAIL in the adversarial trainer: beta starts at 1 on every split row; in CAIL's cells
+    (``spec.cail_coef`` 1) its rounds replace the discriminator's Adam step of the iteration
+    (every other cell of the grid keeps its own step)."""
+
+    names = ("cail",)
+
+    def __init__(self, config: CAILConfig):
+        self.config = config
+
+    def init(self, context: PhaseContext, spec, inputs, confidence, learner_state, keys, ranked):
+        return {"cail_confidence": jnp.ones(context.num_demos)}, learner_state
+
+    def discriminator_step(self, context: PhaseContext, spec, state, batch, key, stepped):
+        params, optimizer_state, metrics = stepped
+        (cail_params, cail_optimizer_state, beta), cail_metrics = iteration_rounds(
+            context, self.config, spec, state, batch.agent_inputs, jax.random.fold_in(key, 1)
+        )
+        use = spec.cail_coef > 0
+        metrics = {
+            **metrics,
+            "disc/loss": jnp.where(use, cail_metrics["cail/disc_loss"], metrics["disc/loss"]),
+        }
+        stepped = (
+            tree_where(use, cail_params, params),
+            tree_where(use, cail_optimizer_state, optimizer_state),
+            metrics,
+        )
+        return stepped, {"cail_confidence": beta}, cail_metrics
+
+    @staticmethod
+    def trajectory_confidence(context: PhaseContext, state) -> jax.Array:
+        """float[K]: CAIL's mean beta over each demonstration trajectory's rows in the split
+        (NaN for a trajectory with no row in it)."""
+        trajectory = context.row_trajectory[state.demo_rows]
+        num = context.trajectories.lengths.shape[0]
+        total = jax.ops.segment_sum(state.cail_confidence, trajectory, num)
+        count = jax.ops.segment_sum(jnp.ones_like(state.cail_confidence), trajectory, num)
+        return jnp.where(count > 0, total / jnp.maximum(count, 1), jnp.nan)

@@ -42,6 +42,9 @@ import numpy as np
 import optax
 from flax import struct
 
+from pngail_jax.networks import ClampedStateReward, ResidualDiscriminator
+from pngail_jax.phase import Phase, PhaseContext
+
 
 @dataclasses.dataclass(frozen=True)
 class FirlConfig:
@@ -239,56 +242,97 @@ class FirlState:
     discriminator_optimizer_state: optax.OptState
 
 
-def outer_step(trainer, spec, state, agent_obs, key) -> tuple[FirlState, dict]:
-    """f-IRL's outer step in an iteration of ``trainer`` (an ``AdversarialTrainer``; its
-    codebase's ``firl/irl_samples.py``): the state discriminator refitted (warm-started) on the
-    split's states against this rollout's, then one Adam step of the reward on the covariance
-    loss over the rollout's ``num_envs`` segments of ``unroll_length`` steps (agent_obs
-    float[T, E, O], our stand-in for their sampled trajectories) and as many resampled
-    demonstration segments. Returns (FirlState, metrics)."""
-    config, trpo_config = trainer.config.firl, trainer.config.trpo
-    size = trainer.env.observation_size
-    firl_state = state.firl
-    discriminator_key, segment_key = jax.random.split(key)
-    disc_params, disc_optimizer_state, disc_losses = fit_discriminator(
-        trainer.firl_discriminator.apply, trainer.firl_discriminator_optimizer,
-        firl_state.discriminator_params, firl_state.discriminator_optimizer_state,
-        trainer._demo_inputs[state.demo_rows, :size], agent_obs.reshape(-1, size),
-        config.discriminator_iterations, config.discriminator_batch_size, discriminator_key,
-    )  # fmt: skip
-    source = trainer._firl_segments
-    if source is None:  # no trajectory ids: segments of consecutive split rows
-        source = SegmentSource.of_rows(state.demo_rows)
-    expert_rows = sample_segment_rows(
-        segment_key, source, trpo_config.num_envs, trpo_config.unroll_length
-    )
-    expert_obs = trainer._demo_inputs[expert_rows, :size]  # float[T, E, O]
-    segments = jnp.concatenate([agent_obs, expert_obs], axis=1)  # float[T, 2E, O]
-    log_ratio = trainer.firl_discriminator.apply(disc_params, segments)  # log rho_E / rho
-    h = divergence_h(log_ratio, spec.firl_fkl_coef, spec.firl_rkl_coef, spec.firl_js_coef)
+class FirlPhase(Phase):
+    """f-IRL in the adversarial trainer: its reward and state discriminator networks, their
+    optimisers, and where its demonstration segments come from (the set's trajectories when
+    it has trajectory ids, else consecutive split rows). In every iteration ``outer_step``
+    runs before any other step, and the policy's reward gains ``spec.firl_coef`` r(s)."""
 
-    def reward_loss_fn(params):
-        rewards = trainer.firl_reward.apply(params, segments)  # float[T, 2E]
-        loss, metrics = covariance_surrogate(
-            h.sum(axis=0), rewards.sum(axis=0), trpo_config.unroll_length
+    names = ("firl",)
+
+    def __init__(self, config: FirlConfig, trajectory_ids=None):
+        self.config = config
+        self.state_discriminator = ResidualDiscriminator(
+            config.discriminator_hidden_size, config.discriminator_residual_blocks,
+            config.clamp_magnitude,
+        )  # fmt: skip
+        self.state_reward = ClampedStateReward(config.reward_hidden_sizes, config.clamp_magnitude)
+        self.discriminator_optimizer = adam_with_l2(
+            config.discriminator_learning_rate, config.discriminator_weight_decay
         )
-        agent, expert = jnp.split(rewards, 2, axis=1)
-        means = {"firl/reward_agent": agent.mean(), "firl/reward_expert": expert.mean()}
-        return loss, {**metrics, **means}
+        self.reward_optimizer = adam_with_l2(
+            config.reward_learning_rate, config.reward_weight_decay
+        )
+        self.segments = (
+            None if trajectory_ids is None else SegmentSource.of_trajectories(trajectory_ids)
+        )
 
-    grads, reward_metrics = jax.grad(reward_loss_fn, has_aux=True)(firl_state.reward_params)
-    updates, reward_optimizer_state = trainer.firl_reward_optimizer.update(
-        grads, firl_state.reward_optimizer_state, firl_state.reward_params
-    )
-    new_state = FirlState(
-        optax.apply_updates(firl_state.reward_params, updates), reward_optimizer_state,
-        disc_params, disc_optimizer_state,
-    )  # fmt: skip
-    metrics = {
-        "firl/disc_loss": disc_losses[-1],
-        "firl/disc_loss_first": disc_losses[0],
-        "firl/log_ratio_agent": log_ratio[:, : trpo_config.num_envs].mean(),
-        "firl/log_ratio_expert": log_ratio[:, trpo_config.num_envs :].mean(),
-        **reward_metrics,
-    }
-    return new_state, metrics
+    def initial_state(self, observation_size: int, key: jax.Array) -> FirlState:
+        """Fresh networks and Adam states."""
+        reward_key, disc_key = jax.random.split(key)
+        reward = self.state_reward.init(reward_key, jnp.zeros((observation_size,)))
+        disc = self.state_discriminator.init(disc_key, jnp.zeros((observation_size,)))
+        return FirlState(
+            reward, self.reward_optimizer.init(reward),
+            disc, self.discriminator_optimizer.init(disc),
+        )  # fmt: skip
+
+    def init(self, context: PhaseContext, spec, inputs, confidence, learner_state, keys, ranked):
+        return {"firl": self.initial_state(context.env.observation_size, keys.firl)}, learner_state
+
+    def reward(self, context: PhaseContext, spec, state, transitions, batch, key):
+        firl_state, metrics = self.outer_step(
+            context, spec, state, transitions.obs, jax.random.fold_in(key, 2)
+        )
+        term = spec.firl_coef * self.state_reward.apply(firl_state.reward_params, batch.agent_obs)
+        return term, {"firl": firl_state}, metrics
+
+    def outer_step(self, context: PhaseContext, spec, state, agent_obs, key):
+        """f-IRL's outer step (its codebase's ``firl/irl_samples.py``): the state
+        discriminator refitted (warm-started) on the split's states against this rollout's,
+        then one Adam step of the reward on the covariance loss over the rollout's
+        ``num_envs`` segments of ``unroll_length`` steps (agent_obs float[T, E, O], our
+        stand-in for their sampled trajectories) and as many resampled demonstration
+        segments. ``state`` needs ``firl`` and ``demo_rows``. Returns (FirlState, metrics)."""
+        config, num_envs, length = self.config, context.num_envs, context.unroll_length
+        size = context.env.observation_size
+        firl_state = state.firl
+        discriminator_key, segment_key = jax.random.split(key)
+        disc_params, disc_optimizer_state, disc_losses = fit_discriminator(
+            self.state_discriminator.apply, self.discriminator_optimizer,
+            firl_state.discriminator_params, firl_state.discriminator_optimizer_state,
+            context.demo_inputs[state.demo_rows, :size], agent_obs.reshape(-1, size),
+            config.discriminator_iterations, config.discriminator_batch_size, discriminator_key,
+        )  # fmt: skip
+        source = self.segments
+        if source is None:  # no trajectory ids: segments of consecutive split rows
+            source = SegmentSource.of_rows(state.demo_rows)
+        expert_rows = sample_segment_rows(segment_key, source, num_envs, length)
+        expert_obs = context.demo_inputs[expert_rows, :size]  # float[T, E, O]
+        segments = jnp.concatenate([agent_obs, expert_obs], axis=1)  # float[T, 2E, O]
+        log_ratio = self.state_discriminator.apply(disc_params, segments)  # log rho_E / rho
+        h = divergence_h(log_ratio, spec.firl_fkl_coef, spec.firl_rkl_coef, spec.firl_js_coef)
+
+        def reward_loss_fn(params):
+            rewards = self.state_reward.apply(params, segments)  # float[T, 2E]
+            loss, metrics = covariance_surrogate(h.sum(axis=0), rewards.sum(axis=0), length)
+            agent, expert = jnp.split(rewards, 2, axis=1)
+            means = {"firl/reward_agent": agent.mean(), "firl/reward_expert": expert.mean()}
+            return loss, {**metrics, **means}
+
+        grads, reward_metrics = jax.grad(reward_loss_fn, has_aux=True)(firl_state.reward_params)
+        updates, reward_optimizer_state = self.reward_optimizer.update(
+            grads, firl_state.reward_optimizer_state, firl_state.reward_params
+        )
+        new_state = FirlState(
+            optax.apply_updates(firl_state.reward_params, updates), reward_optimizer_state,
+            disc_params, disc_optimizer_state,
+        )  # fmt: skip
+        metrics = {
+            "firl/disc_loss": disc_losses[-1],
+            "firl/disc_loss_first": disc_losses[0],
+            "firl/log_ratio_agent": log_ratio[:, :num_envs].mean(),
+            "firl/log_ratio_expert": log_ratio[:, num_envs:].mean(),
+            **reward_metrics,
+        }
+        return new_state, metrics

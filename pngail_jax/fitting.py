@@ -22,6 +22,15 @@ def fit_with_adam(loss_fn, params, learning_rate: float, keys: jax.Array):
     return params, metrics
 
 
+def adam_step(params, optimizer_state, grads, learning_rate):
+    """One Adam step with its learning rate as a value (a grid's cells may differ):
+    ``optax.scale_by_adam()``'s update of ``optimizer_state`` (its ``init``), then
+    ``-learning_rate`` times it. Returns ``(params, optimizer_state)``."""
+    updates, optimizer_state = optax.scale_by_adam().update(grads, optimizer_state)
+    step = jax.tree.map(lambda u: -learning_rate * u, updates)
+    return optax.apply_updates(params, step), optimizer_state
+
+
 def squared_norm(params) -> jax.Array:
     """||theta||^2: the sum of squares of every leaf of ``params`` (weights and biases), the
     L2 term the CAIL codebase adds to its losses (``parameters_to_vector(p).norm() ** 2``).

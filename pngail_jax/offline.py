@@ -42,7 +42,7 @@ from pngail_jax.confidence import (
     train_classifier,
 )
 from pngail_jax.demos import Demonstrations, make_split, successor_rows
-from pngail_jax.fitting import squared_norm, tree_where
+from pngail_jax.fitting import adam_step, squared_norm, tree_where
 from pngail_jax.methods import stack
 from pngail_jax.networks import (
     GaussianPolicy,
@@ -398,7 +398,7 @@ class OfflineTrainer:
                 return loss + 0.5 * spec.ilid_discriminator_weight_decay * squared_norm(params)
 
             loss, grads = jax.value_and_grad(loss_fn)(params)
-            params, optimizer_state = self._adam_step(
+            params, optimizer_state = adam_step(
                 params, optimizer_state, grads, spec.ilid_discriminator_learning_rate
             )
             return params, optimizer_state, loss
@@ -487,7 +487,7 @@ class OfflineTrainer:
             return loss, {**terms, "policy/loss": loss}
 
         grads, policy_metrics = jax.grad(policy_loss, has_aux=True)(state.policy_params)
-        params, optimizer_state = self._adam_step(
+        params, optimizer_state = adam_step(
             state.policy_params, state.policy_optimizer_state, grads, spec.policy_learning_rate
         )
         learning = state.step < spec.num_gradient_steps
@@ -517,7 +517,7 @@ class OfflineTrainer:
 
         grads, (metrics, outputs) = jax.grad(loss_fn, has_aux=True)(state.dwbc_params)
         grads = jax.tree.map(lambda g: spec.dwbc_coef * g, grads)
-        params, optimizer_state = self._adam_step(
+        params, optimizer_state = adam_step(
             state.dwbc_params, state.dwbc_optimizer_state, grads, spec.discriminator_learning_rate
         )
         update = step % self.config.dwbc_discriminator_every == 0
@@ -550,16 +550,11 @@ class OfflineTrainer:
 
         grads, (metrics, logits_union) = jax.grad(loss_fn, has_aux=True)(state.iswbc_params)
         grads = jax.tree.map(lambda g: spec.iswbc_coef * g, grads)
-        params, optimizer_state = self._adam_step(
+        params, optimizer_state = adam_step(
             state.iswbc_params, state.iswbc_optimizer_state, grads, spec.discriminator_learning_rate
         )
         fields = {"iswbc_params": params, "iswbc_optimizer_state": optimizer_state}
         return fields, metrics, iswbc_weights(logits_union)
-
-    def _adam_step(self, params, optimizer_state, grads, learning_rate):
-        updates, optimizer_state = self.optimizer.update(grads, optimizer_state)
-        step = jax.tree.map(lambda u: -learning_rate * u, updates)
-        return optax.apply_updates(params, step), optimizer_state
 
     # -- iterations and blocks ----------------------------------------------------------------
 

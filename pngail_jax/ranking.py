@@ -16,7 +16,7 @@ Confidence-Aware-Imitation-Learning), whose runs the paper reports: ``RankingCon
 T-REX's reward fit, ``DrexConfig()`` D-REX's cloned policy, noisy rollouts and reward fit.
 
 Every function is pure and jittable; ``Trajectories`` are padded to one length, so a grid can
-``vmap`` over seeds and methods.
+``vmap`` over seeds and methods. ``RankingPhase`` is their phase in the adversarial trainer.
 """
 
 from __future__ import annotations
@@ -29,9 +29,10 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from pngail_jax.bc import DeterministicBCConfig
+from pngail_jax.bc import DeterministicBCConfig, cloned_actions, train_deterministic_bc
 from pngail_jax.fitting import fit_with_adam, squared_norm
 from pngail_jax.networks import ReluMLP
+from pngail_jax.phase import Phase, PhaseContext
 
 
 @dataclasses.dataclass(frozen=True)
@@ -391,3 +392,69 @@ def noisy_rollouts(env, act, config: DrexConfig, key: jax.Array) -> Trajectories
         lengths=episodes.valid.sum(axis=1).astype(jnp.int32),
         score=-levels,
     )
+
+
+def ranked_trajectories(trajectories: Trajectories, label_ratio, key) -> jax.Array:
+    """bool[K]: a share ``label_ratio`` of the demonstration trajectories (rounded, at least
+    2), drawn per seed, whose ranking T-REX and CAIL may see: the same label information as
+    the ``label_ratio`` of rows PN-GAIL's D_c holds."""
+    num = trajectories.lengths.shape[0]
+    num_ranked = jnp.maximum(jnp.round(label_ratio * num), 2)
+    position = jax.random.permutation(key, num)
+    return jnp.zeros(num, bool).at[position].set(jnp.arange(num) < num_ranked)
+
+
+class RankingPhase(Phase):
+    """Rewards learned from rankings in the adversarial trainer, one ensemble per compiled
+    name: T-REX's (``demo_rankings``: the ``ranked`` demonstration trajectories) and D-REX's
+    (``noise_rankings``: noisy rollouts of its own cloned policy). The policy's reward gains
+    ``spec.ranking_reward_coef`` times D-REX's ensemble mean where ``spec.noise_rankings_coef``
+    is 1, T-REX's where it is 0 (in a grid with both, every cell fits both)."""
+
+    def __init__(self, names: tuple[str, ...], config: RankingConfig, drex: DrexConfig):
+        self.names, self.config, self.drex = names, config, drex
+        self.rewards = {
+            "demo_rankings": RankingReward(config.hidden_sizes),
+            "noise_rankings": RankingReward(drex.ranking.hidden_sizes),
+        }
+
+    def init(self, context: PhaseContext, spec, inputs, confidence, learner_state, keys, ranked):
+        trex_key, drex_key = jax.random.split(keys.reward)
+        params = {}
+        if "demo_rankings" in self.names:
+            params["demo_rankings"], _ = train_ranking_reward(
+                self.config, context.trajectories, trex_key, eligible=ranked
+            )
+        if "noise_rankings" in self.names:
+            trajectories = self.noisy_rollouts(context, inputs, keys.noise)
+            params["noise_rankings"], _ = train_ranking_reward(
+                self.drex.ranking, trajectories, drex_key
+            )
+        return {"ranking_reward_params": params}, learner_state
+
+    def noisy_rollouts(self, context: PhaseContext, inputs, key) -> Trajectories:
+        """D-REX's ranked trajectories: its deterministic policy cloned from the split's
+        ``inputs`` float[M, O + A] (not the learner's policy of ``bc``), rolled out at each
+        noise level."""
+        size, drex = context.env.observation_size, self.drex
+        low, high = context.action_bounds
+        bc_key, rollout_key = jax.random.split(key)
+        params, _ = train_deterministic_bc(
+            drex.bc, inputs[:, :size], inputs[:, size:], low, high, bc_key
+        )
+
+        def act(obs):
+            return cloned_actions(drex.bc, params, obs, low, high)
+
+        return noisy_rollouts(context.env, act, drex, rollout_key)
+
+    def reward(self, context: PhaseContext, spec, state, transitions, batch, key):
+        weight = {
+            "demo_rankings": 1 - spec.noise_rankings_coef,
+            "noise_rankings": spec.noise_rankings_coef,
+        }
+        term = sum(
+            weight[name] * self.rewards[name].ensemble(params, batch.agent_obs)
+            for name, params in state.ranking_reward_params.items()
+        )
+        return spec.ranking_reward_coef * term, {}, {}

@@ -15,7 +15,7 @@ import pytest
 from pngail_jax import envs
 from pngail_jax.adversarial import AdversarialConfig, AdversarialHyperparams, AdversarialTrainer
 from pngail_jax.bc import BCConfig, DeterministicBCConfig
-from pngail_jax.cail import CAILConfig
+from pngail_jax.cail import CAILConfig, CailPhase
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import DemonstrationError, Demonstrations
 from pngail_jax.firl import FirlConfig
@@ -170,8 +170,9 @@ def test_cail_learns_confidences_that_rank_trajectories_of_known_quality():
     keys = jax.numpy.stack([key(0), key(1), key(2), key(0), key(0)])
     state, metrics = jax.jit(jax.vmap(trainer.train))(hyperparams, specs, keys)
     assert np.asarray(state.ranked_trajectories).all()
+    context = trainer.phases.context
     confidence = np.stack(
-        [np.asarray(trainer.cail_trajectory_confidence(cell)) for cell in cells_of(state, 5)]
+        [np.asarray(CailPhase.trajectory_confidence(context, cell)) for cell in cells_of(state, 5)]
     )
     truth = np.asarray(trainer.trajectories.score)
     assert spearman(confidence[:3].mean(axis=0), truth) >= 0.6, (confidence[:3], truth)

@@ -12,7 +12,6 @@ import pytest
 from pngail_jax import envs, firl
 from pngail_jax.adversarial import AdversarialConfig, AdversarialTrainer
 from pngail_jax.demos import Demonstrations
-from pngail_jax.firl import FirlState
 from pngail_jax.methods import method_spec, stack
 from pngail_jax.networks import ClampedStateReward, ResidualDiscriminator
 from pngail_jax.rl import TRPOConfig
@@ -259,22 +258,17 @@ def test_the_trainers_reward_rises_on_the_demonstrations_without_trajectory_ids(
         ),
     )
     trainer = AdversarialTrainer(config, envs.make("Pendulum-v1"), demos)
-    assert trainer._firl_segments is None
+    phase = trainer.phases.get(firl.FirlPhase)
+    assert phase.segments is None
     agent_obs = jnp.asarray(rng.normal(-1.0, 0.3, size=(25, 4, 3)), jnp.float32)
     demo_rows = jnp.arange(40, dtype=jnp.int32)  # a split of 40 of the 60 rows
 
     def outer_steps(spec, key):
-        reward_key, disc_key = jax.random.split(key)
-        reward = trainer.firl_reward.init(reward_key, jnp.zeros(3))
-        disc = trainer.firl_discriminator.init(disc_key, jnp.zeros(3))
-        firl_state = FirlState(
-            reward, trainer.firl_reward_optimizer.init(reward),
-            disc, trainer.firl_discriminator_optimizer.init(disc),
-        )  # fmt: skip
+        firl_state = phase.initial_state(3, key)
 
         def step(firl_state, key):
             state = types.SimpleNamespace(firl=firl_state, demo_rows=demo_rows)
-            return firl.outer_step(trainer, spec, state, agent_obs, key)
+            return phase.outer_step(trainer.phases.context, spec, state, agent_obs, key)
 
         return jax.lax.scan(step, firl_state, jax.random.split(key, 15))
 

@@ -27,7 +27,7 @@ LAYERS = [
         "learners",
         (
             "rl", "rl.rollout", "rl.train", "rl.ppo", "rl.learners", "settings", "checkpoint",
-            "bc", "firl", "ranking",
+            "phase", "bc", "firl", "ranking",
             "confidence", "methods", "losses", "cail", "offline_losses",
         ),
     ),
