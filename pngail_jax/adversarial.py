@@ -34,12 +34,13 @@ from flax import struct
 
 from pngail_jax import cail, envs, firl, ranking
 from pngail_jax.bc import BCConfig, CloningPhase
-from pngail_jax.confidence import ClassifierConfig, confidence_errors, train_classifier
+from pngail_jax.confidence import ClassifierConfig, confidence_errors, split_confidences
 from pngail_jax.demos import DemonstrationError, Demonstrations, make_split
 from pngail_jax.firl import FirlState
 from pngail_jax.fitting import adam_step
 from pngail_jax.losses import ConfidenceStats, discriminator_loss, policy_reward
-from pngail_jax.methods import PHASES, MethodSpec, required_phases, resolve
+from pngail_jax.method_checks import check_label_ratios, check_methods
+from pngail_jax.methods import PHASES, MethodSpec
 from pngail_jax.networks import Discriminator
 from pngail_jax.phase import PhaseContext, PhaseSet
 from pngail_jax.rl.learners import check_learner, learner_hyperparams, make_learner
@@ -245,74 +246,19 @@ class AdversarialTrainer:
         return self._demo_inputs
 
     def check_label_ratios(self, label_ratios) -> None:
-        """Raises ``DemonstrationError`` when the demonstrations' ``labelled`` mask allows
-        fewer rows than the largest ratio labels, ``round(label_ratio * num_demos)``, and
-        ``ValueError`` when the smallest ratio needs a wider unlabelled classifier batch than
-        the config compiles; call it on the host before building a grid (the split itself
-        labels at most the allowed rows)."""
-        largest = max(float(ratio) for ratio in label_ratios)
-        requested = round(largest * self.num_demos)
-        if self.has_confidence and requested > self.num_allowed:
-            raise DemonstrationError(
-                f"label ratio {largest:g} of {self.num_demos} rows asks for {requested} labelled "
-                f"rows, but the demonstrations' labelled mask allows only {self.num_allowed}"
-            )
-        classifier = self.config.classifier
-        smallest = min(float(ratio) for ratio in label_ratios)
-        num_labelled = max(round(smallest * self.num_demos), 1)
-        needed = classifier.unlabelled_rows_per_step(self.num_demos, num_labelled)
-        if needed > classifier.unlabelled_batch_width:
-            raise ValueError(
-                f"label ratio {smallest:g} of {self.num_demos} rows needs {needed} unlabelled "
-                "rows per classifier step (n_u // n_c), more than ClassifierConfig's "
-                f"max_unlabelled_batch_size {classifier.max_unlabelled_batch_size}: raise it"
-            )
+        """``method_checks.check_label_ratios`` for this trainer's demonstrations; call it on
+        the host before building a grid (the split itself labels at most the allowed rows)."""
+        check_label_ratios(
+            label_ratios, self.num_demos, self.config.classifier,
+            self.num_allowed if self.has_confidence else None,
+        )  # fmt: skip
 
     def check_methods(self, methods) -> None:
-        """Raises ``DemonstrationError`` naming the methods that need confidences the
-        demonstrations do not carry."""
-        readers = [name for name in methods if resolve(name).confidence_source != "none"]
-        if not self.has_confidence and readers:
-            raise DemonstrationError(
-                f"the demonstrations carry no confidences, which {', '.join(readers)} read; "
-                "give a confidence file, or run only methods that read none (gail, wgail)"
-            )
-        missing = [p for p in required_phases(methods) if p not in self.config.phases]
-        if missing:
-            raise ValueError(
-                f"methods {list(methods)} need the training phase(s) {missing}, which this "
-                "trainer does not compile: AdversarialConfig(phases=required_phases(methods))"
-            )
-        penalised = [
-            name for name in methods if resolve(name).coefficients.get("gradient_penalty_coef")
-        ]
-        if penalised and not self.config.gradient_penalty:
-            raise ValueError(
-                f"{', '.join(penalised)} use a gradient penalty, which this trainer does not "
-                "compile: AdversarialConfig(gradient_penalty=True)"
-            )
-        rankers = [name for name in methods if resolve(name).confidence_source == "rankings"]
-        if rankers and self.trajectories is None:
-            raise DemonstrationError(
-                f"{', '.join(rankers)} rank whole trajectories, but these demonstrations have "
-                "no trajectory ids (the authors' MuJoCo files are rows, not trajectories; "
-                "made sets and the authors' Pendulum file have them)"
-            )
-        if rankers and len(np.unique(np.asarray(self.trajectories.score))) < 2:
-            raise DemonstrationError(
-                f"{', '.join(rankers)} need trajectories of at least two confidences to rank"
-            )
-        length = self.config.ranking.snippet_length
-        if (
-            "demo_rankings" in required_phases(methods)
-            and self.config.ranking.skip_short_trajectories
-        ):
-            long_enough = np.asarray(self.trajectories.lengths) >= length
-            if len(np.unique(np.asarray(self.trajectories.score)[long_enough])) < 2:
-                raise DemonstrationError(
-                    f"trex compares snippets of {length} steps, but fewer than two confidences "
-                    f"are among the trajectories of at least {length} steps"
-                )
+        """``method_checks.check_methods`` against what this trainer has and compiles."""
+        check_methods(
+            methods, self.has_confidence, self.config.phases, self.config.gradient_penalty,
+            self.trajectories, self.config.ranking,
+        )  # fmt: skip
 
     @property
     def eval_every(self) -> int:
@@ -329,14 +275,16 @@ class AdversarialTrainer:
             hyperparams.noise_std, self._allowed,
         )  # fmt: skip
         inputs = self._demo_inputs[split.indices]
-        confidence, mean_labelled = self._split_confidences(spec, split, classifier_key)
+        confidence, mean_labelled = split_confidences(
+            self.config.classifier, spec.classifier, spec.classifier_coef,
+            self._classifier_inputs[split.indices], split, classifier_key,
+        )  # fmt: skip
         disc_params = self.discriminator.init(disc_key, inputs[0])
         trpo_state = self.trpo.init(trpo_key)
-        # Keys of the appendix phases come from fold_in, so the split above (and every number
+        # The appendix phases' keys come from fold_in, so the split above (and every number
         # of the seven methods) is the same whichever phases a grid compiles.
-        ranked = self._ranked_trajectories(hyperparams.label_ratio, jax.random.fold_in(key, 2))
         phase_state, trpo_state = self.phases.init(
-            spec, inputs, confidence, trpo_state, jax.random.fold_in(key, 1), ranked
+            spec, inputs, confidence, trpo_state, key, hyperparams.label_ratio
         )
         state = TrainState(
             trpo=trpo_state,
@@ -352,50 +300,12 @@ class AdversarialTrainer:
             iteration=jnp.zeros((), jnp.int32),
             eval_keys=jax.random.split(eval_key, self.config.trpo.num_eval_episodes),
             key=carry_key,
-            ranked_trajectories=ranked,
             **phase_state,
         )
         errors = confidence_errors(confidence, split.true_confidence, split.labelled)
         if not self.has_confidence:
             errors = jax.tree.map(lambda e: jnp.full_like(e, jnp.nan), errors)
         return state, {f"confidence/{name}": value for name, value in errors.items()}
-
-    def _split_confidences(self, spec: MethodSpec, split, key: jax.Array):
-        """(float[N] the confidence every split row trains with, the labelled rows' mean):
-        the given one on D_c's rows; on the rest the classifier's prediction, or D_c's mean
-        for a method without a classifier (``spec.classifier_coef`` 0)."""
-        num_labelled = split.labelled.sum()
-        mean_labelled = jnp.where(split.labelled, split.confidence, 0.0).sum() / jnp.maximum(
-            num_labelled, 1
-        )
-        without_classifier = jnp.where(split.labelled, split.confidence, mean_labelled)
-
-        def classify():
-            predicted, _, _ = train_classifier(
-                self.config.classifier,
-                spec.classifier,
-                self._classifier_inputs[split.indices],
-                split.confidence,
-                split.labelled,
-                key,
-            )
-            return predicted
-
-        # Under vmap a cond with a batched predicate runs both branches; alone, only one.
-        predicted = jax.lax.cond(spec.classifier_coef > 0, classify, lambda: without_classifier)
-        confidence = jnp.where(
-            split.labelled,
-            split.confidence,
-            spec.classifier_coef * predicted + (1 - spec.classifier_coef) * without_classifier,
-        )
-        return confidence, mean_labelled
-
-    def _ranked_trajectories(self, label_ratio, key):
-        """bool[K]: the demonstration trajectories whose ranking T-REX and CAIL may see
-        (``ranking.ranked_trajectories``); None when no compiled phase ranks them."""
-        if self.trajectories is None or not {"demo_rankings", "cail"} & set(self.config.phases):
-            return None
-        return ranking.ranked_trajectories(self.trajectories, label_ratio, key)
 
     def importance_weights(self, state: TrainState) -> jax.Array:
         """WGAIL's w = [exp(-z) pi(a|s)]^(1/2) on every split row; no gradient flows."""

@@ -198,6 +198,7 @@ class CailPhase(Phase):
     (every other cell of the grid keeps its own step)."""
 
     names = ("cail",)
+    ranks_demonstrations = True
 
     def __init__(self, config: CAILConfig):
         self.config = config

@@ -329,3 +329,32 @@ def risk_estimator_variance(
         return supervised + balance
 
     return jnp.var(jax.vmap(one)(jax.random.split(key, num_resamples)))
+
+
+def split_confidences(
+    config: ClassifierConfig, spec: ClassifierSpec, classifier_coef, inputs, split, key
+):
+    """(float[M] the confidence every row of a split trains with, the labelled rows' mean):
+    the given one on D_c's rows; on the rest the classifier's prediction (trained on the
+    split's ``inputs`` float[M, O + A] by ``spec``), or D_c's mean for a method without a
+    classifier (``classifier_coef`` 0). ``split`` is a ``demos.Split``."""
+    num_labelled = split.labelled.sum()
+    mean_labelled = jnp.where(split.labelled, split.confidence, 0.0).sum() / jnp.maximum(
+        num_labelled, 1
+    )
+    without_classifier = jnp.where(split.labelled, split.confidence, mean_labelled)
+
+    def classify():
+        predicted, _, _ = train_classifier(
+            config, spec, inputs, split.confidence, split.labelled, key
+        )
+        return predicted
+
+    # Under vmap a cond with a batched predicate runs both branches; alone, only one.
+    predicted = jax.lax.cond(classifier_coef > 0, classify, lambda: without_classifier)
+    confidence = jnp.where(
+        split.labelled,
+        split.confidence,
+        classifier_coef * predicted + (1 - classifier_coef) * without_classifier,
+    )
+    return confidence, mean_labelled

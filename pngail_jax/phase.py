@@ -25,6 +25,7 @@ import dataclasses
 from typing import NamedTuple
 
 import jax
+import jax.numpy as jnp
 from flax import linen as nn
 
 from pngail_jax import envs
@@ -73,6 +74,8 @@ class Phase:
     ``methods.PHASES`` it implements (a grid may compile a subset of them)."""
 
     names: tuple[str, ...] = ()
+    # Whether the phase reads the ranking of demonstration trajectories (``ranked`` in init).
+    ranks_demonstrations: bool = False
 
     def init(self, context: PhaseContext, spec, inputs, confidence, learner_state, keys, ranked):
         """(TrainState fields, learner_state) of one cell: ``inputs`` float[M, O + A] are the
@@ -111,8 +114,17 @@ class PhaseSet:
         """The compiled phase of class ``kind``, or None."""
         return next((phase for phase in self.phases if isinstance(phase, kind)), None)
 
-    def init(self, spec, inputs, confidence, learner_state, key, ranked):
-        keys, fields = InitKeys.split(key), {}
+    def init(self, spec, inputs, confidence, learner_state, key, label_ratio):
+        """(TrainState fields, learner_state) of the cell of ``key`` (its own key: the phases
+        draw from ``fold_in``s of it): every phase's, and ``ranked_trajectories`` when a
+        phase ranks the demonstrations."""
+        fields, ranked = {}, None
+        trajectories = self.context.trajectories
+        if trajectories is not None and any(p.ranks_demonstrations for p in self.phases):
+            num = trajectories.lengths.shape[0]
+            ranked = ranked_trajectories(num, label_ratio, jax.random.fold_in(key, 2))
+            fields["ranked_trajectories"] = ranked
+        keys = InitKeys.split(jax.random.fold_in(key, 1))
         for phase in self.phases:
             more, learner_state = phase.init(
                 self.context, spec, inputs, confidence, learner_state, keys, ranked
@@ -145,3 +157,16 @@ class PhaseSet:
         for phase in self.phases:
             updated = phase.after_update(self.context, spec, before, updated)
         return updated
+
+
+def ranked_trajectories(num_trajectories: int, label_ratio, key) -> jax.Array:
+    """bool[K]: a share ``label_ratio`` of the K demonstration trajectories (rounded, at
+    least 2), drawn per seed, whose ranking T-REX and CAIL may see: the same label
+    information as the ``label_ratio`` of rows PN-GAIL's D_c holds."""
+    num_ranked = jnp.maximum(jnp.round(label_ratio * num_trajectories), 2)
+    position = jax.random.permutation(key, num_trajectories)
+    return (
+        jnp.zeros(num_trajectories, bool)
+        .at[position]
+        .set(jnp.arange(num_trajectories) < num_ranked)
+    )

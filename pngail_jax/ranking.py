@@ -394,16 +394,6 @@ def noisy_rollouts(env, act, config: DrexConfig, key: jax.Array) -> Trajectories
     )
 
 
-def ranked_trajectories(trajectories: Trajectories, label_ratio, key) -> jax.Array:
-    """bool[K]: a share ``label_ratio`` of the demonstration trajectories (rounded, at least
-    2), drawn per seed, whose ranking T-REX and CAIL may see: the same label information as
-    the ``label_ratio`` of rows PN-GAIL's D_c holds."""
-    num = trajectories.lengths.shape[0]
-    num_ranked = jnp.maximum(jnp.round(label_ratio * num), 2)
-    position = jax.random.permutation(key, num)
-    return jnp.zeros(num, bool).at[position].set(jnp.arange(num) < num_ranked)
-
-
 class RankingPhase(Phase):
     """Rewards learned from rankings in the adversarial trainer, one ensemble per compiled
     name: T-REX's (``demo_rankings``: the ``ranked`` demonstration trajectories) and D-REX's
@@ -413,6 +403,7 @@ class RankingPhase(Phase):
 
     def __init__(self, names: tuple[str, ...], config: RankingConfig, drex: DrexConfig):
         self.names, self.config, self.drex = names, config, drex
+        self.ranks_demonstrations = "demo_rankings" in names
         self.rewards = {
             "demo_rankings": RankingReward(config.hidden_sizes),
             "noise_rankings": RankingReward(drex.ranking.hidden_sizes),

@@ -28,7 +28,7 @@ LAYERS = [
         (
             "rl", "rl.rollout", "rl.train", "rl.ppo", "rl.learners", "settings", "checkpoint",
             "phase", "bc", "firl", "ranking",
-            "confidence", "methods", "losses", "cail", "offline_losses",
+            "confidence", "methods", "losses", "cail", "offline_losses", "method_checks",
         ),
     ),
     (
@@ -213,6 +213,65 @@ def test_no_private_name_is_imported_across_files():
         if imported.startswith("_")
     ]
     assert not private, "\n".join(private)
+
+
+def _private_names_defined(tree: ast.AST) -> set[str]:
+    """The private names a module defines: its functions, classes and module-level names,
+    and the attributes it sets on ``self``."""
+    found = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
+            found.add(node.name)
+        elif isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store):
+            found.add(node.id)
+        elif isinstance(node, ast.Attribute) and isinstance(node.ctx, ast.Store):
+            found.add(node.attr)
+    return {name for name in found if name.startswith("_") and not name.startswith("__")}
+
+
+def _private_reads(paths: dict[str, Path]) -> list[str]:
+    """``obj._name`` read in one module of a private name that only other modules of the
+    package define (an object's private part reached from outside its module: an import
+    test cannot see that dependency). ``self``, ``cls`` and ``super()`` are the module's own;
+    a private name of another library (``data._impl`` of MJX) is defined by none of ours."""
+    trees = {name: ast.parse(path.read_text()) for name, path in paths.items()}
+    defined = {name: _private_names_defined(tree) for name, tree in trees.items()}
+    ours = set().union(*defined.values())
+    found = []
+    for name, tree in trees.items():
+        for node in ast.walk(tree):
+            if not isinstance(node, ast.Attribute) or node.attr not in ours:
+                continue
+            owner = node.value
+            if isinstance(owner, ast.Name) and owner.id in ("self", "cls"):
+                continue
+            if isinstance(owner, ast.Call) and getattr(owner.func, "id", None) == "super":
+                continue
+            if node.attr not in defined[name]:
+                found.append(f"{name}: {ast.unparse(node)} (line {node.lineno})")
+    return found
+
+
+def test_no_module_reads_another_modules_private_parts():
+    """Modules of the package, benchmarks and programs reach other modules' objects through
+    their public names only (a phase gets an explicit context, not the trainer)."""
+    root = PACKAGE.parent
+    paths = {f"pngail_jax.{name}": path for name, path in MODULES.items()}
+    for folder in ("benchmarks", "experiments"):
+        paths |= {f"{folder}/{p.name}": p for p in sorted((root / folder).glob("*.py"))}
+    found = _private_reads(paths)
+    assert not found, "\n".join(found)
+
+
+def test_the_private_read_check_finds_a_read_across_modules(tmp_path):
+    owner, reader = tmp_path / "owner.py", tmp_path / "reader.py"
+    owner.write_text("class Trainer:\n    def __init__(self):\n        self._inputs = 1\n")
+    reader.write_text("def step(trainer):\n    return trainer._inputs + trainer.public\n")
+    assert _private_reads({"owner": owner, "reader": reader}) == [
+        "reader: trainer._inputs (line 2)"
+    ]
+    reader.write_text("def step(self):\n    return self._inputs\n")
+    assert _private_reads({"owner": owner, "reader": reader}) == []
 
 
 @pytest.mark.parametrize("name", sorted(MODULES))

@@ -153,17 +153,6 @@ def resolve_normalizer(config: RunConfig, demos, env) -> tuple[list[float] | Non
     )
 
 
-def check_split_sizes(label_ratios, num_demos: int) -> None:
-    """RunError unless every label ratio leaves a labelled and an unlabelled row."""
-    for ratio in label_ratios:
-        num_labelled = round(ratio * num_demos)
-        if not 0 < num_labelled < num_demos:
-            raise RunError(
-                f"--label-ratio {ratio} labels {num_labelled} of {num_demos} rows; "
-                "need at least one labelled and one unlabelled row"
-            )
-
-
 def build(config: RunConfig, saved=None) -> BuiltRun:
     """Environment, demonstrations, trainer and the compiled grid of ``config`` (``saved``, a
     resumed run's ``record.SavedRun``: its demonstrations from the path it began with, its
@@ -182,10 +171,14 @@ def build(config: RunConfig, saved=None) -> BuiltRun:
     try:
         trainer = AdversarialTrainer(config.adversarial_config(demos.num_rows), env, demos)
         trainer.check_methods(config.methods)
-        trainer.check_label_ratios(config.label_ratios)
+        try:
+            trainer.check_label_ratios(config.label_ratios)
+        except DemonstrationError:
+            raise
+        except ValueError as error:  # a ratio the split or the classifier cannot serve
+            raise RunError(f"--label-ratio: {error}") from None
     except DemonstrationError as error:
         raise RunError(f"{demos_path}: {error}") from None
-    check_split_sizes(config.label_ratios, trainer.num_demos)
     inputs = stack_cells(
         cells, jax.random.key(config.seed), {"bsc_eps": config.task_bsc_eps},
         learner=config.learner,
