@@ -197,8 +197,8 @@ def counting_cache_hits():
 def evaluation_seconds(trpo: TRPO, state: TrainState) -> float:
     """Median seconds of one evaluation of every cell of ``state`` with ``trpo``'s env."""
     evaluate = jax.jit(jax.vmap(trpo.evaluate))
-    program = evaluate.lower(state.trpo, state.eval_keys).compile()
-    return median_seconds(program, state.trpo, state.eval_keys)
+    program = evaluate.lower(state.learner, state.eval_keys).compile()
+    return median_seconds(program, state.learner, state.eval_keys)
 
 
 def time_chunks(grid: Grid) -> tuple[TrainState, dict]:
@@ -305,7 +305,7 @@ def measure_grid(args, train, full_trpo, size: int, devices, key) -> dict:
     if compiling["compile_seconds"] is None:
         compiling["compile_seconds"] = grid.compile_seconds
     state, chunks = time_chunks(grid)
-    eval_seconds = evaluation_seconds(train.trpo, state)
+    eval_seconds = evaluation_seconds(train.learner, state)
     eval_seconds_full = eval_seconds if full_trpo is None else evaluation_seconds(full_trpo, state)
     costs = evaluation_costs(
         chunks["chunk_seconds"],

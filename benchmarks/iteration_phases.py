@@ -131,7 +131,7 @@ def advantages_and_targets(
 
     ``unroll`` set: the benchmark copy of the sequential form with that scan unroll.
     """
-    trpo_hyperparams = hyperparams.trpo
+    trpo_hyperparams = hyperparams.learner
     arguments = (
         rewards,
         values,
@@ -215,7 +215,7 @@ class Phases:
     def policy_batch(self, hyperparams, state, transitions, rewards):
         """``trpo.update``'s first step (``TRPO.advantages_and_targets``), flattened as the
         value fit and the policy step take it (not timed)."""
-        targets = self.trpo.advantages_and_targets(hyperparams.trpo, state, transitions, rewards)
+        targets = self.trpo.advantages_and_targets(hyperparams.learner, state, transitions, rewards)
 
         def flat(x):
             return x.reshape(self.config.batch_size, *x.shape[2:])
@@ -229,13 +229,13 @@ class Phases:
         )
 
     def fit_value(self, hyperparams, state, batch: PolicyBatch):
-        return self.trpo.fit_value(hyperparams.trpo, state, batch.obs, batch.targets, state.key)
+        return self.trpo.fit_value(hyperparams.learner, state, batch.obs, batch.targets, state.key)
 
     def policy_problem(self, hyperparams, state, batch: PolicyBatch):
         """``TRPO.policy_objective`` at the current parameters:
         ``(flat_params, surrogate_loss, fisher_vector_product)``."""
         objective = self.trpo.policy_objective(
-            hyperparams.trpo,
+            hyperparams.learner,
             state.policy_params,
             batch.obs,
             batch.actions,
@@ -257,7 +257,7 @@ class Phases:
         ``(full_step, expected_improvement)``."""
         _, _, product = self.policy_problem(hyperparams, state, batch)
         step_size_squared = 0.5 * jnp.vdot(direction, product(direction))
-        multiplier = jnp.sqrt(jnp.maximum(step_size_squared, 1e-30) / hyperparams.trpo.max_kl)
+        multiplier = jnp.sqrt(jnp.maximum(step_size_squared, 1e-30) / hyperparams.learner.max_kl)
         return direction / multiplier, jnp.vdot(-loss_gradient, direction) / multiplier
 
     def line_search(self, hyperparams, state, batch, full_step, expected_improvement):
@@ -267,7 +267,7 @@ class Phases:
         )
 
     def update(self, hyperparams, state, transitions, rewards):
-        return self.trpo.update(hyperparams.trpo, state, transitions, rewards)
+        return self.trpo.update(hyperparams.learner, state, transitions, rewards)
 
     def iteration(self, hyperparams, spec, state):
         """``AdversarialTrainer._iteration`` itself."""
@@ -347,7 +347,7 @@ def compile_phases(phases: Phases, evaluation_trpo: TRPO | None, cells: int, key
     trainer_state = jax.jit(jax.vmap(phases.init))(
         hyperparams, spec, jax.random.split(init_key, cells)
     )
-    state = trainer_state.trpo
+    state = trainer_state.learner
     evaluation_keys = jax.random.split(evaluation_key, (cells, config.num_eval_episodes))
     timer = PhaseTimer()
 

@@ -101,10 +101,10 @@ class AdversarialConfig:
 
 @struct.dataclass
 class AdversarialHyperparams:
-    """Per-cell values a grid may vary (pytree leaves). ``trpo`` holds the policy learner's
+    """Per-cell values a grid may vary (pytree leaves). ``learner`` holds the policy learner's
     hyperparameters, TRPO's or PPO's."""
 
-    trpo: TRPOHyperparams | PPOHyperparams
+    learner: TRPOHyperparams | PPOHyperparams
     discriminator_learning_rate: jax.Array
     label_ratio: jax.Array  # fraction of the split that is labelled (D_c)
     noise_std: jax.Array  # confidence noise: r <- clip(r + N(0, noise_std^2), 0, 1)
@@ -129,7 +129,7 @@ class AdversarialHyperparams:
                 f"discriminator_learning_rate must be positive, got {discriminator_learning_rate!r}"
             )
         return cls(
-            trpo=learner_hyperparams(learner, **learner_values),
+            learner=learner_hyperparams(learner, **learner_values),
             discriminator_learning_rate=jnp.asarray(discriminator_learning_rate, jnp.float32),
             label_ratio=jnp.asarray(label_ratio, jnp.float32),
             noise_std=jnp.asarray(noise_std, jnp.float32),
@@ -138,7 +138,7 @@ class AdversarialHyperparams:
 
 @struct.dataclass
 class TrainState:
-    trpo: TRPOState | PPOState  # the policy learner's state
+    learner: TRPOState | PPOState  # the policy learner's state
     discriminator_params: dict
     discriminator_optimizer_state: optax.OptState
     demo_rows: jax.Array  # int32[M]: the split's rows of the demonstration set
@@ -200,8 +200,8 @@ class AdversarialTrainer:
         self.env = env
         self.num_demos = num_demos
         self.has_confidence = demos.confidence is not None
-        # The policy learner (named ``trpo`` whichever it is, as its state's field).
-        self.trpo = make_learner(config.learner, config.trpo, env, config.ppo)
+        # The policy learner, TRPO or PPO (``rl.learners``).
+        self.learner = make_learner(config.learner, config.trpo, env, config.ppo)
         self.discriminator = Discriminator(config.discriminator_hidden_sizes)
         self.optimizer = optax.scale_by_adam()
         # One action space on both sides of every learned comparison with the agent (the
@@ -233,7 +233,7 @@ class AdversarialTrainer:
                 applied.observations, applied.actions, demos.trajectory_ids, demos.confidence
             )
         context = PhaseContext(
-            env, self.trpo, self.discriminator, self._demo_inputs, self._action_bounds,
+            env, self.learner, self.discriminator, self._demo_inputs, self._action_bounds,
             num_demos, config.trpo.num_envs, config.trpo.unroll_length,
             self.trajectories, row_trajectory,
         )  # fmt: skip
@@ -266,8 +266,8 @@ class AdversarialTrainer:
         return self.config.trpo.eval_every
 
     def init(self, hyperparams: AdversarialHyperparams, spec: MethodSpec, key: jax.Array):
-        self.trpo.check_hyperparams(hyperparams.trpo)
-        split_key, classifier_key, trpo_key, disc_key, eval_key, carry_key = jax.random.split(
+        self.learner.check_hyperparams(hyperparams.learner)
+        split_key, classifier_key, learner_key, disc_key, eval_key, carry_key = jax.random.split(
             key, 6
         )
         split = make_split(
@@ -280,14 +280,14 @@ class AdversarialTrainer:
             self._classifier_inputs[split.indices], split, classifier_key,
         )  # fmt: skip
         disc_params = self.discriminator.init(disc_key, inputs[0])
-        trpo_state = self.trpo.init(trpo_key)
+        learner_state = self.learner.init(learner_key)
         # The appendix phases' keys come from fold_in, so the split above (and every number
         # of the seven methods) is the same whichever phases a grid compiles.
-        phase_state, trpo_state = self.phases.init(
-            spec, inputs, confidence, trpo_state, key, hyperparams.label_ratio
+        phase_state, learner_state = self.phases.init(
+            spec, inputs, confidence, learner_state, key, hyperparams.label_ratio
         )
         state = TrainState(
-            trpo=trpo_state,
+            learner=learner_state,
             discriminator_params=disc_params,
             discriminator_optimizer_state=self.optimizer.init(disc_params),
             demo_rows=split.indices,
@@ -312,7 +312,7 @@ class AdversarialTrainer:
         inputs = self._demo_inputs[state.demo_rows]
         logits = self.discriminator.apply(state.discriminator_params, inputs)
         size = self.env.observation_size
-        log_prob = self.trpo.log_prob(state.trpo, inputs[:, :size], inputs[:, size:])
+        log_prob = self.learner.log_prob(state.learner, inputs[:, :size], inputs[:, size:])
         return jnp.exp(0.5 * (log_prob - logits))
 
     def iteration(self, hyperparams: AdversarialHyperparams, spec: MethodSpec, state: TrainState):
@@ -321,7 +321,7 @@ class AdversarialTrainer:
         (and the phases' learned rewards) before any step; the discriminator's Adam step (CAIL's
         rounds instead, in its cells); the learner's update (a cloned policy kept, in BC's
         cells)."""
-        trpo_state, transitions = self.trpo.rollout(state.trpo)
+        learner_state, transitions = self.learner.rollout(state.learner)
         weights = self._refreshed_weights(state)
         key, batch_key = jax.random.split(state.key)
         batch = self.discriminator_batch(state, transitions, batch_key)
@@ -338,10 +338,12 @@ class AdversarialTrainer:
         (disc_params, disc_optimizer_state, disc_metrics), more_fields, more_metrics = (
             self.phases.discriminator_step(spec, state, batch, batch_key, (*stepped, disc_metrics))
         )
-        updated, trpo_metrics = self.trpo.update(hyperparams.trpo, trpo_state, transitions, rewards)
-        updated = self.phases.after_update(spec, trpo_state, updated)
+        updated, learner_metrics = self.learner.update(
+            hyperparams.learner, learner_state, transitions, rewards
+        )
+        updated = self.phases.after_update(spec, learner_state, updated)
         state = state.replace(
-            trpo=updated,
+            learner=updated,
             discriminator_params=disc_params,
             discriminator_optimizer_state=disc_optimizer_state,
             importance_weights=weights,
@@ -350,7 +352,7 @@ class AdversarialTrainer:
             **phase_fields,
             **more_fields,
         )
-        metrics = {**trpo_metrics, **disc_metrics, **phase_metrics, **more_metrics}
+        metrics = {**learner_metrics, **disc_metrics, **phase_metrics, **more_metrics}
         return state, {**metrics, "env_steps": updated.env_steps}
 
     def _refreshed_weights(self, state: TrainState) -> jax.Array:
@@ -439,7 +441,7 @@ class AdversarialTrainer:
         self, hyperparams: AdversarialHyperparams, spec: MethodSpec, state: TrainState, num_blocks
     ):
         return run_evaluated_blocks(
-            self.trpo,
+            self.learner,
             functools.partial(self.iteration, hyperparams, spec),
             state,
             self.policy_state,
@@ -455,7 +457,7 @@ class AdversarialTrainer:
     @staticmethod
     def policy_state(state: TrainState) -> TRPOState | PPOState:
         """The learner's state inside a trainer state (for exporting its policy)."""
-        return state.trpo
+        return state.learner
 
 
 def _make_phases(config: AdversarialConfig, trajectory_ids) -> tuple:

@@ -37,7 +37,7 @@ class Trainer(Protocol):
     """What ``Grid`` needs of a trainer (``AdversarialTrainer`` and ``rl.TRPOTrainer`` have
     it): pure ``init(*cell_inputs, key) -> (state, metrics)`` and ``run_blocks(*cell_inputs,
     state, num_blocks=...) -> (state, metrics)``, where a block is ``eval_every`` iterations
-    ending in an evaluation, and ``policy_state(state)``, the TRPO state of its policy."""
+    ending in an evaluation, and ``policy_state(state)``, the learner state of its policy."""
 
     init: Callable[..., Any]
     run_blocks: Callable[..., Any]

@@ -125,7 +125,7 @@ def test_the_appendix_methods_train_under_ppo():
     assert np.all(returns[:, 0] != returns[:, -1])  # every policy moved
     assert np.all(np.asarray(metrics["ppo/kl"]) > 0)
     # PPO's Adam took 10 epochs x 4 minibatches in each of 2 iterations in every cell.
-    assert np.all(np.asarray(state.trpo.optimizer_state.count) == 80)
+    assert np.all(np.asarray(state.learner.optimizer_state.count) == 80)
     assert np.all(np.asarray(state.firl.discriminator_optimizer_state[1].count) == 10)
 
 

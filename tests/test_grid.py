@@ -256,7 +256,7 @@ def test_wgail_weights_refresh_on_schedule():
     state, _ = run(hyperparams, spec, state)  # iteration 2 refreshes from `before`
     inputs = demos.inputs[np.asarray(before.demo_rows)]
     logits = train_discriminator_logits(trainer, before, inputs)
-    log_pi = trainer.trpo.log_prob(before.trpo, inputs[:, :3], inputs[:, 3:])
+    log_pi = trainer.learner.log_prob(before.learner, inputs[:, :3], inputs[:, 3:])
     expected = np.sqrt(np.exp(-np.asarray(logits, np.float64)) * np.exp(np.asarray(log_pi)))
     np.testing.assert_allclose(state.importance_weights, expected, rtol=1e-4)
     refreshed = state.importance_weights
@@ -271,7 +271,7 @@ def test_policy_reward_comes_from_the_discriminator_before_its_step():
     trainer = AdversarialTrainer(config, env, demos)
     hyperparams, spec = AdversarialHyperparams.create(), method_spec("pngail")
     state, _ = jax.jit(trainer.init)(hyperparams, spec, jax.random.key(2))
-    _, transitions = jax.jit(trainer.trpo.rollout)(state.trpo)  # the iteration's own rollout
+    _, transitions = jax.jit(trainer.learner.rollout)(state.learner)  # the iteration's own rollout
     clipped = np.clip(transitions.action, env.action_low, env.action_high)
     agent_inputs = np.concatenate([transitions.obs, clipped], axis=-1)
     run = jax.jit(functools.partial(trainer.run_blocks, num_blocks=1))
@@ -354,7 +354,7 @@ def multihost_worker(process_id: int, port: int) -> dict:
     assert jax.process_count() == 2 and len(jax.devices()) == 2
     grid, state, metrics = chunked_grid_results(chunks=2)
     assert not grid.sharding.is_fully_addressable  # the mesh spans both processes
-    state_returns = grid.fetch(state).trpo.env_steps
+    state_returns = grid.fetch(state).learner.env_steps
     return {name: np.asarray(metrics[name]).tolist() for name in COMPARED} | {
         "env_steps": np.asarray(state_returns).tolist()
     }

@@ -67,8 +67,8 @@ def test_vmapped_seeds_match_single_runs(pendulum):
         # The first layer's biases start at 0, so they hold two TRPO steps (3e-3 to 1e-2),
         # which float32 conjugate gradient solves to a few 1e-4 of that (1.8e-6 seen).
         np.testing.assert_allclose(
-            jax.tree.leaves(batched_state.trpo.policy_params)[0][seed],
-            jax.tree.leaves(state.trpo.policy_params)[0],
+            jax.tree.leaves(batched_state.learner.policy_params)[0][seed],
+            jax.tree.leaves(state.learner.policy_params)[0],
             rtol=1e-4,
             atol=5e-5,
         )
@@ -145,7 +145,7 @@ def test_observation_normalization_option_trains(pendulum):
     state, metrics = jax.jit(TRPOTrainer(config, pendulum).train)(
         TRPOHyperparams.create(), jax.random.key(0)
     )
-    assert float(state.trpo.normalizer.count) == 2 * config.batch_size
+    assert float(state.learner.normalizer.count) == 2 * config.batch_size
     assert np.isfinite(metrics["eval/return"][-1])
 
 
@@ -164,11 +164,11 @@ def test_host_chunks_reuse_one_compiled_block(pendulum):
     state, _ = jax.jit(trainer.init)(hyperparams, jax.random.key(0))
     for _ in range(config.num_evaluations):
         state, _ = block(hyperparams, state)
-    assert int(state.trpo.env_steps) == 6 * config.batch_size
+    assert int(state.learner.env_steps) == 6 * config.batch_size
 
 
 def test_rewards_of_the_wrong_shape_are_rejected(pendulum):
-    trpo = TRPOTrainer(SMALL, pendulum).trpo
+    trpo = TRPOTrainer(SMALL, pendulum).learner
     state = trpo.init(jax.random.key(0))
     state, transitions = trpo.rollout(state)
     with pytest.raises(AssertionError, match="shape"):

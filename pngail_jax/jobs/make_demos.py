@@ -215,7 +215,7 @@ class CheckpointEpisodes:
     parameters are arguments, not constants)."""
 
     def __init__(self, env, trpo_config):
-        policy = TRPOTrainer(trpo_config, env).trpo.policy
+        policy = TRPOTrainer(trpo_config, env).learner.policy
 
         @jax.jit
         def episodes(params, normalizer, keys):

@@ -541,7 +541,7 @@ def true_reward(transitions: Transitions) -> jax.Array:
 class TRPOTrainState:
     """A TRPO-only run's state: the learner plus its fixed evaluation episode keys."""
 
-    trpo: TRPOState
+    learner: TRPOState  # or another learner's state (PPOState)
     eval_keys: jax.Array  # key[num_eval_episodes], the same every evaluation
 
 
@@ -571,9 +571,8 @@ class TRPOTrainer:
     ):
         self.config = config
         self.env = env
-        # The learner's state is the ``trpo`` field of the trainer's state, whichever it is.
-        self.trpo = TRPO(config, env) if learner is None else learner
-        if self.trpo.config != config:
+        self.learner = TRPO(config, env) if learner is None else learner
+        if self.learner.config != config:
             raise ValueError("TRPOTrainer: the learner was built with another TRPOConfig")
         self.reward_fn = reward_fn
 
@@ -583,32 +582,32 @@ class TRPOTrainer:
         return self.config.eval_every
 
     def init(self, hyperparams: TRPOHyperparams, key: jax.Array):
-        self.trpo.check_hyperparams(hyperparams)  # init reads none, but the blocks will
+        self.learner.check_hyperparams(hyperparams)  # init reads none, but the blocks will
         init_key, eval_key = jax.random.split(key)
         state = TRPOTrainState(
-            trpo=self.trpo.init(init_key),
+            learner=self.learner.init(init_key),
             eval_keys=jax.random.split(eval_key, self.config.num_eval_episodes),
         )
         return state, {}
 
     def _iteration(self, hyperparams: TRPOHyperparams, state: TRPOState):
-        state, transitions = self.trpo.rollout(state)
+        state, transitions = self.learner.rollout(state)
         rewards = self.reward_fn(transitions)
-        state, metrics = self.trpo.update(hyperparams, state, transitions, rewards)
+        state, metrics = self.learner.update(hyperparams, state, transitions, rewards)
         return state, {**metrics, "env_steps": state.env_steps}
 
     def run_blocks(
         self, hyperparams: TRPOHyperparams, state: TRPOTrainState, num_blocks: int
     ) -> tuple[TRPOTrainState, dict]:
-        trpo_state, metrics = run_evaluated_blocks(
-            self.trpo,
+        learner_state, metrics = run_evaluated_blocks(
+            self.learner,
             functools.partial(self._iteration, hyperparams),
-            state.trpo,
+            state.learner,
             lambda s: s,
             state.eval_keys,
             num_blocks,
         )
-        return state.replace(trpo=trpo_state), metrics
+        return state.replace(learner=learner_state), metrics
 
     def train(self, hyperparams: TRPOHyperparams, key: jax.Array):
         state, init_metrics = self.init(hyperparams, key)
@@ -618,21 +617,23 @@ class TRPOTrainer:
     @staticmethod
     def policy_state(state: TRPOTrainState) -> TRPOState:
         """The learner's state inside a trainer state (for exporting its policy)."""
-        return state.trpo
+        return state.learner
 
 
-def run_evaluated_blocks(trpo: TRPO, iteration, state, trpo_state_of, eval_keys, num_blocks):
-    """``num_blocks`` (static) scans of ``trpo.config.eval_every`` iterations, each followed by
-    a deterministic evaluation of ``trpo_state_of(state)`` on ``eval_keys``.
+def run_evaluated_blocks(
+    learner: OnPolicyLearner, iteration, state, learner_state_of, eval_keys, num_blocks
+):
+    """``num_blocks`` (static) scans of ``learner.config.eval_every`` iterations, each followed by
+    a deterministic evaluation of ``learner_state_of(state)`` on ``eval_keys``.
 
     ``iteration(state) -> (state, metrics)``; returns the final state and the metrics flattened
     to float[num_blocks * eval_every], with ``eval/return`` NaN except at each block's end.
     """
-    eval_every = trpo.config.eval_every
+    eval_every = learner.config.eval_every
 
     def block(state, _):
         state, metrics = jax.lax.scan(lambda s, _: iteration(s), state, None, length=eval_every)
-        eval_return = trpo.evaluate(trpo_state_of(state), eval_keys)
+        eval_return = learner.evaluate(learner_state_of(state), eval_keys)
         metrics["eval/return"] = jnp.full((eval_every,), jnp.nan).at[-1].set(eval_return)
         return state, metrics
 
