@@ -126,7 +126,7 @@ from pngail_jax.grid import Grid, make_cells, nonfinite_cells, stack_cells
 from pngail_jax.methods import METHOD_NAMES
 from pngail_jax.programs import flags
 from pngail_jax.rl.learners import LEARNERS
-from pngail_jax.rl.train import TRPO
+from pngail_jax.rl.trpo import TRPO
 
 DEFAULT_ENV = "Pendulum-v1"
 REPO_ROOT = Path(__file__).resolve().parents[1]

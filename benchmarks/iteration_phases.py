@@ -74,8 +74,8 @@ from pngail_jax.demos import Demonstrations
 from pngail_jax.fitting import adam_step
 from pngail_jax.methods import method_spec, stack
 from pngail_jax.rl.gae import generalized_advantages
-from pngail_jax.rl.train import TRPO
 from pngail_jax.rl.trpo import (
+    TRPO,
     backtracking_line_search,
     conjugate_gradient,
 )

@@ -48,7 +48,8 @@ from common import (
 )  # fmt: skip
 
 from pngail_jax import envs
-from pngail_jax.rl.train import TRPO, TRPOConfig, TRPOHyperparams
+from pngail_jax.rl.on_policy import TRPOConfig
+from pngail_jax.rl.trpo import TRPO, TRPOHyperparams
 
 REFERENCE_SPEED = 4400.0  # the authors' PyTorch TRPO on Pendulum-v1, one core, training only
 REFERENCE_NOTE = (

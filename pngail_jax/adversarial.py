@@ -44,8 +44,9 @@ from pngail_jax.methods import PHASES, MethodSpec
 from pngail_jax.networks import Discriminator
 from pngail_jax.phase import PhaseContext, PhaseSet
 from pngail_jax.rl.learners import check_learner, learner_hyperparams, make_learner
+from pngail_jax.rl.on_policy import TRPOConfig, run_evaluated_blocks
 from pngail_jax.rl.ppo import PPOConfig, PPOHyperparams, PPOState
-from pngail_jax.rl.train import TRPOConfig, TRPOHyperparams, TRPOState, run_evaluated_blocks
+from pngail_jax.rl.trpo import TRPOHyperparams, TRPOState
 
 
 @dataclasses.dataclass(frozen=True)

@@ -28,7 +28,7 @@ from pngail_jax.integrity import (
     write_manifest,
 )
 from pngail_jax.networks import GaussianPolicy
-from pngail_jax.rl.train import ObservationNormalizer
+from pngail_jax.rl.on_policy import ObservationNormalizer
 
 # 2 added digests.json; version 1 directories (no digests) still load, unverified.
 POLICY_FORMAT_VERSION = 2

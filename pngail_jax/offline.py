@@ -63,8 +63,8 @@ from pngail_jax.offline_losses import (
     one_centred_penalty,
     weighted_nll,
 )
+from pngail_jax.rl.on_policy import ObservationNormalizer
 from pngail_jax.rl.rollout import evaluate
-from pngail_jax.rl.train import ObservationNormalizer
 
 # The parts a grid compiles only when one of its methods needs them.
 COMPONENTS = ("dwbc", "iswbc", "ilid", "classifier")

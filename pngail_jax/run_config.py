@@ -40,8 +40,8 @@ from pngail_jax.methods import (
     resolve,
 )
 from pngail_jax.rl.learners import LEARNERS
+from pngail_jax.rl.on_policy import TRPOConfig
 from pngail_jax.rl.ppo import PPOConfig
-from pngail_jax.rl.train import TRPOConfig
 from pngail_jax.settings import RunSettings, settings_for
 from pngail_jax.tracking import BACKENDS as LOG_BACKENDS
 from pngail_jax.validation import (

@@ -19,7 +19,7 @@ from __future__ import annotations
 import dataclasses
 
 from pngail_jax import envs, validation
-from pngail_jax.rl.train import TRPOConfig
+from pngail_jax.rl.on_policy import TRPOConfig
 
 
 def _positive_int(name: str, value) -> int:

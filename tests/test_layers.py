@@ -19,14 +19,14 @@ LAYERS = [
         "foundation",
         (
             "validation", "integrity", "outputs", "compilation", "stats", "fitting",
-            "networks", "rl.gae", "rl.trpo", "envs", "envs.*", "demos.tables",
+            "networks", "rl.gae", "envs", "envs.*", "demos.tables",
         ),
     ),
     ("data", ("demos", "demos.*")),
     (
         "learners",
         (
-            "rl", "rl.rollout", "rl.train", "rl.ppo", "rl.learners", "settings", "checkpoint",
+            "rl", "rl.rollout", "rl.on_policy", "rl.trpo", "rl.train", "rl.ppo", "rl.learners", "settings", "checkpoint",
             "phase", "bc", "firl", "ranking",
             "confidence", "methods", "losses", "cail", "offline_losses", "method_checks",
         ),

@@ -126,7 +126,7 @@ def test_learns_pendulum_with_reference_defaults(pendulum):
 
 
 def test_observation_normalizer_matches_numpy():
-    from pngail_jax.rl.train import ObservationNormalizer
+    from pngail_jax.rl.on_policy import ObservationNormalizer
 
     rng = np.random.default_rng(0)
     chunks = [rng.normal(3.0, 2.0, size=(n, 4)).astype(np.float32) for n in (5, 17, 40)]
@@ -178,7 +178,7 @@ def test_rewards_of_the_wrong_shape_are_rejected(pendulum):
 def test_staggered_starts_draw_each_envs_first_time_limit(pendulum):
     """With ``stagger_starts`` the envs' first time limits spread over 1..200 (the networks
     are initialised as without it); without it every limit is the task's 200."""
-    from pngail_jax.rl.train import TRPO
+    from pngail_jax.rl.trpo import TRPO
 
     config = dataclasses.replace(SMALL, num_envs=32)
     key = jax.random.key(5)

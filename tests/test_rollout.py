@@ -176,7 +176,7 @@ def test_staggered_starts_cut_the_first_episode_and_keep_envs_out_of_step():
 def test_training_returns_count_whole_episodes_only():
     """A staggered first episode cut short is left out of ``train/episode_return``; a whole
     one (here: every later episode, max steps of reward 1) is counted."""
-    from pngail_jax.rl.train import episode_metrics
+    from pngail_jax.rl.on_policy import episode_metrics
 
     max_steps = 10
     limits, transitions = _staggered_rollout(8, max_steps, 8, jax.random.key(4))

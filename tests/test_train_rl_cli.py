@@ -64,7 +64,7 @@ def test_load_policy_picks_best_seed_and_acts(run_dir, capsys):
 
 def test_load_policy_matches_saved_parameters(tmp_path):
     from pngail_jax.checkpoint import save_policies
-    from pngail_jax.rl.train import ObservationNormalizer
+    from pngail_jax.rl.on_policy import ObservationNormalizer
 
     policy = GaussianPolicy(action_size=2, hidden_sizes=(8,))
     params = jax.vmap(lambda k: policy.init(k, np.zeros(3, np.float32)))(

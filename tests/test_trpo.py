@@ -7,10 +7,10 @@ import pytest
 from jax.flatten_util import ravel_pytree
 
 from pngail_jax.networks import GaussianPolicy, gaussian_entropy, gaussian_kl, gaussian_log_prob
-from pngail_jax.rl.train import gauss_newton_fisher_product
 from pngail_jax.rl.trpo import (
     backtracking_line_search,
     conjugate_gradient,
+    gauss_newton_fisher_product,
     hessian_vector_product,
     natural_gradient_step,
 )
@@ -113,7 +113,8 @@ def test_line_search_keeps_parameters_when_nothing_improves():
 
 
 def test_fisher_subsample_keeps_every_environment():
-    from pngail_jax.rl.train import TRPOConfig, fisher_sample_indices
+    from pngail_jax.rl.on_policy import TRPOConfig
+    from pngail_jax.rl.trpo import fisher_sample_indices
 
     config = TRPOConfig(num_envs=4, unroll_length=6, fisher_subsample=3, num_value_minibatches=2)
     # Flattened time-major batch: row t * 4 + n. Every 3rd step (t = 0, 3) of all 4 envs.
@@ -160,7 +161,8 @@ def test_the_surrogate_loss_and_its_gradient_against_numpy():
     against the same formula from the policy's outputs in NumPy; at the old parameters the
     ratio is 1, so the loss is -mean(A) and its gradient is -mean(A grad log pi)."""
     from pngail_jax import envs
-    from pngail_jax.rl.train import TRPO, TRPOConfig, TRPOHyperparams
+    from pngail_jax.rl.on_policy import TRPOConfig
+    from pngail_jax.rl.trpo import TRPO, TRPOHyperparams
 
     trpo = TRPO(
         TRPOConfig(num_envs=2, unroll_length=4, hidden_sizes=(5,), num_value_minibatches=2),

@@ -28,8 +28,8 @@ from pngail_jax.jobs.train_rl import TrainRLConfig, train_rl
 from pngail_jax.networks import GaussianPolicy
 from pngail_jax.outputs import claimed, prepare_output
 from pngail_jax.report import json_safe, read_evaluations
+from pngail_jax.rl.on_policy import ObservationNormalizer
 from pngail_jax.rl.rollout import evaluate
-from pngail_jax.rl.train import ObservationNormalizer
 from pngail_jax.settings import REFERENCE_SETTINGS, parse_solver, settings_for
 
 PROGRAM = "compare_settings"

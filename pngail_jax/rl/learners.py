@@ -10,8 +10,9 @@ from __future__ import annotations
 import dataclasses
 
 from pngail_jax import envs
+from pngail_jax.rl.on_policy import OnPolicyLearner, TRPOConfig
 from pngail_jax.rl.ppo import PPO, PPOConfig, PPOHyperparams
-from pngail_jax.rl.train import TRPO, OnPolicyLearner, TRPOConfig, TRPOHyperparams
+from pngail_jax.rl.trpo import TRPO, TRPOHyperparams
 
 LEARNERS = ("trpo", "ppo")
 HYPERPARAMS = {"trpo": TRPOHyperparams, "ppo": PPOHyperparams}

@@ -38,13 +38,13 @@ from flax import struct
 from pngail_jax import envs
 from pngail_jax.networks import gaussian_entropy, gaussian_kl, gaussian_log_prob
 from pngail_jax.rl.gae import generalized_advantages
-from pngail_jax.rl.rollout import Transitions, rollout_metrics
-from pngail_jax.rl.train import (
+from pngail_jax.rl.on_policy import (
     ObservationNormalizer,
     OnPolicyLearner,
     TRPOConfig,
     episode_metrics,
 )
+from pngail_jax.rl.rollout import Transitions, rollout_metrics
 
 
 @dataclasses.dataclass(frozen=True)

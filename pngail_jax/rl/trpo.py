@@ -1,15 +1,37 @@
-"""The natural-gradient step of TRPO: Fisher-vector products, conjugate gradient, line search.
+"""TRPO in pure JAX: the learner (``TRPO``: value fit, advantages, the natural-gradient step of
+the policy) and its maths (Fisher-vector products, conjugate gradient, line search).
 
-Every loop has a fixed iteration count and uses masks instead of early exits, so all cells of
-a vmapped grid do the same work (docs/architecture.md).
+Static settings (shapes, iteration counts, which Fisher product) are the frozen
+``rl.on_policy.TRPOConfig``; everything a grid may vary (discount, KL bound, learning rate,
+whether to bootstrap through truncation) is a ``TRPOHyperparams`` pytree. Defaults are the
+paper's and the reference code's (``docs/trpo.md``), except that GAE bootstraps the value
+through time-limit truncation (``bootstrap_truncation``). Every loop has a fixed iteration
+count and uses masks instead of early exits, so all cells of a vmapped grid do the same work
+(docs/architecture.md).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import NamedTuple
 
+import chex
 import jax
 import jax.numpy as jnp
+import optax
+from flax import struct
+from jax.flatten_util import ravel_pytree
+
+from pngail_jax import envs
+from pngail_jax.networks import gaussian_entropy, gaussian_kl, gaussian_log_prob
+from pngail_jax.rl.gae import generalized_advantages
+from pngail_jax.rl.on_policy import (
+    ObservationNormalizer,
+    OnPolicyLearner,
+    TRPOConfig,
+    episode_metrics,
+)
+from pngail_jax.rl.rollout import Transitions, rollout_metrics
 
 
 def conjugate_gradient(
@@ -117,5 +139,298 @@ def hessian_vector_product(
 
     def product(v):
         return jax.jvp(gradient, (at,), (v,))[1] + damping * v
+
+    return product
+
+
+@struct.dataclass
+class TRPOHyperparams:
+    """Per-run values (pytree leaves, so a grid can vmap over them)."""
+
+    gamma: jax.Array
+    lam: jax.Array
+    max_kl: jax.Array
+    damping: jax.Array
+    value_learning_rate: jax.Array
+    bootstrap_truncation: jax.Array  # bool[]: False treats truncation as terminal (reference)
+
+    @classmethod
+    def create(
+        cls,
+        gamma=0.995,
+        lam=0.97,
+        max_kl=0.01,
+        damping=0.1,
+        value_learning_rate=3e-4,
+        bootstrap_truncation=True,
+    ) -> TRPOHyperparams:
+        floats = dict(
+            gamma=gamma,
+            lam=lam,
+            max_kl=max_kl,
+            damping=damping,
+            value_learning_rate=value_learning_rate,
+        )
+        for name, value in floats.items():
+            if not (value > 0) or (name in ("gamma", "lam") and value > 1):
+                raise ValueError(f"TRPOHyperparams.{name} out of range: {value!r}")
+        return cls(
+            **{k: jnp.asarray(v, jnp.float32) for k, v in floats.items()},
+            bootstrap_truncation=jnp.asarray(bootstrap_truncation, bool),
+        )
+
+
+class PolicyObjective(NamedTuple):
+    """What TRPO's natural-gradient step works on (``TRPO.policy_objective``): the flat
+    parameters and their unravel function, the surrogate loss and mean KL as functions of
+    flat parameters, the damped Fisher-vector product, and the old policy's outputs."""
+
+    flat_params: jax.Array
+    unravel: Callable
+    surrogate_loss: Callable[[jax.Array], jax.Array]
+    mean_kl: Callable[[jax.Array], jax.Array]
+    fisher_vector_product: Callable[[jax.Array], jax.Array]
+    old_mean: jax.Array
+    old_log_std: jax.Array
+
+
+class LearningTargets(NamedTuple):
+    """What ``TRPO.advantages_and_targets`` gives the value and policy steps."""
+
+    normalizer: ObservationNormalizer  # updated on this rollout when normalisation is on
+    obs: jax.Array  # float[T, N, O], normalised
+    advantages: jax.Array  # float[T, N], standardised
+    value_targets: jax.Array  # float[T, N]
+
+
+@struct.dataclass
+class TRPOState:
+    policy_params: dict
+    value_params: dict
+    value_optimizer_state: optax.OptState
+    normalizer: ObservationNormalizer
+    env_state: envs.AutoResetState
+    env_steps: jax.Array
+    key: jax.Array
+
+
+class TRPO(OnPolicyLearner):
+    """The pieces of a TRPO run for one environment and static config.
+
+    ``init``, ``rollout``, ``update`` and ``evaluate`` are pure; an adversarial trainer calls
+    ``rollout``, computes its own rewards and calls ``update`` with them.
+    """
+
+    LEARNED_FIELDS = ("policy_params", "value_params", "value_optimizer_state", "normalizer")
+    HYPERPARAMS = TRPOHyperparams
+
+    def __init__(self, config: TRPOConfig, env: envs.Env):
+        super().__init__(config, env)
+        self.value_optimizer = optax.scale_by_adam()
+
+    def init(self, key: jax.Array) -> TRPOState:
+        policy_key, value_key, env_key, carry_key = jax.random.split(key, 4)
+        dummy_obs = jnp.zeros((self.env.observation_size,))
+        value_params = self.value.init(value_key, dummy_obs)
+        env_state = self.reset_envs(env_key)
+        return TRPOState(
+            policy_params=self.policy.init(policy_key, dummy_obs),
+            value_params=value_params,
+            value_optimizer_state=self.value_optimizer.init(value_params),
+            normalizer=ObservationNormalizer.create(self.env.observation_size),
+            env_state=env_state,
+            env_steps=jnp.zeros((), jnp.int32),
+            key=carry_key,
+        )
+
+    def update(
+        self,
+        hyperparams: TRPOHyperparams,
+        state: TRPOState,
+        transitions: Transitions,
+        rewards: jax.Array,
+    ) -> tuple[TRPOState, dict[str, jax.Array]]:
+        """Value regression then one natural-gradient policy step, on ``rewards`` float[T, N].
+
+        Returns the new state and scalar metrics of the step and of the rollout it learnt
+        from (``rollout_metrics``: every trainer's metrics carry them).
+        """
+        config = self.config
+        chex.assert_shape(rewards, (config.unroll_length, config.num_envs))
+        targets = self.advantages_and_targets(hyperparams, state, transitions, rewards)
+        flat = lambda x: x.reshape(config.batch_size, *x.shape[2:])  # noqa: E731
+        key, value_key = jax.random.split(state.key)
+        value_params, value_optimizer_state, value_loss = self.fit_value(
+            hyperparams, state, flat(targets.obs), flat(targets.value_targets), value_key
+        )
+        policy_params, policy_metrics = self.policy_step(
+            hyperparams,
+            state.policy_params,
+            flat(targets.obs),
+            flat(transitions.action),
+            flat(transitions.log_prob),
+            flat(targets.advantages),
+        )
+        metrics = {
+            **episode_metrics(transitions, rewards),
+            "value/loss": value_loss,
+            **policy_metrics,
+            **rollout_metrics(transitions, self.env),
+        }
+        state = state.replace(
+            policy_params=policy_params,
+            value_params=value_params,
+            value_optimizer_state=value_optimizer_state,
+            normalizer=targets.normalizer,
+            key=key,
+        )
+        return state, metrics
+
+    def advantages_and_targets(
+        self, hyperparams: TRPOHyperparams, state: TRPOState, transitions, rewards
+    ) -> LearningTargets:
+        """The update's first step: the observation normaliser updated (when it is on), the
+        normalised observations, and from one GAE pass both the policy's standardised
+        advantages (lambda) and the value targets, bootstrapped discounted returns (lambda =
+        1) as the reference's; each float[T, N] (observations float[T, N, O])."""
+        config = self.config
+        normalizer = self.updated_normalizer(state, transitions)
+        obs = normalizer(transitions.obs)
+        values = self.value.apply(state.value_params, obs)
+        next_values = self.value.apply(state.value_params, normalizer(transitions.final_obs))
+        both_advantages, both_targets = generalized_advantages(
+            rewards,
+            values,
+            next_values,
+            transitions.done,
+            transitions.truncated,
+            hyperparams.gamma,
+            jnp.stack([hyperparams.lam, jnp.ones_like(hyperparams.lam)]),
+            hyperparams.bootstrap_truncation,
+            config.gae_form,
+        )
+        advantages, targets = both_advantages[0], both_targets[1]
+        advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
+        return LearningTargets(normalizer, obs, advantages, targets)
+
+    def fit_value(self, hyperparams, state, obs, targets, key):
+        """The update's value step: Adam over one permutation of the flattened batch (obs
+        float[B, O], targets float[B]) in ``num_value_minibatches`` steps. Returns the value
+        parameters, their optimiser state and the mean loss."""
+        num_minibatches = self.config.num_value_minibatches
+        minibatch_size = self.config.batch_size // num_minibatches
+        order = jax.random.permutation(key, self.config.batch_size)
+        order = order[: num_minibatches * minibatch_size].reshape(num_minibatches, minibatch_size)
+
+        def loss_fn(params, indices):
+            prediction = self.value.apply(params, obs[indices])
+            return jnp.mean((prediction - targets[indices]) ** 2)
+
+        def body(carry, indices):
+            params, optimizer_state = carry
+            loss, grads = jax.value_and_grad(loss_fn)(params, indices)
+            updates, optimizer_state = self.value_optimizer.update(grads, optimizer_state)
+            params = optax.apply_updates(
+                params, jax.tree.map(lambda u: -hyperparams.value_learning_rate * u, updates)
+            )
+            return (params, optimizer_state), loss
+
+        (params, optimizer_state), losses = jax.lax.scan(
+            body, (state.value_params, state.value_optimizer_state), order
+        )
+        return params, optimizer_state, losses.mean()
+
+    def policy_objective(
+        self, hyperparams, policy_params, obs, actions, old_log_prob, advantages
+    ) -> PolicyObjective:
+        """The natural-gradient step's problem at ``policy_params`` on a flattened batch
+        (obs float[B, O], actions float[B, A], old_log_prob and advantages float[B])."""
+        flat_params, unravel = ravel_pytree(policy_params)
+        old_mean, old_log_std = jax.lax.stop_gradient(self.policy.apply(policy_params, obs))
+        fisher_rows = fisher_sample_indices(self.config)
+        fisher_obs, fisher_old_mean = obs[fisher_rows], old_mean[fisher_rows]
+
+        def surrogate_loss(flat):
+            mean, log_std = self.policy.apply(unravel(flat), obs)
+            ratio = jnp.exp(gaussian_log_prob(mean, log_std, actions) - old_log_prob)
+            return -jnp.mean(advantages * ratio)
+
+        def mean_kl(flat):
+            mean, log_std = self.policy.apply(unravel(flat), fisher_obs)
+            return jnp.mean(gaussian_kl(fisher_old_mean, old_log_std, mean, log_std))
+
+        if self.config.fisher == "gauss_newton":
+            fisher_vector_product = gauss_newton_fisher_product(
+                self.policy, unravel, flat_params, fisher_obs, hyperparams.damping
+            )
+        else:
+            fisher_vector_product = hessian_vector_product(
+                mean_kl, flat_params, hyperparams.damping
+            )
+        return PolicyObjective(
+            flat_params=flat_params,
+            unravel=unravel,
+            surrogate_loss=surrogate_loss,
+            mean_kl=mean_kl,
+            fisher_vector_product=fisher_vector_product,
+            old_mean=old_mean,
+            old_log_std=old_log_std,
+        )
+
+    def policy_step(self, hyperparams, policy_params, obs, actions, old_log_prob, advantages):
+        """The update's policy step: one natural-gradient step (conjugate gradient, then a
+        backtracking line search within ``max_kl``) on a flattened batch, with its metrics."""
+        objective = self.policy_objective(
+            hyperparams, policy_params, obs, actions, old_log_prob, advantages
+        )
+        new_flat, metrics = natural_gradient_step(
+            objective.surrogate_loss,
+            objective.mean_kl,
+            objective.flat_params,
+            hyperparams.max_kl,
+            hyperparams.damping,
+            self.config.num_cg_iterations,
+            self.config.num_backtracks,
+            objective.fisher_vector_product,
+        )
+        new_params = objective.unravel(new_flat)
+        new_mean, new_log_std = self.policy.apply(new_params, obs)
+        kl = gaussian_kl(objective.old_mean, objective.old_log_std, new_mean, new_log_std)
+        loss = objective.surrogate_loss
+        metrics = {
+            **metrics,
+            "trpo/kl": jnp.mean(kl),
+            "trpo/entropy": gaussian_entropy(new_log_std),
+            "trpo/surrogate_improvement": loss(objective.flat_params) - loss(new_flat),
+        }
+        return new_params, metrics
+
+
+def fisher_sample_indices(config: TRPOConfig) -> jax.Array:
+    """Rows of the flattened time-major batch ([T, N] -> T * N) whose Fisher products TRPO
+    uses: every ``fisher_subsample``-th time step of every environment, so each trajectory
+    contributes (a stride over the flat batch would keep the same few environments)."""
+    steps = jnp.arange(0, config.unroll_length, config.fisher_subsample)
+    return (steps[:, None] * config.num_envs + jnp.arange(config.num_envs)).reshape(-1)
+
+
+def gauss_newton_fisher_product(policy, unravel, flat_params, obs, damping):
+    """v -> (J^T M J / N) v + damping v for a diagonal Gaussian policy.
+
+    J is the Jacobian of (mean float[N, A], log_std float[A]) in the parameters and M the
+    Fisher metric of a Gaussian in those coordinates: 1/sigma^2 per mean entry, 2 per log-std.
+    At the current parameters this equals the Hessian of the mean KL (the reference's form).
+    """
+    num_samples = obs.shape[0]
+
+    def outputs(flat):
+        return policy.apply(unravel(flat), obs)
+
+    (_, log_std), vjp = jax.vjp(outputs, flat_params)
+
+    def product(v):
+        _, (d_mean, d_log_std) = jax.jvp(outputs, (flat_params,), (v,))
+        weighted = (d_mean * jnp.exp(-2 * log_std) / num_samples, 2.0 * d_log_std)
+        return vjp(weighted)[0] + damping * v
 
     return product

@@ -1,0 +1,243 @@
+"""What every policy learner shares (TRPO, ``rl.trpo``; PPO, ``rl.ppo``): the static settings
+of the rollout, the networks and the evaluation (``TRPOConfig``, which also holds TRPO's own
+solver settings), the observation normaliser, the ``OnPolicyLearner`` base class (networks,
+auto-resetting envs, rollout, log-probabilities, evaluation), the episode metrics of a
+rollout, and ``run_evaluated_blocks``, the scan of iterations and evaluations every trainer
+runs."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Literal
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from pngail_jax import envs
+from pngail_jax.networks import GaussianPolicy, ValueNetwork, gaussian_log_prob
+from pngail_jax.rl.gae import GAEForm
+from pngail_jax.rl.rollout import Transitions, collect, evaluate
+
+
+@dataclasses.dataclass(frozen=True)
+class TRPOConfig:
+    """Shape-giving, static settings. ``num_envs * unroll_length`` steps per iteration."""
+
+    num_envs: int = 25
+    unroll_length: int = 200
+    num_iterations: int = 100
+    eval_every: int = 10
+    num_eval_episodes: int = 32
+    hidden_sizes: tuple[int, ...] = (100, 100)
+    num_value_minibatches: int = 30
+    num_cg_iterations: int = 10
+    num_backtracks: int = 10
+    normalize_observations: bool = False
+    # "hessian": Hessian of the mean KL times v, the reference's form (second-order autodiff).
+    # "gauss_newton": J^T M J v for the Gaussian policy, the same matrix at the current
+    # parameters, from one jvp and one vjp, and faster: the default everywhere (library,
+    # sweep, train_rl), so that Python and the command line run the same program.
+    fisher: Literal["hessian", "gauss_newton"] = "gauss_newton"
+    # Fisher products on every k-th time step of every env (OpenAI baselines uses every 5th
+    # sample); 1 = all.
+    fisher_subsample: int = 1
+    # GAE as a T-step scan ("sequential") or a log-depth tree ("associative"): the same
+    # numbers up to float rounding (tests/test_gae.py); which is faster depends on the device.
+    gae_form: GAEForm = "sequential"
+    # Each env's first episode truncated at a random length (envs.AutoReset.staggered_reset),
+    # so that the envs of a task that never terminates do not stay in step.
+    stagger_starts: bool = False
+
+    def __post_init__(self):
+        for name in (
+            "num_envs",
+            "unroll_length",
+            "num_iterations",
+            "eval_every",
+            "num_eval_episodes",
+            "num_value_minibatches",
+            "num_cg_iterations",
+            "num_backtracks",
+            "fisher_subsample",
+        ):
+            value = getattr(self, name)
+            if not isinstance(value, int) or value < 1:
+                raise ValueError(f"TRPOConfig.{name} must be a positive integer, got {value!r}")
+        if self.num_iterations % self.eval_every:
+            raise ValueError(
+                f"TRPOConfig.num_iterations ({self.num_iterations}) must be a "
+                f"multiple of eval_every ({self.eval_every})"
+            )
+        if not isinstance(self.stagger_starts, bool):
+            raise ValueError(
+                f"TRPOConfig.stagger_starts must be True or False, got {self.stagger_starts!r}"
+            )
+        if self.fisher not in ("hessian", "gauss_newton"):
+            raise ValueError(
+                f"TRPOConfig.fisher must be 'hessian' or 'gauss_newton', got {self.fisher!r}"
+            )
+        if self.gae_form not in ("sequential", "associative"):
+            raise ValueError(
+                f"TRPOConfig.gae_form must be 'sequential' or 'associative', got {self.gae_form!r}"
+            )
+        if self.batch_size < self.num_value_minibatches:
+            raise ValueError(
+                f"samples per iteration (num_envs x unroll_length = {self.num_envs} x "
+                f"{self.unroll_length} = {self.batch_size}) must be at least the "
+                f"{self.num_value_minibatches} value minibatches"
+            )
+
+    @property
+    def batch_size(self) -> int:
+        return self.num_envs * self.unroll_length
+
+    @property
+    def num_evaluations(self) -> int:
+        return self.num_iterations // self.eval_every
+
+
+@struct.dataclass
+class ObservationNormalizer:
+    """Running mean and variance of observations (Welford / Chan parallel update)."""
+
+    count: jax.Array
+    mean: jax.Array
+    sum_squares: jax.Array
+
+    @classmethod
+    def create(cls, size: int) -> ObservationNormalizer:
+        return cls(count=jnp.zeros(()), mean=jnp.zeros(size), sum_squares=jnp.zeros(size))
+
+    def update(self, obs: jax.Array) -> ObservationNormalizer:
+        obs = obs.reshape(-1, obs.shape[-1])
+        batch_count = obs.shape[0]
+        batch_mean = obs.mean(axis=0)
+        batch_sum_squares = ((obs - batch_mean) ** 2).sum(axis=0)
+        count = self.count + batch_count
+        delta = batch_mean - self.mean
+        return ObservationNormalizer(
+            count=count,
+            mean=self.mean + delta * batch_count / count,
+            sum_squares=self.sum_squares
+            + batch_sum_squares
+            + delta**2 * self.count * batch_count / count,
+        )
+
+    def __call__(self, obs: jax.Array) -> jax.Array:
+        std = jnp.sqrt(self.sum_squares / jnp.maximum(self.count, 1.0)) + 1e-8
+        normalized = jnp.clip((obs - self.mean) / std, -10.0, 10.0)
+        return jnp.where(self.count > 0, normalized, obs)
+
+
+def episode_metrics(transitions: Transitions, rewards: jax.Array) -> dict[str, jax.Array]:
+    """The mean return of the whole episodes that ended in the rollout (NaN when none did;
+    a staggered first episode cut short does not count) and the mean reward the update
+    learnt from."""
+    finished = (transitions.done | transitions.truncated) & ~transitions.ended_early
+    num_finished = finished.sum()
+    return {
+        "train/episode_return": jnp.where(
+            num_finished > 0,
+            jnp.where(finished, transitions.episode_return, 0.0).sum()
+            / jnp.maximum(num_finished, 1),
+            jnp.nan,
+        ),
+        "train/reward": rewards.mean(),
+    }
+
+
+class OnPolicyLearner:
+    """What TRPO and PPO share for one environment and static config: the Gaussian policy and
+    value networks, the auto-resetting envs, the rollout, log-probabilities and evaluation.
+
+    A learner's state has at least ``policy_params``, ``value_params``, ``normalizer``,
+    ``env_state``, ``env_steps`` and ``key``; ``LEARNED_FIELDS`` names the fields its update
+    learns (what a frozen cloned policy keeps, ``adversarial``).
+    """
+
+    LEARNED_FIELDS: tuple[str, ...] = ("policy_params", "value_params", "normalizer")
+    HYPERPARAMS: type  # the per-cell values its update reads
+
+    def check_hyperparams(self, hyperparams) -> None:
+        """ValueError unless ``hyperparams`` are this learner's (a cell made for the other
+        learner would otherwise fail deep inside the update)."""
+        if not isinstance(hyperparams, self.HYPERPARAMS):
+            raise ValueError(
+                f"this trainer's learner is {type(self).__name__}, which reads "
+                f"{self.HYPERPARAMS.__name__}, but the cell gives "
+                f"{type(hyperparams).__name__}: make the cells for the same learner "
+                "(AdversarialHyperparams.create(learner=...), stack_cells(..., learner=...))"
+            )
+
+    def __init__(self, config: TRPOConfig, env: envs.Env):
+        self.config = config
+        self.env = env
+        self.auto_env = envs.AutoReset(env)
+        self.policy = GaussianPolicy(env.action_size, config.hidden_sizes)
+        self.value = ValueNetwork(config.hidden_sizes)
+
+    def reset_envs(self, key: jax.Array) -> envs.AutoResetState:
+        """The ``num_envs`` parallel envs' first states (leaves [N, ...]); with
+        ``stagger_starts``, each first episode cut at its own random length."""
+        num_envs = self.config.num_envs
+        if not self.config.stagger_starts:
+            return jax.vmap(self.auto_env.reset)(jax.random.split(key, num_envs))
+        reset_key, limit_key = jax.random.split(key)
+        return jax.vmap(self.auto_env.staggered_reset)(
+            jax.random.split(reset_key, num_envs), jax.random.split(limit_key, num_envs)
+        )
+
+    def rollout(self, state):
+        """``unroll_length`` steps of the ``num_envs`` envs with the current stochastic policy:
+        (state with the envs, key and step count moved on, Transitions float[T, N, ...])."""
+        key, rollout_key = jax.random.split(state.key)
+        env_state, transitions = collect(
+            self.auto_env,
+            self.policy,
+            state.policy_params,
+            state.normalizer,
+            state.env_state,
+            self.config.unroll_length,
+            rollout_key,
+        )
+        state = state.replace(
+            env_state=env_state, key=key, env_steps=state.env_steps + self.config.batch_size
+        )
+        return state, transitions
+
+    def log_prob(self, state, obs: jax.Array, action: jax.Array) -> jax.Array:
+        """log pi(action | obs) of the current policy: obs float[..., O], action float[..., A]."""
+        mean, log_std = self.policy.apply(state.policy_params, state.normalizer(obs))
+        return gaussian_log_prob(mean, log_std, action)
+
+    def evaluate(self, state, keys: jax.Array) -> jax.Array:
+        return evaluate(self.env, self.policy, state.policy_params, state.normalizer, keys)
+
+    def updated_normalizer(self, state, transitions: Transitions) -> ObservationNormalizer:
+        """The observation normaliser after this rollout (unchanged when normalisation is
+        off)."""
+        if self.config.normalize_observations:
+            return state.normalizer.update(transitions.obs)
+        return state.normalizer
+
+
+def run_evaluated_blocks(
+    learner: OnPolicyLearner, iteration, state, learner_state_of, eval_keys, num_blocks
+):
+    """``num_blocks`` (static) scans of ``learner.config.eval_every`` iterations, each followed by
+    a deterministic evaluation of ``learner_state_of(state)`` on ``eval_keys``.
+
+    ``iteration(state) -> (state, metrics)``; returns the final state and the metrics flattened
+    to float[num_blocks * eval_every], with ``eval/return`` NaN except at each block's end.
+    """
+    eval_every = learner.config.eval_every
+
+    def block(state, _):
+        state, metrics = jax.lax.scan(lambda s, _: iteration(s), state, None, length=eval_every)
+        eval_return = learner.evaluate(learner_state_of(state), eval_keys)
+        metrics["eval/return"] = jnp.full((eval_every,), jnp.nan).at[-1].set(eval_return)
+        return state, metrics
+
+    state, metrics = jax.lax.scan(block, state, None, length=num_blocks)
+    return state, jax.tree.map(lambda x: x.reshape(-1, *x.shape[2:]), metrics)
