@@ -6,6 +6,9 @@ import math
 import pytest
 from conftest import authors_data
 
+from pngail_jax.jobs.early_rewards import EarlyRewardsConfig
+from pngail_jax.jobs.early_rewards import early_rewards as early_rewards_job
+from pngail_jax.jobs.errors import RunError
 from pngail_jax.programs import early_rewards
 
 PENDULUM = authors_data() / "Pendulum-v1_mixture.npy"
@@ -25,3 +28,17 @@ def test_early_rewards_reads_every_variant_at_every_reading(tmp_path):
     )
     with pytest.raises(SystemExit):  # never over an existing file
         early_rewards.main([*flags, "--out", str(out)])
+
+
+def test_the_job_refuses_bad_settings_and_an_existing_file_before_any_work(tmp_path):
+    with pytest.raises(ValueError, match="iterations >= every"):
+        EarlyRewardsConfig(str(PENDULUM), iterations=5, every=10)
+    with pytest.raises(ValueError, match="classifier_steps"):
+        EarlyRewardsConfig(str(PENDULUM), classifier_steps=0)
+    existing = tmp_path / "early.json"
+    existing.write_text("{}")
+    with pytest.raises(RunError, match="exists"):
+        early_rewards_job(EarlyRewardsConfig(str(PENDULUM)), existing)
+    assert existing.read_text() == "{}"
+    with pytest.raises(RunError, match="demonstrations"):
+        early_rewards_job(EarlyRewardsConfig(str(tmp_path / "missing.npy")), tmp_path / "a.json")

@@ -26,8 +26,8 @@ LAYERS = [
     (
         "learners",
         (
-            "rl", "rl.rollout", "rl.on_policy", "rl.trpo", "rl.train", "rl.ppo", "rl.learners", "settings", "checkpoint",
-            "phase", "bc", "firl", "ranking",
+            "rl", "rl.rollout", "rl.on_policy", "rl.trpo", "rl.train", "rl.ppo", "rl.learners",
+            "settings", "checkpoint", "phase", "bc", "firl", "ranking",
             "confidence", "methods", "losses", "cail", "offline_losses", "method_checks",
         ),
     ),
@@ -46,8 +46,8 @@ LAYERS = [
 
 # The jobs in their dependency order: each imports only those before it.
 JOB_ORDER = [
-    "errors", "classify", "chunks", "train_seeds", "make_demos", "train_rl", "compare_settings",
-    "build", "record", "results", "sweep", "offline",
+    "errors", "classify", "chunks", "early_rewards", "train_seeds", "make_demos", "train_rl",
+    "compare_settings", "build", "record", "results", "sweep", "offline",
 ]  # fmt: skip
 LONGEST_MODULE = 700
 LONGEST_JOB = 400

@@ -849,9 +849,9 @@ def main(argv=None) -> int:
     r = sub.add_parser("run", help="run every tiny invocation and write OUT/manifest.json")
     r.add_argument("--repo", required=True, help="the checkout to run (cwd and PYTHONPATH)")
     r.add_argument("--out", required=True, help="output folder (must be empty or new)")
-    r.add_argument("--cache", default=str(Path(__file__).resolve().parent / "xla-cache"),
-                   help="PNGAIL_JAX_COMPILATION_CACHE (default: xla-cache beside this script; "
-                        "'' for the programs' default)")  # fmt: skip
+    r.add_argument("--cache", default=str(Path.home() / ".cache" / "pngail-jax" / "snapshot-xla"),
+                   help="PNGAIL_JAX_COMPILATION_CACHE (default: ~/.cache/pngail-jax/snapshot-xla, "
+                        "outside every checkout; '' for the programs' default)")  # fmt: skip
     r.add_argument("--python", help="interpreter (default: this one)")
     r.add_argument("--only", help="comma-separated name prefixes of INVOCATIONS to run")
     r.add_argument("--overwrite", action="store_true", help="empty a non-empty --out first")
