@@ -3,7 +3,7 @@ iteration, side by side on one machine and one task, at the settings a run uses.
 
 For each method of ``--methods`` the script builds the run the sweep would build
 (``RunConfig(methods=(method,), seeds=--seeds)``, the task's run settings, the appendix
-phases at their codebases' settings: ``pngail_jax.jobs.build.build``), then times, warm:
+phases at their codebases' settings: ``pngail_jax.jobs.build.build_run``), then times, warm:
 
 - ``init_seconds``: the grid's ``init`` (the split, the SC/BSC classifier, and the method's
   training phases: T-REX's and D-REX's reward fits, D-REX's cloning and noisy rollouts, BC),
@@ -35,7 +35,7 @@ from pathlib import Path
 from common import context, markdown_table, time_grid_chunks, write_rows
 
 from pngail_jax import RunConfig
-from pngail_jax.jobs.build import build
+from pngail_jax.jobs.build import build_run
 from pngail_jax.jobs.errors import RunError
 
 DEFAULT_METHODS = ("pngail", "gail", "cail", "trex", "firl-fkl")
@@ -44,7 +44,7 @@ RELEASED_PENDULUM = Path("data/released/Pendulum-v1_mixture.npy")
 
 def measure(config: RunConfig, repeats: int) -> dict:
     """Compiles ``config``'s grid and times its init and one chunk (see the module doc)."""
-    grid = build(config, None).grid
+    grid = build_run(config).grid
     _, _, init_seconds, chunk_seconds = time_grid_chunks(grid, repeats)
     return {
         "init_seconds": init_seconds,

@@ -5,18 +5,8 @@ and will then be removed; import from ``pngail_jax`` (``run``, ``RunConfig``,
 
 import warnings
 
-from pngail_jax.jobs.build import (  # noqa: F401
-    DEMO_CACHE,
-    RANDOM_RETURN_EPISODES,
-    BuiltRun,
-    announce_inputs,
-    build,
-    input_files,
-    load_or_make_demos,
-    minari_directory,
-    normalizer_of,
-    resolve_normalizer,
-)
+from pngail_jax.jobs.build import BuiltRun  # noqa: F401
+from pngail_jax.jobs.build import build_run as build  # noqa: F401  (its old signature)
 from pngail_jax.jobs.chunks import (  # noqa: F401
     LONG_CHUNK_SECONDS,
     Progress,
@@ -27,6 +17,15 @@ from pngail_jax.jobs.chunks import (  # noqa: F401
     nanmean,
     restore_checkpoint,
     stop_after_this_chunk,
+)
+from pngail_jax.jobs.demonstrations import (  # noqa: F401
+    DEMO_CACHE,
+    RANDOM_RETURN_EPISODES,
+    input_files,
+    load_or_make_demos,
+    minari_directory,
+    normalizer_of,
+    resolve_normalizer,
 )
 from pngail_jax.jobs.errors import RunError  # noqa: F401
 from pngail_jax.jobs.record import (  # noqa: F401

@@ -285,7 +285,7 @@ def test_an_authors_file_gets_its_known_action_scale_unless_one_is_given(tmp_pat
     """The authors' Pendulum file stores torque / 2: loaded by name it is multiplied by 2 (the
     sweep and classify say so and record it); a given scale, even 1, wins; other files get 1."""
     from pngail_jax.demos import action_scale_note
-    from pngail_jax.jobs import build as build_job
+    from pngail_jax.jobs import demonstrations as demos_job
     from pngail_jax.run_config import RunConfig
 
     mixture = write_released(tmp_path, GOOD_ROWS)
@@ -306,16 +306,16 @@ def test_an_authors_file_gets_its_known_action_scale_unless_one_is_given(tmp_pat
         (tmp_path / "set.npz").write_bytes(GOOD_NPZ)
         load_demonstrations(tmp_path / "set.npz", action_scale=2.0)
     # The sweep's loader: the config's None is the known scale, 1.0 is the stored units.
-    demos, _ = build_job.load_or_make_demos(RunConfig(demos=str(mixture)))
+    demos, _ = demos_job.load_or_make_demos(RunConfig(demos=str(mixture)))
     np.testing.assert_array_equal(demos.actions, known.actions)
-    demos, _ = build_job.load_or_make_demos(RunConfig(demos=str(mixture), action_scale=1.0))
+    demos, _ = demos_job.load_or_make_demos(RunConfig(demos=str(mixture), action_scale=1.0))
     np.testing.assert_array_equal(demos.actions, GOOD_ROWS[:, 3:])
 
 
 def test_a_plain_file_of_rows_loads_for_any_environment_by_its_sizes(tmp_path):
     """Any .npy of rows [s, a] (not an authors' file): split by the environment's sizes, with a
     confidence file or none; without sizes the error says how to give them."""
-    from pngail_jax.jobs import build as build_job
+    from pngail_jax.jobs import demonstrations as demos_job
     from pngail_jax.run_config import RunConfig
 
     rows = np.random.default_rng(0).uniform(-1, 1, (6, 4)).astype(np.float32)
@@ -325,7 +325,7 @@ def test_a_plain_file_of_rows_loads_for_any_environment_by_its_sizes(tmp_path):
     with pytest.raises(DemonstrationError, match=r"not an authors' file; give the environment"):
         load_demonstrations(path)
     env = envs.make("Pendulum-v1")
-    demos, _ = build_job.load_or_make_demos(RunConfig(demos=str(path), conf=str(conf)), env=env)
+    demos, _ = demos_job.load_or_make_demos(RunConfig(demos=str(path), conf=str(conf)), env=env)
     np.testing.assert_array_equal(demos.observations, rows[:, :3])
     np.testing.assert_array_equal(demos.actions, rows[:, 3:])  # no scale for a plain file
     np.testing.assert_allclose(demos.confidence, np.linspace(0, 1, 6))
@@ -334,27 +334,27 @@ def test_a_plain_file_of_rows_loads_for_any_environment_by_its_sizes(tmp_path):
     with pytest.raises(DemonstrationError, match=r"rows have 4 columns, but the environment's"):
         load_demonstrations(path, observation_size=3, action_size=2)
     # A config names its confidence file, so a resume checks it too.
-    inputs = build_job.input_files(RunConfig(demos=str(path), conf=str(conf)), str(path))
+    inputs = demos_job.input_files(RunConfig(demos=str(path), conf=str(conf)), str(path))
     assert set(inputs) == {"demonstrations", "confidence file"}
 
 
 def test_normalisers_from_flags_or_a_measured_random_policy():
     """--optimal-return alone: the random end is measured (uniform random actions, a fixed
     key: the same number twice); both flags: taken as given; neither: the file's own."""
-    from pngail_jax.jobs import build as build_job
+    from pngail_jax.jobs import demonstrations as demos_job
     from pngail_jax.run_config import RunConfig
 
     env = envs.make("Pendulum-v1")
     plain = Demonstrations(np.zeros((4, 3), np.float32), np.zeros((4, 1), np.float32))
-    assert build_job.resolve_normalizer(RunConfig(), plain, env) == (None, "none")
+    assert demos_job.resolve_normalizer(RunConfig(), plain, env) == (None, "none")
     given = RunConfig(random_return=-1200, optimal_return=-150)
-    assert build_job.resolve_normalizer(given, plain, env)[0] == [-1200.0, -150.0]
-    measured, source = build_job.resolve_normalizer(RunConfig(optimal_return=-150), plain, env)
+    assert demos_job.resolve_normalizer(given, plain, env)[0] == [-1200.0, -150.0]
+    measured, source = demos_job.resolve_normalizer(RunConfig(optimal_return=-150), plain, env)
     assert -1500 < measured[0] < -900 and measured[1] == -150.0  # Pendulum's random policy
     assert "measured" in source
-    assert build_job.resolve_normalizer(RunConfig(optimal_return=-150), plain, env)[0] == measured
-    with pytest.raises(build_job.RunError, match=r"--optimal-return -2000 is not above the random"):
-        build_job.resolve_normalizer(RunConfig(optimal_return=-2000), plain, env)
+    assert demos_job.resolve_normalizer(RunConfig(optimal_return=-150), plain, env)[0] == measured
+    with pytest.raises(demos_job.RunError, match=r"--optimal-return -2000 is not above the random"):
+        demos_job.resolve_normalizer(RunConfig(optimal_return=-2000), plain, env)
     with pytest.raises(ValueError, match="random_return needs optimal_return"):
         RunConfig(random_return=-1200)
     with pytest.raises(ValueError, match=r"optimal_return \(-1300.0\) must be above"):

@@ -129,7 +129,7 @@ def test_changed_inputs_name_the_file(tmp_path):
 
 def test_a_minari_dataset_is_recorded_by_its_content_not_only_its_id(tmp_path, monkeypatch):
     from pngail_jax.integrity import changed_inputs
-    from pngail_jax.jobs import build as build_job
+    from pngail_jax.jobs import demonstrations as demos_job
     from pngail_jax.run_config import RunConfig
 
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path))
@@ -138,9 +138,9 @@ def test_a_minari_dataset_is_recorded_by_its_content_not_only_its_id(tmp_path, m
     (dataset / "data" / "main_data.hdf5").write_bytes(b"episodes")
     (dataset / "metadata.json").write_text("{}")
     config = RunConfig(demos="minari:pendulum/mine-v0")
-    records = build_job.input_files(config, "minari:pendulum/mine-v0")
+    records = demos_job.input_files(config, "minari:pendulum/mine-v0")
     assert list(records) == ["Minari dataset"] and records["Minari dataset"]["bytes"] == 10
     assert changed_inputs(records) == []
     (dataset / "data" / "main_data.hdf5").write_bytes(b"episodez")  # rebuilt, same size
     assert changed_inputs(records) == [f"Minari dataset {dataset} has changed since the run began"]
-    assert build_job.input_files(config, "minari:pendulum/other-v0") == {}  # not there: id only
+    assert demos_job.input_files(config, "minari:pendulum/other-v0") == {}  # not there: id only

@@ -46,8 +46,9 @@ LAYERS = [
 
 # The jobs in their dependency order: each imports only those before it.
 JOB_ORDER = [
-    "errors", "classify", "chunks", "early_rewards", "train_seeds", "make_demos", "train_rl",
-    "compare_settings", "build", "record", "results", "sweep", "offline",
+    "errors", "classify", "chunks", "early_rewards", "train_seeds", "make_demos",
+    "demonstrations", "train_rl", "compare_settings", "build", "record", "results", "sweep",
+    "offline",
 ]  # fmt: skip
 LONGEST_MODULE = 700
 LONGEST_JOB = 400

@@ -39,6 +39,6 @@ def test_the_runners_old_names_still_import_with_a_warning():
     sys.modules.pop("pngail_jax.runner", None)
     with pytest.warns(DeprecationWarning, match="pngail_jax.runner is now pngail_jax.jobs"):
         old = importlib.import_module("pngail_jax.runner")
-    assert old.run is sweep.run and old.build is build.build
+    assert old.run is sweep.run and old.build is build.build_run
     assert old.load_saved is record.load_saved and old.train_seeds.__module__.endswith("seeds")
     assert old.intact_checkpoint is chunks.intact_checkpoint

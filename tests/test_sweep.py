@@ -14,8 +14,8 @@ from conftest import metrics_numbers, sigterm_to_self, tiny_sweep_args
 from pngail_jax import outputs
 from pngail_jax.demos import save_npz
 from pngail_jax.integrity import sealed_differences
-from pngail_jax.jobs import build as build_job
 from pngail_jax.jobs import chunks, record
+from pngail_jax.jobs import demonstrations as demos_job
 from pngail_jax.outputs import MARKER
 from pngail_jax.programs import sweep
 from pngail_jax.runs import sealed_part
@@ -285,7 +285,7 @@ def test_a_damaged_demonstration_cache_is_made_again(demos_path, tmp_path, monke
     from pngail_jax.jobs.make_demos import MakeDemosConfig
     from pngail_jax.run_config import RunConfig
 
-    monkeypatch.setattr(build_job, "DEMO_CACHE", tmp_path)
+    monkeypatch.setattr(demos_job, "DEMO_CACHE", tmp_path)
     cached = tmp_path / "Pendulum-v1" / "demos.npz"
     cached.parent.mkdir()
     cached.write_bytes(demos_path.read_bytes()[:300])  # a truncated copy
@@ -295,8 +295,8 @@ def test_a_damaged_demonstration_cache_is_made_again(demos_path, tmp_path, monke
         calls.append((config, claim.directory, claim.overwrite))
         shutil.copy(demos_path, cached)
 
-    monkeypatch.setattr(build_job, "make_claimed", fake_make)
-    demos, path = build_job.load_or_make_demos(RunConfig(env="Pendulum-v1"))
+    monkeypatch.setattr(demos_job, "make_claimed", fake_make)
+    demos, path = demos_job.load_or_make_demos(RunConfig(env="Pendulum-v1"))
     printed = capsys.readouterr().out
     assert "the cached demonstrations are damaged" in printed and str(cached) in printed
     # The making's defaults (the command line's), over the runner's own damaged cache.
@@ -429,13 +429,13 @@ def test_a_second_sweep_waits_for_the_demonstrations_another_process_makes(
     from pngail_jax import outputs
     from pngail_jax.run_config import RunConfig
 
-    monkeypatch.setattr(build_job, "DEMO_CACHE", tmp_path)
+    monkeypatch.setattr(demos_job, "DEMO_CACHE", tmp_path)
     monkeypatch.setattr(outputs, "WAIT_SECONDS", 0.1)
 
     def made_twice(config, claim):
         raise AssertionError("the demonstrations were made a second time")
 
-    monkeypatch.setattr(build_job, "make_claimed", made_twice)
+    monkeypatch.setattr(demos_job, "make_claimed", made_twice)
     cache = tmp_path / "Pendulum-v1"
     holder = subprocess.Popen(
         [sys.executable, "-c", HOLD_THE_CACHE, str(cache), str(demos_path)],
@@ -444,7 +444,7 @@ def test_a_second_sweep_waits_for_the_demonstrations_another_process_makes(
     )
     try:
         assert holder.stdout.readline().strip() == "holding"
-        demos, path = build_job.load_or_make_demos(RunConfig(env="Pendulum-v1"))
+        demos, path = demos_job.load_or_make_demos(RunConfig(env="Pendulum-v1"))
     finally:
         holder.wait(timeout=60)
     printed = capsys.readouterr().out
@@ -453,6 +453,13 @@ def test_a_second_sweep_waits_for_the_demonstrations_another_process_makes(
     assert f"in use by experiments.make_demos, process {holder.pid}" in waiting[0]
     assert "reusing demonstrations" in printed
     assert demos.num_rows == 100 and path == str((cache / "demos.npz").absolute())
+
+
+def test_the_demonstrations_cache_is_a_setting(tmp_path, monkeypatch):
+    monkeypatch.delenv(demos_job.DEMO_CACHE_VARIABLE, raising=False)
+    assert demos_job.demos_cache() == demos_job.DEMO_CACHE == Path("runs") / "demos-cache"
+    monkeypatch.setenv(demos_job.DEMO_CACHE_VARIABLE, str(tmp_path / "cache"))
+    assert demos_job.demos_cache() == tmp_path / "cache"
 
 
 def test_a_sigterm_ends_the_sweep_in_one_line(demos_path, tmp_path, monkeypatch):

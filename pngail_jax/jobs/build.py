@@ -1,57 +1,24 @@
-"""Building a sweep: its environment, demonstrations (given, or made once and cached under
-``DEMO_CACHE``), normaliser, trainer and compiled ``Grid``, and the record of its input
-files."""
+"""Building a sweep, as named steps (``build_run``): its cells, its environment, its
+demonstrations (``jobs.demonstrations.prepare``: read or made, and their normaliser), then
+``build``, which receives them: the trainer and the compiled ``Grid``."""
 
 from __future__ import annotations
 
 import dataclasses
-import os
-from pathlib import Path
 
 import jax
 
+from pngail_jax import envs
 from pngail_jax import settings as run_settings
 from pngail_jax.adversarial import AdversarialTrainer
-from pngail_jax.demos import (
-    DemonstrationError,
-    action_scale_note,
-    load_demonstrations,
-    released_confidence_path,
-)
-from pngail_jax.demos.generate import random_policy_return
-from pngail_jax.demos.minari import MINARI_PREFIX
-from pngail_jax.grid import Grid, make_cells, stack_cells
-from pngail_jax.integrity import file_record
+from pngail_jax.demos import DemonstrationError, action_scale_note
+from pngail_jax.grid import Cell, Grid, make_cells, stack_cells
+from pngail_jax.jobs import demonstrations as run_demonstrations
 from pngail_jax.jobs.chunks import blocks_per_chunk
-from pngail_jax.jobs.errors import RunError, refusals
-from pngail_jax.jobs.make_demos import PROGRAM as MAKE_PROGRAM
-from pngail_jax.jobs.make_demos import MakeDemosConfig, make_claimed
-from pngail_jax.outputs import claimed
+from pngail_jax.jobs.demonstrations import RunDemonstrations
+from pngail_jax.jobs.errors import RunError
 from pngail_jax.run_config import RunConfig
 from pngail_jax.tracking import ticking
-
-
-def minari_directory(dataset_id: str) -> Path | None:
-    """Where Minari keeps a local dataset (``MINARI_DATASETS_PATH``, default
-    ``~/.minari/datasets``), or None when it is not there."""
-    root = Path(os.environ.get("MINARI_DATASETS_PATH", "~/.minari/datasets")).expanduser()
-    directory = root / dataset_id
-    return directory if directory.is_dir() else None
-
-
-def input_files(config: RunConfig, demos_path: str) -> dict:
-    """``{role: integrity.file_record}`` of the files a run reads its demonstrations from
-    (a local Minari dataset by its whole directory)."""
-    if demos_path.startswith(MINARI_PREFIX):
-        files = {"confidence file": config.conf} if config.conf else {}
-        dataset = minari_directory(demos_path.removeprefix(MINARI_PREFIX))
-        if dataset is not None:  # its content, not only its id: a rebuilt dataset differs
-            files["Minari dataset"] = dataset
-    else:
-        files = {"demonstrations": demos_path}
-        if config.conf or demos_path.endswith("_mixture.npy"):
-            files["confidence file"] = config.conf or released_confidence_path(demos_path)
-    return {role: file_record(path) for role, path in files.items()}
 
 
 @dataclasses.dataclass
@@ -59,115 +26,63 @@ class BuiltRun:
     """A compiled grid and what its outputs need."""
 
     config: RunConfig
-    env: object
-    trainer: object
-    cells: list
-    grid: object
-    demos_path: str
-    normalizer: list[float] | None
-    action_scale: float = 1.0  # what the stored actions were multiplied by
-    normalizer_source: str = "none"
+    env: envs.Env
+    trainer: AdversarialTrainer
+    cells: list[Cell]
+    grid: Grid
+    demonstrations: RunDemonstrations
+
+    @property
+    def demos_path(self) -> str:
+        return self.demonstrations.path
+
+    @property
+    def normalizer(self) -> list[float] | None:
+        return self.demonstrations.normalizer
+
+    @property
+    def normalizer_source(self) -> str:
+        return self.demonstrations.normalizer_source
+
+    @property
+    def action_scale(self) -> float:
+        return self.demonstrations.action_scale
 
 
-DEMO_CACHE = Path("runs") / "demos-cache"  # demonstrations made for runs that name none
+def build_run(config: RunConfig, saved=None) -> BuiltRun:
+    """Every step of a sweep's build (``saved``: a resumed run's ``record.SavedRun``, whose
+    demonstrations and normaliser are those it began with)."""
+    cells = run_cells(config)
+    env = make_run_env(config, cells)
+    demonstrations = run_demonstrations.prepare(config, env, saved)
+    return build(config, env, cells, demonstrations, resumed=saved is not None)
 
 
-def load_or_make_demos(config: RunConfig, saved_path: str | None = None, env=None):
-    """The demonstrations and the path they came from: ``config.demos`` (a file of rows that
-    is not an authors' one is split by ``env``'s sizes), else made once with
-    ``jobs.make_demos`` (its defaults: 1:4 optimal to intermediate trajectories) and
-    reused from ``DEMO_CACHE/<env>/``."""
-    source = saved_path or config.demos
-    if source is not None:
-        demos = load_demonstrations(
-            source,
-            config.conf,
-            config.action_scale,
-            confidence_field=config.confidence_field,
-            observation_size=None if env is None else env.observation_size,
-            action_size=None if env is None else env.action_size,
-        )
-        return demos, source
-    cached = DEMO_CACHE / config.env / "demos.npz"
-    damaged = False
-    if cached.exists():
-        demos = _cached_demos(cached)
-        if demos is not None:
-            return demos, str(cached.absolute())
-        damaged = True
-    # Made once, under the cache's lock: a second run that finds another process making
-    # them waits for it, then reuses what it made. The cache is the sweep's own: a making
-    # cut short there is replaced.
-    with refusals(), claimed(cached.parent, MAKE_PROGRAM, overwrite=True, wait=True) as claim:
-        if cached.exists() and not damaged:  # made by the process waited for
-            demos = _cached_demos(cached)
-            if demos is not None:
-                return demos, str(cached.absolute())
-        elif not damaged:
-            print(f"no demonstrations given: making them into {cached.parent}")
-        make_claimed(MakeDemosConfig(env=config.env), claim)
-    return load_demonstrations(cached), str(cached.absolute())
-
-
-def _cached_demos(cached: Path):
-    """The cached demonstrations, or None (saying so) when the file is damaged."""
-    try:
-        demos = load_demonstrations(cached)
-    except DemonstrationError as error:
-        print(f"the cached demonstrations are damaged: {error}; making them again")
-        return None
-    print(f"reusing demonstrations {cached}", flush=True)
-    return demos
-
-
-def normalizer_of(demos) -> list[float] | None:
-    metadata = demos.metadata
-    if "random_return" in metadata and "optimal_return" in metadata:
-        return [float(metadata["random_return"]), float(metadata["optimal_return"])]
-    return None
-
-
-RANDOM_RETURN_EPISODES = 32
-
-
-def resolve_normalizer(config: RunConfig, demos, env) -> tuple[list[float] | None, str]:
-    """(random, optimal) returns and where they came from: the flags, the demonstrations'
-    metadata, or the flag's optimal return with a random return measured here (uniform
-    random actions, ``RANDOM_RETURN_EPISODES`` episodes, a key of ``config.seed``)."""
-    if config.optimal_return is None:
-        normalizer = normalizer_of(demos)
-        source = demos.metadata.get("normalizer_source", "the demonstrations' metadata")
-        return normalizer, source if normalizer else "none"
-    if config.random_return is not None:
-        return [config.random_return, config.optimal_return], "--random-return, --optimal-return"
-    key = jax.random.fold_in(jax.random.key(config.seed), 7)
-    random_return = random_policy_return(env, key, RANDOM_RETURN_EPISODES)
-    if not config.optimal_return > random_return:
-        raise RunError(
-            f"--optimal-return {config.optimal_return:g} is not above the random policy's "
-            f"return, {random_return:.1f} (measured): give the best return the task allows"
-        )
-    return [random_return, config.optimal_return], (
-        f"--optimal-return; random return measured ({RANDOM_RETURN_EPISODES} episodes of "
-        "uniform random actions)"
-    )
-
-
-def build(config: RunConfig, saved=None) -> BuiltRun:
-    """Environment, demonstrations, trainer and the compiled grid of ``config`` (``saved``, a
-    resumed run's ``record.SavedRun``: its demonstrations from the path it began with, its
-    normaliser)."""
-    cells = make_cells(
+def run_cells(config: RunConfig) -> list[Cell]:
+    """The grid's cells: every setting x method x seed of ``config``."""
+    return make_cells(
         config.methods, config.seeds, config.label_ratios, config.noise_stds, config.grid_axes
     )
+
+
+def make_run_env(config: RunConfig, cells: list[Cell]) -> envs.Env:
+    """The task's environment, sized for the grid (a batched engine's width)."""
     try:
-        env = run_settings.make_env(config.env, config.settings, cells=len(cells))
+        return run_settings.make_env(config.env, config.settings, cells=len(cells))
     except ValueError as error:  # e.g. a custom factory that raised or returned no Env
         raise RunError(f"environment: {error}") from None
-    try:
-        demos, demos_path = load_or_make_demos(config, saved.demos_path if saved else None, env)
-    except (DemonstrationError, FileNotFoundError, ImportError) as error:
-        raise RunError(f"demonstrations: {error}") from None
+
+
+def build(
+    config: RunConfig,
+    env: envs.Env,
+    cells: list[Cell],
+    demonstrations: RunDemonstrations,
+    resumed: bool = False,
+) -> BuiltRun:
+    """The trainer of ``demonstrations`` in ``env`` (the methods and label ratios checked
+    against it) and the compiled grid of ``cells``."""
+    demos, demos_path = demonstrations.demos, demonstrations.path
     try:
         trainer = AdversarialTrainer(config.adversarial_config(demos.num_rows), env, demos)
         trainer.check_methods(config.methods)
@@ -187,10 +102,6 @@ def build(config: RunConfig, saved=None) -> BuiltRun:
     num_evaluations = config.iterations // eval_every
     chunk_blocks = blocks_per_chunk(num_evaluations, max(1, config.chunk_iterations // eval_every))
     devices = jax.devices()
-    if saved is not None and saved.normalizer is not None:  # as the run began
-        normalizer, normalizer_source = saved.normalizer, "the run's config.json"
-    else:
-        normalizer, normalizer_source = resolve_normalizer(config, demos, env)
     print(
         f"{len(cells)} runs ({', '.join(config.methods)} x {config.seeds} seeds x "
         f"{config.num_settings} setting(s)) on {config.env}, {config.iterations} iterations x "
@@ -199,7 +110,7 @@ def build(config: RunConfig, saved=None) -> BuiltRun:
         f"  {run_settings.describe(config.settings, env)}",
         flush=True,
     )
-    announce_inputs(demos, trainer, normalizer, normalizer_source, config, saved)
+    announce_inputs(demonstrations, trainer, config, resumed)
     with ticking("compiling"):
         grid = Grid(trainer, inputs, chunk_blocks, devices)
     print(
@@ -208,24 +119,24 @@ def build(config: RunConfig, saved=None) -> BuiltRun:
         f"{grid.iterations_per_chunk} iterations per chunk)",
         flush=True,
     )
-    action_scale = float(demos.metadata.get("action_scale", 1.0))
-    return BuiltRun(
-        config, env, trainer, cells, grid, demos_path, normalizer, action_scale, normalizer_source
-    )
+    return BuiltRun(config, env, trainer, cells, grid, demonstrations)
 
 
-def announce_inputs(demos, trainer, normalizer, normalizer_source, config, saved) -> None:
+def announce_inputs(
+    demonstrations: RunDemonstrations, trainer, config: RunConfig, resumed: bool
+) -> None:
     """The notes on what the run reads: its normaliser, an applied action scale, clipped
     demonstration actions."""
+    demos, normalizer = demonstrations.demos, demonstrations.normalizer
     if normalizer is None:
         print(
             "note: the demonstrations carry no random/optimal returns: no normalised return "
             "(give --optimal-return, and --random-return or it is measured)"
         )
-    elif config.optimal_return is not None and saved is None:
+    elif config.optimal_return is not None and not resumed:
         print(
             f"normalised return: random {normalizer[0]:.1f}, optimal {normalizer[1]:.1f} "
-            f"({normalizer_source})"
+            f"({demonstrations.normalizer_source})"
         )
     if action_scale_note(demos):
         print(action_scale_note(demos))

@@ -24,7 +24,6 @@ from pngail_jax import settings as run_settings
 from pngail_jax.demos import DemonstrationError
 from pngail_jax.grid import Grid, make_cells, nonfinite_cells
 from pngail_jax.integrity import CONFIG_SEAL, IntegrityError, read_json, seal, write_json
-from pngail_jax.jobs.build import input_files, load_or_make_demos, resolve_normalizer
 from pngail_jax.jobs.chunks import (
     Progress,
     blocks_per_chunk,
@@ -33,6 +32,7 @@ from pngail_jax.jobs.chunks import (
     run_chunks,
     start,
 )
+from pngail_jax.jobs.demonstrations import input_files, load_or_make_demos, resolve_normalizer
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.offline import (
     DEFAULT_OFFLINE_METHODS,

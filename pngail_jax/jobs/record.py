@@ -22,7 +22,8 @@ from pngail_jax.integrity import (
     seal,
     write_json,
 )
-from pngail_jax.jobs.build import BuiltRun, input_files
+from pngail_jax.jobs.build import BuiltRun
+from pngail_jax.jobs.demonstrations import input_files
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.methods import preset_record
 from pngail_jax.run_config import RunConfig, provenance, upgrade_saved_config

@@ -37,7 +37,7 @@ import numpy as np
 
 from pngail_jax.grid import nonfinite_cells
 from pngail_jax.jobs import record, results
-from pngail_jax.jobs.build import BuiltRun, build
+from pngail_jax.jobs.build import BuiltRun, build_run
 from pngail_jax.jobs.chunks import (
     Progress,
     format_seconds,
@@ -84,7 +84,7 @@ def run(
     passes it when the caller has read it already, with ``record.load_saved``).
     ``overwrite``: replace a finished or unfinished run of the sweep in ``out``.
     ``allow_changed_inputs``: resume although a demonstration file changed since the run
-    began (``config.demos`` None: they are made once and cached, ``build.load_or_make_demos``).
+    began (``config.demos`` None: they are made once and cached, ``jobs.demonstrations``).
     ``allow_unsealed``: resume a run whose config seal is missing, its config unchecked.
     ``command``: the command line recorded in ``config.json`` (default: this process's).
     Raises ``RunError`` naming the problem (before any computation where it can be seen then).
@@ -150,7 +150,7 @@ class _Steps:
                 print(f"{self.out}: the run is already complete; nothing to do")
                 return results.read_result(self.out) if self.writer else None
             checkpoint = intact_checkpoint(self.out / "checkpoints")
-        built = build(self.config, self.saved)
+        built = build_run(self.config, self.saved)
         if claim is not None and self.saved is None:
             claim.prepare()  # an old run (overwrite) kept until the new one is built
             record.write_config(self.out, built, self.command)

@@ -10,7 +10,8 @@
 
 The command line fills in a ``pngail_jax.run_config.RunConfig``. Without ``--demos`` the
 demonstrations are made by ``pngail_jax.jobs.make_demos`` (1:4 optimal to intermediate
-trajectories) once and reused from ``runs/demos-cache/<env>/``. Writes to ``--out`` (default
+trajectories) once and reused from ``runs/demos-cache/<env>/`` (or
+``$PNGAIL_JAX_DEMOS_CACHE/<env>/``). Writes to ``--out`` (default
 ``runs/<timestamp>``): ``config.json`` (the config, what it resolved to, and provenance),
 ``metrics.csv``, ``curves.png``, ``summary.md``, ``summary.json``, ``policies/<method>/``
 (every seed's final policy, for ``pngail_jax.load_policy``) and ``checkpoints/`` (the whole
