@@ -4,7 +4,8 @@ The command line (``python -m experiments.sweep``) only fills one in; Python use
 directly (``RunConfig(env="Hopper", methods=("gail", "pngail"))``) or from a preset
 (``RunConfig.preset("paper", demos="...")``). ``to_dict`` / ``from_dict`` (and ``from_json``)
 round-trip it, so a saved ``config.json`` starts a new run (``--config FILE``) or continues one
-(``--resume DIR``). ``provenance()`` adds what a saved run should remember of where it ran.
+(``--resume DIR``). ``config_record.provenance()`` adds what a saved run should remember of
+where it ran.
 
 Every field is checked when a config is made, from Python or from a file: a wrong type, a NaN
 or infinite number or a count below 1 raises ``pngail_jax.validation.ConfigError`` naming the
@@ -17,44 +18,34 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import os
-import platform
-import subprocess
-import sys
 from collections.abc import Mapping
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
 from pngail_jax import envs
-from pngail_jax.adversarial import AdversarialConfig, AdversarialHyperparams
+from pngail_jax.adversarial import AdversarialConfig
 from pngail_jax.confidence import ClassifierConfig
+from pngail_jax.config_record import upgrade_saved_config
 from pngail_jax.firl import FirlConfig
-from pngail_jax.grid import GRID_AXES, METHOD_AXES
+from pngail_jax.grid import GRID_AXES
 from pngail_jax.methods import (
-    ALL_METHOD_NAMES,
     METHOD_NAMES,
-    PRESETS,
-    check_preset,
     required_phases,
     resolve,
 )
-from pngail_jax.rl.learners import LEARNERS
 from pngail_jax.rl.on_policy import TRPOConfig
 from pngail_jax.rl.ppo import PPOConfig
+from pngail_jax.run_config_checks import check_between_fields, check_names
 from pngail_jax.settings import RunSettings, settings_for
-from pngail_jax.tracking import BACKENDS as LOG_BACKENDS
 from pngail_jax.validation import (
     ConfigError,
     fail,
     float_axis,
     integer,
-    is_among,
     layer_sizes,
     real,
 )
 
-FISHER_FORMS = ("gauss_newton", "hessian")
 # What a saved config.json holds besides the config's fields (pngail_jax.jobs.record writes them);
 # RunConfig.from_dict ignores these and refuses any other key that is not a field.
 RECORD_KEYS = ("resolved", "provenance")
@@ -151,8 +142,8 @@ class RunConfig:
             value = getattr(self, name)
             if value is not None and (not isinstance(value, str) or not value):
                 fail(name, f"must be a non-empty string or None, got {value!r}")
-        self._check_names()
-        self._check_between_fields()
+        check_names(self)
+        check_between_fields(self)
 
     def _set(self, name: str, value) -> None:
         object.__setattr__(self, name, value)
@@ -213,118 +204,6 @@ class RunConfig:
             if not 0 < self.bsc_eps < 0.5:
                 fail("bsc_eps", f"must lie in (0, 0.5), got {self.bsc_eps!r}")
         self._set("grid_axes", _grid_axes(self.grid_axes))
-
-    def _check_names(self) -> None:
-        """The names each field must be among: methods, the Fisher form, log backends."""
-        if not self.methods:
-            fail(
-                "methods",
-                f"must name at least one method; available: {', '.join(ALL_METHOD_NAMES)}",
-            )
-        unknown = [
-            name for name in self.methods
-            if not isinstance(name, str) or (":" not in name and name not in PRESETS)
-        ]  # fmt: skip
-        if unknown:
-            fail(
-                "methods",
-                f": unknown method(s) {unknown}; available: {', '.join(PRESETS)}, or "
-                "package.module:preset",
-            )
-        for name in self.methods:  # a registered name, or package.module:preset, imported
-            try:
-                resolve(name)
-            except ValueError as error:
-                fail("methods", f": {error}")
-        if len(set(self.methods)) != len(self.methods):
-            fail("methods", f"must not repeat, got {list(self.methods)}")
-        if not is_among(self.learner, LEARNERS):
-            fail("learner", f"must be one of {LEARNERS}, got {self.learner!r}")
-        if not is_among(self.fisher, FISHER_FORMS):
-            fail("fisher", f"must be one of {FISHER_FORMS}, got {self.fisher!r}")
-        bad_backends = [name for name in self.log if not is_among(name, LOG_BACKENDS)]
-        if bad_backends:
-            fail(
-                "log",
-                f": unknown log backend(s) {bad_backends}; available: {', '.join(LOG_BACKENDS)}",
-            )
-        if len(set(self.log)) != len(self.log):
-            fail("log", f"backends must not repeat, got {list(self.log)}")
-        if self.baseline is not None and self.baseline not in self.methods:
-            fail("baseline", f"must be one of the run's methods {list(self.methods)}, got "
-                 f"{self.baseline!r}")  # fmt: skip
-        for field, values in self.grid_axes:  # a hyperparameter's range
-            if field in METHOD_AXES:
-                continue
-            for value in values:
-                try:
-                    AdversarialHyperparams.create(learner=self.learner, **{field: value})
-                except ValueError as error:
-                    fail("grid_axes", f": {field}={value:g}: {error}")
-        for name in self.methods:  # every value of a coefficient axis, on every method
-            for field, values in self.grid_axes:
-                if field not in METHOD_AXES:
-                    continue
-                preset = resolve(name)
-                for value in values:
-                    changed = {**preset.coefficients, field: value}
-                    try:
-                        check_preset(name, dataclasses.replace(preset, coefficients=changed))
-                    except ValueError as error:
-                        fail("grid_axes", f": {field}={value:g} on {error}")
-
-    def _check_between_fields(self) -> None:
-        """The checks between fields: the run's length and its task's settings, the
-        normalised return's ends, the demonstrations and their companion fields."""
-        if self.iterations % self.settings.eval_every:
-            fail(
-                "iterations",
-                f"({self.iterations}) must be a multiple of the evaluation interval "
-                f"({self.settings.eval_every}, settings.eval_every)",
-            )
-        if self.settings.physics is not None and self.env not in envs.GYM_TASKS:
-            fail(
-                "settings.physics",
-                f": only gymnasium's MuJoCo tasks ({', '.join(envs.GYM_TASKS)}) have a choice of "
-                f"engine, not {self.env}",
-                name="RunSettings.physics",
-            )
-        if self.env == "Pendulum-v1" and self.settings.env_options:
-            cap = next(iter(self.settings.env_options))  # the first solver cap set
-            fail(
-                f"settings.{cap}",
-                ": Pendulum-v1 has no MJX solver (its solver caps stay None)",
-                name=f"RunSettings.{cap}",
-            )
-        self.adversarial_config()  # the trainer's own checks (e.g. samples per iteration)
-        if self.random_return is not None and self.optimal_return is None:
-            fail("random_return", "needs optimal_return (the normalised return's other end)")
-        if None not in (self.random_return, self.optimal_return) and not (
-            self.optimal_return > self.random_return
-        ):
-            fail(
-                "optimal_return",
-                f"({self.optimal_return}) must be above random_return ({self.random_return})",
-            )
-        self._check_demonstration_fields()
-
-    def _check_demonstration_fields(self) -> None:
-        if self.conf is not None and self.demos is None:
-            fail("conf", ": a confidence file needs demos (made demonstrations carry their own)")
-        is_minari = self.demos is not None and self.demos.startswith("minari:")
-        if self.confidence_field is not None and not is_minari:
-            fail(
-                "confidence_field",
-                "reads a Minari dataset's episode metadata: demos minari:<id>",
-            )
-        if (
-            self.demos is not None
-            and self.demos.endswith(".npz")
-            and (self.conf is not None or self.action_scale not in (None, 1.0))
-        ):
-            fail(
-                "demos", ": an .npz set carries its confidences and units: no conf or action_scale"
-            )
 
     @classmethod
     def preset(cls, name: str, **overrides) -> RunConfig:
@@ -458,44 +337,6 @@ PRESETS_BY_NAME: dict[str, dict[str, Any]] = {
 }
 
 
-def upgrade_saved_config(data: dict[str, Any]) -> dict[str, Any]:
-    """A config.json written before ``RunConfig`` (flat keys) in today's layout; today's
-    unchanged."""
-    if "classifier_steps" not in data:  # the old layout's mark
-        return data
-    from pngail_jax.settings import REFERENCE_SETTINGS
-
-    needed = ["demos", "platform", "device_count", "local_device_count"]
-    if not data.get("settings"):
-        needed += ["num_envs", "unroll_length", "eval_every"]
-    missing = [key for key in needed if key not in data]
-    if missing:
-        raise ValueError(
-            f"a config.json of the old layout (classifier_steps) lacks key(s) {missing}"
-        )
-
-    settings = data.get("settings") or dataclasses.asdict(
-        REFERENCE_SETTINGS.replace(
-            num_envs=data["num_envs"],
-            unroll_length=data["unroll_length"],
-            eval_every=data["eval_every"],
-        )
-    )
-    kept = (
-        "env methods seeds iterations label_ratios noise_stds seed action_scale num_demos "
-        "chunk_iterations fisher fisher_subsample cpu_devices demos conf"
-    ).split()
-    return {
-        **{key: data[key] for key in kept if key in data},
-        "settings": settings,
-        "classifier": {"num_steps": data["classifier_steps"]},
-        "resolved": {"demos_path": data["demos"]},
-        "provenance": {
-            key: data[key] for key in ("platform", "device_count", "local_device_count")
-        },
-    }
-
-
 # -- field checks (pngail_jax.validation): each returns the value in its stored type -------
 
 _TUPLE_FIELDS = ("methods", "label_ratios", "noise_stds", "log", "discriminator_hidden_sizes")
@@ -614,82 +455,3 @@ def _nested(cls, where: str, data: Mapping):
         raise error.nested(where) from None
     except TypeError as error:
         fail(where, f": {error}")
-
-
-def provenance(argv: list[str] | None = None, program: str | None = None) -> dict[str, Any]:
-    """Where and with what a run ran: versions, git commit, devices, the command line
-    (``python -m <program> <argv>`` when ``program`` names the module, so that it can be run
-    again as it stands)."""
-    import jax
-
-    def version(package: str) -> str | None:
-        try:
-            return metadata.version(package)
-        except metadata.PackageNotFoundError:
-            return None
-
-    devices = jax.devices()
-    return {
-        "pngail_jax_version": version("pngail-jax"),
-        "git_commit": _git_commit(),
-        "python": platform.python_version(),
-        "libraries": {
-            name: version(name)
-            for name in ("jax", "jaxlib", "flax", "optax", "brax", "mujoco", "mujoco-mjx")
-        },
-        "platform": devices[0].platform,
-        "device_kind": devices[0].device_kind,
-        # XLA compiles for the CPU it runs on and under XLA_FLAGS: two runs give the same
-        # bits only on the same CPU model with the same flags (docs/sweep.md).
-        "cpu_model": _cpu_model(),
-        "xla_flags": os.environ.get("XLA_FLAGS", ""),
-        "device_count": len(devices),
-        "local_device_count": len(jax.local_devices()),
-        "process_count": jax.process_count(),
-        "command_line": [
-            *(["python", "-m", program] if program else [Path(sys.argv[0]).name]),
-            *(sys.argv[1:] if argv is None else argv),
-        ],
-    }
-
-
-def _cpu_model() -> str:
-    """The host CPU's model name (Linux's /proc/cpuinfo), else what the platform says."""
-    try:
-        with open("/proc/cpuinfo") as file:
-            for line in file:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
-
-
-def _git_commit() -> str | None:
-    """The checkout's commit (with ``+dirty`` when files differ), or None outside git."""
-    root = Path(__file__).resolve().parent.parent
-    try:
-        toplevel = subprocess.run(
-            ["git", "rev-parse", "--show-toplevel"],
-            cwd=root,
-            capture_output=True,
-            text=True,
-            timeout=5,
-        )
-        if toplevel.returncode != 0 or Path(toplevel.stdout.strip()).resolve() != root:
-            return None  # an installed copy, possibly inside another project's checkout
-        commit = subprocess.run(
-            ["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=5
-        )
-        if commit.returncode != 0:
-            return None
-        dirty = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no"],
-            cwd=root,
-            capture_output=True,
-            text=True,
-            timeout=5,
-        )
-        return commit.stdout.strip() + ("+dirty" if dirty.stdout.strip() else "")
-    except (OSError, subprocess.SubprocessError):
-        return None

@@ -21,8 +21,11 @@ from pngail_jax import envs
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.methods import METHOD_NAMES
 from pngail_jax.programs import cli, compare_settings, sweep
-from pngail_jax.run_config import FISHER_FORMS, LEARNERS, LOG_BACKENDS, RunConfig
+from pngail_jax.rl.learners import LEARNERS
+from pngail_jax.run_config import RunConfig
+from pngail_jax.run_config_checks import FISHER_FORMS
 from pngail_jax.settings import RunSettings
+from pngail_jax.tracking import BACKENDS as LOG_BACKENDS
 from pngail_jax.validation import ConfigError
 
 PROPERTY = hypothesis_settings(max_examples=50, deadline=None, database=None, derandomize=True)

@@ -34,7 +34,8 @@ LAYERS = [
     (
         "trainers",
         (
-            "adversarial", "grid", "train", "run_config", "report", "plots", "tracking", "compare",
+            "adversarial", "grid", "train", "run_config", "run_config_checks", "config_record",
+            "report", "plots", "tracking", "compare",
             "run_records", "offline", "runs",
         ),
     ),

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from pngail_jax.confidence import ClassifierConfig
-from pngail_jax.run_config import RunConfig, upgrade_saved_config
+from pngail_jax.config_record import upgrade_saved_config
+from pngail_jax.run_config import RunConfig
 from pngail_jax.settings import RunSettings, settings_for
 
 

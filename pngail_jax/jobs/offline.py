@@ -21,6 +21,7 @@ import numpy as np
 
 from pngail_jax import plots, report
 from pngail_jax import settings as run_settings
+from pngail_jax.config_record import provenance
 from pngail_jax.demos import DemonstrationError
 from pngail_jax.grid import Grid, make_cells, nonfinite_cells
 from pngail_jax.integrity import CONFIG_SEAL, IntegrityError, read_json, seal, write_json
@@ -43,7 +44,7 @@ from pngail_jax.offline import (
     stack_offline_cells,
 )
 from pngail_jax.outputs import claimed
-from pngail_jax.run_config import RunConfig, provenance
+from pngail_jax.run_config import RunConfig
 from pngail_jax.runs import UntrustedRun, sealed_part, verify_run
 from pngail_jax.tracking import ticking
 

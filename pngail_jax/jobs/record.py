@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from pngail_jax import methods
+from pngail_jax.config_record import provenance, upgrade_saved_config
 from pngail_jax.demos.minari import MINARI_PREFIX
 from pngail_jax.integrity import (
     CONFIG_SEAL,
@@ -26,7 +27,7 @@ from pngail_jax.jobs.build import BuiltRun
 from pngail_jax.jobs.demonstrations import input_files
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.methods import preset_record
-from pngail_jax.run_config import RunConfig, provenance, upgrade_saved_config
+from pngail_jax.run_config import RunConfig
 from pngail_jax.runs import sealed_part
 from pngail_jax.validation import ConfigError
 

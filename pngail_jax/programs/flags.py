@@ -18,8 +18,11 @@ from typing import Any
 
 from pngail_jax import envs
 from pngail_jax.programs.cli import comma_floats, known_names, text_argument
-from pngail_jax.run_config import FISHER_FORMS, LEARNERS, LOG_BACKENDS, TASK_CLASSIFIER_STEPS
+from pngail_jax.rl.learners import LEARNERS
+from pngail_jax.run_config import TASK_CLASSIFIER_STEPS
+from pngail_jax.run_config_checks import FISHER_FORMS
 from pngail_jax.settings import REFERENCE_SETTINGS, RunSettings, parse_solver, settings_for
+from pngail_jax.tracking import BACKENDS as LOG_BACKENDS
 from pngail_jax.validation import ConfigError
 
 

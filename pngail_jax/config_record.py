@@ -1,0 +1,131 @@
+"""What a saved ``config.json`` keeps around its ``RunConfig``: the provenance written with it
+(where and with what the run ran) and the upgrade of a config written in an older layout.
+Both are read by the run record (``jobs.record``) and by ``RunConfig.from_dict``."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import platform
+import subprocess
+import sys
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+
+def upgrade_saved_config(data: dict[str, Any]) -> dict[str, Any]:
+    """A config.json written before ``RunConfig`` (flat keys) in today's layout; today's
+    unchanged."""
+    if "classifier_steps" not in data:  # the old layout's mark
+        return data
+    from pngail_jax.settings import REFERENCE_SETTINGS
+
+    needed = ["demos", "platform", "device_count", "local_device_count"]
+    if not data.get("settings"):
+        needed += ["num_envs", "unroll_length", "eval_every"]
+    missing = [key for key in needed if key not in data]
+    if missing:
+        raise ValueError(
+            f"a config.json of the old layout (classifier_steps) lacks key(s) {missing}"
+        )
+
+    settings = data.get("settings") or dataclasses.asdict(
+        REFERENCE_SETTINGS.replace(
+            num_envs=data["num_envs"],
+            unroll_length=data["unroll_length"],
+            eval_every=data["eval_every"],
+        )
+    )
+    kept = (
+        "env methods seeds iterations label_ratios noise_stds seed action_scale num_demos "
+        "chunk_iterations fisher fisher_subsample cpu_devices demos conf"
+    ).split()
+    return {
+        **{key: data[key] for key in kept if key in data},
+        "settings": settings,
+        "classifier": {"num_steps": data["classifier_steps"]},
+        "resolved": {"demos_path": data["demos"]},
+        "provenance": {
+            key: data[key] for key in ("platform", "device_count", "local_device_count")
+        },
+    }
+
+
+def provenance(argv: list[str] | None = None, program: str | None = None) -> dict[str, Any]:
+    """Where and with what a run ran: versions, git commit, devices, the command line
+    (``python -m <program> <argv>`` when ``program`` names the module, so that it can be run
+    again as it stands)."""
+    import jax
+
+    def version(package: str) -> str | None:
+        try:
+            return metadata.version(package)
+        except metadata.PackageNotFoundError:
+            return None
+
+    devices = jax.devices()
+    return {
+        "pngail_jax_version": version("pngail-jax"),
+        "git_commit": _git_commit(),
+        "python": platform.python_version(),
+        "libraries": {
+            name: version(name)
+            for name in ("jax", "jaxlib", "flax", "optax", "brax", "mujoco", "mujoco-mjx")
+        },
+        "platform": devices[0].platform,
+        "device_kind": devices[0].device_kind,
+        # XLA compiles for the CPU it runs on and under XLA_FLAGS: two runs give the same
+        # bits only on the same CPU model with the same flags (docs/sweep.md).
+        "cpu_model": _cpu_model(),
+        "xla_flags": os.environ.get("XLA_FLAGS", ""),
+        "device_count": len(devices),
+        "local_device_count": len(jax.local_devices()),
+        "process_count": jax.process_count(),
+        "command_line": [
+            *(["python", "-m", program] if program else [Path(sys.argv[0]).name]),
+            *(sys.argv[1:] if argv is None else argv),
+        ],
+    }
+
+
+def _cpu_model() -> str:
+    """The host CPU's model name (Linux's /proc/cpuinfo), else what the platform says."""
+    try:
+        with open("/proc/cpuinfo") as file:
+            for line in file:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def _git_commit() -> str | None:
+    """The checkout's commit (with ``+dirty`` when files differ), or None outside git."""
+    root = Path(__file__).resolve().parent.parent
+    try:
+        toplevel = subprocess.run(
+            ["git", "rev-parse", "--show-toplevel"],
+            cwd=root,
+            capture_output=True,
+            text=True,
+            timeout=5,
+        )
+        if toplevel.returncode != 0 or Path(toplevel.stdout.strip()).resolve() != root:
+            return None  # an installed copy, possibly inside another project's checkout
+        commit = subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=5
+        )
+        if commit.returncode != 0:
+            return None
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=root,
+            capture_output=True,
+            text=True,
+            timeout=5,
+        )
+        return commit.stdout.strip() + ("+dirty" if dirty.stdout.strip() else "")
+    except (OSError, subprocess.SubprocessError):
+        return None

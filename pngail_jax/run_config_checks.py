@@ -1,0 +1,132 @@
+"""The checks of a ``RunConfig`` that read its fields together, run when a config is made
+(``RunConfig.__post_init__``, after each field is normalised to its type): the names each
+field must be among (the methods: registered or importable presets, each once), the checks
+between fields, and those of the demonstrations' companion fields. Each failure is a
+``ConfigError`` naming the field (the command line names its flag)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+from pngail_jax import envs
+from pngail_jax.adversarial import AdversarialHyperparams
+from pngail_jax.grid import METHOD_AXES
+from pngail_jax.methods import ALL_METHOD_NAMES, PRESETS, check_preset, resolve
+from pngail_jax.rl.learners import LEARNERS
+from pngail_jax.tracking import BACKENDS as LOG_BACKENDS
+from pngail_jax.validation import fail, is_among
+
+FISHER_FORMS = ("gauss_newton", "hessian")
+
+
+def check_names(config) -> None:
+    """The names each field must be among: methods, the Fisher form, log backends."""
+    if not config.methods:
+        fail(
+            "methods",
+            f"must name at least one method; available: {', '.join(ALL_METHOD_NAMES)}",
+        )
+    unknown = [
+        name for name in config.methods
+        if not isinstance(name, str) or (":" not in name and name not in PRESETS)
+    ]  # fmt: skip
+    if unknown:
+        fail(
+            "methods",
+            f": unknown method(s) {unknown}; available: {', '.join(PRESETS)}, or "
+            "package.module:preset",
+        )
+    for name in config.methods:  # a registered name, or package.module:preset, imported
+        try:
+            resolve(name)
+        except ValueError as error:
+            fail("methods", f": {error}")
+    if len(set(config.methods)) != len(config.methods):
+        fail("methods", f"must not repeat, got {list(config.methods)}")
+    if not is_among(config.learner, LEARNERS):
+        fail("learner", f"must be one of {LEARNERS}, got {config.learner!r}")
+    if not is_among(config.fisher, FISHER_FORMS):
+        fail("fisher", f"must be one of {FISHER_FORMS}, got {config.fisher!r}")
+    bad_backends = [name for name in config.log if not is_among(name, LOG_BACKENDS)]
+    if bad_backends:
+        fail(
+            "log",
+            f": unknown log backend(s) {bad_backends}; available: {', '.join(LOG_BACKENDS)}",
+        )
+    if len(set(config.log)) != len(config.log):
+        fail("log", f"backends must not repeat, got {list(config.log)}")
+    if config.baseline is not None and config.baseline not in config.methods:
+        fail("baseline", f"must be one of the run's methods {list(config.methods)}, got "
+             f"{config.baseline!r}")  # fmt: skip
+    for field, values in config.grid_axes:  # a hyperparameter's range
+        if field in METHOD_AXES:
+            continue
+        for value in values:
+            try:
+                AdversarialHyperparams.create(learner=config.learner, **{field: value})
+            except ValueError as error:
+                fail("grid_axes", f": {field}={value:g}: {error}")
+    for name in config.methods:  # every value of a coefficient axis, on every method
+        for field, values in config.grid_axes:
+            if field not in METHOD_AXES:
+                continue
+            preset = resolve(name)
+            for value in values:
+                changed = {**preset.coefficients, field: value}
+                try:
+                    check_preset(name, dataclasses.replace(preset, coefficients=changed))
+                except ValueError as error:
+                    fail("grid_axes", f": {field}={value:g} on {error}")
+
+
+def check_between_fields(config) -> None:
+    """The checks between fields: the run's length and its task's settings, the
+    normalised return's ends, the demonstrations and their companion fields."""
+    if config.iterations % config.settings.eval_every:
+        fail(
+            "iterations",
+            f"({config.iterations}) must be a multiple of the evaluation interval "
+            f"({config.settings.eval_every}, settings.eval_every)",
+        )
+    if config.settings.physics is not None and config.env not in envs.GYM_TASKS:
+        fail(
+            "settings.physics",
+            f": only gymnasium's MuJoCo tasks ({', '.join(envs.GYM_TASKS)}) have a choice of "
+            f"engine, not {config.env}",
+            name="RunSettings.physics",
+        )
+    if config.env == "Pendulum-v1" and config.settings.env_options:
+        cap = next(iter(config.settings.env_options))  # the first solver cap set
+        fail(
+            f"settings.{cap}",
+            ": Pendulum-v1 has no MJX solver (its solver caps stay None)",
+            name=f"RunSettings.{cap}",
+        )
+    config.adversarial_config()  # the trainer's own checks (e.g. samples per iteration)
+    if config.random_return is not None and config.optimal_return is None:
+        fail("random_return", "needs optimal_return (the normalised return's other end)")
+    if None not in (config.random_return, config.optimal_return) and not (
+        config.optimal_return > config.random_return
+    ):
+        fail(
+            "optimal_return",
+            f"({config.optimal_return}) must be above random_return ({config.random_return})",
+        )
+    check_demonstration_fields(config)
+
+
+def check_demonstration_fields(config) -> None:
+    if config.conf is not None and config.demos is None:
+        fail("conf", ": a confidence file needs demos (made demonstrations carry their own)")
+    is_minari = config.demos is not None and config.demos.startswith("minari:")
+    if config.confidence_field is not None and not is_minari:
+        fail(
+            "confidence_field",
+            "reads a Minari dataset's episode metadata: demos minari:<id>",
+        )
+    if (
+        config.demos is not None
+        and config.demos.endswith(".npz")
+        and (config.conf is not None or config.action_scale not in (None, 1.0))
+    ):
+        fail("demos", ": an .npz set carries its confidences and units: no conf or action_scale")
