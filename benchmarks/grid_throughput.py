@@ -432,8 +432,8 @@ def rerun_with_host_devices(num_devices: int, argv) -> int:
     return subprocess.run(command, env=environment).returncode
 
 
-def parse_args(argv=None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def _add_grid_flags(parser: argparse.ArgumentParser) -> None:
+    """What each grid is: its task, sizes, chunk, classifier, Fisher form and learner."""
     parser.add_argument(
         "--env",
         choices=envs.ENV_NAMES,
@@ -472,6 +472,11 @@ def parse_args(argv=None) -> argparse.Namespace:
         help="the policy learner under every method (default trpo); trpo,ppo measures both "
         "in this run, side by side",
     )
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    _add_grid_flags(parser)
     parser.add_argument("--devices", type=int, default=None, help="shard every grid over N devices")
     parser.add_argument(
         "--quick",
@@ -502,6 +507,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     flags.add_settings_flags(parser)
     args = parser.parse_args(argv)
     args.argv = list(sys.argv[1:] if argv is None else argv)
+    return _checked(parser, args)
+
+
+def _checked(parser: argparse.ArgumentParser, args: argparse.Namespace) -> argparse.Namespace:
+    """The flags' values resolved (sizes, classifier steps, demonstrations, settings) and
+    checked, naming the flag of a bad one."""
     if args.sizes is None:
         args.sizes = QUICK_SIZES if args.quick else SIZES
     else:

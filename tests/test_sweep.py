@@ -506,7 +506,6 @@ def test_a_record_keeps_the_run_small_and_checks_itself(finished, tmp_path, caps
     final evaluation); --check finds each kind of damage."""
     import gzip
 
-    from pngail_jax import run_records
     from pngail_jax.programs import record as program
 
     [folder] = program.main([str(finished), "--name", "tiny", "--records", str(tmp_path)])
@@ -540,7 +539,18 @@ def test_a_record_keeps_the_run_small_and_checks_itself(finished, tmp_path, caps
     (other / "notes.txt").write_text("mine")
     with pytest.raises(SystemExit, match="holds files a record does not .notes.txt."):
         program.main([str(finished), "--name", "other", "--records", str(tmp_path)])
-    # Damage: a metrics file changed, a stated return edited, a cell cut out.
+
+
+def test_record_check_finds_each_kind_of_damage(finished, tmp_path):
+    """--check refuses a changed metrics file, an edited stated return or late share, and a
+    cell cut out; a folder without a run is named."""
+    import gzip
+
+    from pngail_jax import run_records
+    from pngail_jax.programs import record as program
+
+    [folder] = program.main([str(finished), "--name", "tiny", "--records", str(tmp_path)])
+    record = json.loads((folder / "record.json").read_text())
     good = (folder / "metrics.csv.gz").read_bytes()
     (folder / "metrics.csv.gz").write_bytes(good[:-10])
     with pytest.raises(SystemExit, match="metrics.csv.gz differs from what the record wrote"):

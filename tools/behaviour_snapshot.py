@@ -604,60 +604,20 @@ def _shown(command: list[str]) -> str:
 
 
 def run(args) -> int:
+    """Runs the selected invocations on ``--repo`` into ``--out`` and writes the manifest."""
     repo = Path(args.repo).resolve()
     out = Path(args.out).resolve()
     cache = Path(args.cache).resolve() if args.cache else None
-    if out.exists() and any(out.iterdir()):
-        if not args.overwrite:
-            sys.exit(f"{out} is not empty (--overwrite to empty it)")
-        import shutil
-
-        shutil.rmtree(out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / LOGS).mkdir()
-    env = {**os.environ, "PYTHONPATH": str(repo), "PYTHONHASHSEED": "0", "MPLBACKEND": "Agg"}
-    if cache is not None:
-        env["PNGAIL_JAX_COMPILATION_CACHE"] = str(cache)
     python = args.python or sys.executable
-    where = subprocess.run(
-        [python, "-c", "import pngail_jax; print(pngail_jax.__file__)"],
-        cwd=repo, env=env, capture_output=True, text=True, check=False,
-    )  # fmt: skip
-    imported = where.stdout.strip()
-    if where.returncode or not Path(imported).resolve().is_relative_to(repo):
-        sys.exit(f"pngail_jax imports from {imported or where.stderr.strip()}, not from {repo}")
-    print(f"pngail_jax from {imported}")
+    env, imported = _prepare_run(repo, out, cache, python, args.overwrite)
     before_status = _git_status(repo)
     selected = [
         i
         for i in INVOCATIONS
         if not args.only or any(i.name.startswith(o) for o in args.only.split(","))
     ]
-    commands = []
     started = time.monotonic()
-    for invocation in selected:
-        command = _command(invocation, out, python)
-        print(
-            f"[{time.monotonic() - started:6.0f}s] {invocation.name}: {_shown(command)}", flush=True
-        )
-        t0 = time.monotonic()
-        log = out / LOGS / invocation.name.replace("/", "__")
-        if invocation.makedirs:
-            (out / invocation.name).mkdir(parents=True, exist_ok=True)
-        with open(f"{log}.stdout", "wb") as stdout, open(f"{log}.stderr", "wb") as stderr:
-            done = subprocess.run(command, cwd=repo, env=env, stdout=stdout, stderr=stderr,
-                                  check=False)  # fmt: skip
-        wall = time.monotonic() - t0
-        print(f"         exit {done.returncode} in {wall:.1f}s", flush=True)
-        if done.returncode:
-            print(
-                "         " + Path(f"{log}.stderr").read_text()[-2000:].replace("\n", "\n         ")
-            )
-        commands.append({
-            "name": invocation.name, "program": invocation.program, "note": invocation.note,
-            "command": _shown(command).replace(str(out), "<OUT>").replace(python, "python"),
-            "exit_status": done.returncode, "wall_seconds": round(wall, 1),
-        })  # fmt: skip
+    commands = [_run_one(invocation, repo, out, env, python, started) for invocation in selected]
     meta = {
         "repo": str(repo),
         "out": str(out),
@@ -678,6 +638,53 @@ def run(args) -> int:
     if meta["created_in_repo"]:
         print(f"WARNING: new or changed files in {repo}: {meta['created_in_repo']}")
     return 1 if failed else 0
+
+
+def _prepare_run(repo: Path, out: Path, cache, python: str, overwrite: bool):
+    """An empty ``out`` and the programs' environment; checks that ``repo``'s code is what
+    imports. Returns (environment, where pngail_jax imports from)."""
+    if out.exists() and any(out.iterdir()):
+        if not overwrite:
+            sys.exit(f"{out} is not empty (--overwrite to empty it)")
+        import shutil
+
+        shutil.rmtree(out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / LOGS).mkdir()
+    env = {**os.environ, "PYTHONPATH": str(repo), "PYTHONHASHSEED": "0", "MPLBACKEND": "Agg"}
+    if cache is not None:
+        env["PNGAIL_JAX_COMPILATION_CACHE"] = str(cache)
+    where = subprocess.run(
+        [python, "-c", "import pngail_jax; print(pngail_jax.__file__)"],
+        cwd=repo, env=env, capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    imported = where.stdout.strip()
+    if where.returncode or not Path(imported).resolve().is_relative_to(repo):
+        sys.exit(f"pngail_jax imports from {imported or where.stderr.strip()}, not from {repo}")
+    print(f"pngail_jax from {imported}")
+    return env, imported
+
+
+def _run_one(invocation, repo: Path, out: Path, env: dict, python: str, started: float) -> dict:
+    """Runs one invocation, its stdout and stderr logged under OUT/LOGS: its manifest row."""
+    command = _command(invocation, out, python)
+    print(f"[{time.monotonic() - started:6.0f}s] {invocation.name}: {_shown(command)}", flush=True)
+    t0 = time.monotonic()
+    log = out / LOGS / invocation.name.replace("/", "__")
+    if invocation.makedirs:
+        (out / invocation.name).mkdir(parents=True, exist_ok=True)
+    with open(f"{log}.stdout", "wb") as stdout, open(f"{log}.stderr", "wb") as stderr:
+        done = subprocess.run(command, cwd=repo, env=env, stdout=stdout, stderr=stderr,
+                              check=False)  # fmt: skip
+    wall = time.monotonic() - t0
+    print(f"         exit {done.returncode} in {wall:.1f}s", flush=True)
+    if done.returncode:
+        print("         " + Path(f"{log}.stderr").read_text()[-2000:].replace("\n", "\n         "))
+    return {
+        "name": invocation.name, "program": invocation.program, "note": invocation.note,
+        "command": _shown(command).replace(str(out), "<OUT>").replace(python, "python"),
+        "exit_status": done.returncode, "wall_seconds": round(wall, 1),
+    }  # fmt: skip
 
 
 def write_manifest(out: Path, meta: dict) -> None:
@@ -755,10 +762,29 @@ def _git_status(repo: Path) -> list[str]:
 
 
 def compare(args) -> int:
+    """Compares two snapshots' manifests; 1 when a difference that counts is found."""
     a_dir, b_dir = Path(args.a), Path(args.b)
     a = json.loads((a_dir / MANIFEST).read_text())
     b = json.loads((b_dir / MANIFEST).read_text())
-    failures = 0
+    rows = _file_rows(a, b, args.strict)
+    failures = sum(counts for *_, counts in rows)
+    _print_file_rows(a_dir, b_dir, a, b, rows, args.all)
+    failures += _compare_commands(a, b)
+    differing = _compare_skipped_and_streams(a, b)
+    if args.diff:
+        for status, _kind, name, _counts in rows:
+            if status == "differ":
+                _show_diff(a_dir, b_dir, name, args.diff)
+        for key in differing:
+            cmd, stream = key.rsplit(" ", 1)
+            rel = f"{LOGS}/{cmd.replace('/', '__')}.{stream}"
+            _show_diff(a_dir, b_dir, rel, args.diff)
+    print(f"\n{'DIFFERENT' if failures else 'SAME'}: {failures} difference(s) that count")
+    return 1 if failures else 0
+
+
+def _file_rows(a: dict, b: dict, strict: bool) -> list[tuple]:
+    """(status, kind, file, counts) of every file in either manifest."""
     rows = []
     for name in sorted(set(a["files"]) | set(b["files"])):
         ea, eb = a["files"].get(name), b["files"].get(name)
@@ -770,11 +796,14 @@ def compare(args) -> int:
             status = "only in A"
         else:
             status = "same" if ea["sha256"] == eb["sha256"] else "differ"
-        counts = status != "same" and (numeric or args.strict)
-        failures += counts
+        counts = status != "same" and (numeric or strict)
         rows.append((status, kind, name, counts))
+    return rows
+
+
+def _print_file_rows(a_dir, b_dir, a: dict, b: dict, rows: list[tuple], show_all: bool) -> None:
     width = max((len(r[2]) for r in rows), default=10)
-    shown = rows if args.all else [r for r in rows if r[0] != "same"]
+    shown = rows if show_all else [r for r in rows if r[0] != "same"]
     summary: dict[str, int] = {}
     for status, *_ in rows:
         summary[status] = summary.get(status, 0) + 1
@@ -782,10 +811,14 @@ def compare(args) -> int:
     print(f"{'status':10} {'kind':17} {'file':{width}}  counts")
     for status, kind, name, counts in shown:
         print(f"{status:10} {kind:17} {name:{width}}  {'FAIL' if counts else ''}")
-    if not args.all:
+    if not show_all:
         print(f"(... and {summary.get('same', 0)} files the same; --all lists them)")
     print("\nfiles: " + ", ".join(f"{v} {k}" for k, v in sorted(summary.items())))
-    # Exit statuses of the commands.
+
+
+def _compare_commands(a: dict, b: dict) -> int:
+    """Commands whose exit status differs (each counts)."""
+    failures = 0
     status_a = {c["name"]: c["exit_status"] for c in a["commands"]}
     status_b = {c["name"]: c["exit_status"] for c in b["commands"]}
     for name in sorted(set(status_a) | set(status_b)):
@@ -794,6 +827,12 @@ def compare(args) -> int:
             print(
                 f"command {name}: exit {status_a.get(name)} in A, {status_b.get(name)} in B  FAIL"
             )
+    return failures
+
+
+def _compare_skipped_and_streams(a: dict, b: dict) -> list[str]:
+    """Prints the skipped files present on one side and the differing stdout / stderr
+    streams (never failures); returns those streams."""
     # Skipped files (png, OCDBT pointers): listed, only their presence compared.
     skipped_a, skipped_b = set(a["skipped"]), set(b["skipped"])
     print(
@@ -808,16 +847,7 @@ def compare(args) -> int:
         f"stdout/stderr (secondary, never a failure): {len(streams_a)} streams, "
         f"differ: {_some(differing)}"
     )
-    if args.diff:
-        for status, _kind, name, _counts in rows:
-            if status == "differ":
-                _show_diff(a_dir, b_dir, name, args.diff)
-        for key in differing:
-            cmd, stream = key.rsplit(" ", 1)
-            rel = f"{LOGS}/{cmd.replace('/', '__')}.{stream}"
-            _show_diff(a_dir, b_dir, rel, args.diff)
-    print(f"\n{'DIFFERENT' if failures else 'SAME'}: {failures} difference(s) that count")
-    return 1 if failures else 0
+    return differing
 
 
 def _some(names: list[str], shown: int = 10) -> str:
