@@ -125,24 +125,9 @@ def iteration_rounds(context: PhaseContext, config: CAILConfig, spec, state, age
     fresh batch. agent_inputs float[N, O + A] is this iteration's rollout; ``state`` the
     trainer's state before the iteration. Returns ``((discriminator params, its Adam state,
     beta float[M]), metrics)``, the metrics averaged over the rounds."""
-    trajectories, discriminator = context.trajectories, context.discriminator
-    features = jnp.concatenate([trajectories.observations, trajectories.actions], axis=-1)
-    valid = trajectories.valid
+    batch_loss, ranking_loss = _round_losses(context, state, agent_inputs)
     ranked = state.ranked_trajectories.astype(jnp.float32)
     num_agent = agent_inputs.shape[0]
-
-    def batch_loss(params, beta, agent_rows, demo_rows):
-        logits_agent = discriminator.apply(params, agent_inputs[agent_rows])
-        logits_demo = discriminator.apply(params, context.demo_inputs[state.demo_rows[demo_rows]])
-        return inner_loss(logits_agent, logits_demo, beta[demo_rows])
-
-    def ranking_loss(params, index):
-        returns = trajectory_returns(
-            lambda x: policy_reward(discriminator.apply(params, x)),
-            features[index],
-            valid[index],
-        )
-        return margin_ranking_loss(returns, trajectories.score[index])
 
     def round_(carry, round_key):
         params, optimizer_state, beta = carry
@@ -190,6 +175,30 @@ def iteration_rounds(context: PhaseContext, config: CAILConfig, spec, state, age
     metrics["cail/skipped_steps"] *= config.num_rounds  # a count per iteration
     beta = carry[2]
     return carry, {**metrics, "cail/beta_std": beta.std(), "cail/beta_max": beta.max()}
+
+
+def _round_losses(context: PhaseContext, state, agent_inputs):
+    """A round's two losses of the discriminator's parameters: the confidence-weighted one on
+    rows of the rollout and of the split, ``batch_loss(params, beta, agent_rows, demo_rows)``,
+    and the margin ranking one on ranked trajectories, ``ranking_loss(params, index)``."""
+    trajectories, discriminator = context.trajectories, context.discriminator
+    features = jnp.concatenate([trajectories.observations, trajectories.actions], axis=-1)
+    valid = trajectories.valid
+
+    def batch_loss(params, beta, agent_rows, demo_rows):
+        logits_agent = discriminator.apply(params, agent_inputs[agent_rows])
+        logits_demo = discriminator.apply(params, context.demo_inputs[state.demo_rows[demo_rows]])
+        return inner_loss(logits_agent, logits_demo, beta[demo_rows])
+
+    def ranking_loss(params, index):
+        returns = trajectory_returns(
+            lambda x: policy_reward(discriminator.apply(params, x)),
+            features[index],
+            valid[index],
+        )
+        return margin_ranking_loss(returns, trajectories.score[index])
+
+    return batch_loss, ranking_loss
 
 
 class CailPhase(Phase):

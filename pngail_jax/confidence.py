@@ -211,13 +211,10 @@ def train_classifier(
     init_key, train_key = jax.random.split(key)
     params = model.init(init_key, inputs[0], deterministic=True)
     optimizer = optax.amsgrad(config.learning_rate)
-    num_labelled = labelled.sum()
-    beta = (inputs.shape[0] - num_labelled) / inputs.shape[0]
+    beta, unlabelled_weights, positive_branch, labelled_p, unlabelled_p = _training_constants(
+        config, confidence, labelled
+    )
     width = config.unlabelled_batch_width
-    unlabelled_weights = _unlabelled_weights(config, inputs.shape[0], num_labelled)
-    positive_branch = jnp.sum(jnp.where(labelled, confidence, 0.0)) / num_labelled > 0.5
-    labelled_p = labelled / num_labelled
-    unlabelled_p = (~labelled) / jnp.maximum((~labelled).sum(), 1)
 
     def loss_fn(params, batch_labelled, batch_unlabelled, dropout_key):
         key_c, key_u = jax.random.split(dropout_key)
@@ -249,6 +246,19 @@ def train_classifier(
     )
     logits = model.apply(params, inputs, deterministic=True)
     return jnp.where(labelled, confidence, jax.nn.sigmoid(logits)), logits, metrics
+
+
+def _training_constants(config: ClassifierConfig, confidence, labelled):
+    """What a classifier's training reads of its split: beta = n_u / N, the unlabelled rows'
+    weights, SC's branch (the labelled mean above 0.5), and the labelled and unlabelled rows'
+    sampling probabilities float[N]."""
+    num_rows, num_labelled = labelled.shape[0], labelled.sum()
+    beta = (num_rows - num_labelled) / num_rows
+    unlabelled_weights = _unlabelled_weights(config, num_rows, num_labelled)
+    positive_branch = jnp.sum(jnp.where(labelled, confidence, 0.0)) / num_labelled > 0.5
+    labelled_p = labelled / num_labelled
+    unlabelled_p = (~labelled) / jnp.maximum((~labelled).sum(), 1)
+    return beta, unlabelled_weights, positive_branch, labelled_p, unlabelled_p
 
 
 def confidence_errors(predicted, true_confidence, labelled):

@@ -458,33 +458,7 @@ class OfflineTrainer:
             fixed["ilid"] = (selected, ilid_union, state.ilid_weight[rows])
 
         def policy_loss(params):
-            nll_expert = -self._log_density(params, expert).sum(-1)
-            nll_union = -self._log_density(params, union).sum(-1)
-            loss = spec.expert_bc_coef * nll_expert.mean() + spec.union_bc_coef * nll_union.mean()
-            terms = {"policy/nll_expert": nll_expert.mean(), "policy/nll_union": nll_union.mean()}
-            if "dwbc" in fixed:
-                nll_other = -self._log_density(params, other).sum(-1)
-                dwbc, dwbc_terms = dwbc_policy_loss(
-                    nll_expert, nll_other, *fixed["dwbc"], spec.dwbc_alpha, spec.dwbc_eta
-                )
-                loss += spec.dwbc_coef * dwbc
-                terms |= dwbc_terms
-            if "iswbc_weights" in fixed:
-                iswbc, iswbc_terms = weighted_nll(
-                    nll_union, fixed["iswbc_weights"], spec.iswbc_cutoff
-                )
-                loss += spec.iswbc_coef * iswbc
-                terms |= iswbc_terms
-            if "ilid" in fixed:  # its codebase: mean_{E+S}[w nll] + mean_S[nll]
-                selected, ilid_union, weights = fixed["ilid"]
-                nll_selected = -self._log_density(params, selected).sum(-1)
-                nll_ilid_union = -self._log_density(params, ilid_union).sum(-1)
-                weighted, _ = weighted_nll(nll_ilid_union, weights)
-                loss += spec.ilid_coef * (weighted + nll_selected.mean())
-                terms |= {"ilid/weighted_nll": weighted, "ilid/nll_selected": nll_selected.mean(),
-                          "ilid/mean_weight": weights.mean()}  # fmt: skip
-            loss += 0.5 * spec.policy_weight_decay * squared_norm(params)
-            return loss, {**terms, "policy/loss": loss}
+            return self._policy_loss(spec, params, expert, union, other, fixed)
 
         grads, policy_metrics = jax.grad(policy_loss, has_aux=True)(state.policy_params)
         params, optimizer_state = adam_step(
@@ -501,6 +475,37 @@ class OfflineTrainer:
             **fields,
         )
         return state, {**metrics, **policy_metrics}
+
+    def _policy_loss(self, spec: OfflineSpec, params, expert, union, other, fixed):
+        """The policy's loss on this step's batches: BC on the expert and union rows by
+        the spec's coefficients, plus DWBC's, ISW-BC's and ILID's weighted terms where
+        compiled (``fixed``: their discriminators' outputs, held fixed), plus weight decay.
+        Returns (loss, metrics)."""
+        nll_expert = -self._log_density(params, expert).sum(-1)
+        nll_union = -self._log_density(params, union).sum(-1)
+        loss = spec.expert_bc_coef * nll_expert.mean() + spec.union_bc_coef * nll_union.mean()
+        terms = {"policy/nll_expert": nll_expert.mean(), "policy/nll_union": nll_union.mean()}
+        if "dwbc" in fixed:
+            nll_other = -self._log_density(params, other).sum(-1)
+            dwbc, dwbc_terms = dwbc_policy_loss(
+                nll_expert, nll_other, *fixed["dwbc"], spec.dwbc_alpha, spec.dwbc_eta
+            )
+            loss += spec.dwbc_coef * dwbc
+            terms |= dwbc_terms
+        if "iswbc_weights" in fixed:
+            iswbc, iswbc_terms = weighted_nll(nll_union, fixed["iswbc_weights"], spec.iswbc_cutoff)
+            loss += spec.iswbc_coef * iswbc
+            terms |= iswbc_terms
+        if "ilid" in fixed:  # its codebase: mean_{E+S}[w nll] + mean_S[nll]
+            selected, ilid_union, weights = fixed["ilid"]
+            nll_selected = -self._log_density(params, selected).sum(-1)
+            nll_ilid_union = -self._log_density(params, ilid_union).sum(-1)
+            weighted, _ = weighted_nll(nll_ilid_union, weights)
+            loss += spec.ilid_coef * (weighted + nll_selected.mean())
+            terms |= {"ilid/weighted_nll": weighted, "ilid/nll_selected": nll_selected.mean(),
+                      "ilid/mean_weight": weights.mean()}  # fmt: skip
+        loss += 0.5 * spec.policy_weight_decay * squared_norm(params)
+        return loss, {**terms, "policy/loss": loss}
 
     def _dwbc_update(self, spec, state: OfflineState, expert, other, step):
         """DWBC's discriminator on (obs, action, the policy's log-density feature): its
