@@ -193,6 +193,15 @@ def seal(path: str | Path, document) -> None:
     write_json(path, {"sealed": document, "sha256": json_digest(document)})
 
 
+def write_sealed(path: str | Path, document, seal_path: str | Path, sealed=None) -> None:
+    """Writes a run's ``document`` (config.json, paper.json) to ``path`` after its seal at
+    ``seal_path`` (of ``sealed``, the part a resume checks; None: the whole document), so
+    that the document never exists without its seal. Every job that begins a run writes
+    its record so."""
+    seal(seal_path, document if sealed is None else sealed)
+    write_json(path, document)
+
+
 def sealed_differences(path: str | Path, document, prefix: str = "") -> list[str] | None:
     """The fields where ``document`` differs from the sealed one at ``path`` (``"a.b: was X,
     now Y"``), [] when equal, None when there is no seal (a run from an older version);

@@ -217,7 +217,7 @@ def verify_run(
     directory = Path(directory)
     if output_owner(directory) not in RUN_PROGRAMS:
         raise UntrustedRun(f"{who}: holds no sweep or offline run")
-    document, notes = _sealed_config(directory, who, allow_unsealed)
+    document, notes = sealed_document(directory, who, allow_unsealed=allow_unsealed)
     inputs = changed_inputs(recorded_inputs(document)) if check_inputs else []
     if inputs:
         raise UntrustedRun(
@@ -233,33 +233,51 @@ def verify_run(
     return notes
 
 
-def _sealed_config(directory: Path, who: str, allow_unsealed: bool) -> tuple[dict, list[str]]:
-    """The run's config.json once it equals its seal (or, with ``allow_unsealed``, has none:
-    then a note says so), and the notes; else ``UntrustedRun`` naming what differs."""
+UNSEALED_REMEDY = "restore the seal, or pass --allow-unsealed to go on unchecked"
+
+
+def sealed_document(
+    directory: Path,
+    who: str,
+    *,
+    name: str = "config.json",
+    what: str = "run config",
+    seal_name: str | None = None,
+    part=sealed_part,
+    allow_unsealed: bool = False,
+    unsealed_remedy: str = UNSEALED_REMEDY,
+) -> tuple[dict, list[str]]:
+    """The one read of a run's record (a sweep's or offline run's config.json, train_rl's,
+    the paper plan's paper.json, each written by ``integrity.write_sealed``): the document
+    ``name`` (a ``what``, in messages) once ``part(document)`` equals its seal
+    ``seal_name`` (default ``integrity.CONFIG_SEAL``), or, with ``allow_unsealed``, has none
+    (a note says so), and the notes; else ``UntrustedRun`` starting with ``who`` and naming
+    what differs."""
     from pngail_jax.integrity import CONFIG_SEAL, sealed_differences
 
+    seal_name = seal_name or CONFIG_SEAL
     try:
-        document = read_json(directory / "config.json", "run config")
+        document = read_json(directory / name, what)
         if not isinstance(document, dict):
             raise IntegrityError("not a JSON object")
-        changes = sealed_differences(directory / CONFIG_SEAL, sealed_part(document))
+        changes = sealed_differences(directory / seal_name, part(document))
     except FileNotFoundError:
-        raise UntrustedRun(f"{who}: no config.json there") from None
+        raise UntrustedRun(f"{who}: no {name} there") from None
     except (OSError, IntegrityError) as error:
         raise UntrustedRun(f"{who}: {error}") from None
     if changes is None and not allow_unsealed:
         raise UntrustedRun(
-            f"{who}: its seal {CONFIG_SEAL} is missing (a copy without its dot-files, or a run "
-            "from before seals), so its config.json cannot be checked against what the run "
-            "began with; restore the seal, or pass --allow-unsealed to go on unchecked"
+            f"{who}: its seal {seal_name} is missing (a copy without its dot-files, or a run "
+            f"from before seals), so its {name} cannot be checked against what the run began "
+            f"with; {unsealed_remedy}"
         )
     if changes:
         raise UntrustedRun(
-            f"{who}: config.json was changed since the run began ({'; '.join(changes[:3])}"
+            f"{who}: {name} was changed since the run began ({'; '.join(changes[:3])}"
             + (f"; and {len(changes) - 3} more" if len(changes) > 3 else "")
             + "): a run keeps what it began with; restore the file"
         )
-    unsealed = [f"{who}: no seal, config.json unchecked (--allow-unsealed)"]
+    unsealed = [f"{who}: no seal, {name} unchecked (--allow-unsealed)"]
     return document, unsealed if changes is None else []
 
 

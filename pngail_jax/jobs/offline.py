@@ -24,7 +24,7 @@ from pngail_jax import settings as run_settings
 from pngail_jax.config_record import provenance
 from pngail_jax.demos import DemonstrationError
 from pngail_jax.grid import Grid, make_cells, nonfinite_cells
-from pngail_jax.integrity import CONFIG_SEAL, IntegrityError, read_json, seal, write_json
+from pngail_jax.integrity import CONFIG_SEAL, IntegrityError, read_json, write_json, write_sealed
 from pngail_jax.jobs.chunks import (
     Progress,
     blocks_per_chunk,
@@ -222,8 +222,7 @@ def _begin(claim, out: Path, document: dict) -> None:
     """A new run's folder: claimed, its config sealed and written first, so that a run cut
     short can resume (and a config.json never exists without its seal)."""
     claim.prepare()
-    seal(out / CONFIG_SEAL, sealed_part(document))
-    write_json(out / "config.json", document)
+    write_sealed(out / "config.json", document, out / CONFIG_SEAL, sealed_part(document))
 
 
 def _check_resumable(out: Path, config: OfflineRunConfig) -> None:

@@ -20,8 +20,7 @@ from pngail_jax.integrity import (
     IntegrityError,
     changed_inputs,
     read_json,
-    seal,
-    write_json,
+    write_sealed,
 )
 from pngail_jax.jobs.build import BuiltRun
 from pngail_jax.jobs.demonstrations import input_files
@@ -170,8 +169,7 @@ def write_config(out: Path, run: BuiltRun, command: Sequence[str] | None = None)
     # What the run is created with, apart from the file a user may edit: every resume
     # compares config.json with it (provenance aside) and refuses a change, naming it.
     # Sealed first, so that a config.json never exists without its seal.
-    seal(out / SEAL, sealed_part(document))
-    write_json(out / "config.json", document)
+    write_sealed(out / "config.json", document, out / SEAL, sealed_part(document))
 
 
 def already_complete(out: Path) -> bool:

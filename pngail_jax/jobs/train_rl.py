@@ -27,13 +27,9 @@ from pngail_jax import validation
 from pngail_jax.checkpoint import save_trpo_policies
 from pngail_jax.integrity import (
     CONFIG_SEAL,
-    IntegrityError,
     atomic_path,
-    read_json,
-    seal,
-    sealed_differences,
-    write_json,
     write_manifest,
+    write_sealed,
 )
 from pngail_jax.jobs.chunks import nanmean
 from pngail_jax.jobs.errors import RunError, refusals
@@ -42,6 +38,7 @@ from pngail_jax.outputs import claimed, output_owner
 from pngail_jax.report import write_seed_metrics_csv
 from pngail_jax.rl import PPOConfig, TRPOHyperparams, TRPOTrainer
 from pngail_jax.rl.learners import LEARNERS, learner_hyperparams, make_learner
+from pngail_jax.runs import UntrustedRun, sealed_document
 
 PROGRAM = "train_rl"  # the owner its directories are marked with (pngail_jax.outputs)
 # metrics.csv's columns after seed and iteration, by learner.
@@ -156,8 +153,7 @@ def train_rl(
             check_resumable(out, document)
         else:
             claim.prepare()
-            seal(out / CONFIG_SEAL, document)  # first: config.json never exists without it
-            write_json(out / "config.json", document)
+            write_sealed(out / "config.json", document, out / CONFIG_SEAL)
         _train(config, env, out)
     return out
 
@@ -171,22 +167,17 @@ def check_resumable(out: Path, document: dict) -> None:
     if (out / "policy.json").exists():
         raise RunError(f"--resume {out}: the run is complete (its policy.json is written)")
     try:
-        changes = sealed_differences(out / CONFIG_SEAL, document)
-        saved = read_json(out / "config.json", "train_rl run config")
-    except IntegrityError as error:
-        raise RunError(f"--resume {out}: {error}") from None
-    if changes is None:
-        raise RunError(
-            f"--resume {out}: its seal {CONFIG_SEAL} is missing (a copy made without its "
-            "dot-files, or a run from before train_rl sealed its config), so what the run "
-            "began with cannot be checked; start a new run"
-        )
-    if changes or saved != document:
-        listed = "; ".join(changes[:5]) or "config.json differs from its flags"
-        raise RunError(
-            f"cannot resume {out}: config.json was changed since the run began, or these "
-            f"flags give another run ({listed}); start a new run"
-        )
+        saved, _ = sealed_document(
+            out, f"--resume {out}", what="train_rl run config", part=lambda document: document,
+            unsealed_remedy="start a new run",
+        )  # fmt: skip
+    except UntrustedRun as error:
+        raise RunError(str(error)) from None
+    if saved != document:
+        listed = "; ".join(f"{key}: {saved.get(key)!r} -> {document.get(key)!r}"
+                           for key in sorted(set(saved) | set(document))
+                           if saved.get(key) != document.get(key))  # fmt: skip
+        raise RunError(f"cannot resume {out}: these flags give another run ({listed})")
 
 
 def _train(config: TrainRLConfig, env, out: Path) -> None:

@@ -18,9 +18,7 @@ from pngail_jax.integrity import (
     changed_inputs,
     file_record,
     read_json,
-    seal,
-    sealed_differences,
-    write_json,
+    write_sealed,
 )
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.outputs import claimed
@@ -28,6 +26,7 @@ from pngail_jax.paper.adopt import adopt_grids, finished_sweep
 from pngail_jax.paper.grids import demo_paths, planned_configs, released_files, run_grids
 from pngail_jax.paper.page import write_page
 from pngail_jax.paper.plan import BUDGETS, FIGURES, PAPER_TASKS, RENAMED_BUDGETS, plan
+from pngail_jax.runs import UntrustedRun, sealed_document
 
 PROGRAM = "paper"
 
@@ -106,8 +105,7 @@ def run_paper(
         figures, grids = _plan_or_refuse(options, released)
         if not resume:
             claim.prepare()
-            write_json(out / "paper.json", options)
-            seal(out / PAPER_SEAL, options)
+            write_sealed(out / "paper.json", options, out / PAPER_SEAL)
         print(
             f"{len(figures)} figure(s) from {len(grids)} grid(s) on "
             f"{', '.join(options['envs'])} at the {options['budget']} preset; the authors' "
@@ -224,18 +222,14 @@ def saved_options(out: Path, flag: str = "--resume") -> dict:
     """A resumed (or with ``flag`` another flag's) plan's options: its paper.json, checked
     against its seal and the presets."""
     path = out / "paper.json"
-    try:
-        options = read_json(path, "paper run options")
-        changes = sealed_differences(out / PAPER_SEAL, options)
-    except IntegrityError as error:
-        raise RunError(f"{flag} {out}: {error}") from None
-    if changes:
-        raise RunError(
-            f"{flag} {out}: paper.json was changed since the run began ("
-            + "; ".join(changes[:5])
-            + "): restore it, or start a new run"
-        )
-    if not isinstance(options, dict) or "budget" not in options:
+    try:  # a plan from before paper.json was sealed has no seal: it goes on
+        options, _ = sealed_document(
+            out, f"{flag} {out}", name="paper.json", what="paper run options", seal_name=PAPER_SEAL,
+            part=lambda document: document, allow_unsealed=True,
+        )  # fmt: skip
+    except UntrustedRun as error:
+        raise RunError(str(error)) from None
+    if "budget" not in options:
         raise RunError(f"{flag} {out}: {path} is not a paper run's options")
     budget = RENAMED_BUDGETS.get(options["budget"], options["budget"])
     if budget not in BUDGETS:
