@@ -49,11 +49,6 @@ class PhaseContext:
     trajectories: object | None = None
     row_trajectory: jax.Array | None = None
 
-    @property
-    def batch_size(self) -> int:
-        """B = T x N: rows of one rollout (and of the discriminator's batch on each side)."""
-        return self.num_envs * self.unroll_length
-
 
 class InitKeys(NamedTuple):
     """The keys of the phases' ``init``, split once from the cell's phase key (so every
