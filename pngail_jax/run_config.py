@@ -100,7 +100,7 @@ class RunConfig:
     baseline: str | None = None
     seed: int = 0  # base PRNG seed; cell keys are fold_in(key(seed), cell seed)
     # Demonstrations: a *_mixture.npy (authors' layout), an .npz, or "minari:<dataset id>";
-    # None: made with pngail_jax.jobs.make_demos and cached (jobs.demonstrations.load_or_make_demos).
+    # None: made with pngail_jax.jobs.make_demos and cached (jobs.demonstrations).
     demos: str | None = None
     conf: str | None = None  # confidence file (default: the mixture's sibling)
     confidence_field: str | None = None  # Minari: the per-episode field holding confidences
