@@ -397,15 +397,15 @@ def test_adoption_refuses_unfinished_and_different_sweeps(tmp_path):
 def test_an_unset_action_scale_compares_as_the_scale_the_loader_applies():
     """A sweep of the authors' Pendulum file given no --action-scale runs on its known scale
     (2), as the plan's grid, which names it: adoptable. Another scale is not."""
-    from pngail_jax.paper.adopt import comparable
+    from pngail_jax.paper.adopt import adoption_fields
     from pngail_jax.run_config import RunConfig
 
     def config(scale, name="Pendulum-v1_mixture.npy"):
         return RunConfig(env="Pendulum-v1", demos=f"/data/{name}", action_scale=scale)
 
-    assert comparable(config(None)) == comparable(config(2.0))
-    assert comparable(config(None)) != comparable(config(1.0))
-    assert comparable(config(None, "Hopper-v2_mixture.npy"))["action_scale"] == 1.0
+    assert adoption_fields(config(None)) == adoption_fields(config(2.0))
+    assert adoption_fields(config(None)) != adoption_fields(config(1.0))
+    assert adoption_fields(config(None, "Hopper-v2_mixture.npy"))["action_scale"] == 1.0
 
 
 def test_the_made_experts_learner_is_the_demo_learner_and_the_grids_keep_theirs(

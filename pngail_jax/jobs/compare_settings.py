@@ -167,7 +167,7 @@ def write_comparison(config: CompareSettingsConfig, out: Path, results: dict, cu
     return summary
 
 
-def read_curves(directory: Path) -> tuple[np.ndarray, np.ndarray]:
+def read_arm_curves(directory: Path) -> tuple[np.ndarray, np.ndarray]:
     """(env_steps int[I], eval returns float[seeds, I]) at the evaluated iterations."""
     ((steps, returns),) = read_evaluations(directory / "metrics.csv", "eval/return").values()
     return steps, returns
@@ -234,7 +234,7 @@ def evaluate_arms(config: CompareSettingsConfig, directories: dict) -> tuple[dic
     evaluators = {}
     results, curves = {}, {}
     for arm, directory in directories.items():
-        curves[arm] = read_curves(directory)
+        curves[arm] = read_arm_curves(directory)
         saved = json.loads((directory / "config.json").read_text())
         metadata, arrays = saved_policies(directory)
         final = {}

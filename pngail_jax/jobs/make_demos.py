@@ -162,7 +162,7 @@ def make_claimed(config: MakeDemosConfig, claim: Claim) -> Path:
     episodes = CheckpointEpisodes(env, config.trpo_config)
     picked = pick_policies(config, env, snapshots, episodes)
     demos = roll_out_mixture(config, env, picked, episodes)
-    path = write_outputs(out, demos, {k: demos.metadata[k] for k in NORMALIZER_KEYS})
+    path = write_demonstrations(out, demos, {k: demos.metadata[k] for k in NORMALIZER_KEYS})
     print(policies_table(picked))
     _, first_rows = np.unique(demos.trajectory_ids, return_index=True)
     confidences = [float(c) for c in demos.confidence[np.sort(first_rows)]]
@@ -342,7 +342,7 @@ def _labelled_rows(parts, env, picked: Picked):
 NORMALIZER_KEYS = ("env", "random_return", "optimal_return")
 
 
-def write_outputs(out: Path, demos: Demonstrations, normalizer: dict) -> Path:
+def write_demonstrations(out: Path, demos: Demonstrations, normalizer: dict) -> Path:
     """``normalizer.json``, then ``demos.npz`` (the mark of a finished run), each written to
     a temporary sibling and renamed, so a kill never leaves a truncated file behind."""
     atomic_write_text(out / "normalizer.json", json.dumps(normalizer, indent=2))

@@ -227,7 +227,7 @@ def as_saved(config: RunConfig, saved: SavedRun) -> RunConfig:
     return config
 
 
-def comparable(config: RunConfig) -> dict:
+def resume_comparable(config: RunConfig) -> dict:
     """``config.to_dict()`` with its file paths normalised (``a/../b`` is ``b``)."""
     document = config.to_dict()
     for name in ("demos", "conf"):

@@ -104,8 +104,8 @@ def _config_to_run(config, out: Path, resume: bool, saved, allow_unsealed: bool 
     """The config a run trains (a resumed run's own) and its saved record (None if new)."""
     if resume:
         saved = saved or record.load_saved(out, allow_unsealed)
-        given = None if config is None else record.comparable(record.as_saved(config, saved))
-        if given is not None and given != record.comparable(saved.config):
+        given = None if config is None else record.resume_comparable(record.as_saved(config, saved))
+        if given is not None and given != record.resume_comparable(saved.config):
             raise RunError(
                 f"resume {out}: the config given differs from the run's config.json; pass None "
                 "to continue the run as it began"

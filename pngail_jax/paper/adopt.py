@@ -104,12 +104,12 @@ def matching_grid(directory: Path, saved: dict, configs: Mapping[str, RunConfig]
     """The name of the planned grid whose config ``saved`` (a config.json) is, up to
     ``ADOPT_IGNORES``; else ``RunError`` naming the differences from the grid of its task."""
     try:
-        given = comparable(RunConfig.from_dict(saved))
+        given = adoption_fields(RunConfig.from_dict(saved))
     except ValueError as error:
         raise RunError(f"--adopt {directory}: {error}") from None
     differences = {}
     for name, config in configs.items():
-        planned = comparable(config)
+        planned = adoption_fields(config)
         changed = [key for key in planned if planned[key] != given.get(key)]
         if not changed:
             return name
@@ -123,12 +123,12 @@ def matching_grid(directory: Path, saved: dict, configs: Mapping[str, RunConfig]
     name, changed = min(differences.items(), key=lambda item: len(item[1]))
     raise RunError(
         f"--adopt {directory}: not the plan's grid {name}: "
-        + "; ".join(f"{key} {given.get(key)!r}, the plan's {comparable(configs[name])[key]!r}"
+        + "; ".join(f"{key} {given.get(key)!r}, the plan's {adoption_fields(configs[name])[key]!r}"
                     for key in changed[:4])
     )  # fmt: skip
 
 
-def comparable(config: RunConfig) -> dict:
+def adoption_fields(config: RunConfig) -> dict:
     """``config``'s fields but ``ADOPT_IGNORES``, as JSON would hold them (tuples as lists),
     with the action scale the loader applies in place of None (a sweep of the authors'
     Pendulum file given no ``--action-scale`` runs on its known scale, 2, as the plan does)."""

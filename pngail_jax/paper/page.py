@@ -27,7 +27,7 @@ from pngail_jax.report import LATE_LABEL, group_label, late_evaluations
 # -- the results page ------------------------------------------------------------------------
 
 
-def read_curves(directory: Path) -> dict[tuple[str, str], dict[str, np.ndarray]]:
+def read_grid_curves(directory: Path) -> dict[tuple[str, str], dict[str, np.ndarray]]:
     """(method, setting) -> {"steps": int[T], "normalized": float[seeds, T]} from a grid's
     metrics.csv, evaluated iterations only (``report.read_evaluations``)."""
     from pngail_jax.report import read_evaluations
@@ -272,7 +272,10 @@ def figure_results(out: Path, figures: list[Figure], grids) -> dict:
     the grids' curves and summaries under ``out/grids``."""
     shown = {s.grid for figure in figures for series in figure.panels.values() for s in series}
     loaded = {
-        name: (read_curves(out / "grids" / name), read_json(out / "grids" / name / "summary.json"))
+        name: (
+            read_grid_curves(out / "grids" / name),
+            read_json(out / "grids" / name / "summary.json"),
+        )
         for name in grids
         if name in shown
     }
