@@ -160,10 +160,6 @@ def assert_a_page_so_far_shows_what_ran(out, text, capsys):
     """--page writes the page of a plan's grids as they are into its own folder, touching
     nothing in the plan: a finished plan's as its own page; a grid in progress at the
     iteration it reached, a task not started left out, each said; no outputs, one line."""
-    import shutil
-
-    from pngail_jax.integrity import seal
-    from pngail_jax.paper.run import PAPER_SEAL
 
     before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
     page = paper.main(["--page", str(out), "--out", str(out.parent / "page")]).read_text()
@@ -186,7 +182,17 @@ def assert_a_page_so_far_shows_what_ran(out, text, capsys):
     assert "--page writes the page of the plan in DIR as it is: drop --preset" in (
         capsys.readouterr().err
     )
-    # The same plan on two tasks, its Pendulum grid at iteration 2 of 4 and Hopper not begun.
+    assert_a_page_of_a_partial_plan(out)
+
+
+def assert_a_page_of_a_partial_plan(out):
+    """The same plan on two tasks, its Pendulum grid at iteration 2 of 4 and Hopper not
+    begun: the page says what ran, what is in progress and what has not started."""
+    import shutil
+
+    from pngail_jax.integrity import seal
+    from pngail_jax.paper.run import PAPER_SEAL
+
     partial = out.parent / "partial"
     shutil.copytree(out, partial)
     options = json.loads((partial / "paper.json").read_text())
