@@ -24,3 +24,35 @@ def test_the_config_walk_climbs_no_layer_and_counts_what_it_cannot_follow(capsys
     assert out["stays"] >= out["rooms"] > 10  # it walked the package, not an empty tree
     assert "jobs.sweep (layer jobs)" in out["rooms_list"]
     assert f"{out['stays']} stays in {out['rooms']} rooms" in capsys.readouterr().out
+
+
+def test_the_snapshot_drops_wall_clock_columns_and_compare_fails_on_a_result(tmp_path, capsys):
+    """A CSV differing only in its wall_seconds column normalises to the same text; two
+    manifests that differ in a numeric file make ``compare`` exit 1, equal ones 0."""
+    import json
+
+    tool = _tool("behaviour_snapshot")
+    context = tool.Context.for_run(tmp_path, tmp_path / "out", None)
+    first = b"iteration,method,eval/return,wall_seconds\n1,gail,-150.5,3.2\n"
+    later = b"iteration,method,eval/return,wall_seconds\n1,gail,-150.5,9.9\n"
+    changed = b"iteration,method,eval/return,wall_seconds\n1,gail,-150.4,3.2\n"
+    text, dropped = tool.normalise_csv(first, context)
+    assert dropped == ["wall_seconds"] and text == tool.normalise_csv(later, context)[0]
+    assert text != tool.normalise_csv(changed, context)[0]
+
+    def manifest(folder, sha):
+        folder.mkdir()
+        entry = {"kind": "csv", "numeric": True, "sha256": sha}
+        document = {"files": {"sweep/metrics.csv": entry}, "commands": [], "skipped": {},
+                    "streams (secondary)": {}}  # fmt: skip
+        (folder / tool.MANIFEST).write_text(json.dumps(document))
+        return str(folder)
+
+    a, b, c = (
+        manifest(tmp_path / "a", "1"),
+        manifest(tmp_path / "b", "1"),
+        manifest(tmp_path / "c", "2"),
+    )
+    assert tool.main(["compare", a, b]) == 0
+    assert tool.main(["compare", a, c]) == 1
+    assert "DIFFERENT: 1 difference(s) that count" in capsys.readouterr().out
