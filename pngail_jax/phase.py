@@ -29,6 +29,7 @@ import jax.numpy as jnp
 from flax import linen as nn
 
 from pngail_jax import envs
+from pngail_jax.rl.on_policy import OnPolicyLearner
 
 
 @dataclasses.dataclass(frozen=True)
@@ -37,7 +38,7 @@ class PhaseContext:
     between cells or iterations)."""
 
     env: envs.Env
-    learner: object  # the policy learner (``rl.learners.make_learner``): TRPO or PPO
+    learner: OnPolicyLearner  # the policy learner (``rl.learners.make_learner``): TRPO or PPO
     discriminator: nn.Module  # the adversarial discriminator z(s, a)
     demo_inputs: jax.Array  # float[N, O + A]: every demonstration row, actions clipped
     action_bounds: tuple[jax.Array, jax.Array]  # (low, high), float[A] each
