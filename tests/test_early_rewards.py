@@ -35,6 +35,8 @@ def test_the_job_refuses_bad_settings_and_an_existing_file_before_any_work(tmp_p
         EarlyRewardsConfig(str(PENDULUM), iterations=5, every=10)
     with pytest.raises(ValueError, match="classifier_steps"):
         EarlyRewardsConfig(str(PENDULUM), classifier_steps=0)
+    with pytest.raises(SystemExit, match=r"iterations \(15\) must be a multiple of every \(10\)"):
+        early_rewards.main(["--demos", str(PENDULUM), "--iterations", "15", "--every", "10"])
     existing = tmp_path / "early.json"
     existing.write_text("{}")
     with pytest.raises(RunError, match="exists"):

@@ -59,6 +59,11 @@ class EarlyRewardsConfig:
     def __post_init__(self):
         if not (self.seeds >= 1 and self.iterations >= self.every >= 1):
             raise ValueError("need seeds >= 1 and iterations >= every >= 1")
+        if self.iterations % self.every:
+            raise ValueError(
+                f"iterations ({self.iterations}) must be a multiple of every ({self.every}): "
+                "a reading ends each block of every iterations"
+            )
         if self.classifier_steps < 1:
             raise ValueError("classifier_steps must be positive")
 

@@ -46,10 +46,10 @@ def parse_args(argv=None):
 def main(argv=None) -> dict:
     """Runs the job of the flags and returns its readings."""
     args = parse_args(argv)
-    config = EarlyRewardsConfig(
-        str(args.demos), args.seeds, args.iterations, args.every, args.classifier_steps
-    )
     try:
+        config = EarlyRewardsConfig(
+            str(args.demos), args.seeds, args.iterations, args.every, args.classifier_steps
+        )
         return early_rewards(config, args.out)
-    except RunError as error:
-        raise SystemExit(str(error)) from None
+    except (RunError, ValueError) as error:
+        raise SystemExit(f"early_rewards: {error}") from None
