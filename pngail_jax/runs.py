@@ -236,6 +236,16 @@ def verify_run(
 UNSEALED_REMEDY = "restore the seal, or pass --allow-unsealed to go on unchecked"
 
 
+def changed_inputs_refusal(changes: list[str], who: str, what: str, remedy: str) -> str:
+    """The one line that refuses to go on with a ``what`` (a run, a plan) whose input files
+    changed since it began (``changes``: ``integrity.changed_inputs``' lines), naming each
+    file and the ``remedy``."""
+    return (
+        f"{who}: {'; '.join(changes)}. The rest of the {what} would train on other data than "
+        f"its start: {remedy}"
+    )
+
+
 def sealed_document(
     directory: Path,
     who: str,

@@ -27,7 +27,7 @@ from pngail_jax.jobs.demonstrations import input_files
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.methods import preset_record
 from pngail_jax.run_config import RunConfig
-from pngail_jax.runs import sealed_part
+from pngail_jax.runs import changed_inputs_refusal, sealed_part
 from pngail_jax.validation import ConfigError
 
 
@@ -133,12 +133,10 @@ def check_inputs(saved: SavedRun, allow_changed: bool) -> None:
     changes = changed_inputs(saved.inputs)
     if not changes:
         return
-    listing = "; ".join(changes)
     if not allow_changed:
-        raise RunError(
-            f"cannot resume: {listing}. The rest of the run would train on other data than "
-            "its start. Restore the file, or pass --allow-changed-inputs to go on anyway."
-        )
+        remedy = "restore the file, or pass --allow-changed-inputs to go on anyway"
+        raise RunError(changed_inputs_refusal(changes, "cannot resume", "run", remedy))
+    listing = "; ".join(changes)
     print(f"WARNING: {listing}; going on (--allow-changed-inputs): the run mixes data sets")
 
 

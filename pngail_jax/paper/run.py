@@ -26,7 +26,7 @@ from pngail_jax.paper.adopt import adopt_grids, finished_sweep
 from pngail_jax.paper.grids import demo_paths, planned_configs, released_files, run_grids
 from pngail_jax.paper.page import write_page
 from pngail_jax.paper.plan import BUDGETS, FIGURES, PAPER_TASKS, RENAMED_BUDGETS, plan
-from pngail_jax.runs import UntrustedRun, sealed_document
+from pngail_jax.runs import UntrustedRun, changed_inputs_refusal, sealed_document
 
 PROGRAM = "paper"
 
@@ -269,8 +269,5 @@ def check_paper_inputs(out: Path, options: dict, released: dict[str, Path]) -> N
     if missing and not changes:
         changes = [f"the authors' files for {', '.join(missing)} are no longer found"]
     if changes:
-        raise RunError(
-            f"--resume {out}: {'; '.join(changes)}. The rest of the plan would run on other "
-            "data than its start: restore the files (the folder in paper.json's "
-            "released_demos), or start a new run"
-        )
+        remedy = "restore the files (the folder in paper.json's released_demos), or start a new run"
+        raise RunError(changed_inputs_refusal(changes, f"--resume {out}", "plan", remedy))
