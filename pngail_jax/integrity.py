@@ -213,10 +213,12 @@ def sealed_differences(path: str | Path, document, prefix: str = "") -> list[str
     sealed = record.get("sealed") if isinstance(record, dict) else None
     if sealed is None or json_digest(sealed) != record.get("sha256"):
         raise IntegrityError(f"{path}: damaged (its content differs from its digest)")
-    return _differences(sealed, document, prefix)
+    return document_differences(sealed, document, prefix)
 
 
-def _differences(was, now, prefix: str) -> list[str]:
+def document_differences(was, now, prefix: str = "") -> list[str]:
+    """The fields where JSON document ``now`` differs from ``was``, one line each
+    (``"a.b: was X, now Y"``, ``added``, ``removed``); [] when equal."""
     if isinstance(was, dict) and isinstance(now, dict):
         found = []
         for key in sorted(set(was) | set(now), key=str):
@@ -226,7 +228,7 @@ def _differences(was, now, prefix: str) -> list[str]:
             elif key not in was:
                 found.append(f"{name}: added ({json.dumps(now[key])})")
             else:
-                found += _differences(was[key], now[key], f"{name}.")
+                found += document_differences(was[key], now[key], f"{name}.")
         return found
     if was != now:
         return [f"{prefix.rstrip('.')}: was {json.dumps(was)}, now {json.dumps(now)}"]

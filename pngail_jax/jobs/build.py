@@ -13,9 +13,8 @@ from pngail_jax import settings as run_settings
 from pngail_jax.adversarial import AdversarialTrainer
 from pngail_jax.demos import DemonstrationError, action_scale_note
 from pngail_jax.grid import Cell, Grid, make_cells, stack_cells
-from pngail_jax.jobs import demonstrations as run_demonstrations
 from pngail_jax.jobs.chunks import blocks_per_chunk
-from pngail_jax.jobs.demonstrations import RunDemonstrations
+from pngail_jax.jobs.demonstrations import RunDemonstrations, prepare
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.run_config import RunConfig
 from pngail_jax.tracking import ticking
@@ -54,7 +53,7 @@ def build_run(config: RunConfig, saved=None) -> BuiltRun:
     demonstrations and normaliser are those it began with)."""
     cells = run_cells(config)
     env = make_run_env(config, cells)
-    demonstrations = run_demonstrations.prepare(config, env, saved)
+    demonstrations = prepare(config, env, saved)
     return build(config, env, cells, demonstrations, resumed=saved is not None)
 
 

@@ -28,6 +28,7 @@ from pngail_jax.checkpoint import save_trpo_policies
 from pngail_jax.integrity import (
     CONFIG_SEAL,
     atomic_path,
+    document_differences,
     write_manifest,
     write_sealed,
 )
@@ -173,10 +174,9 @@ def check_resumable(out: Path, document: dict) -> None:
         )  # fmt: skip
     except UntrustedRun as error:
         raise RunError(str(error)) from None
-    if saved != document:
-        listed = "; ".join(f"{key}: {saved.get(key)!r} -> {document.get(key)!r}"
-                           for key in sorted(set(saved) | set(document))
-                           if saved.get(key) != document.get(key))  # fmt: skip
+    changes = document_differences(saved, document)
+    if changes:
+        listed = "; ".join(changes[:5])
         raise RunError(f"cannot resume {out}: these flags give another run ({listed})")
 
 
