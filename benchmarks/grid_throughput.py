@@ -126,7 +126,7 @@ from pngail_jax.grid import Grid, make_cells, nonfinite_cells, stack_cells
 from pngail_jax.methods import METHOD_NAMES
 from pngail_jax.programs import flags
 from pngail_jax.rl.learners import LEARNERS
-from pngail_jax.rl.trpo import TRPO
+from pngail_jax.rl.trpo import TRPO, TRPOConfig
 
 DEFAULT_ENV = "Pendulum-v1"
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -175,7 +175,7 @@ def full_episode_trpo(env_name: str, settings, train, cells: int) -> TRPO | None
         if settings.physics == "warp":
             options["warp_batch"] = cells * max(settings.num_envs, settings.num_eval_episodes)
     env = envs.make(env_name, terminate_when_unhealthy=False, **options)
-    return TRPO(train.config.trpo, env)
+    return TRPO(train.config.rollout, env, train.config.trpo)
 
 
 @contextlib.contextmanager
@@ -313,7 +313,7 @@ def measure_grid(args, train, full_trpo, size: int, devices, key) -> dict:
         eval_seconds_full,
         grid.iterations_per_chunk,
         args.run_settings.eval_every,
-        grid.num_cells * train.config.trpo.batch_size,
+        grid.num_cells * train.config.rollout.batch_size,
     )
     return {
         **costs,
@@ -333,7 +333,8 @@ def make_grid_train(args, env, demos):
     """The adversarial trainer of one chunk: ``--iterations`` iterations, one evaluation."""
     chunk_settings = args.run_settings.replace(eval_every=args.iterations)
     config = AdversarialConfig(
-        trpo=chunk_settings.trpo_config(args.iterations, fisher=args.fisher),
+        rollout=chunk_settings.rollout_config(args.iterations),
+        trpo=TRPOConfig(fisher=args.fisher),
         classifier=ClassifierConfig(num_steps=args.classifier_steps),
         num_demos=None,
         learner=args.learner,

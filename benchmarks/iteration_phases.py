@@ -76,6 +76,7 @@ from pngail_jax.methods import method_spec, stack
 from pngail_jax.rl.gae import generalized_advantages
 from pngail_jax.rl.trpo import (
     TRPO,
+    TRPOConfig,
     backtracking_line_search,
     conjugate_gradient,
 )
@@ -167,7 +168,8 @@ class Phases:
         # The split holds every row; a short classifier phase (only init uses it).
         self.trainer = AdversarialTrainer(
             AdversarialConfig(
-                trpo=self.config,
+                rollout=self.config,
+                trpo=trpo.trpo,
                 classifier=ClassifierConfig(num_steps=10),
                 num_demos=num_demo_rows,
             ),
@@ -250,7 +252,7 @@ class Phases:
 
     def conjugate_gradient(self, hyperparams, state, batch: PolicyBatch, loss_gradient):
         _, _, product = self.policy_problem(hyperparams, state, batch)
-        return conjugate_gradient(product, -loss_gradient, self.config.num_cg_iterations)
+        return conjugate_gradient(product, -loss_gradient, self.trpo.trpo.num_cg_iterations)
 
     def full_step(self, hyperparams, state, batch: PolicyBatch, loss_gradient, direction):
         """``natural_gradient_step``'s scaling of the CG direction to the KL bound:
@@ -263,7 +265,11 @@ class Phases:
     def line_search(self, hyperparams, state, batch, full_step, expected_improvement):
         flat_params, surrogate_loss, _ = self.policy_problem(hyperparams, state, batch)
         return backtracking_line_search(
-            surrogate_loss, flat_params, full_step, expected_improvement, self.config.num_backtracks
+            surrogate_loss,
+            flat_params,
+            full_step,
+            expected_improvement,
+            self.trpo.trpo.num_backtracks,
         )
 
     def update(self, hyperparams, state, transitions, rewards):
@@ -478,28 +484,27 @@ def parse_arguments(argv=None) -> argparse.Namespace:
 def main(argv=None) -> None:
     args = parse_arguments(argv)
     settings = settings_for(args.env, num_envs=args.num_envs, unroll_length=args.unroll_length)
-    config = settings.trpo_config(
-        num_iterations=settings.eval_every, fisher=args.fisher, gae_form=args.gae_form
-    )
-    trpo = TRPO(config, make_env(args.env, settings))
+    config = settings.rollout_config(num_iterations=settings.eval_every, gae_form=args.gae_form)
+    trpo_config = TRPOConfig(fisher=args.fisher)
+    trpo = TRPO(config, make_env(args.env, settings), trpo_config)
     evaluation_trpo = None
     if args.env in TERMINATING_ENVS:
         options = dict(settings.env_options)
         if args.env in envs.GYM_TASKS:
             options["physics"] = settings.physics
         never_ending = envs.make(args.env, terminate_when_unhealthy=False, **options)
-        evaluation_trpo = TRPO(config, never_ending)
+        evaluation_trpo = TRPO(config, never_ending, trpo_config)
     common = {
         "env": args.env,
         "cells": args.cells,
         "num_envs": config.num_envs,
         "unroll_length": config.unroll_length,
-        "fisher": config.fisher,
+        "fisher": trpo_config.fisher,
         "gae_form": config.gae_form,
         **context(),
     }
     print(
-        f"{args.env}, {args.cells} cells, {describe(settings)}; fisher {config.fisher}, "
+        f"{args.env}, {args.cells} cells, {describe(settings)}; fisher {trpo_config.fisher}, "
         f"update GAE {config.gae_form}; {args.demo_rows} demo rows; device {common['device']}, "
         f"jax {jax.__version__}",
         flush=True,

@@ -7,9 +7,9 @@ median of 3 calls. Steps/s counts training transitions only:
 compile; peak memory is XLA's ``memory_analysis()`` (arguments + outputs + temporaries -
 aliased). ``train_over_env_ratio`` divides by environment-only steps/s at the same total width
 (num_envs * seeds), measured in the same run with ``env_throughput.measure``. Rows: reference
-fidelity (``TRPOConfig()``: Hessian Fisher products on every sample) and the speed options
-``fisher="gauss_newton"``, ``fisher_subsample=5`` and both. Pendulum-v1 runs the reference's
-25 envs x 200 steps; Brax tasks 16 x 64 so that a CPU finishes.
+fidelity (``TRPOConfig(fisher="hessian")``: Hessian Fisher products on every sample) and the
+speed options ``fisher="gauss_newton"``, ``fisher_subsample=5`` and both. Pendulum-v1 runs
+the reference's 25 envs x 200 steps; Brax tasks 16 x 64 so that a CPU finishes.
 
     python benchmarks/trpo_throughput.py --quick                 # Pendulum, seeds 1,5, 2 rows
     python benchmarks/trpo_throughput.py --brax-seeds 1,5 --json rows.json  # 8 min, 2-core CPU
@@ -48,8 +48,8 @@ from common import (
 )  # fmt: skip
 
 from pngail_jax import envs
-from pngail_jax.rl.on_policy import TRPOConfig
-from pngail_jax.rl.trpo import TRPO, TRPOHyperparams
+from pngail_jax.rl.on_policy import RolloutConfig
+from pngail_jax.rl.trpo import TRPO, TRPOConfig, TRPOHyperparams
 
 REFERENCE_SPEED = 4400.0  # the authors' PyTorch TRPO on Pendulum-v1, one core, training only
 REFERENCE_NOTE = (
@@ -57,28 +57,32 @@ REFERENCE_NOTE = (
     "run; a Pendulum-v1 figure, so for other envs it only sets a scale)"
 )
 VARIANTS = {
-    "reference": {},
+    "reference": {"fisher": "hessian"},
     "gauss_newton": {"fisher": "gauss_newton"},
-    "subsample5": {"fisher_subsample": 5},
+    "subsample5": {"fisher": "hessian", "fisher_subsample": 5},
     "gauss_newton+subsample5": {"fisher": "gauss_newton", "fisher_subsample": 5},
 }
 QUICK_VARIANTS = ("reference", "gauss_newton+subsample5")
 
 
-def make_config(env_name: str, variant: str) -> TRPOConfig:
+def make_configs(env_name: str, variant: str) -> tuple[RolloutConfig, TRPOConfig]:
+    """The rollout's shape for ``env_name`` and TRPO's settings of ``variant``."""
     sizes = {} if env_name == "Pendulum-v1" else {"num_envs": 16, "unroll_length": 64}
-    return TRPOConfig(**sizes, **VARIANTS[variant])
+    return RolloutConfig(**sizes), TRPOConfig(**VARIANTS[variant])
 
 
 def initial_states(env_name: str, env, num_seeds: int, key: jax.Array):
     """TRPOState with a leading seed axis; the Fisher options do not change its shapes."""
-    trpo = TRPO(make_config(env_name, "reference"), env)
+    rollout, trpo_config = make_configs(env_name, "reference")
+    trpo = TRPO(rollout, env, trpo_config)
     return jax.jit(jax.vmap(trpo.init))(jax.random.split(key, num_seeds))
 
 
-def measure_training(config, env, states, num_iterations: int, mesh=None) -> dict:
-    """Compiles and times ``num_iterations`` rollout+update iterations of every seed in states."""
-    trpo = TRPO(config, env)
+def measure_training(configs, env, states, num_iterations: int, mesh=None) -> dict:
+    """Compiles and times ``num_iterations`` rollout+update iterations of every seed in states
+    (``configs``: the rollout's and TRPO's, as ``make_configs`` gives them)."""
+    config, trpo_config = configs
+    trpo = TRPO(config, env, trpo_config)
     hyperparams = TRPOHyperparams.create()
     num_seeds = jax.tree.leaves(states)[0].shape[0]
 
@@ -116,7 +120,7 @@ def sharding_measurements(num_devices: int, num_iterations: int) -> dict:
     """Pendulum-v1, reference fidelity, 5N seeds: on one device, then sharded over N."""
     if jax.device_count() < num_devices:
         raise RuntimeError(f"needs {num_devices} devices, jax sees {jax.devices()}")
-    env, config = envs.make("Pendulum-v1"), make_config("Pendulum-v1", "reference")
+    env, config = envs.make("Pendulum-v1"), make_configs("Pendulum-v1", "reference")
     states = initial_states("Pendulum-v1", env, 5 * num_devices, jax.random.key(0))
     result = {"one_device": measure_training(config, env, states, num_iterations)}
     if num_devices > 1:
@@ -177,20 +181,20 @@ def training_rows(names, seed_counts, brax_seed_counts, variants, num_iterations
     for name in names:
         env = envs.make(name)
         for num_seeds in seed_counts if name == "Pendulum-v1" else brax_seed_counts:
-            width = make_config(name, "reference").num_envs * num_seeds
+            width = make_configs(name, "reference")[0].num_envs * num_seeds
             key, env_key, init_key = jax.random.split(key, 3)
             env_speed = env_ceiling(env, width, scan_length(name, width, False), env_key)
             env_speed = env_speed["steps_per_second"]
             print(f"{name} width {width}: env only {env_speed:,.0f} steps/s", flush=True)
             states = initial_states(name, env, num_seeds, init_key)
             for variant in variants:
-                config = make_config(name, variant)
-                result = measure_training(config, env, states, num_iterations)
+                config, trpo_config = make_configs(name, variant)
+                result = measure_training((config, trpo_config), env, states, num_iterations)
                 speed = result["steps_per_second"]
                 extra = {
                     "unroll_length": config.unroll_length,
-                    "fisher": config.fisher,
-                    "fisher_subsample": config.fisher_subsample,
+                    "fisher": trpo_config.fisher,
+                    "fisher_subsample": trpo_config.fisher_subsample,
                     "env_steps_per_second": env_speed,
                     "train_over_env_ratio": speed / env_speed,
                     "speedup_vs_reference": speed / REFERENCE_SPEED,
@@ -253,7 +257,7 @@ def main(argv=None) -> None:
         rows = training_rows(
             names, seed_counts, brax_seed_counts, variants, args.iterations, common
         )
-        sizes = [(name, make_config(name, "reference")) for name in names]
+        sizes = [(name, make_configs(name, "reference")[0]) for name in names]
         sizes = "; ".join(f"{n}: {c.num_envs} envs x {c.unroll_length} steps" for n, c in sizes)
         print(f"\n{sizes}; {args.iterations} iterations per call; speed-up {REFERENCE_NOTE}.\n")
         print(rows_table(rows), flush=True)

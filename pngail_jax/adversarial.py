@@ -43,20 +43,22 @@ from pngail_jax.method_checks import check_label_ratios, check_methods
 from pngail_jax.methods import PHASES, MethodSpec
 from pngail_jax.networks import Discriminator
 from pngail_jax.phase import PhaseContext, PhaseSet
-from pngail_jax.rl.learners import check_learner, learner_hyperparams, make_learner
-from pngail_jax.rl.on_policy import TRPOConfig, run_evaluated_blocks
+from pngail_jax.rl.learners import check_batch, learner_hyperparams, make_learner
+from pngail_jax.rl.on_policy import RolloutConfig, run_evaluated_blocks
 from pngail_jax.rl.ppo import PPOConfig, PPOHyperparams, PPOState
-from pngail_jax.rl.trpo import TRPOHyperparams, TRPOState
+from pngail_jax.rl.trpo import TRPOConfig, TRPOHyperparams, TRPOState
 
 
 @dataclasses.dataclass(frozen=True)
 class AdversarialConfig:
     """Static settings (shapes, counts, schedules) of an adversarial run."""
 
-    # The rollout's shape and the policy and value networks (both learners), TRPO's settings.
-    trpo: TRPOConfig = TRPOConfig()
-    # The policy learner, "trpo" (the paper's) or "ppo" (``rl.learners``), and PPO's settings.
+    # The rollout's shape, the run's length and the policy and value networks (both learners).
+    rollout: RolloutConfig = RolloutConfig()
+    # The policy learner, "trpo" (the paper's) or "ppo" (``rl.learners``), and each one's
+    # own settings (the one that does not run is not read).
     learner: str = "trpo"
+    trpo: TRPOConfig = TRPOConfig()
     ppo: PPOConfig = PPOConfig()
     classifier: ClassifierConfig = ClassifierConfig()
     # Rows per split (the paper's n_c + n_u); None = every demonstration row.
@@ -79,9 +81,7 @@ class AdversarialConfig:
     gradient_penalty: bool = False
 
     def __post_init__(self):
-        check_learner(self.learner)
-        if self.learner == "ppo":
-            self.ppo.check_batch(self.trpo)
+        check_batch(self.learner, self.rollout, self.ppo, self.trpo)
         unknown = [phase for phase in self.phases if phase not in PHASES]
         if unknown or len(set(self.phases)) != len(self.phases):
             raise ValueError(
@@ -202,7 +202,7 @@ class AdversarialTrainer:
         self.num_demos = num_demos
         self.has_confidence = demos.confidence is not None
         # The policy learner, TRPO or PPO (``rl.learners``).
-        self.learner = make_learner(config.learner, config.trpo, env, config.ppo)
+        self.learner = make_learner(config.learner, config.rollout, env, config.ppo, config.trpo)
         self.discriminator = Discriminator(config.discriminator_hidden_sizes)
         self.optimizer = optax.scale_by_adam()
         # One action space on both sides of every learned comparison with the agent (the
@@ -235,7 +235,7 @@ class AdversarialTrainer:
             )
         context = PhaseContext(
             env, self.learner, self.discriminator, self._demo_inputs, self._action_bounds,
-            num_demos, config.trpo.num_envs, config.trpo.unroll_length,
+            num_demos, config.rollout.num_envs, config.rollout.unroll_length,
             self.trajectories, row_trajectory,
         )  # fmt: skip
         self.phases = PhaseSet(context, _make_phases(config, demos.trajectory_ids))
@@ -264,7 +264,7 @@ class AdversarialTrainer:
     @property
     def eval_every(self) -> int:
         """Iterations per block of ``run_blocks`` (``grid.Trainer``)."""
-        return self.config.trpo.eval_every
+        return self.config.rollout.eval_every
 
     def init(self, hyperparams: AdversarialHyperparams, spec: MethodSpec, key: jax.Array):
         self.learner.check_hyperparams(hyperparams.learner)
@@ -299,7 +299,7 @@ class AdversarialTrainer:
                 mean_confidence=confidence.mean(), mean_labelled_confidence=mean_labelled
             ),
             iteration=jnp.zeros((), jnp.int32),
-            eval_keys=jax.random.split(eval_key, self.config.trpo.num_eval_episodes),
+            eval_keys=jax.random.split(eval_key, self.config.rollout.num_eval_episodes),
             key=carry_key,
             **phase_state,
         )
@@ -370,12 +370,12 @@ class AdversarialTrainer:
     def discriminator_batch(self, state: TrainState, transitions, key) -> DiscriminatorBatch:
         """The rollout's rows (actions clipped to the bounds, as the demonstrations') and as
         many split rows drawn with replacement."""
-        trpo_config = self.config.trpo
-        agent_obs = transitions.obs.reshape(trpo_config.batch_size, -1)
+        rollout = self.config.rollout
+        agent_obs = transitions.obs.reshape(rollout.batch_size, -1)
         agent_inputs = jnp.concatenate(
             [transitions.obs, jnp.clip(transitions.action, *self._action_bounds)], axis=-1
-        ).reshape(trpo_config.batch_size, -1)
-        rows = jax.random.randint(key, (trpo_config.batch_size,), 0, self.num_demos)
+        ).reshape(rollout.batch_size, -1)
+        rows = jax.random.randint(key, (rollout.batch_size,), 0, self.num_demos)
         return DiscriminatorBatch(
             agent_obs, agent_inputs, rows, self._demo_inputs[state.demo_rows[rows]]
         )
@@ -435,7 +435,7 @@ class AdversarialTrainer:
         if self.phases:  # every method whose reward is not (only) adversarial has a phase
             rewards = spec.adversarial_reward_coef * rewards
         rewards, fields, metrics = self.phases.reward(spec, state, transitions, batch, rewards, key)
-        shape = (self.config.trpo.unroll_length, self.config.trpo.num_envs)
+        shape = (self.config.rollout.unroll_length, self.config.rollout.num_envs)
         return rewards.reshape(shape), fields, metrics
 
     def run_blocks(
@@ -452,7 +452,9 @@ class AdversarialTrainer:
 
     def train(self, hyperparams: AdversarialHyperparams, spec: MethodSpec, key: jax.Array):
         state, init_metrics = self.init(hyperparams, spec, key)
-        state, metrics = self.run_blocks(hyperparams, spec, state, self.config.trpo.num_evaluations)
+        state, metrics = self.run_blocks(
+            hyperparams, spec, state, self.config.rollout.num_evaluations
+        )
         return state, {**metrics, **init_metrics}
 
     @staticmethod

@@ -88,7 +88,7 @@ def save_policies(
 def save_trpo_policies(
     directory, env, config, trpo_state, eval_returns, extra=None, write_metadata=True
 ) -> Path:
-    """Saves the stacked per-seed policies of a ``TRPOState`` (``config``: its ``TRPOConfig``)
+    """Saves the stacked per-seed policies of a ``TRPOState`` (``config``: its ``RolloutConfig``)
     with what ``load_policy`` needs (``write_metadata``: see ``save_policies``)."""
     return save_policies(
         directory,

@@ -84,7 +84,9 @@ def output_owner(directory: Path) -> str | None:
         except (OSError, ValueError):
             return None
         if isinstance(document, dict):
-            return "sweep" if "resolved" in document else "train_rl" if "trpo" in document else None
+            if "resolved" in document:
+                return "sweep"
+            return "train_rl" if "rollout" in document or "trpo" in document else None
     return None
 
 

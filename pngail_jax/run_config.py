@@ -33,8 +33,9 @@ from pngail_jax.methods import (
     required_phases,
     resolve,
 )
-from pngail_jax.rl.on_policy import TRPOConfig
+from pngail_jax.rl.on_policy import RolloutConfig
 from pngail_jax.rl.ppo import PPOConfig
+from pngail_jax.rl.trpo import TRPOConfig
 from pngail_jax.run_config_checks import check_between_fields, check_names
 from pngail_jax.settings import RunSettings, settings_for
 from pngail_jax.validation import (
@@ -256,10 +257,9 @@ class RunConfig:
             )
             classifier = dataclasses.replace(classifier, max_unlabelled_batch_size=width)
         return AdversarialConfig(
-            trpo=self.settings.trpo_config(
-                self.iterations, fisher=self.fisher, fisher_subsample=self.fisher_subsample
-            ),
+            rollout=self.settings.rollout_config(self.iterations),
             learner=self.learner,
+            trpo=TRPOConfig(fisher=self.fisher, fisher_subsample=self.fisher_subsample),
             classifier=classifier,
             num_demos=num_demos,
             discriminator_hidden_sizes=self.discriminator_hidden_sizes,
@@ -343,6 +343,7 @@ _TUPLE_FIELDS = ("methods", "label_ratios", "noise_stds", "log", "discriminator_
 # The fields a grid axis cannot vary, with a reason (they shape the compiled program).
 _STATIC_FIELDS = {
     *(field.name for field in dataclasses.fields(RunSettings)),
+    *(field.name for field in dataclasses.fields(RolloutConfig)),
     *(field.name for field in dataclasses.fields(TRPOConfig)),
     *(field.name for field in dataclasses.fields(ClassifierConfig)),
     *(field.name for field in dataclasses.fields(PPOConfig)),

@@ -19,7 +19,7 @@ from __future__ import annotations
 import dataclasses
 
 from pngail_jax import envs, validation
-from pngail_jax.rl.on_policy import TRPOConfig
+from pngail_jax.rl.on_policy import RolloutConfig
 
 
 def _positive_int(name: str, value) -> int:
@@ -73,7 +73,7 @@ class RunSettings:
     num_eval_episodes: int = 32
     normalize_observations: bool = False
     # Each env's first episode cut at a random length, so that the parallel envs of a task
-    # that never terminates are not in step (TRPOConfig.stagger_starts). Off in every row:
+    # that never terminates are not in step (RolloutConfig.stagger_starts). Off in every row:
     # on HalfCheetah it learned no better than the lockstep (docs/performance.md).
     stagger_starts: bool = False
     # Engine of gymnasium's MuJoCo tasks (envs.PHYSICS); None: from the platform when the
@@ -117,10 +117,10 @@ class RunSettings:
             return "the task's own"
         return f"{self.solver_iterations} Newton / {self.ls_iterations} line-search iterations"
 
-    def trpo_config(self, num_iterations: int, **options) -> TRPOConfig:
-        """The ``TRPOConfig`` of a run of ``num_iterations`` with these settings; ``options``
-        set its other fields (Fisher product form, network sizes, ...)."""
-        return TRPOConfig(
+    def rollout_config(self, num_iterations: int, **options) -> RolloutConfig:
+        """The ``RolloutConfig`` of a run of ``num_iterations`` with these settings; ``options``
+        set its other fields (network sizes, GAE's form)."""
+        return RolloutConfig(
             num_envs=self.num_envs,
             unroll_length=self.unroll_length,
             num_iterations=num_iterations,

@@ -17,7 +17,7 @@ from pngail_jax.demos import Demonstrations, load_demonstrations
 from pngail_jax.grid import make_cells, stack_cells
 from pngail_jax.methods import PRESETS, required_phases
 from pngail_jax.ranking import RankingConfig
-from pngail_jax.rl import TRPOConfig
+from pngail_jax.rl import RolloutConfig, TRPOConfig
 
 SHARED_PENDULUM = authors_data()
 
@@ -41,7 +41,8 @@ def test_gail_learns_pendulum_from_the_optimal_trajectory():
     )
     np.testing.assert_array_equal(optimal.confidence, 1.0)
     config = AdversarialConfig(
-        trpo=TRPOConfig(num_iterations=150, eval_every=10, fisher="gauss_newton"),
+        rollout=RolloutConfig(num_iterations=150, eval_every=10),
+        trpo=TRPOConfig(fisher="gauss_newton"),
         classifier=ClassifierConfig(num_steps=100),  # GAIL reads no confidences
     )
     trainer = AdversarialTrainer(config, env, optimal)
@@ -63,7 +64,8 @@ def test_gail_learns_pendulum_from_a_controllers_trajectory():
     optimal, returns = swing_up_demonstrations(num_episodes=1, seed=0)
     assert optimal.num_rows == 200 and returns[0] > -200
     config = AdversarialConfig(
-        trpo=TRPOConfig(num_iterations=150, eval_every=10, fisher="gauss_newton"),
+        rollout=RolloutConfig(num_iterations=150, eval_every=10),
+        trpo=TRPOConfig(fisher="gauss_newton"),
         classifier=ClassifierConfig(num_steps=100),  # GAIL reads no confidences
     )
     trainer = AdversarialTrainer(config, envs.make("Pendulum-v1"), optimal)
@@ -88,7 +90,7 @@ def test_methods_that_read_confidences_learn_from_a_mixture_gail_cannot():
     demos, returns = swing_up_mixture()
     assert returns[0] > -200 and max(returns[1:]) < -1000
     config = AdversarialConfig(
-        trpo=TRPOConfig(num_envs=10, num_iterations=250, eval_every=10, num_eval_episodes=8),
+        rollout=RolloutConfig(num_envs=10, num_iterations=250, eval_every=10, num_eval_episodes=8),
         classifier=ClassifierConfig(num_steps=2000),
     )
     trainer = AdversarialTrainer(config, envs.make("Pendulum-v1"), demos)
@@ -121,10 +123,10 @@ def test_demonstration_actions_reach_every_learned_comparison_clipped_as_the_age
     inside = dataclasses.replace(beyond, actions=np.clip(actions, -2, 2))
     methods = ("gail", "wgail", "bc", "cail")
     config = AdversarialConfig(
-        trpo=TRPOConfig(
-            num_envs=4, unroll_length=25, num_iterations=2, eval_every=1, num_eval_episodes=1,
-            num_value_minibatches=5,
+        rollout=RolloutConfig(
+            num_envs=4, unroll_length=25, num_iterations=2, eval_every=1, num_eval_episodes=1
         ),
+        trpo=TRPOConfig(num_value_minibatches=5),
         classifier=ClassifierConfig(num_steps=20),
         wgail_refresh_every=1,
         phases=required_phases(methods),
@@ -146,11 +148,15 @@ def test_demonstration_actions_reach_every_learned_comparison_clipped_as_the_age
 
 
 def _small_trainer(demos, **config):
-    trpo = TRPOConfig(
-        num_envs=4, unroll_length=25, num_iterations=2, eval_every=1, num_eval_episodes=1,
-        num_value_minibatches=5,
-    )  # fmt: skip
-    config = AdversarialConfig(trpo=trpo, classifier=ClassifierConfig(num_steps=20), **config)
+    rollout = RolloutConfig(
+        num_envs=4, unroll_length=25, num_iterations=2, eval_every=1, num_eval_episodes=1
+    )
+    config = AdversarialConfig(
+        rollout=rollout,
+        trpo=TRPOConfig(num_value_minibatches=5),
+        classifier=ClassifierConfig(num_steps=20),
+        **config,
+    )
     return AdversarialTrainer(config, envs.make("Pendulum-v1"), demos)
 
 

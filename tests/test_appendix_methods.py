@@ -23,7 +23,7 @@ from pngail_jax.grid import make_cells, stack_cells
 from pngail_jax.methods import METHOD_NAMES, method_spec, required_phases, stack
 from pngail_jax.networks import orthogonal_init
 from pngail_jax.ranking import DrexConfig, RankingConfig
-from pngail_jax.rl import TRPOConfig
+from pngail_jax.rl import RolloutConfig, TRPOConfig
 from pngail_jax.rl.ppo import PPOConfig
 from pngail_jax.run_config import RunConfig
 
@@ -48,10 +48,11 @@ def trainer_for(methods, data=None, num_iterations=2, learner="trpo"):
     config = AdversarialConfig(
         learner=learner,
         ppo=PPOConfig(num_minibatches=4),
-        trpo=TRPOConfig(
+        rollout=RolloutConfig(
             num_envs=4, unroll_length=25, num_iterations=num_iterations, eval_every=1,
-            num_eval_episodes=1, num_value_minibatches=5,
+            num_eval_episodes=1,
         ),
+        trpo=TRPOConfig(num_value_minibatches=5),
         classifier=ClassifierConfig(num_steps=20),
         phases=required_phases(methods),
         ranking=RankingConfig(num_steps=20, snippet_length=10, hidden_sizes=(16,)),

@@ -44,7 +44,7 @@ def _result(final_own, final_fast=None, env_options=None):
     if final_fast is not None:
         arrays["fast"] = np.asarray(final_fast, float)
     return {
-        "trpo": {"num_envs": 25, "unroll_length": 200, "normalize_observations": False},
+        "rollout": {"num_envs": 25, "unroll_length": 200, "normalize_observations": False},
         "env_options": env_options or {},
         "fisher_subsample": 1,
         "final_return": {k: v.tolist() for k, v in arrays.items()},
@@ -91,7 +91,7 @@ def test_the_job_trains_evaluates_and_reuses_a_finished_arm(tmp_path, capsys):
     summary = job.compare_settings(config, tmp_path / "cmp")
     arm = summary["arms"]["table"]
     assert len(arm["final_return"]["own"]) == 2 and "fast" not in arm["final_return"]
-    assert arm["trpo"] == {"num_envs": 25, "unroll_length": 200, "normalize_observations": False}
+    assert arm["rollout"] == {"num_envs": 25, "unroll_length": 200, "normalize_observations": False}
     assert arm["not_worse_than_baseline"] is True  # the baseline itself
     assert (tmp_path / "cmp" / "table" / "policy.json").exists()
     assert outputs.unaccounted(tmp_path / "cmp", "compare_settings") == []

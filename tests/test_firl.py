@@ -14,7 +14,7 @@ from pngail_jax.adversarial import AdversarialConfig, AdversarialTrainer
 from pngail_jax.demos import Demonstrations
 from pngail_jax.methods import method_spec, stack
 from pngail_jax.networks import ClampedStateReward, ResidualDiscriminator
-from pngail_jax.rl import TRPOConfig
+from pngail_jax.rl import RolloutConfig
 from pngail_jax.run_config import RunConfig
 
 RNG = np.random.default_rng(0)
@@ -251,7 +251,7 @@ def test_the_trainers_reward_rises_on_the_demonstrations_without_trajectory_ids(
         actions=np.zeros((60, 1), np.float32),
     )
     config = AdversarialConfig(
-        trpo=TRPOConfig(num_envs=4, unroll_length=25, num_iterations=1, eval_every=1),
+        rollout=RolloutConfig(num_envs=4, unroll_length=25, num_iterations=1, eval_every=1),
         phases=("firl",),
         firl=firl.FirlConfig(
             discriminator_iterations=20, discriminator_batch_size=32, reward_learning_rate=1e-2

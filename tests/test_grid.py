@@ -23,7 +23,7 @@ from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import DemonstrationError, Demonstrations
 from pngail_jax.grid import Grid, make_cells, nonfinite_cells, stack_cells
 from pngail_jax.methods import method_spec
-from pngail_jax.rl import TRPOConfig
+from pngail_jax.rl import RolloutConfig, TRPOConfig
 
 COMPARED = ("eval/return", "disc/loss", "disc/acc_agent", "train/reward", "trpo/kl")
 
@@ -60,14 +60,14 @@ def small_setup(num_iterations=2, eval_every=1, **config_overrides):
         metadata={"random_return": -1200.0, "optimal_return": -150.0},
     )
     config = AdversarialConfig(
-        trpo=TRPOConfig(
+        rollout=RolloutConfig(
             num_envs=4,
             unroll_length=50,
             num_iterations=num_iterations,
             eval_every=eval_every,
             num_eval_episodes=2,
-            num_value_minibatches=5,
         ),
+        trpo=TRPOConfig(num_value_minibatches=5),
         classifier=ClassifierConfig(num_steps=50),
         **config_overrides,
     )
@@ -227,8 +227,8 @@ def test_a_nan_cell_is_reported_and_leaves_the_others_alone():
     _, clean = train(hyperparams, specs, keys)
     _, mixed = train(poisoned, specs, keys)
     mixed = jax.device_get(mixed)
-    assert nonfinite_cells(mixed, config.trpo.eval_every).tolist() == [1]
-    assert nonfinite_cells(jax.device_get(clean), config.trpo.eval_every).tolist() == []
+    assert nonfinite_cells(mixed, config.rollout.eval_every).tolist() == [1]
+    assert nonfinite_cells(jax.device_get(clean), config.rollout.eval_every).tolist() == []
     np.testing.assert_array_equal(clean["rollout/nonfinite_actions"], 0)  # the count is there
     others = [index for index in range(len(cells)) if index != 1]
     for name in COMPARED:
@@ -339,7 +339,7 @@ def test_methods_that_read_no_confidences_run_without_them():
 def test_bad_demonstrations_are_clear_errors():
     env, demos, config = small_setup()
     with pytest.raises(DemonstrationError, match="only 120 rows"):
-        AdversarialTrainer(AdversarialConfig(trpo=config.trpo, num_demos=500), env, demos)
+        AdversarialTrainer(AdversarialConfig(rollout=config.rollout, num_demos=500), env, demos)
     wrong_size = Demonstrations(demos.observations[:, :2], demos.actions, demos.confidence)
     with pytest.raises(DemonstrationError, match="observations of size 2"):
         AdversarialTrainer(config, env, wrong_size)

@@ -140,7 +140,7 @@ def _hopper_grid_setup():
     from pngail_jax.adversarial import AdversarialConfig, AdversarialTrainer
     from pngail_jax.confidence import ClassifierConfig
     from pngail_jax.demos import Demonstrations
-    from pngail_jax.rl import TRPOConfig
+    from pngail_jax.rl import RolloutConfig
 
     env = envs.make("Hopper-v4", physics="c", max_episode_steps=50)
     rng = np.random.default_rng(0)
@@ -149,10 +149,10 @@ def _hopper_grid_setup():
         actions=rng.uniform(-1, 1, size=(120, 3)).astype(np.float32),
         confidence=np.repeat(rng.uniform(0.2, 1.0, 6), 20).astype(np.float32),
     )
-    trpo = TRPOConfig(
+    rollout = RolloutConfig(
         num_envs=4, unroll_length=20, num_iterations=2, eval_every=1, num_eval_episodes=2
     )
-    config = AdversarialConfig(trpo=trpo, classifier=ClassifierConfig(num_steps=20))
+    config = AdversarialConfig(rollout=rollout, classifier=ClassifierConfig(num_steps=20))
     return AdversarialTrainer(config, env, demos), small_grid_inputs()
 
 

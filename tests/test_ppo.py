@@ -20,7 +20,7 @@ from test_grid import assert_close_across_programs, assert_resumes_bit_exactly, 
 from pngail_jax import envs
 from pngail_jax.adversarial import AdversarialHyperparams, AdversarialTrainer
 from pngail_jax.grid import make_cells, stack_cells
-from pngail_jax.rl import PPO, PPOConfig, PPOHyperparams, TRPOConfig, TRPOTrainer
+from pngail_jax.rl import PPO, PPOConfig, PPOHyperparams, RolloutConfig, TRPOTrainer
 from pngail_jax.rl.learners import learner_hyperparams, make_learner
 from pngail_jax.rl.ppo import clipped_surrogate_loss, value_loss
 
@@ -95,9 +95,7 @@ def test_value_loss_matches_numpy(clip):
 def test_reward_normalisation_matches_numpy(pendulum):
     """Rewards divided by the running std of each env's discounted return (reset at episode
     ends), over two rollouts, against a NumPy computation of the same statistics."""
-    config = TRPOConfig(
-        num_envs=3, unroll_length=7, num_iterations=2, eval_every=1, num_value_minibatches=1
-    )
+    config = RolloutConfig(num_envs=3, unroll_length=7, num_iterations=2, eval_every=1)
     learner = PPO(config, pendulum, PPOConfig(num_minibatches=3))
     state = learner.init(jax.random.key(0))
     hyperparams = PPOHyperparams.create(gamma=0.9)
@@ -125,7 +123,7 @@ def test_reward_normalisation_matches_numpy(pendulum):
 def test_ppo_batch_reuses_gae(pendulum):
     """The batch's advantages and targets are GAE(gamma, lambda) of the rollout (NumPy), with
     V of the state each step reached (final_obs) for bootstrapping."""
-    config = TRPOConfig(num_envs=3, unroll_length=40, num_iterations=1, eval_every=1)
+    config = RolloutConfig(num_envs=3, unroll_length=40, num_iterations=1, eval_every=1)
     learner = PPO(config, pendulum, PPOConfig(num_minibatches=4))
     state = learner.init(jax.random.key(1))
     state, transitions = learner.rollout(state)
@@ -160,13 +158,13 @@ def test_bad_values_and_foreign_hyperparameters_are_named():
     with pytest.raises(ValueError, match=r"ppo learner has no hyperparameter max_kl \(trpo's\)"):
         learner_hyperparams("ppo", max_kl=0.01)
     with pytest.raises(ValueError, match="learner must be one of trpo, ppo"):
-        make_learner("sac", TRPOConfig(), envs.make("Pendulum-v1"))
-    pendulum, config = envs.make("Pendulum-v1"), TRPOConfig(num_iterations=1, eval_every=1)
+        make_learner("sac", RolloutConfig(), envs.make("Pendulum-v1"))
+    pendulum, config = envs.make("Pendulum-v1"), RolloutConfig(num_iterations=1, eval_every=1)
     trainer = TRPOTrainer(config, pendulum, learner=PPO(config, pendulum))
     with pytest.raises(ValueError, match="learner is PPO, which reads PPOHyperparams, but the"):
         trainer.init(learner_hyperparams("trpo"), jax.random.key(0))
     with pytest.raises(ValueError, match="at least PPO's 32 minibatches"):
-        PPO(TRPOConfig(num_envs=1, unroll_length=10, num_value_minibatches=1), None)
+        PPO(RolloutConfig(num_envs=1, unroll_length=10), None)
 
 
 def test_run_config_takes_the_learner_and_refuses_the_other_learners_axes():
@@ -282,8 +280,8 @@ def test_ppo_learns_pendulum_on_the_true_reward(pendulum):
     or better on at least two of three seeds, each from about -1,100 at iteration 10.
     Measured: -148, -194, -172 (first evaluations -1,107, -1,136, -1,111), about 10 s on 2
     CPU cores."""
-    config = TRPOConfig(num_envs=10, unroll_length=200, num_iterations=50, eval_every=10,
-                        num_eval_episodes=10)  # fmt: skip
+    config = RolloutConfig(num_envs=10, unroll_length=200, num_iterations=50, eval_every=10,
+                           num_eval_episodes=10)  # fmt: skip
     learner = PPO(config, pendulum, PPOConfig(num_minibatches=8))
     train = jax.jit(jax.vmap(TRPOTrainer(config, pendulum, learner=learner).train))
     hyperparams = _stack(PPOHyperparams.create(learning_rate=1e-3), 3)

@@ -8,16 +8,16 @@ import numpy as np
 import pytest
 
 from pngail_jax import envs
-from pngail_jax.rl import TRPOConfig, TRPOHyperparams, TRPOTrainer
+from pngail_jax.rl import TRPO, RolloutConfig, TRPOConfig, TRPOHyperparams, TRPOTrainer
 
-SMALL = TRPOConfig(
-    num_envs=4,
-    unroll_length=50,
-    num_iterations=2,
-    eval_every=2,
-    num_eval_episodes=4,
-    num_value_minibatches=5,
-)
+SMALL = RolloutConfig(num_envs=4, unroll_length=50, num_iterations=2, eval_every=2,
+                      num_eval_episodes=4)  # fmt: skip
+SMALL_TRPO = TRPOConfig(num_value_minibatches=5)
+
+
+def small_trainer(env, config: RolloutConfig = SMALL) -> TRPOTrainer:
+    """TRPO on ``env``'s reward with the small rollout and 5 value minibatches."""
+    return TRPOTrainer(config, env, learner=TRPO(config, env, SMALL_TRPO))
 
 
 def _stack(tree, n):
@@ -30,7 +30,7 @@ def pendulum():
 
 
 def test_same_key_same_program_is_bit_identical(pendulum):
-    train = jax.jit(TRPOTrainer(SMALL, pendulum).train)
+    train = jax.jit(small_trainer(pendulum).train)
     hyperparams = TRPOHyperparams.create()
     key = jax.random.key(3)
     _, first = train(hyperparams, key)
@@ -53,7 +53,7 @@ VMAP_RTOL = {
 
 
 def test_vmapped_seeds_match_single_runs(pendulum):
-    train = TRPOTrainer(SMALL, pendulum).train
+    train = small_trainer(pendulum).train
     hyperparams = TRPOHyperparams.create()
     keys = jax.random.split(jax.random.key(0), 3)
     batched_state, batched = jax.jit(jax.vmap(train))(_stack(hyperparams, 3), keys)
@@ -75,9 +75,7 @@ def test_vmapped_seeds_match_single_runs(pendulum):
 
 
 def test_metrics_and_counters(pendulum):
-    _, metrics = jax.jit(TRPOTrainer(SMALL, pendulum).train)(
-        TRPOHyperparams.create(), jax.random.key(0)
-    )
+    _, metrics = jax.jit(small_trainer(pendulum).train)(TRPOHyperparams.create(), jax.random.key(0))
     np.testing.assert_array_equal(metrics["env_steps"], [200, 400])
     assert np.isnan(metrics["eval/return"][0]) and np.isfinite(metrics["eval/return"][1])
     assert set(metrics) >= {
@@ -95,9 +93,11 @@ def test_metrics_and_counters(pendulum):
 
 def test_bad_configuration_is_a_clear_error():
     with pytest.raises(ValueError, match="multiple of eval_every"):
-        TRPOConfig(num_iterations=25, eval_every=10)
-    with pytest.raises(ValueError, match="num_envs must be a positive integer"):
-        TRPOConfig(num_envs=0)
+        RolloutConfig(num_iterations=25, eval_every=10)
+    with pytest.raises(ValueError, match="RolloutConfig.num_envs must be a positive integer"):
+        RolloutConfig(num_envs=0)
+    with pytest.raises(ValueError, match="at least the 30 value minibatches"):
+        TRPO(RolloutConfig(num_envs=2, unroll_length=10), envs.make("Pendulum-v1"))
     with pytest.raises(ValueError, match="fisher must be"):
         TRPOConfig(fisher="exact")
     with pytest.raises(ValueError, match="max_kl out of range"):
@@ -115,7 +115,7 @@ def test_learns_pendulum_with_reference_defaults(pendulum):
     of three seeds. Measured here: -186, -169, -168 (from about -900 at iteration 20), 25 s
     on 2 CPU cores.
     """
-    config = TRPOConfig(num_iterations=100, eval_every=20)
+    config = RolloutConfig(num_iterations=100, eval_every=20)
     train = jax.jit(jax.vmap(TRPOTrainer(config, pendulum).train))
     keys = jax.random.split(jax.random.key(0), 3)
     _, metrics = train(_stack(TRPOHyperparams.create(), 3), keys)
@@ -142,7 +142,7 @@ def test_observation_normalizer_matches_numpy():
 
 def test_observation_normalization_option_trains(pendulum):
     config = dataclasses.replace(SMALL, normalize_observations=True)
-    state, metrics = jax.jit(TRPOTrainer(config, pendulum).train)(
+    state, metrics = jax.jit(small_trainer(pendulum, config).train)(
         TRPOHyperparams.create(), jax.random.key(0)
     )
     assert float(state.learner.normalizer.count) == 2 * config.batch_size
@@ -154,7 +154,7 @@ def test_host_chunks_reuse_one_compiled_block(pendulum):
     import chex
 
     config = dataclasses.replace(SMALL, num_iterations=6)
-    trainer = TRPOTrainer(config, pendulum)
+    trainer = small_trainer(pendulum, config)
     hyperparams = TRPOHyperparams.create()
 
     def run(hyperparams, state):
@@ -168,7 +168,7 @@ def test_host_chunks_reuse_one_compiled_block(pendulum):
 
 
 def test_rewards_of_the_wrong_shape_are_rejected(pendulum):
-    trpo = TRPOTrainer(SMALL, pendulum).learner
+    trpo = small_trainer(pendulum).learner
     state = trpo.init(jax.random.key(0))
     state, transitions = trpo.rollout(state)
     with pytest.raises(AssertionError, match="shape"):
@@ -178,8 +178,6 @@ def test_rewards_of_the_wrong_shape_are_rejected(pendulum):
 def test_staggered_starts_draw_each_envs_first_time_limit(pendulum):
     """With ``stagger_starts`` the envs' first time limits spread over 1..200 (the networks
     are initialised as without it); without it every limit is the task's 200."""
-    from pngail_jax.rl.trpo import TRPO
-
     config = dataclasses.replace(SMALL, num_envs=32)
     key = jax.random.key(5)
     plain = TRPO(config, pendulum).init(key)

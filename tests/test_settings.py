@@ -48,14 +48,14 @@ def test_reference_setting_is_the_reference_codes():
     assert REFERENCE_SETTINGS.env_options == {}
 
 
-def test_trpo_config_carries_the_settings():
-    config = settings_for("Hopper", num_envs=250, unroll_length=20).trpo_config(
-        100, fisher="gauss_newton"
+def test_rollout_config_carries_the_settings():
+    config = settings_for("Hopper", num_envs=250, unroll_length=20).rollout_config(
+        100, gae_form="associative"
     )
     assert (config.num_envs, config.unroll_length, config.batch_size) == (250, 20, 5000)
     assert (config.eval_every, config.num_eval_episodes) == (50, 10)
-    assert (config.num_iterations, config.fisher) == (100, "gauss_newton")
-    assert settings_for("Hopper", stagger_starts=True).trpo_config(100).stagger_starts
+    assert (config.num_iterations, config.gae_form) == (100, "associative")
+    assert settings_for("Hopper", stagger_starts=True).rollout_config(100).stagger_starts
 
 
 def test_overrides_and_their_errors():
@@ -116,7 +116,7 @@ def test_hopper_learns_with_the_table_settings():
     row = settings_for("Hopper", eval_every=10)
     env = settings.make_env("Hopper", row)
     assert env.model_options["iterations"] == 1 and env.model_options["ls_iterations"] == 4
-    train = jax.jit(TRPOTrainer(row.trpo_config(10, fisher="gauss_newton"), env).train)
+    train = jax.jit(TRPOTrainer(row.rollout_config(10), env).train)  # Gauss-Newton, the default
     key = jax.random.split(jax.random.key(0), 3)[0]  # train_rl --seed 0's first seed
     _, metrics = train(TRPOHyperparams.create(), key)
     final = float(metrics["eval/return"][-1])

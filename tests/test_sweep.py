@@ -81,7 +81,7 @@ def test_sweep_writes_every_output(finished, tmp_path):
     assert config["provenance"]["libraries"]["jax"] and config["provenance"]["device_count"] == 1
     # What decides whether another run gives the same bits (docs/sweep.md).
     assert config["provenance"]["cpu_model"] and "xla_flags" in config["provenance"]
-    assert config["resolved"]["adversarial"]["trpo"]["num_envs"] == 4
+    assert config["resolved"]["adversarial"]["rollout"]["num_envs"] == 4
     assert config["resolved"]["inputs"]["demonstrations"]["sha256"].startswith("sha256:")
     check_exported_policies(out, final)
 

@@ -45,7 +45,8 @@ def test_outputs_are_written(run_dir):
     assert lines[0].startswith("seed,iteration,env_steps,eval/return")
     assert len(lines) == 1 + 2 * 4
     config = json.loads((run_dir / "config.json").read_text())
-    assert config["trpo"]["num_iterations"] == 4 and config["seeds"] == 2
+    assert config["rollout"]["num_iterations"] == 4 and config["seeds"] == 2
+    assert config["trpo"]["fisher"] == "gauss_newton" and "num_envs" not in config["trpo"]
 
 
 def test_load_policy_picks_best_seed_and_acts(run_dir, capsys):
@@ -147,12 +148,10 @@ def test_load_policy_checks_cannot_be_switched_off_and_bad_inputs_are_named(run_
         pngail_jax.load_policy(copy, verbose=False)
 
 
-def test_an_interrupted_run_resumes_to_the_same_numbers(run_dir, tmp_path, monkeypatch, capsys):
-    """The fixture's run, stopped after its first block's checkpoint, then --resume DIR:
-    metrics.csv byte-identical to the uninterrupted run's."""
+def _stopped_after_first_block(run_dir, out, monkeypatch):
+    """The fixture's run again into ``out``, stopped after its first block's checkpoint."""
     from pngail_jax.jobs import chunks
 
-    out = tmp_path / "stopped"
     argv = [*json.loads((run_dir / "config.json").read_text())["argv"]]
     argv[argv.index("--out") + 1] = str(out)
     save = chunks.save_checkpoint
@@ -166,6 +165,13 @@ def test_an_interrupted_run_resumes_to_the_same_numbers(run_dir, tmp_path, monke
         train_rl.main(argv)
     assert not (out / "policy.json").exists() and (out / "checkpoints" / "chunk_0001").is_dir()
     monkeypatch.setattr(chunks, "save_checkpoint", save)
+
+
+def test_an_interrupted_run_resumes_to_the_same_numbers(run_dir, tmp_path, monkeypatch, capsys):
+    """The fixture's run, stopped after its first block's checkpoint, then --resume DIR:
+    metrics.csv byte-identical to the uninterrupted run's."""
+    out = tmp_path / "stopped"
+    _stopped_after_first_block(run_dir, out, monkeypatch)
     with pytest.raises(SystemExit):
         train_rl.main(["--resume", str(out), "--seeds", "3"])  # its own flags only
     assert "takes no other flags" in capsys.readouterr().err
@@ -192,6 +198,26 @@ def test_an_interrupted_run_resumes_to_the_same_numbers(run_dir, tmp_path, monke
     with pytest.raises(SystemExit):
         train_rl.main(["--resume", str(out)])
     assert "the run is complete" in capsys.readouterr().err
+
+
+def test_a_run_begun_before_the_rollout_section_resumes(run_dir, tmp_path, monkeypatch):
+    """A run whose sealed config.json has the layout from before the rollout's settings had
+    their own section ("trpo" held them beside TRPO's) resumes to the uninterrupted run's
+    numbers; in that layout a PPO run's "trpo" held TRPO's unused settings, which go."""
+    from pngail_jax.integrity import CONFIG_SEAL, write_sealed
+    from pngail_jax.jobs.train_rl import upgrade_document
+
+    out = tmp_path / "old-layout"
+    _stopped_after_first_block(run_dir, out, monkeypatch)
+    today = json.loads((out / "config.json").read_text())
+    old = {key: value for key, value in today.items() if key != "rollout"}
+    old["trpo"] = {**today["rollout"], **today["trpo"]}
+    write_sealed(out / "config.json", old, out / CONFIG_SEAL)
+    assert upgrade_document(old) == today and upgrade_document(today) is today
+    train_rl.main(["--resume", str(out)])
+    assert (out / "metrics.csv").read_bytes() == (run_dir / "metrics.csv").read_bytes()
+    ppo = upgrade_document({**old, "learner": "ppo", "ppo": {"num_epochs": 10}})
+    assert "trpo" not in ppo and ppo["rollout"] == today["rollout"] and ppo["ppo"]
 
 
 def test_resume_checks_again_under_the_lock(run_dir, tmp_path, monkeypatch, capsys):

@@ -113,14 +113,13 @@ def test_line_search_keeps_parameters_when_nothing_improves():
 
 
 def test_fisher_subsample_keeps_every_environment():
-    from pngail_jax.rl.on_policy import TRPOConfig
+    from pngail_jax.rl.on_policy import RolloutConfig
     from pngail_jax.rl.trpo import fisher_sample_indices
 
-    config = TRPOConfig(num_envs=4, unroll_length=6, fisher_subsample=3, num_value_minibatches=2)
+    config = RolloutConfig(num_envs=4, unroll_length=6)
     # Flattened time-major batch: row t * 4 + n. Every 3rd step (t = 0, 3) of all 4 envs.
-    np.testing.assert_array_equal(fisher_sample_indices(config), [0, 1, 2, 3, 12, 13, 14, 15])
-    every = fisher_sample_indices(TRPOConfig(num_envs=4, unroll_length=6, num_value_minibatches=2))
-    np.testing.assert_array_equal(every, np.arange(24))
+    np.testing.assert_array_equal(fisher_sample_indices(config, 3), [0, 1, 2, 3, 12, 13, 14, 15])
+    np.testing.assert_array_equal(fisher_sample_indices(config, 1), np.arange(24))
 
 
 def _numpy_gaussian(rng, shape):
@@ -161,12 +160,13 @@ def test_the_surrogate_loss_and_its_gradient_against_numpy():
     against the same formula from the policy's outputs in NumPy; at the old parameters the
     ratio is 1, so the loss is -mean(A) and its gradient is -mean(A grad log pi)."""
     from pngail_jax import envs
-    from pngail_jax.rl.on_policy import TRPOConfig
-    from pngail_jax.rl.trpo import TRPO, TRPOHyperparams
+    from pngail_jax.rl.on_policy import RolloutConfig
+    from pngail_jax.rl.trpo import TRPO, TRPOConfig, TRPOHyperparams
 
     trpo = TRPO(
-        TRPOConfig(num_envs=2, unroll_length=4, hidden_sizes=(5,), num_value_minibatches=2),
+        RolloutConfig(num_envs=2, unroll_length=4, hidden_sizes=(5,)),
         envs.make("Pendulum-v1"),
+        TRPOConfig(num_value_minibatches=2),
     )
     params = trpo.policy.init(jax.random.key(1), jnp.zeros(3))
     rng = np.random.default_rng(4)

@@ -24,7 +24,7 @@ import orbax.checkpoint as ocp
 from pngail_jax import envs, validation
 from pngail_jax.integrity import atomic_path, atomic_write_text, write_json
 from pngail_jax.jobs.errors import refusals
-from pngail_jax.jobs.train_rl import TrainRLConfig, train_rl
+from pngail_jax.jobs.train_rl import TrainRLConfig, train_rl, upgrade_document
 from pngail_jax.networks import GaussianPolicy
 from pngail_jax.outputs import claimed, prepare_output
 from pngail_jax.report import json_safe, read_evaluations
@@ -235,7 +235,7 @@ def evaluate_arms(config: CompareSettingsConfig, directories: dict) -> tuple[dic
     results, curves = {}, {}
     for arm, directory in directories.items():
         curves[arm] = read_arm_curves(directory)
-        saved = json.loads((directory / "config.json").read_text())
+        saved = upgrade_document(json.loads((directory / "config.json").read_text()))
         metadata, arrays = saved_policies(directory)
         final = {}
         for name, solver in physics.items():
@@ -246,8 +246,8 @@ def evaluate_arms(config: CompareSettingsConfig, directories: dict) -> tuple[dic
             returns = evaluators[name](arrays["policy_params"], arrays["normalizer"])
             final[name] = np.asarray(returns)
         results[arm] = {
-            "trpo": {
-                name: saved["trpo"][name]
+            "rollout": {
+                name: saved["rollout"][name]
                 for name in ("num_envs", "unroll_length", "normalize_observations")
             },
             "env_options": saved["env_options"],
@@ -278,7 +278,7 @@ def comparison_markdown(summary: dict) -> str:
         "|---|---|---:|---:|---:|---|",
     ]
     for arm, result in summary["arms"].items():
-        settings = result["trpo"]
+        settings = result["rollout"]
         shape = f"{settings['num_envs']} x {settings['unroll_length']}"
         solver = "fast" if result["trained_on"] == "fast" else "own"
         normalized = ", norm. obs" if settings["normalize_observations"] else ""

@@ -143,7 +143,7 @@ def _read_every_chunk(config: EarlyRewardsConfig, trainer, grid: Grid, optimal) 
         return f"iteration {iteration} ({time.perf_counter() - began:.0f} s)"
 
     state, progress = start(grid, None)
-    steps_per_chunk = grid.num_cells * trainer.config.trpo.batch_size * config.every
+    steps_per_chunk = grid.num_cells * trainer.config.rollout.batch_size * config.every
     run_chunks(
         grid, state, progress, config.iterations // config.every,
         steps_per_chunk=steps_per_chunk, line=line, after=read,

@@ -44,7 +44,7 @@ from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.jobs.train_seeds import train_seeds
 from pngail_jax.outputs import Claim, claimed
 from pngail_jax.rl import TRPOTrainer
-from pngail_jax.rl.learners import LEARNERS, learner_hyperparams, make_learner
+from pngail_jax.rl.learners import LEARNERS, check_batch, learner_hyperparams, make_learner
 
 DEMOS_FILE = "demos.npz"  # written last: its presence marks a finished run
 PROGRAM = "make_demos"  # the owner its directories are marked with (pngail_jax.outputs)
@@ -85,7 +85,7 @@ class MakeDemosConfig:
             validation.fail(
                 "intermediate_target", f"must be in (0, 1), got {self.intermediate_target}"
             )
-        self.trpo_config  # noqa: B018  (the TRPO config's own checks)
+        check_batch(self.learner, self.rollout_config)
 
     @property
     def ratio_parts(self) -> tuple[float, float]:
@@ -109,8 +109,8 @@ class MakeDemosConfig:
         return round(self.num_trajectories * optimal / (optimal + intermediate))
 
     @property
-    def trpo_config(self):
-        return self.settings.trpo_config(self.iterations)
+    def rollout_config(self):
+        return self.settings.rollout_config(self.iterations)
 
 
 class Checkpoint(NamedTuple):
@@ -159,7 +159,7 @@ def make_claimed(config: MakeDemosConfig, claim: Claim) -> Path:
     start = time.perf_counter()
     snapshots = train_candidates(config, env, out)
     print("2/3 measuring random and optimal returns", flush=True)
-    episodes = CheckpointEpisodes(env, config.trpo_config)
+    episodes = CheckpointEpisodes(env, config.rollout_config)
     picked = pick_policies(config, env, snapshots, episodes)
     demos = roll_out_mixture(config, env, picked, episodes)
     path = write_demonstrations(out, demos, {k: demos.metadata[k] for k in NORMALIZER_KEYS})
@@ -177,9 +177,9 @@ def make_claimed(config: MakeDemosConfig, claim: Claim) -> Path:
 def train_candidates(config: MakeDemosConfig, env, out: Path) -> list[Checkpoint]:
     """TRPO on the true reward, every evaluated checkpoint of every seed kept (in memory and
     under ``out/checkpoints/iter_XXXX/``)."""
-    trpo_config = config.trpo_config
-    learner = make_learner(config.learner, trpo_config, env)
-    trainer = TRPOTrainer(trpo_config, env, learner=learner)
+    rollout = config.rollout_config
+    learner = make_learner(config.learner, rollout, env)
+    trainer = TRPOTrainer(rollout, env, learner=learner)
     hyperparams = jax.tree.map(
         lambda x: jnp.broadcast_to(x, (config.seeds, *x.shape)),
         learner_hyperparams(config.learner),
@@ -189,7 +189,7 @@ def train_candidates(config: MakeDemosConfig, env, out: Path) -> list[Checkpoint
     def keep(iteration, state, metrics):
         returns = metrics["eval/return"][:, -1]
         save_trpo_policies(
-            out / "checkpoints" / f"iter_{iteration:04d}", env, trpo_config, state, returns
+            out / "checkpoints" / f"iter_{iteration:04d}", env, rollout, state, returns
         )
         for seed in range(config.seeds):
             pick = jax.tree.map(lambda x, s=seed: x[s], (state.policy_params, state.normalizer))
@@ -214,8 +214,8 @@ class CheckpointEpisodes:
     """Deterministic episodes of any checkpoint, one compiled program for all of them (the
     parameters are arguments, not constants)."""
 
-    def __init__(self, env, trpo_config):
-        policy = TRPOTrainer(trpo_config, env).learner.policy
+    def __init__(self, env, rollout):
+        policy = TRPOTrainer(rollout, env).learner.policy
 
         @jax.jit
         def episodes(params, normalizer, keys):

@@ -140,7 +140,7 @@ def export_policies(out: Path, run: BuiltRun, host_state, progress: Progress, wr
             save_trpo_policies(
                 directory,
                 run.env,
-                run.trainer.config.trpo,
+                run.trainer.config.rollout,
                 seeds_state,
                 final_returns[rows],
                 extra,

@@ -37,8 +37,8 @@ from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.jobs.train_seeds import train_seeds
 from pngail_jax.outputs import claimed, output_owner
 from pngail_jax.report import write_seed_metrics_csv
-from pngail_jax.rl import PPOConfig, TRPOHyperparams, TRPOTrainer
-from pngail_jax.rl.learners import LEARNERS, learner_hyperparams, make_learner
+from pngail_jax.rl import PPOConfig, RolloutConfig, TRPOConfig, TRPOHyperparams, TRPOTrainer
+from pngail_jax.rl.learners import LEARNERS, check_batch, learner_hyperparams, make_learner
 from pngail_jax.runs import UntrustedRun, sealed_document
 
 PROGRAM = "train_rl"  # the owner its directories are marked with (pngail_jax.outputs)
@@ -80,24 +80,24 @@ class TrainRLConfig:
         validation.integer("seed", self.seed, 0)
         if self.learner not in LEARNERS:
             validation.fail("learner", f"must be one of {LEARNERS}, got {self.learner!r}")
-        if self.learner == "ppo":
-            try:
-                self.ppo.check_batch(self.trpo_config)
-            except ValueError as error:
-                validation.fail("ppo", str(error))
         if self.iterations % self.settings.eval_every:
             validation.fail(
                 "iterations",
                 f"({self.iterations}) must be a multiple of the evaluation interval "
                 f"({self.settings.eval_every}, settings.eval_every)",
             )
-        self.trpo_config  # noqa: B018  (the TRPO config's own checks)
+        try:
+            check_batch(self.learner, self.rollout_config, self.ppo, self.trpo_config)
+        except ValueError as error:
+            validation.fail(self.learner, str(error))
 
     @property
-    def trpo_config(self):
-        return self.settings.trpo_config(
-            self.iterations, fisher=self.fisher, fisher_subsample=self.fisher_subsample
-        )
+    def rollout_config(self) -> RolloutConfig:
+        return self.settings.rollout_config(self.iterations)
+
+    @property
+    def trpo_config(self) -> TRPOConfig:
+        return TRPOConfig(fisher=self.fisher, fisher_subsample=self.fisher_subsample)
 
     @property
     def hyperparams(self) -> TRPOHyperparams:
@@ -107,8 +107,14 @@ class TrainRLConfig:
 
     def trainer(self, env) -> TRPOTrainer:
         """The trainer of this run in ``env`` (its learner on the true reward)."""
-        config = self.trpo_config
-        return TRPOTrainer(config, env, learner=make_learner(self.learner, config, env, self.ppo))
+        config = self.rollout_config
+        learner = make_learner(self.learner, config, env, self.ppo, self.trpo_config)
+        return TRPOTrainer(config, env, learner=learner)
+
+    @property
+    def learner_config(self) -> TRPOConfig | PPOConfig:
+        """The running learner's own settings."""
+        return self.ppo if self.learner == "ppo" else self.trpo_config
 
     def document(self, command: Sequence[str] | None = None) -> dict:
         """config.json's content (``command``: the flags a program was given, which its
@@ -122,8 +128,8 @@ class TrainRLConfig:
                     "seeds": self.seeds,
                     "seed": self.seed,
                     "learner": self.learner,
-                    "trpo": dataclasses.asdict(self.trpo_config),
-                    **({"ppo": dataclasses.asdict(self.ppo)} if self.learner == "ppo" else {}),
+                    "rollout": dataclasses.asdict(self.rollout_config),
+                    self.learner: dataclasses.asdict(self.learner_config),
                     "hyperparams": jax.tree.map(lambda x: x.item(), self.hyperparams).__dict__,
                     "argv": None if command is None else list(command),
                 }
@@ -159,6 +165,21 @@ def train_rl(
     return out
 
 
+def upgrade_document(document: dict) -> dict:
+    """A train_rl config.json of the layout before the rollout's settings had a section of
+    their own ("trpo" held them beside TRPO's, whichever learner ran) in today's layout:
+    "rollout", and "trpo" for a TRPO run; today's unchanged."""
+    old = document.get("trpo")
+    if not isinstance(old, dict) or "num_envs" not in old:
+        return document
+    shared = {field.name for field in dataclasses.fields(RolloutConfig)}
+    upgraded = {key: value for key, value in document.items() if key != "trpo"}
+    upgraded["rollout"] = {key: value for key, value in old.items() if key in shared}
+    if document.get("learner", "trpo") == "trpo":
+        upgraded["trpo"] = {key: value for key, value in old.items() if key not in shared}
+    return upgraded
+
+
 def check_resumable(out: Path, document: dict) -> None:
     """Refuses to resume a finished run, a run without its seal, or one whose flags or
     config.json differ from the config it was sealed with when it began (``document``: what
@@ -174,14 +195,14 @@ def check_resumable(out: Path, document: dict) -> None:
         )  # fmt: skip
     except UntrustedRun as error:
         raise RunError(str(error)) from None
-    changes = document_differences(saved, document)
+    changes = document_differences(upgrade_document(saved), document)
     if changes:
         listed = "; ".join(changes[:5])
         raise RunError(f"cannot resume {out}: these flags give another run ({listed})")
 
 
 def _train(config: TrainRLConfig, env, out: Path) -> None:
-    trpo_config = config.trpo_config
+    rollout = config.rollout_config
     trainer = config.trainer(env)
     learner = config.learner.upper()
     hyperparams = jax.tree.map(
@@ -190,7 +211,7 @@ def _train(config: TrainRLConfig, env, out: Path) -> None:
     keys = jax.random.split(jax.random.key(config.seed), config.seeds)
     print(
         f"{learner} on {config.env}: {config.seeds} seeds x {config.iterations} iterations x "
-        f"{trpo_config.batch_size} steps ({run_settings.describe(config.settings)}) -> {out}",
+        f"{rollout.batch_size} steps ({run_settings.describe(config.settings)}) -> {out}",
         flush=True,
     )
     start = time.perf_counter()
@@ -201,7 +222,7 @@ def _train(config: TrainRLConfig, env, out: Path) -> None:
         out / "learning_curve.png", metrics, f"{learner} on {config.env} ({config.seeds} seeds)"
     )
     save_trpo_policies(
-        out, env, trpo_config, state, final_returns, {"env_options": config.settings.env_options}
+        out, env, rollout, state, final_returns, {"env_options": config.settings.env_options}
     )
     # The run is complete: its checkpoints go, and the digests list what stays.
     shutil.rmtree(out / "checkpoints", ignore_errors=True)

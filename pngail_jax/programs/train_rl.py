@@ -36,7 +36,7 @@ from pngail_jax.programs.cli import (
     signals_stop_at_a_checkpoint,
     use_compile_cache,
 )
-from pngail_jax.rl.learners import LEARNERS
+from pngail_jax.rl.learners import LEARNERS, check_batch
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -125,7 +125,7 @@ def _check(parser, args) -> None:
             f"({args.settings.eval_every}, --eval-every)"
         )
     try:
-        args.settings.trpo_config(args.iterations)
+        check_batch(args.learner, args.settings.rollout_config(args.iterations))
     except ValueError as error:
         parser.error(str(error))
 

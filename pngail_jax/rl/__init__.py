@@ -2,10 +2,10 @@
 search) and PPO, on shared rollouts, GAE, networks and evaluation."""
 
 from pngail_jax.rl.learners import LEARNERS, learner_hyperparams, make_learner
-from pngail_jax.rl.on_policy import TRPOConfig
+from pngail_jax.rl.on_policy import RolloutConfig
 from pngail_jax.rl.ppo import PPO, PPOConfig, PPOHyperparams, PPOState
 from pngail_jax.rl.train import TRPOTrainer, TRPOTrainState
-from pngail_jax.rl.trpo import TRPO, TRPOHyperparams, TRPOState
+from pngail_jax.rl.trpo import TRPO, TRPOConfig, TRPOHyperparams, TRPOState
 
 __all__ = [
     "LEARNERS",
@@ -13,6 +13,7 @@ __all__ = [
     "PPOConfig",
     "PPOHyperparams",
     "PPOState",
+    "RolloutConfig",
     "TRPO",
     "TRPOConfig",
     "TRPOHyperparams",

@@ -10,9 +10,9 @@ from __future__ import annotations
 import dataclasses
 
 from pngail_jax import envs
-from pngail_jax.rl.on_policy import OnPolicyLearner, TRPOConfig
+from pngail_jax.rl.on_policy import OnPolicyLearner, RolloutConfig
 from pngail_jax.rl.ppo import PPO, PPOConfig, PPOHyperparams
-from pngail_jax.rl.trpo import TRPO, TRPOHyperparams
+from pngail_jax.rl.trpo import TRPO, TRPOConfig, TRPOHyperparams
 
 LEARNERS = ("trpo", "ppo")
 HYPERPARAMS = {"trpo": TRPOHyperparams, "ppo": PPOHyperparams}
@@ -26,13 +26,28 @@ def check_learner(name) -> str:
 
 
 def make_learner(
-    name: str, config: TRPOConfig, env: envs.Env, ppo: PPOConfig | None = None
+    name: str,
+    config: RolloutConfig,
+    env: envs.Env,
+    ppo: PPOConfig | None = None,
+    trpo: TRPOConfig | None = None,
 ) -> OnPolicyLearner:
-    """The learner ``name`` for ``env``: ``config`` gives the rollout's shape and networks
-    (and TRPO's settings), ``ppo`` PPO's (None: the defaults)."""
+    """The learner ``name`` for ``env``: ``config`` gives the rollout's shape and networks,
+    ``trpo`` and ``ppo`` each learner's own settings (None: the defaults)."""
     if check_learner(name) == "ppo":
         return PPO(config, env, ppo)
-    return TRPO(config, env)
+    return TRPO(config, env, trpo)
+
+
+def check_batch(
+    name: str, config: RolloutConfig, ppo: PPOConfig | None = None, trpo: TRPOConfig | None = None
+) -> None:
+    """ValueError when ``config``'s rollout has fewer samples than learner ``name`` splits
+    each iteration's batch into (TRPO's value minibatches, PPO's minibatches)."""
+    if check_learner(name) == "ppo":
+        (PPOConfig() if ppo is None else ppo).check_batch(config)
+    else:
+        (TRPOConfig() if trpo is None else trpo).check_batch(config)
 
 
 def hyperparam_names(name: str) -> tuple[str, ...]:

@@ -1,14 +1,12 @@
 """What every policy learner shares (TRPO, ``rl.trpo``; PPO, ``rl.ppo``): the static settings
-of the rollout, the networks and the evaluation (``TRPOConfig``, which also holds TRPO's own
-solver settings), the observation normaliser, the ``OnPolicyLearner`` base class (networks,
-auto-resetting envs, rollout, log-probabilities, evaluation), the episode metrics of a
-rollout, and ``run_evaluated_blocks``, the scan of iterations and evaluations every trainer
-runs."""
+of the rollout, the networks and the evaluation (``RolloutConfig``), the observation
+normaliser, the ``OnPolicyLearner`` base class (networks, auto-resetting envs, rollout,
+log-probabilities, evaluation), the episode metrics of a rollout, and
+``run_evaluated_blocks``, the scan of iterations and evaluations every trainer runs."""
 
 from __future__ import annotations
 
 import dataclasses
-from typing import Literal
 
 import jax
 import jax.numpy as jnp
@@ -21,8 +19,11 @@ from pngail_jax.rl.rollout import Transitions, collect, evaluate
 
 
 @dataclasses.dataclass(frozen=True)
-class TRPOConfig:
-    """Shape-giving, static settings. ``num_envs * unroll_length`` steps per iteration."""
+class RolloutConfig:
+    """What both learners share, static: the rollout's shape (``num_envs * unroll_length``
+    steps per iteration), the run's length, the evaluation, the networks and the observation
+    normaliser. Each learner's own settings are its config beside it (``rl.trpo.TRPOConfig``,
+    ``rl.ppo.PPOConfig``)."""
 
     num_envs: int = 25
     unroll_length: int = 200
@@ -30,18 +31,7 @@ class TRPOConfig:
     eval_every: int = 10
     num_eval_episodes: int = 32
     hidden_sizes: tuple[int, ...] = (100, 100)
-    num_value_minibatches: int = 30
-    num_cg_iterations: int = 10
-    num_backtracks: int = 10
     normalize_observations: bool = False
-    # "hessian": Hessian of the mean KL times v, the reference's form (second-order autodiff).
-    # "gauss_newton": J^T M J v for the Gaussian policy, the same matrix at the current
-    # parameters, from one jvp and one vjp, and faster: the default everywhere (library,
-    # sweep, train_rl), so that Python and the command line run the same program.
-    fisher: Literal["hessian", "gauss_newton"] = "gauss_newton"
-    # Fisher products on every k-th time step of every env (OpenAI baselines uses every 5th
-    # sample); 1 = all.
-    fisher_subsample: int = 1
     # GAE as a T-step scan ("sequential") or a log-depth tree ("associative"): the same
     # numbers up to float rounding (tests/test_gae.py); which is faster depends on the device.
     gae_form: GAEForm = "sequential"
@@ -51,41 +41,24 @@ class TRPOConfig:
 
     def __post_init__(self):
         for name in (
-            "num_envs",
-            "unroll_length",
-            "num_iterations",
-            "eval_every",
-            "num_eval_episodes",
-            "num_value_minibatches",
-            "num_cg_iterations",
-            "num_backtracks",
-            "fisher_subsample",
-        ):
+            "num_envs", "unroll_length", "num_iterations", "eval_every", "num_eval_episodes",
+        ):  # fmt: skip
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
-                raise ValueError(f"TRPOConfig.{name} must be a positive integer, got {value!r}")
+                raise ValueError(f"RolloutConfig.{name} must be a positive integer, got {value!r}")
         if self.num_iterations % self.eval_every:
             raise ValueError(
-                f"TRPOConfig.num_iterations ({self.num_iterations}) must be a "
+                f"RolloutConfig.num_iterations ({self.num_iterations}) must be a "
                 f"multiple of eval_every ({self.eval_every})"
             )
         if not isinstance(self.stagger_starts, bool):
             raise ValueError(
-                f"TRPOConfig.stagger_starts must be True or False, got {self.stagger_starts!r}"
-            )
-        if self.fisher not in ("hessian", "gauss_newton"):
-            raise ValueError(
-                f"TRPOConfig.fisher must be 'hessian' or 'gauss_newton', got {self.fisher!r}"
+                f"RolloutConfig.stagger_starts must be True or False, got {self.stagger_starts!r}"
             )
         if self.gae_form not in ("sequential", "associative"):
             raise ValueError(
-                f"TRPOConfig.gae_form must be 'sequential' or 'associative', got {self.gae_form!r}"
-            )
-        if self.batch_size < self.num_value_minibatches:
-            raise ValueError(
-                f"samples per iteration (num_envs x unroll_length = {self.num_envs} x "
-                f"{self.unroll_length} = {self.batch_size}) must be at least the "
-                f"{self.num_value_minibatches} value minibatches"
+                "RolloutConfig.gae_form must be 'sequential' or 'associative', "
+                f"got {self.gae_form!r}"
             )
 
     @property
@@ -170,7 +143,7 @@ class OnPolicyLearner:
                 "(AdversarialHyperparams.create(learner=...), stack_cells(..., learner=...))"
             )
 
-    def __init__(self, config: TRPOConfig, env: envs.Env):
+    def __init__(self, config: RolloutConfig, env: envs.Env):
         self.config = config
         self.env = env
         self.auto_env = envs.AutoReset(env)

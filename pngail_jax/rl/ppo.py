@@ -21,7 +21,7 @@ coefficient 0.5, no entropy bonus, gradient norm 0.5, clipped value loss). Where
 departs from it (docs/ppo.md): the networks and the rollout shape are the task's (TRPO's
 tanh 100 x 100 networks, ``num_envs x unroll_length`` from the settings table, where CleanRL
 has 64 x 64 with orthogonal initialisation and one env of 2,048 steps), observation
-normalisation follows ``TRPOConfig.normalize_observations``, and the reward normalisation's
+normalisation follows ``RolloutConfig.normalize_observations``, and the reward normalisation's
 statistics are updated once per rollout (CleanRL's wrapper updates them every step).
 """
 
@@ -41,7 +41,7 @@ from pngail_jax.rl.gae import generalized_advantages
 from pngail_jax.rl.on_policy import (
     ObservationNormalizer,
     OnPolicyLearner,
-    TRPOConfig,
+    RolloutConfig,
     episode_metrics,
 )
 from pngail_jax.rl.rollout import Transitions, rollout_metrics
@@ -50,7 +50,7 @@ from pngail_jax.rl.rollout import Transitions, rollout_metrics
 @dataclasses.dataclass(frozen=True)
 class PPOConfig:
     """PPO's static settings (loop counts and which losses are compiled); the rollout's shape
-    and the networks are ``TRPOConfig``'s, which both learners share."""
+    and the networks are ``RolloutConfig``'s, which both learners share."""
 
     num_epochs: int = 10
     num_minibatches: int = 32
@@ -69,7 +69,7 @@ class PPOConfig:
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"PPOConfig.{name} must be True or False")
 
-    def check_batch(self, config: TRPOConfig) -> None:
+    def check_batch(self, config: RolloutConfig) -> None:
         """Raises ValueError when the rollout has fewer samples than minibatches."""
         if config.batch_size < self.num_minibatches:
             raise ValueError(
@@ -183,7 +183,7 @@ class PPO(OnPolicyLearner):
     )  # fmt: skip
     HYPERPARAMS = PPOHyperparams
 
-    def __init__(self, config: TRPOConfig, env: envs.Env, ppo: PPOConfig | None = None):
+    def __init__(self, config: RolloutConfig, env: envs.Env, ppo: PPOConfig | None = None):
         ppo = PPOConfig() if ppo is None else ppo
         ppo.check_batch(config)
         super().__init__(config, env)

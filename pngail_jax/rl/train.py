@@ -11,7 +11,7 @@ import jax
 from flax import struct
 
 from pngail_jax import envs
-from pngail_jax.rl.on_policy import OnPolicyLearner, TRPOConfig, run_evaluated_blocks
+from pngail_jax.rl.on_policy import OnPolicyLearner, RolloutConfig, run_evaluated_blocks
 from pngail_jax.rl.rollout import Transitions
 from pngail_jax.rl.trpo import TRPO, TRPOHyperparams, TRPOState
 
@@ -49,7 +49,7 @@ class TRPOTrainer:
 
     def __init__(
         self,
-        config: TRPOConfig,
+        config: RolloutConfig,
         env: envs.Env,
         reward_fn: RewardFunction = true_reward,
         learner: OnPolicyLearner | None = None,
@@ -58,7 +58,7 @@ class TRPOTrainer:
         self.env = env
         self.learner = TRPO(config, env) if learner is None else learner
         if self.learner.config != config:
-            raise ValueError("TRPOTrainer: the learner was built with another TRPOConfig")
+            raise ValueError("TRPOTrainer: the learner was built with another RolloutConfig")
         self.reward_fn = reward_fn
 
     @property

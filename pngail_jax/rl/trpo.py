@@ -1,8 +1,9 @@
 """TRPO in pure JAX: the learner (``TRPO``: value fit, advantages, the natural-gradient step of
 the policy) and its maths (Fisher-vector products, conjugate gradient, line search).
 
-Static settings (shapes, iteration counts, which Fisher product) are the frozen
-``rl.on_policy.TRPOConfig``; everything a grid may vary (discount, KL bound, learning rate,
+Static settings are two frozen configs: the rollout's shape and the iteration counts that
+both learners share (``rl.on_policy.RolloutConfig``) and TRPO's own loop counts and Fisher
+product (``TRPOConfig``); everything a grid may vary (discount, KL bound, learning rate,
 whether to bootstrap through truncation) is a ``TRPOHyperparams`` pytree. Defaults are the
 paper's and the reference code's (``docs/trpo.md``), except that GAE bootstraps the value
 through time-limit truncation (``bootstrap_truncation``). Every loop has a fixed iteration
@@ -12,8 +13,9 @@ count and uses masks instead of early exits, so all cells of a vmapped grid do t
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import Literal, NamedTuple
 
 import chex
 import jax
@@ -28,7 +30,7 @@ from pngail_jax.rl.gae import generalized_advantages
 from pngail_jax.rl.on_policy import (
     ObservationNormalizer,
     OnPolicyLearner,
-    TRPOConfig,
+    RolloutConfig,
     episode_metrics,
 )
 from pngail_jax.rl.rollout import Transitions, rollout_metrics
@@ -143,6 +145,48 @@ def hessian_vector_product(
     return product
 
 
+@dataclasses.dataclass(frozen=True)
+class TRPOConfig:
+    """TRPO's own static settings (loop counts and which Fisher product is compiled); the
+    rollout's shape and the networks are ``RolloutConfig``'s, which both learners share."""
+
+    num_value_minibatches: int = 30
+    num_cg_iterations: int = 10
+    num_backtracks: int = 10
+    # "hessian": Hessian of the mean KL times v, the reference's form (second-order autodiff).
+    # "gauss_newton": J^T M J v for the Gaussian policy, the same matrix at the current
+    # parameters, from one jvp and one vjp, and faster: the default everywhere (library,
+    # sweep, train_rl), so that Python and the command line run the same program.
+    fisher: Literal["hessian", "gauss_newton"] = "gauss_newton"
+    # Fisher products on every k-th time step of every env (OpenAI baselines uses every 5th
+    # sample); 1 = all.
+    fisher_subsample: int = 1
+
+    def __post_init__(self):
+        for name in ("num_value_minibatches", "num_cg_iterations", "num_backtracks"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or value < 1:
+                raise ValueError(f"TRPOConfig.{name} must be a positive integer, got {value!r}")
+        if not isinstance(self.fisher_subsample, int) or self.fisher_subsample < 1:
+            raise ValueError(
+                "TRPOConfig.fisher_subsample must be a positive integer, "
+                f"got {self.fisher_subsample!r}"
+            )
+        if self.fisher not in ("hessian", "gauss_newton"):
+            raise ValueError(
+                f"TRPOConfig.fisher must be 'hessian' or 'gauss_newton', got {self.fisher!r}"
+            )
+
+    def check_batch(self, rollout: RolloutConfig) -> None:
+        """Raises ValueError when the rollout has fewer samples than value minibatches."""
+        if rollout.batch_size < self.num_value_minibatches:
+            raise ValueError(
+                f"samples per iteration (num_envs x unroll_length = {rollout.num_envs} x "
+                f"{rollout.unroll_length} = {rollout.batch_size}) must be at least the "
+                f"{self.num_value_minibatches} value minibatches"
+            )
+
+
 @struct.dataclass
 class TRPOHyperparams:
     """Per-run values (pytree leaves, so a grid can vmap over them)."""
@@ -224,8 +268,11 @@ class TRPO(OnPolicyLearner):
     LEARNED_FIELDS = ("policy_params", "value_params", "value_optimizer_state", "normalizer")
     HYPERPARAMS = TRPOHyperparams
 
-    def __init__(self, config: TRPOConfig, env: envs.Env):
+    def __init__(self, config: RolloutConfig, env: envs.Env, trpo: TRPOConfig | None = None):
+        trpo = TRPOConfig() if trpo is None else trpo
+        trpo.check_batch(config)
         super().__init__(config, env)
+        self.trpo = trpo
         self.value_optimizer = optax.scale_by_adam()
 
     def init(self, key: jax.Array) -> TRPOState:
@@ -317,7 +364,7 @@ class TRPO(OnPolicyLearner):
         """The update's value step: Adam over one permutation of the flattened batch (obs
         float[B, O], targets float[B]) in ``num_value_minibatches`` steps. Returns the value
         parameters, their optimiser state and the mean loss."""
-        num_minibatches = self.config.num_value_minibatches
+        num_minibatches = self.trpo.num_value_minibatches
         minibatch_size = self.config.batch_size // num_minibatches
         order = jax.random.permutation(key, self.config.batch_size)
         order = order[: num_minibatches * minibatch_size].reshape(num_minibatches, minibatch_size)
@@ -347,7 +394,7 @@ class TRPO(OnPolicyLearner):
         (obs float[B, O], actions float[B, A], old_log_prob and advantages float[B])."""
         flat_params, unravel = ravel_pytree(policy_params)
         old_mean, old_log_std = jax.lax.stop_gradient(self.policy.apply(policy_params, obs))
-        fisher_rows = fisher_sample_indices(self.config)
+        fisher_rows = fisher_sample_indices(self.config, self.trpo.fisher_subsample)
         fisher_obs, fisher_old_mean = obs[fisher_rows], old_mean[fisher_rows]
 
         def surrogate_loss(flat):
@@ -359,7 +406,7 @@ class TRPO(OnPolicyLearner):
             mean, log_std = self.policy.apply(unravel(flat), fisher_obs)
             return jnp.mean(gaussian_kl(fisher_old_mean, old_log_std, mean, log_std))
 
-        if self.config.fisher == "gauss_newton":
+        if self.trpo.fisher == "gauss_newton":
             fisher_vector_product = gauss_newton_fisher_product(
                 self.policy, unravel, flat_params, fisher_obs, hyperparams.damping
             )
@@ -389,8 +436,8 @@ class TRPO(OnPolicyLearner):
             objective.flat_params,
             hyperparams.max_kl,
             hyperparams.damping,
-            self.config.num_cg_iterations,
-            self.config.num_backtracks,
+            self.trpo.num_cg_iterations,
+            self.trpo.num_backtracks,
             objective.fisher_vector_product,
         )
         new_params = objective.unravel(new_flat)
@@ -406,11 +453,11 @@ class TRPO(OnPolicyLearner):
         return new_params, metrics
 
 
-def fisher_sample_indices(config: TRPOConfig) -> jax.Array:
+def fisher_sample_indices(config: RolloutConfig, fisher_subsample: int) -> jax.Array:
     """Rows of the flattened time-major batch ([T, N] -> T * N) whose Fisher products TRPO
     uses: every ``fisher_subsample``-th time step of every environment, so each trajectory
     contributes (a stride over the flat batch would keep the same few environments)."""
-    steps = jnp.arange(0, config.unroll_length, config.fisher_subsample)
+    steps = jnp.arange(0, config.unroll_length, fisher_subsample)
     return (steps[:, None] * config.num_envs + jnp.arange(config.num_envs)).reshape(-1)
 
 
