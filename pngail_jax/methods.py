@@ -181,6 +181,7 @@ DISPLAY_NAMES = {
     "bc-all": "BC (all rows)",
     "dwbc": "DWBC",
     "iswbc": "ISW-BC",
+    "ilid": "ILID",
 }
 
 

@@ -383,3 +383,35 @@ def record_table(record: dict, baseline: str | None = None) -> str:
             )
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def glance_table(records: list[dict], statistic: str = "late_average") -> str:
+    """Several checked records in one table: a row per task (the records of one task
+    joined, each method from one record only), a column per method in the order met, each
+    cell the mean ± s.e. over seeds of ``statistic``'s normalised return ("-": not run).
+    The docs' tables between ``<!-- record-glance NAME NAME ... -->`` markers are this text
+    (``experiments.record --docs``)."""
+    from pngail_jax import stats
+    from pngail_jax.methods import display_name
+
+    rows: dict[str, dict[str, np.ndarray]] = {}
+    for record in records:
+        task = rows.setdefault(str(run_settings(record["config"]).get("env")), {})
+        for method, seeds in record[_key(statistic)].items():
+            if method in task:
+                raise RecordError(f"record {record['name']}: {method!r} is in another record too")
+            task[method] = np.asarray([math.nan if v is None else v for v in seeds], float)
+    methods = list(dict.fromkeys(method for task in rows.values() for method in task))
+    lines = [
+        "| task (seeds) | " + " | ".join(display_name(method) for method in methods) + " |",
+        "|---|" + "---:|" * len(methods),
+    ]
+    for env, task in rows.items():
+        counts = sorted({int(np.isfinite(seeds).sum()) for seeds in task.values()})
+        cells = []
+        for method in methods:
+            row = stats.seed_summary(task[method]) if method in task else None
+            cells.append("-" if row is None else f"{row['mean']:.2f} ± {row['se']:.2f}")
+        seeds = "/".join(map(str, counts))
+        lines.append(f"| {env} ({seeds}) | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"

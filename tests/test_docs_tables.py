@@ -6,6 +6,7 @@ them."""
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from pngail_jax import run_records
@@ -47,3 +48,23 @@ def test_a_table_edited_by_hand_is_found_and_rewritten(tmp_path):
     assert program.rewrite_docs(tmp_path, ROOT / "records") == []  # now current
     with pytest.raises(run_records.RecordError, match="has no method 'gail'"):
         run_records.record_table(record, "gail")
+
+
+def test_a_glance_table_joins_records_by_task():
+    """A row per task, the records of one task joined (Pendulum's ILID comes from its own
+    record), each cell the headline's mean ± s.e. over seeds, computed here in NumPy; a
+    method in two records of one task is refused."""
+    names = ["offline-pendulum", "offline-pendulum-ilid", "offline-hopper"]
+    records = [run_records.check_record(ROOT / "records" / name) for name in names]
+    lines = run_records.glance_table(records).splitlines()
+    assert lines[0] == (
+        "| task (seeds) | BC (expert rows) | BC (all rows) | DWBC | ISW-BC | ILID |"
+    )
+    pendulum, hopper = lines[2].split(" | "), lines[3].split(" | ")
+    assert pendulum[0] == "| Pendulum-v1 (5)" and hopper[0] == "| Hopper-v4 (5)"
+    assert hopper[-1] == "- |"  # ILID needs trajectories, which Hopper's file does not keep
+    seeds = np.asarray(records[0]["late_average_normalized_return"]["iswbc"], float)
+    mean, se = seeds.mean(), seeds.std(ddof=1) / np.sqrt(len(seeds))
+    assert pendulum[4] == f"{mean:.2f} ± {se:.2f}"
+    with pytest.raises(run_records.RecordError, match="'bc-expert' is in another record too"):
+        run_records.glance_table([records[0], records[0]])

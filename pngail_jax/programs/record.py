@@ -11,8 +11,10 @@ checkpoints, policies or plots. Writing one checks it; ``--check`` verifies kept
 metrics file against its digest, whole against the config, the final returns recomputed).
 A table in README.md or docs/ between ``<!-- record-table NAME -->`` and
 ``<!-- /record-table -->`` is ``run_records.record_table`` of ``records/NAME`` (with
-``baseline=METHOD`` after the name: each method's probability of improvement over it): ``--docs``
-writes them, and tests/test_docs_tables.py fails when one differs from its record.
+``baseline=METHOD`` after the name: each method's probability of improvement over it), and one
+between ``<!-- record-glance NAME NAME ... -->`` and ``<!-- /record-glance -->`` is
+``run_records.glance_table`` of those records (a row per task): ``--docs`` writes them, and
+tests/test_docs_tables.py fails when one differs from its records.
 """
 
 from __future__ import annotations
@@ -45,8 +47,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     add_allow_unsealed(parser.add_argument, "record a run")
     parser.add_argument(
         "--docs", action="store_true",
-        help="rewrite every <!-- record-table NAME --> table of README.md and docs/*.md from "
-        "its record (checked first)",
+        help="rewrite every <!-- record-table NAME --> and <!-- record-glance NAME ... --> "
+        "table of README.md and docs/*.md from its records (checked first)",
     )  # fmt: skip
     args = parser.parse_args(argv)
     if args.docs:
@@ -67,6 +69,12 @@ MARKED = re.compile(
     r"(?P<table>.*?)(?P<end><!-- /record-table -->)",
     re.S,
 )
+# Several records in one table (``run_records.glance_table``): names separated by spaces.
+GLANCED = re.compile(
+    r"(<!-- record-glance (?P<name>[\w.-]+(?: [\w.-]+)*) -->\n)"
+    r"(?P<table>.*?)(?P<end><!-- /record-glance -->)",
+    re.S,
+)
 
 
 def doc_files(root: Path = Path(".")) -> list[Path]:
@@ -74,29 +82,35 @@ def doc_files(root: Path = Path(".")) -> list[Path]:
     return [root / "README.md", *sorted((root / "docs").glob("*.md"))]
 
 
+def _expected(match: re.Match, records: Path) -> str:
+    """The table a marker's records give (RecordError for one missing or failing its check)."""
+    if match.re is GLANCED:
+        names = match["name"].split()
+        return run_records.glance_table([run_records.check_record(records / n) for n in names])
+    record = run_records.check_record(records / match["name"])
+    return run_records.record_table(record, match["baseline"])
+
+
 def marked_tables(path: Path, records: Path = Path("records")) -> list[tuple[str, str, str]]:
-    """(record name, the table in ``path``, the table its record gives) for each marked
-    table of ``path``; RecordError for a record missing or failing its check."""
-    found = []
-    for match in MARKED.finditer(path.read_text()):
-        record = run_records.check_record(records / match["name"])
-        expected = run_records.record_table(record, match["baseline"])
-        found.append((match["name"], match["table"], expected))
-    return found
+    """(record name or names, the table in ``path``, the table its records give) for each
+    marked table of ``path``; RecordError for a record missing or failing its check."""
+    text = path.read_text()
+    return [
+        (match["name"], match["table"], _expected(match, records))
+        for pattern in (MARKED, GLANCED)
+        for match in pattern.finditer(text)
+    ]
 
 
 def rewrite_docs(root: Path = Path("."), records: Path = Path("records")) -> list[Path]:
-    """Every marked table of ``doc_files`` rewritten from its record; returns the files
+    """Every marked table of ``doc_files`` rewritten from its records; returns the files
     changed."""
     changed = []
     for path in doc_files(root):
         text = path.read_text()
-
-        def table(match):
-            record = run_records.check_record(records / match["name"])
-            return match[1] + run_records.record_table(record, match["baseline"]) + match["end"]
-
-        new = MARKED.sub(table, text)
+        new = text
+        for pattern in (MARKED, GLANCED):
+            new = pattern.sub(lambda m: m[1] + _expected(m, records) + m["end"], new)
         if new != text:
             path.write_text(new)
             changed.append(path)
