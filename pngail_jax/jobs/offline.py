@@ -242,6 +242,7 @@ def _environment_and_demos(config: OfflineRunConfig):
     try:
         env = run_settings.make_env(config.env, run_config.settings, cells)
         demos, demos_path = load_or_make_demos(run_config, None, env)
+        demos.check_env(env)  # before config.json is written, not in the first program
     except (DemonstrationError, FileNotFoundError, ImportError, ValueError) as error:
         raise RunError(f"demonstrations: {error}") from None
     if demos.confidence is None:
