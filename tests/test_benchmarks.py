@@ -90,7 +90,8 @@ def test_iteration_phases(tmp_path):
             "--rounds", "1"]  # fmt: skip
     rows = rows_of("iteration_phases", argv, tmp_path / "rows.json")
     assert all(positive(row["milliseconds"]) for row in rows)
-    assert {"gae/sequential", "gae/associative"} <= {row["phase"] for row in rows}
+    phases = {row["phase"] for row in rows}
+    assert {"gae/sequential", "gae/associative", "line_search/all_fractions"} <= phases
 
 
 def test_classifier_throughput(tmp_path):

@@ -112,6 +112,43 @@ def test_line_search_keeps_parameters_when_nothing_improves():
     np.testing.assert_allclose(new_x, [0.0, 0.0])
 
 
+def _numpy_line_search(loss, x, full_step, expected, num_backtracks=10, accept_ratio=0.1):
+    """The reference's loop, written out: the first fraction 0.5^k whose improvement is
+    positive and above accept_ratio x expected x fraction; none: x unchanged."""
+    base = loss(x)
+    for k in range(num_backtracks):
+        fraction = 0.5**k
+        actual = base - loss(x + fraction * full_step)
+        if actual > 0 and actual / (expected * fraction) > accept_ratio:
+            return x + fraction * full_step, True, fraction
+    return x, False, 0.0
+
+
+def test_line_search_stops_where_the_reference_loop_does_also_under_vmap():
+    """On a quadratic bowl, steps that overshoot by different factors are taken at
+    different fractions (0.5^0 ... none); each cell of a vmapped search equals the NumPy
+    loop, though the batched loop runs until the last cell has taken one."""
+    with jax.enable_x64(True):
+        x = jnp.array([1.0, -2.0])
+        loss = lambda p: jnp.sum(p**2)  # noqa: E731
+        overshoots = jnp.array([1.0, 3.0, 9.0, 40.0, 5000.0, -1.0])  # -1: uphill
+        steps = -overshoots[:, None] * x  # x + f * step = x (1 - f * overshoot)
+        expected = jnp.full(len(overshoots), 5.0)
+        new_x, accepted, fraction = jax.jit(
+            jax.vmap(lambda step, e: backtracking_line_search(loss, x, step, e))
+        )(steps, expected)
+        numpy_loss = lambda p: float(np.sum(p**2))  # noqa: E731
+        taken = set()
+        for i, step in enumerate(np.asarray(steps)):
+            want_x, want_accepted, want_fraction = _numpy_line_search(
+                numpy_loss, np.asarray(x), step, 5.0
+            )
+            assert bool(accepted[i]) == want_accepted and float(fraction[i]) == want_fraction
+            np.testing.assert_allclose(new_x[i], want_x, rtol=0, atol=1e-15)
+            taken.add(want_fraction)
+    assert 0.0 in taken and len(taken) >= 4, taken  # cells stop at different fractions
+
+
 def test_fisher_subsample_keeps_every_environment():
     from pngail_jax.rl.on_policy import RolloutConfig
     from pngail_jax.rl.trpo import fisher_sample_indices

@@ -6,9 +6,10 @@ both learners share (``rl.on_policy.RolloutConfig``) and TRPO's own loop counts 
 product (``TRPOConfig``); everything a grid may vary (discount, KL bound, learning rate,
 whether to bootstrap through truncation) is a ``TRPOHyperparams`` pytree. Defaults are the
 paper's and the reference code's (``docs/trpo.md``), except that GAE bootstraps the value
-through time-limit truncation (``bootstrap_truncation``). Every loop has a fixed iteration
-count and uses masks instead of early exits, so all cells of a vmapped grid do the same work
-(docs/architecture.md).
+through time-limit truncation (``bootstrap_truncation``). Every loop but the line search
+has a fixed iteration count and uses masks instead of early exits, so all cells of a vmapped
+grid do the same work; the line search stops at the first fraction it takes, with the result
+of trying them all (docs/architecture.md).
 """
 
 from __future__ import annotations
@@ -77,19 +78,31 @@ def backtracking_line_search(
     """The reference's line search over fractions 0.5^k, k = 0..num_backtracks-1.
 
     Takes the first fraction whose actual improvement is positive and more than
-    ``accept_ratio`` times the expected (linear) improvement; keeps ``x`` if none is.
-    All fractions are evaluated (fixed work).
+    ``accept_ratio`` times the expected (linear) improvement; keeps ``x`` if none is. The
+    fractions are tried in order and the search stops at the first it takes, as the
+    reference's loop breaks (under ``vmap`` the loop runs until every cell has taken one or
+    run out). Evaluating all of them side by side instead cost 14 times as much on a CPU
+    (docs/performance.md, "A shorter iteration") for the same result.
 
     Returns ``(new_x, accepted, fraction)``: fraction is 0 when no step was accepted.
     """
     base_loss = loss(x)
-    fractions = 0.5 ** jnp.arange(num_backtracks, dtype=x.dtype)
-    new_losses = jax.vmap(lambda f: loss(x + f * full_step))(fractions)
-    actual = base_loss - new_losses
-    ratio = actual / (expected_improvement * fractions)
-    acceptable = (ratio > accept_ratio) & (actual > 0)
-    accepted = jnp.any(acceptable)
-    fraction = jnp.where(accepted, fractions[jnp.argmax(acceptable)], 0.0)
+    zero = jnp.zeros((), x.dtype)
+
+    def untried(carry):
+        k, accepted, _ = carry
+        return (k < num_backtracks) & ~accepted
+
+    def try_next(carry):
+        k, _, _ = carry
+        fraction = 0.5 ** k.astype(x.dtype)
+        actual = base_loss - loss(x + fraction * full_step)
+        acceptable = (actual / (expected_improvement * fraction) > accept_ratio) & (actual > 0)
+        return k + 1, acceptable, jnp.where(acceptable, fraction, zero)
+
+    _, accepted, fraction = jax.lax.while_loop(
+        untried, try_next, (jnp.zeros((), jnp.int32), jnp.zeros((), bool), zero)
+    )
     return x + fraction * full_step, accepted, fraction
 
 
