@@ -338,7 +338,7 @@ def test_a_resume_checks_the_authors_files_and_its_own_options(tmp_path):
     run.mkdir()
     (run / "paper.json").write_text(json.dumps({"budget": "huge"}))
     with pytest.raises(
-        SystemExit, match="names an unknown preset 'huge' .known: check, paper, cpu, test"
+        SystemExit, match="names an unknown preset 'huge' .known: check, paper, gpu, cpu, test"
     ):
         paper.main(["--resume", str(run)])
     (run / "paper.json").write_text("{")

@@ -23,7 +23,14 @@ from pngail_jax.integrity import (
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.outputs import claimed
 from pngail_jax.paper.adopt import adopt_grids, finished_sweep
-from pngail_jax.paper.grids import demo_paths, planned_configs, released_files, run_grids
+from pngail_jax.paper.estimate import estimate_table, read_throughput
+from pngail_jax.paper.grids import (
+    demo_paths,
+    grid_complete,
+    planned_configs,
+    released_files,
+    run_grids,
+)
 from pngail_jax.paper.page import write_page
 from pngail_jax.paper.plan import BUDGETS, FIGURES, PAPER_TASKS, RENAMED_BUDGETS, plan
 from pngail_jax.runs import UntrustedRun, changed_inputs_refusal, sealed_document
@@ -81,15 +88,19 @@ def run_paper(
     overwrite: bool = False,
     adopt=(),
     allow_unsealed: bool = False,
+    throughput=None,
 ):
     """Runs the plan of ``options`` (``paper_options``) into ``out`` (new, empty, or with
     ``overwrite`` a paper run), or with ``resume`` continues the plan in ``out`` (``options``
     None: its paper.json's); ``adopt``: finished sweep folders to keep as the plan's grids
     they match (``paper.adopt``); ``allow_unsealed``: adopt sweeps, and resume grids, whose
-    config seal is missing. Returns the page's path. Raises ``RunError`` with one line."""
+    config seal is missing; ``throughput``: a benchmark's rows, from which the wall time of
+    what is left is estimated before anything runs (``paper.estimate``). Returns the page's
+    path. Raises ``RunError`` with one line."""
     out = Path(out)
     if overwrite and not resume:
         _refuse_adopting_from_inside(out, adopt)
+    rates = None if throughput is None else (throughput, read_throughput(throughput))
     with refusals(), claimed(out, PROGRAM, overwrite=overwrite, resume=resume) as claim:
         if resume:
             options = saved_options(out)
@@ -115,6 +126,7 @@ def run_paper(
         physics = options.get("physics")  # absent from runs begun before the flag existed
         learner = options.get("learner", "trpo")  # absent from runs begun before the flag
         demo_learner = options.get("demo_learner", learner)  # likewise
+        _print_estimate(out, options["budget"], grids, physics, rates)
         demos = demo_paths(grids, out, budget, released, physics, demo_learner)
         command = shlex.split(options["command"])
         configs = planned_configs(grids, demos, budget, physics, learner)
@@ -127,6 +139,28 @@ def run_paper(
         page = write_page(out, options, figures, grids, timings, adopted)
     print(f"\nwrote {page}")
     return page
+
+
+def _print_estimate(out: Path, budget_name: str, grids: dict, physics, rates) -> None:
+    """The estimated wall time of the grids (and made demonstrations) not yet finished in
+    ``out``, from ``rates`` (the throughput file and its rows); without them, on the gpu
+    preset, how to get them."""
+    if rates is None:
+        if budget_name == "gpu":
+            print(
+                "no --throughput: for an estimate of the plan's wall time first run "
+                "python benchmarks/gpu_check.py --json FILE on this machine",
+                flush=True,
+            )
+        return
+    path, rows = rates
+    left = {name: grid for name, grid in grids.items()
+            if not grid_complete(out / "grids" / name)}  # fmt: skip
+    made = [task for task in dict.fromkeys(g.task for g in left.values() if g.demos.ratio)
+            if not (out / "demos" / task / "demos.npz").exists()]  # fmt: skip
+    table = estimate_table(left, BUDGETS[budget_name], physics, rows, made)
+    print(f"\nEstimated wall time of what is left, at the rates in {path}:\n{table}\n",
+          flush=True)  # fmt: skip
 
 
 def page_so_far(plan_dir, out, *, overwrite: bool = False) -> Path:

@@ -2,6 +2,7 @@
 
     python -m experiments.paper --preset check     # all of it on a 2-core CPU (under an hour)
     python -m experiments.paper --preset paper --released-demos data/released   # a GPU
+    python -m experiments.paper --preset gpu --throughput gpu_check.json ...    # its wall time
     python -m experiments.paper --only fig2,table1 --envs Hopper,Pendulum-v1
     python -m experiments.paper --resume results/paper-20261123-120000
     python -m experiments.paper --page results/paper-20261123-120000   # the page so far
@@ -97,7 +98,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="check: everything on a CPU, 20 iterations x 2 seeds, a check not a result "
         "(the default); cpu: 500 iterations x 5 seeds (Pendulum-v1 grids in half an hour, "
         "MuJoCo grids in 1.5-2 hours each on a 2-core CPU); paper: 5,000 iterations x 5 "
-        "seeds (a GPU); test: the test suite's. --budget is the old name",
+        "seeds (a GPU); gpu: the paper's budget in longer chunks, with an estimate of its "
+        "wall time from --throughput; test: the test suite's. --budget is the old name",
     )
     parser.add_argument(
         "--released-demos",
@@ -123,6 +125,14 @@ def build_parser() -> argparse.ArgumentParser:
         choices=LEARNERS,
         help="the policy learner of the make_demos runs alone (default: --learner's): a "
         "stronger made expert at the preset's budget, the grids' learner unchanged",
+    )
+    parser.add_argument(
+        "--throughput",
+        type=path_argument,
+        metavar="FILE",
+        help="a benchmark's rows measured on this machine (benchmarks/gpu_check.py --json, or "
+        "benchmarks/grid_throughput.py --json): the plan's wall time is estimated from them "
+        "before it starts (also with --resume, for what is left)",
     )
     add_run_folder_flags(parser)
     add_compile_cache_flags(parser)
@@ -219,7 +229,7 @@ def _check_resume(parser: argparse.ArgumentParser, args) -> None:
 
 def _check_page(parser: argparse.ArgumentParser, args) -> None:
     """``--page DIR`` reads the plan's options from DIR: takes only --out and --overwrite."""
-    flags = PLAN_FLAGS | {"resume": "--resume", "adopt": "--adopt"}
+    flags = PLAN_FLAGS | {"resume": "--resume", "adopt": "--adopt", "throughput": "--throughput"}
     given = [flag for name, flag in flags.items() if getattr(args, name) is not None]
     if given:
         parser.error(f"--page writes the page of the plan in DIR as it is: drop {given[0]}")
@@ -275,6 +285,7 @@ def main(argv=None) -> Path:
                 overwrite=args.overwrite,
                 adopt=args.adopt or (),
                 allow_unsealed=args.allow_unsealed,
+                throughput=args.throughput,
             )
     except RunError as error:  # a grid's or a demonstration making's refusal, one line
         raise SystemExit(str(error)) from None
