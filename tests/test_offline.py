@@ -235,24 +235,30 @@ def test_ilid_selects_other_rows_that_lead_to_expert_like_states(demos, grid_run
             assert row + 1 < len(ids) and ids[row + 1] == ids[row]
 
 
-def test_the_program_writes_the_sweeps_outputs_and_refuses_a_second_run(
-    demos_path, tmp_path, capsys
-):
-    """experiments.offline end to end on a tiny grid: config.json, metrics.csv (no
-    environment step), summary.json with each method's probability of beating BC on every
-    row, curves.png; a second run into the same folder is refused, and so are demonstrations
-    the run cannot use, before it writes anything."""
-    from pngail_jax.demos import load_npz, save_npz
+def test_demonstrations_a_run_cannot_use_are_refused_before_it_writes(demos_path, tmp_path):
+    """ILID on rows without trajectories, and demonstrations of another task: one line each,
+    before config.json is written."""
     from pngail_jax.programs import offline as program
 
     with pytest.raises(SystemExit, match="no trajectories .its rows carry no trajectory ids"):
         program.main(["--demos", str(demos_path), "--methods", "ilid", "--out",
                       str(tmp_path / "refused")])  # fmt: skip
-    # Demonstrations of another task: one line, before config.json is written.
     with pytest.raises(SystemExit, match="demonstrations of Pendulum-v1 do not fit Hopper-v4"):
         program.main(["--demos", str(demos_path), "--env", "Hopper-v4", "--out",
                       str(tmp_path / "other-task")])  # fmt: skip
-    assert not (tmp_path / "other-task" / "config.json").exists()
+    for folder in ("refused", "other-task"):
+        assert not (tmp_path / folder / "config.json").exists()
+
+
+def test_the_program_writes_the_sweeps_outputs_and_refuses_a_second_run(
+    demos_path, tmp_path, capsys
+):
+    """experiments.offline end to end on a tiny grid: config.json, metrics.csv (no
+    environment step), summary.json with each method's probability of beating BC on every
+    row, curves.png; a second run into the same folder is refused."""
+    from pngail_jax.demos import load_npz, save_npz
+    from pngail_jax.programs import offline as program
+
     with_trajectories = tmp_path / "trajectories.npz"  # the same rows, in 5 trajectories
     save_npz(with_trajectories, dataclasses.replace(
         load_npz(demos_path), trajectory_ids=np.repeat(np.arange(5), 20)))  # fmt: skip

@@ -80,6 +80,17 @@ class Budget:
 
 
 NO_SETTINGS = {"pendulum": {}, "mujoco": {}}  # every task's own row
+PAPER_BUDGET = Budget(
+    iterations=5_000,
+    seeds=5,
+    chunk_iterations=250,
+    classifier_steps=None,
+    demo_iterations={"pendulum": 300, "mujoco": 2_000},
+    demo_seeds=3,
+    measure_episodes=64,
+    settings=NO_SETTINGS,
+    demo_settings=NO_SETTINGS,
+)
 BUDGETS = {
     # Every figure on a 2-core CPU: a check that everything runs, not a result.
     "check": Budget(
@@ -110,32 +121,12 @@ BUDGETS = {
         },  # fmt: skip
     ),
     # The paper's budget: 5,000 TRPO iterations of about 5,000 steps, 5 seeds (a GPU).
-    "paper": Budget(
-        iterations=5_000,
-        seeds=5,
-        chunk_iterations=250,
-        classifier_steps=None,
-        demo_iterations={"pendulum": 300, "mujoco": 2_000},
-        demo_seeds=3,
-        measure_episodes=64,
-        settings=NO_SETTINGS,
-        demo_settings=NO_SETTINGS,
-    ),
+    "paper": PAPER_BUDGET,
     # The paper's budget on an accelerator: its iterations and seeds, each task's own row of
     # the settings table (25 envs x 200 steps: the wide, short rollout learned worse on the
     # CPU, docs/performance.md), longer chunks (fewer round trips to the host), and with
     # --throughput an estimate of the wall time before it starts.
-    "gpu": Budget(
-        iterations=5_000,
-        seeds=5,
-        chunk_iterations=500,
-        classifier_steps=None,
-        demo_iterations={"pendulum": 300, "mujoco": 2_000},
-        demo_seeds=3,
-        measure_episodes=64,
-        settings=NO_SETTINGS,
-        demo_settings=NO_SETTINGS,
-    ),
+    "gpu": dataclasses.replace(PAPER_BUDGET, chunk_iterations=500),
     # A tenth of the paper's budget (2.5 M steps per run): Pendulum-v1 grids in about half
     # an hour each on a 2-core CPU, the MuJoCo grids of the authors' files on the C engine in
     # 1.5-2 hours each (Hopper-v4: 122 minutes beside other jobs; docs/results.md).
