@@ -130,16 +130,11 @@ BUDGETS = {
     # A tenth of the paper's budget (2.5 M steps per run): Pendulum-v1 grids in about half
     # an hour each on a 2-core CPU, the MuJoCo grids of the authors' files on the C engine in
     # 1.5-2 hours each (Hopper-v4: 122 minutes beside other jobs; docs/results.md).
-    "cpu": Budget(
+    "cpu": dataclasses.replace(
+        PAPER_BUDGET,
         iterations=500,
-        seeds=5,
         chunk_iterations=100,
-        classifier_steps=None,
         demo_iterations={"pendulum": 150, "mujoco": 300},
-        demo_seeds=3,
-        measure_episodes=64,
-        settings=NO_SETTINGS,
-        demo_settings=NO_SETTINGS,
     ),
     # The test suite's: Pendulum-v1 in seconds.
     "test": Budget(
