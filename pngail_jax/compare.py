@@ -69,6 +69,20 @@ class Scores:
     def tasks(self) -> list[str]:
         return list(dict.fromkeys(task for by_task in self.values.values() for task in by_task))
 
+    def only(self, methods: Sequence[str]) -> Scores:
+        """The scores of ``methods`` alone, in that order (CompareError naming one the runs
+        do not have)."""
+        unknown = [method for method in methods if method not in self.values]
+        if not methods:
+            raise CompareError("--methods names no method")
+        if unknown:
+            raise CompareError(
+                f"--methods: {', '.join(unknown)} not in the runs (their methods: "
+                f"{', '.join(self.methods)})"
+            )
+        kept = {method: self.values[method] for method in methods}
+        return dataclasses.replace(self, values=kept)
+
     def common(self) -> tuple[Scores, dict[str, list[str]]]:
         """The scores on the tasks where every method has a finite score (aggregates over
         different task sets would not compare), and the tasks left out per method.

@@ -74,6 +74,26 @@ def test_only_tasks_every_method_ran_are_aggregated():
         compare.compare(s, "c")
 
 
+def test_methods_chosen_alone_widen_the_tasks_aggregated(tmp_path, capsys):
+    """A method that ran one task only narrows the aggregates to that task; --methods leaves
+    it out, and the others are aggregated over every task they ran (here, by the program)."""
+    s = Scores({"a": A, "b": B, "c": {"t2": np.array([0.5, 0.6])}})
+    assert compare.compare(s, "a")["tasks"] == ["t2"]
+    assert compare.compare(s.only(["b", "a"]), "a")["tasks"] == ["t1", "t2"]
+    assert s.only(["b", "a"]).methods == ["b", "a"]
+    with pytest.raises(compare.CompareError, match="--methods: d not in the runs"):
+        s.only(["a", "d"])
+    with pytest.raises(compare.CompareError, match="--methods names no method"):
+        s.only([])
+    one = fake_run(tmp_path / "one", "t1", {"a": A["t1"], "b": B["t1"]})
+    two = fake_run(tmp_path / "two", "t2", {"a": A["t2"], "b": B["t2"], "c": [0.5, 0.6]})
+    out = program.main([str(one), str(two), "--methods", "a,b", "--out", str(tmp_path / "c")])
+    assert json.loads((out / "compare.json").read_text())["tasks"] == ["t1", "t2"]
+    with pytest.raises(SystemExit, match="--methods: x not in the runs"):
+        program.main([str(one), "--methods", "a,x", "--out", str(tmp_path / "d")])
+    capsys.readouterr()
+
+
 def test_a_task_where_a_method_has_no_finite_score_is_left_out():
     s = Scores({"a": A, "b": {"t1": B["t1"], "t2": np.full(2, np.nan)}})
     result = compare.compare(s, "a")

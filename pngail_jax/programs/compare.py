@@ -54,6 +54,11 @@ def parse_args(argv=None) -> argparse.Namespace:
         f"{report.LATE_SHARE * 100:.0f}%% of training (the default, the figure re-runs agree on "
         "best), or final, its last evaluation",
     )  # fmt: skip
+    parser.add_argument(
+        "--methods",
+        help="comma-separated: compare these methods alone, in this order (default: every "
+        "method of the runs; the aggregates use the tasks every compared method ran)",
+    )
     add_allow_unsealed(parser.add_argument, "compare a run")
     parser.add_argument(
         "--expected", type=path_argument, metavar="RECORD",
@@ -85,6 +90,8 @@ def main(argv=None) -> Path:
 def write_comparison(args, claim) -> None:
     """The comparison of ``args.runs`` into the claimed ``args.out``."""
     scores = compare.load_scores(args.runs, args.statistic, allow_unsealed=args.allow_unsealed)
+    if args.methods is not None:
+        scores = scores.only([name.strip() for name in args.methods.split(",") if name.strip()])
     baseline = args.baseline or ("pngail" if "pngail" in scores.methods else scores.methods[0])
     result = compare.compare(scores, baseline, seed=args.seed)
     expected, expected_text = _against_record(args, scores)
