@@ -6,6 +6,8 @@ import importlib.util
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -56,3 +58,20 @@ def test_the_snapshot_drops_wall_clock_columns_and_compare_fails_on_a_result(tmp
     assert tool.main(["compare", a, b]) == 0
     assert tool.main(["compare", a, c]) == 1
     assert "DIFFERENT: 1 difference(s) that count" in capsys.readouterr().out
+
+
+def test_the_record_trend_ends_with_the_records_headline(capsys):
+    """The last of five windows is the last 20% of training: its mean over seeds is the
+    record's headline mean for every method."""
+    import json
+
+    import numpy as np
+
+    folder = ROOT / "records" / "offline-ant"
+    rows = _tool("record_trend").main([str(folder)])
+    headline = json.loads((folder / "record.json").read_text())["late_average_normalized_return"]
+    assert [row["method"] for row in rows] == list(headline)
+    for row in rows:
+        assert row["windows"][-1] == pytest.approx(np.mean(headline[row["method"]]), abs=1e-6)
+        assert row["change"] == pytest.approx(row["windows"][-1] - row["windows"][-2], abs=1e-9)
+    assert "| offline-ant | ILID |" in capsys.readouterr().out
