@@ -86,8 +86,9 @@ class TrainRLConfig:
                 f"({self.iterations}) must be a multiple of the evaluation interval "
                 f"({self.settings.eval_every}, settings.eval_every)",
             )
+        rollout, trpo = self.rollout_config, self.trpo_config  # each config's own checks
         try:
-            check_batch(self.learner, self.rollout_config, self.ppo, self.trpo_config)
+            check_batch(self.learner, rollout, self.ppo, trpo)
         except ValueError as error:
             validation.fail(self.learner, str(error))
 
