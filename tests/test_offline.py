@@ -295,7 +295,18 @@ def test_the_program_writes_the_sweeps_outputs_and_refuses_a_second_run(
     with pytest.raises(SystemExit):
         program.parse_args(argv)
     assert "already holds a run of experiments.offline" in capsys.readouterr().err
-    # Its rows join the online methods' tables: compare reads it, a record keeps it.
+    assert_compare_and_the_record_read_it(out, rows, tmp_path / "records")
+    # Sealed as the sweep is: a config.json edited by hand is not resumed under its label.
+    document = json.loads((out / "config.json").read_text())
+    document["config"]["gradient_steps"] = 80
+    (out / "config.json").write_text(json.dumps(document))
+    with pytest.raises(SystemExit, match="config.json was changed since the run began"):
+        program.main(["--resume", str(out)])
+
+
+def assert_compare_and_the_record_read_it(out, rows, records):
+    """An offline run's rows join the online methods' tables: compare reads its headline,
+    and a record keeps it."""
     from pngail_jax import compare, run_records
 
     scores = compare.load_scores([out])
@@ -305,16 +316,9 @@ def test_the_program_writes_the_sweeps_outputs_and_refuses_a_second_run(
     assert scores.values["dwbc"][scores.tasks[0]].tolist() == pytest.approx(
         evaluated[1::2], abs=1e-5
     )
-    folder = run_records.write_record(out, "tiny-offline", tmp_path / "records")
-    record = run_records.check_record(folder)
+    record = run_records.check_record(run_records.write_record(out, "tiny-offline", records))
     assert record["program"] == "experiments.offline" and record["complete"]
     assert "BC (all rows)" in run_records.record_table(record, "bc-all")
-    # Sealed as the sweep is: a config.json edited by hand is not resumed under its label.
-    document = json.loads((out / "config.json").read_text())
-    document["config"]["gradient_steps"] = 80
-    (out / "config.json").write_text(json.dumps(document))
-    with pytest.raises(SystemExit, match="config.json was changed since the run began"):
-        program.main(["--resume", str(out)])
 
 
 @pytest.mark.heavy
