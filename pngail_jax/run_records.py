@@ -396,10 +396,14 @@ def glance_table(records: list[dict], statistic: str = "late_average") -> str:
 
     rows: dict[str, dict[str, np.ndarray]] = {}
     for record in records:
-        task = rows.setdefault(str(run_settings(record["config"]).get("env")), {})
+        env = str(run_settings(record["config"]).get("env"))
+        task = rows.setdefault(env, {})
         for method, seeds in record[_key(statistic)].items():
             if method in task:
-                raise RecordError(f"record {record['name']}: {method!r} is in another record too")
+                raise RecordError(
+                    f"record {record['name']}: {method!r} on {env} is in another record of "
+                    "the table too"
+                )
             task[method] = np.asarray([math.nan if v is None else v for v in seeds], float)
     methods = list(dict.fromkeys(method for task in rows.values() for method in task))
     lines = [

@@ -66,5 +66,7 @@ def test_a_glance_table_joins_records_by_task():
     seeds = np.asarray(records[0]["late_average_normalized_return"]["iswbc"], float)
     mean, se = seeds.mean(), seeds.std(ddof=1) / np.sqrt(len(seeds))
     assert pendulum[4] == f"{mean:.2f} ± {se:.2f}"
-    with pytest.raises(run_records.RecordError, match="'bc-expert' is in another record too"):
+    with pytest.raises(
+        run_records.RecordError, match="'bc-expert' on Pendulum-v1 is in another record"
+    ):
         run_records.glance_table([records[0], records[0]])

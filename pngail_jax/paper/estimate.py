@@ -20,7 +20,7 @@ from pathlib import Path
 from pngail_jax import envs
 from pngail_jax.jobs.chunks import format_seconds
 from pngail_jax.jobs.errors import RunError
-from pngail_jax.paper.plan import Budget, GridSpec
+from pngail_jax.paper.plan import Budget, GridSpec, task_kind
 
 RATE_KEYS = ("steps_per_second_with_eval", "steps_per_second")  # the first one present
 
@@ -97,7 +97,7 @@ def estimate_table(grids: dict, budget: Budget, physics, rows: list[dict], made_
     parts = [(name, grid.task, *grid_size(grid, budget, physics)) for name, grid in grids.items()]
     for task in made_tasks:
         settings = budget.run_settings(task, physics, demos=True)
-        iterations = budget.demo_iterations["pendulum" if task == "Pendulum-v1" else "mujoco"]
+        iterations = budget.demo_iterations[task_kind(task)]
         steps = budget.demo_seeds * iterations * settings.num_envs * settings.unroll_length
         parts.append((f"demonstrations of {task}", task, budget.demo_seeds, steps))
     for name, task, cells, steps in parts:
