@@ -72,9 +72,9 @@ class Scores:
     def only(self, methods: Sequence[str]) -> Scores:
         """The scores of ``methods`` alone, in that order (CompareError naming one the runs
         do not have)."""
-        unknown = [method for method in methods if method not in self.values]
         if not methods:
             raise CompareError("--methods names no method")
+        unknown = [method for method in methods if method not in self.values]
         if unknown:
             raise CompareError(
                 f"--methods: {', '.join(unknown)} not in the runs (their methods: "

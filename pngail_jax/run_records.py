@@ -330,6 +330,11 @@ def expected_markdown(
     return "\n".join(lines) + "\n"
 
 
+def _seed_values(seeds: list[float | None]) -> np.ndarray:
+    """A record's per-seed list as float[seeds], NaN for a seed without a score."""
+    return np.asarray([math.nan if v is None else v for v in seeds], float)
+
+
 def record_table(record: dict, baseline: str | None = None) -> str:
     """A results table made from a checked record (``check_record``'s dictionary): per
     method, the headline (the normalised return over the last ``late_share`` of training)
@@ -347,16 +352,13 @@ def record_table(record: dict, baseline: str | None = None) -> str:
     if baseline is not None and baseline not in late:
         raise RecordError(f"record {record['name']} has no method {baseline!r}: {list(late)}")
 
-    def values(seeds):
-        return np.asarray([math.nan if v is None else v for v in seeds], float)
-
     def summary(seeds) -> tuple[str, str]:
-        row = stats.seed_summary(values(seeds))
+        row = stats.seed_summary(_seed_values(seeds))
         low, high = row["ci95"]
         return f"{row['mean']:.2f} ± {row['se']:.2f}", f"{row['iqm']:.2f} [{low:.2f}, {high:.2f}]"
 
     def improvement(statistic, method) -> str:
-        ours, theirs = values(statistic[anchor]), values(statistic[method])
+        ours, theirs = _seed_values(statistic[anchor]), _seed_values(statistic[method])
         if baseline is not None:
             ours, theirs = theirs, ours
         low, high = stats.probability_of_improvement_ci(ours, theirs)
@@ -373,7 +375,7 @@ def record_table(record: dict, baseline: str | None = None) -> str:
         "|---|---:|---:|---:|---:|---:|" + ("---:|---:|" if compared else ""),
     ]
     for method in late:
-        seeds = int(np.isfinite(values(late[method])).sum())
+        seeds = int(np.isfinite(_seed_values(late[method])).sum())
         cells = [display_name(method), str(seeds), *summary(late[method]), *summary(final[method])]
         if compared:
             cells += (
@@ -404,7 +406,7 @@ def glance_table(records: list[dict], statistic: str = "late_average") -> str:
                     f"record {record['name']}: {method!r} on {env} is in another record of "
                     "the table too"
                 )
-            task[method] = np.asarray([math.nan if v is None else v for v in seeds], float)
+            task[method] = _seed_values(seeds)
     methods = list(dict.fromkeys(method for task in rows.values() for method in task))
     lines = [
         "| task (seeds) | " + " | ".join(display_name(method) for method in methods) + " |",

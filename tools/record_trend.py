@@ -15,9 +15,6 @@ same kind is unlikely to move the result much. The record is checked first
 from __future__ import annotations
 
 import argparse
-import csv
-import gzip
-import io
 import sys
 from pathlib import Path
 
@@ -27,15 +24,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from pngail_jax import run_records  # noqa: E402
 from pngail_jax.methods import display_name  # noqa: E402
+from pngail_jax.report import metrics_rows  # noqa: E402
 
 
 def evaluations(folder: Path) -> dict[str, dict[int, list[tuple[int, float]]]]:
     """method -> seed -> [(iteration, normalised return)] of a checked record."""
     run_records.check_record(folder)
-    with gzip.open(folder / run_records.METRICS_FILE) as raw:
-        rows = list(csv.DictReader(io.TextIOWrapper(raw, encoding="utf8")))
     found: dict[str, dict[int, list]] = {}
-    for row in rows:
+    for row in metrics_rows(folder / run_records.METRICS_FILE):
         if row.get("normalized_return"):
             seeds = found.setdefault(row["method"], {})
             seeds.setdefault(int(row["seed"]), []).append(

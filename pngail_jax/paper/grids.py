@@ -45,6 +45,12 @@ def released_files(directory: Path | None, tasks: Sequence[str]) -> dict[str, Pa
     return found
 
 
+def made_demos_path(out: Path, task: str) -> Path:
+    """Where a plan in ``out`` keeps ``task``'s made demonstrations (written last by the
+    making, so its presence marks a finished one)."""
+    return out / "demos" / task / make_demos.DEMOS_FILE
+
+
 def demo_paths(
     grids, out: Path, budget: Budget, released: dict[str, Path], physics=None, learner="trpo"
 ):
@@ -65,8 +71,8 @@ def demo_paths(
             for s in made
             if s.task == task
         }
-        directory = out / "demos" / task
-        full = directory / "demos.npz"
+        full = made_demos_path(out, task)
+        directory = full.parent
         if not full.exists():
             print(f"\n== demonstrations for {task}: making them into {directory}", flush=True)
             config = demo_config(task, budget, counts, physics, learner)

@@ -27,6 +27,7 @@ from pngail_jax.paper.estimate import estimate_table, read_throughput
 from pngail_jax.paper.grids import (
     demo_paths,
     grid_complete,
+    made_demos_path,
     planned_configs,
     released_files,
     run_grids,
@@ -156,8 +157,9 @@ def _print_estimate(out: Path, budget_name: str, grids: dict, physics, rates) ->
     path, rows = rates
     left = {name: grid for name, grid in grids.items()
             if not grid_complete(out / "grids" / name)}  # fmt: skip
-    made = [task for task in dict.fromkeys(g.task for g in left.values() if g.demos.ratio)
-            if not (out / "demos" / task / "demos.npz").exists()]  # fmt: skip
+    made = [task for task in dict.fromkeys(g.task for g in left.values()
+                                           if g.demos.ratio is not None)
+            if not made_demos_path(out, task).exists()]  # fmt: skip
     table = estimate_table(left, BUDGETS[budget_name], physics, rows, made)
     print(f"\nEstimated wall time of what is left, at the rates in {path}:\n{table}\n",
           flush=True)  # fmt: skip
