@@ -28,6 +28,19 @@ def test_the_config_walk_climbs_no_layer_and_counts_what_it_cannot_follow(capsys
     assert f"{out['stays']} stays in {out['rooms']} rooms" in capsys.readouterr().out
 
 
+def test_the_objects_walk_is_the_part_of_the_walk_that_receives_config_objects():
+    """``--objects`` follows config objects only, so its stays are a subset of the full
+    walk's, and it still reaches where the trainers take the config in."""
+    tool = _tool("config_walk")
+    full, objects = tool.report(ROOT), tool.report(ROOT, objects=True)
+    assert set(objects["stays_list"]) < set(full["stays_list"])
+    assert "run_config:RunConfig.adversarial_config" in objects["stays_list"]
+    assert "adversarial:AdversarialTrainer.__init__" in objects["stays_list"]
+    assert "envs.base:Env.step" in full["stays_list"]  # a value read from the config, not one
+    assert "envs.base:Env.step" not in objects["stays_list"]
+    assert objects["climbs_up_layer"] == 0
+
+
 def test_the_snapshot_drops_wall_clock_columns_and_compare_fails_on_a_result(tmp_path, capsys):
     """A CSV differing only in its wall_seconds column normalises to the same text; two
     manifests that differ in a numeric file make ``compare`` exit 1, equal ones 0."""

@@ -303,6 +303,12 @@ def layer_of(module: str, layers) -> int | None:
 
 
 # ----------------------------------------------------------------------------- the walk
+def is_config_class(cls: ClassInfo) -> bool:
+    """Objects mode's config objects: pngail_jax's data-like classes named ``*Config`` or
+    ``*Settings`` (the run config, its parts, and the forms the trainers take it in)."""
+    return not cls.assigns_self and cls.name.endswith(("Config", "Settings"))
+
+
 def fkey(module: str, cls: ClassInfo | None, fn) -> tuple[str, str]:
     return (module, f"{cls.name}.{fn.name}" if cls else fn.name)
 
@@ -329,8 +335,9 @@ def _own_nodes(fn):
 
 
 class Walk:
-    def __init__(self, index: Index, carrying_attrs: set):
+    def __init__(self, index: Index, carrying_attrs: set, objects: bool = False):
         self.ix = index
+        self.objects = objects  # follow config objects only (see "Objects mode")
         self.carrying_attrs = set(carrying_attrs)  # {(module, class, attr)}
         self.attr_types: dict = {}  # (module, class, attr) -> ClassInfo
         self.memo: dict = {}  # fkey -> (frozenset tracked, {param: ClassInfo})
@@ -425,6 +432,42 @@ class Body:
         return self.self_name in self.tracked and not self.cls.assigns_self
 
     def carries(self, expr) -> bool:
+        found = self._contains_carrying(expr)
+        if not found or not self.w.objects or isinstance(expr, ast.Name):
+            return found
+        return self._is_config_object(expr)
+
+    def _is_config_object(self, expr) -> bool:
+        """Objects mode: a carrying expression counts only when its value is a config object
+        (its inferred class is data-like), or ``replace(obj, ...)`` of one."""
+        if isinstance(expr, ast.Call) and expr.args:
+            f = expr.func
+            callee = f.attr if isinstance(f, ast.Attribute) else getattr(f, "id", None)
+            if callee == "replace" and self._contains_carrying(expr.args[0]):
+                return self._is_config_object(expr.args[0])
+        if (
+            isinstance(expr, ast.Name)
+            or isinstance(expr, ast.Attribute)
+            and self.self_name
+            and isinstance(expr.value, ast.Name)
+            and expr.value.id == self.self_name
+            and (self.cls.module, self.cls.name, expr.attr) in self.w.carrying_attrs
+        ):
+            return True
+        t = self.etype(expr)
+        return t is not None and is_config_class(t)
+
+    def _holds_config(self, receiver) -> bool:
+        """Objects mode: a method called on an object that keeps a config object in an
+        attribute (``self.config = config``) is followed, its ``self`` tracked."""
+        if not self.w.objects:
+            return False
+        t = self.etype(receiver)
+        return t is not None and any(
+            (m, c) == (t.module, t.name) for m, c, _ in self.w.carrying_attrs
+        )
+
+    def _contains_carrying(self, expr) -> bool:
         if expr is None:
             return False
         if isinstance(expr, ast.Name):
@@ -436,7 +479,7 @@ class Body:
             and expr.value.id == self.self_name
         ):
             return self.self_attr_carries(expr.attr)
-        return any(self.carries(child) for child in ast.iter_child_nodes(expr))
+        return any(self._contains_carrying(child) for child in ast.iter_child_nodes(expr))
 
     def _mark(self, target, value_carries: bool, value=None) -> bool:
         changed = False
@@ -650,7 +693,9 @@ class Body:
     def call(self, call: ast.Call):
         f = call.func
         receiver = f.value if isinstance(f, ast.Attribute) else None
-        receiver_carries = receiver is not None and self.carries(receiver)
+        receiver_carries = receiver is not None and (
+            self.carries(receiver) or self._holds_config(receiver)
+        )
         args_carry = [self.carries(a) for a in call.args]
         kw_carry = [self.carries(k.value) for k in call.keywords]
         if not (receiver_carries or any(args_carry) or any(kw_carry)):
@@ -717,14 +762,14 @@ class Body:
         return tracked, types
 
 
-def run_walk(root: Path):
+def run_walk(root: Path, objects: bool = False):
     index = Index(root)
     info = index.modules["jobs.sweep"]
     fn = info.defs["run"][1]
     run_config = index.symbol("run_config", "RunConfig")[1]
     attrs: set = set()
     for passes in range(1, 20):  # noqa: B007 (the count is reported)
-        w = Walk(index, attrs)
+        w = Walk(index, attrs, objects)
         w.visit("jobs.sweep", None, fn, {"config"}, {"config": run_config})
         if w.carrying_attrs == attrs:
             break
@@ -763,8 +808,8 @@ def _unresolved_kind(text: str) -> str:
     return "other (local value, computed callee)"
 
 
-def report(root: Path, trace: bool = False):
-    index, w, passes = run_walk(root)
+def report(root: Path, trace: bool = False, objects: bool = False):
+    index, w, passes = run_walk(root, objects)
     layers = read_layers(root)
     up, reentry, on_stack = [], [], []
     for (a, b), meta in sorted(w.edges.items(), key=lambda kv: kv[1]["order"]):
@@ -824,8 +869,11 @@ def main(argv=None):
     parser.add_argument("root", type=Path)
     parser.add_argument("--json", type=Path)
     parser.add_argument("--trace", action="store_true")
+    parser.add_argument(
+        "--objects", action="store_true", help="follow config objects only, not values read from them"
+    )
     args = parser.parse_args(argv)
-    out = report(args.root, args.trace)
+    out = report(args.root, args.trace, args.objects)
     if args.json:
         args.json.write_text(json.dumps(out, indent=1))
     print(
