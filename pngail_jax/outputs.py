@@ -42,7 +42,7 @@ OWNED = {
                  "policy.json", "policy_params", "digests.json", "checkpoints"),
     "make_demos": ("demos.npz", "normalizer.json", "checkpoints"),
     "compare_settings": ("comparison.json", "comparison.md", "comparison.png",
-                         "reference*", "table*", "mid-fast", "wide-fast"),  # + its arms' runs
+                         "reference*", "table*", "mid-fast", "wide-fast*"),  # + its arms' runs
     "paper": ("paper.json", ".paper.sealed.json", "grids", "demos", "timings.json",
               "adopted.json", "README.md", "results.json", "*.png"),
     "paper-page": ("README.md", "results.json", "*.png"),

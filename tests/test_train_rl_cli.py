@@ -218,6 +218,11 @@ def test_a_run_begun_before_the_rollout_section_resumes(run_dir, tmp_path, monke
     assert (out / "metrics.csv").read_bytes() == (run_dir / "metrics.csv").read_bytes()
     ppo = upgrade_document({**old, "learner": "ppo", "ppo": {"num_epochs": 10}})
     assert "trpo" not in ppo and ppo["rollout"] == today["rollout"] and ppo["ppo"]
+    trpo = {key: value for key, value in today["trpo"].items() if key != "num_value_epochs"}
+    before_epochs = {**today, "trpo": trpo}  # the layout before the value fit's epochs
+    assert upgrade_document(before_epochs) == today
+    old["trpo"].pop("num_value_epochs")
+    assert upgrade_document(old) == today
 
 
 def test_resume_checks_again_under_the_lock(run_dir, tmp_path, monkeypatch, capsys):

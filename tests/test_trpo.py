@@ -242,3 +242,42 @@ def test_the_surrogate_loss_and_its_gradient_against_numpy():
         rtol=1e-4,
         atol=1e-6,
     )
+
+
+def test_value_epochs_are_one_epoch_fits_in_a_row_with_folded_keys():
+    """``num_value_epochs=3`` fits the value as three one-epoch fits one after another, the
+    e-th on ``fold_in(key, e)``'s permutation (the first on ``key``'s, so one epoch is the
+    reference's fit unchanged); the loss on the batch falls with more epochs."""
+    from pngail_jax import envs
+    from pngail_jax.rl.on_policy import RolloutConfig
+    from pngail_jax.rl.trpo import TRPO, TRPOConfig, TRPOHyperparams
+
+    rollout = RolloutConfig(num_envs=2, unroll_length=12, hidden_sizes=(8,))
+    pendulum = envs.make("Pendulum-v1")
+
+    def learner(epochs):
+        return TRPO(rollout, pendulum, TRPOConfig(num_value_minibatches=4, num_value_epochs=epochs))
+
+    one, three = learner(1), learner(3)
+    state = one.init(jax.random.key(0))
+    rng = np.random.default_rng(5)
+    obs = jnp.asarray(rng.normal(size=(24, 3)), jnp.float32)
+    targets = jnp.asarray(rng.normal(size=24) + obs[:, 0], jnp.float32)
+    hyperparams, key = TRPOHyperparams.create(), jax.random.key(7)
+    params, opt_state, _ = three.fit_value(hyperparams, state, obs, targets, key)
+    chained = state
+    for epoch_key in (key, jax.random.fold_in(key, 1), jax.random.fold_in(key, 2)):
+        value_params, value_opt, _ = one.fit_value(hyperparams, chained, obs, targets, epoch_key)
+        chained = chained.replace(value_params=value_params, value_optimizer_state=value_opt)
+    for got, want in zip(jax.tree.leaves((params, opt_state)),
+                         jax.tree.leaves((chained.value_params, chained.value_optimizer_state)),
+                         strict=True):  # fmt: skip
+        np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
+
+    def loss(value_params):
+        return float(jnp.mean((one.value.apply(value_params, obs) - targets) ** 2))
+
+    after_one = one.fit_value(hyperparams, state, obs, targets, key)[0]
+    assert loss(params) < loss(after_one) < loss(state.value_params)
+    with pytest.raises(ValueError, match="num_value_epochs"):
+        TRPOConfig(num_value_epochs=0)

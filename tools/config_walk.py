@@ -870,7 +870,9 @@ def main(argv=None):
     parser.add_argument("--json", type=Path)
     parser.add_argument("--trace", action="store_true")
     parser.add_argument(
-        "--objects", action="store_true", help="follow config objects only, not values read from them"
+        "--objects",
+        action="store_true",
+        help="follow config objects only, not values read from them",
     )
     args = parser.parse_args(argv)
     out = report(args.root, args.trace, args.objects)

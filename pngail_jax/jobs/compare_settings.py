@@ -36,13 +36,21 @@ PROGRAM = "compare_settings"
 COMPARISON_FILE = "comparison.json"  # written last: its presence marks a finished comparison
 
 # Each arm: the settings it starts from ("table": the task's row; "reference": the authors'),
-# the settings it changes, and its Fisher subsample. The flags train_rl takes for the same
-# run are in ``arm_flags``.
+# the settings it changes, its Fisher subsample and its value fit's epochs. The flags train_rl
+# takes for the same run are in ``arm_flags``.
 ARMS = {
     "reference": {"settings": "reference"},
     "reference-fast": {"settings": "reference", "solver": "fast"},
     "mid-fast": {"settings": "reference", "solver": "fast", "num_envs": 100, "unroll_length": 50},
     "wide-fast": {"settings": "reference", "solver": "fast", "num_envs": 250, "unroll_length": 20},
+    "reference-fast-value10": {"settings": "reference", "solver": "fast", "value_epochs": 10},
+    "wide-fast-value10": {
+        "settings": "reference",
+        "solver": "fast",
+        "num_envs": 250,
+        "unroll_length": 20,
+        "value_epochs": 10,
+    },
     "table": {},
     "table-own-solver": {"solver": "own"},
     "table-normalized": {"normalize_observations": True},
@@ -98,6 +106,7 @@ class CompareSettingsConfig:
         base = REFERENCE_SETTINGS if spec.pop("settings", "table") == "reference" else None
         base = base or settings_for(self.env)
         fisher_subsample = spec.pop("fisher_subsample", 1)
+        value_epochs = spec.pop("value_epochs", 1)
         if "solver" in spec:
             spec.update(parse_solver(spec.pop("solver")))
         settings = dataclasses.replace(base, eval_every=self.eval_every, **spec)
@@ -108,6 +117,7 @@ class CompareSettingsConfig:
             seed=self.seed,
             fisher="gauss_newton",
             fisher_subsample=fisher_subsample,
+            value_epochs=value_epochs,
             settings=settings,
         )
 
@@ -252,6 +262,7 @@ def evaluate_arms(config: CompareSettingsConfig, directories: dict) -> tuple[dic
             },
             "env_options": saved["env_options"],
             "fisher_subsample": saved["trpo"]["fisher_subsample"],
+            "value_epochs": saved["trpo"]["num_value_epochs"],
             "final_return": {name: values.tolist() for name, values in final.items()},
             "final_return_mean_se": {
                 name: mean_and_standard_error(values) for name, values in final.items()
@@ -284,6 +295,8 @@ def comparison_markdown(summary: dict) -> str:
         normalized = ", norm. obs" if settings["normalize_observations"] else ""
         if result["fisher_subsample"] > 1:
             normalized += f", Fisher on every {result['fisher_subsample']}th step"
+        if result.get("value_epochs", 1) > 1:
+            normalized += f", {result['value_epochs']} value epochs"
         lines.append(
             f"| {arm} | {shape}, {solver} solver{normalized} | "
             f"{cell(result['final_return_mean_se']['own'])} | "

@@ -67,6 +67,7 @@ class TrainRLConfig:
     seed: int = 0
     fisher: str = "gauss_newton"
     fisher_subsample: int = 1
+    value_epochs: int = 1
     truncation_as_terminal: bool = False
     settings: run_settings.RunSettings | None = None
     learner: str = "trpo"
@@ -75,7 +76,7 @@ class TrainRLConfig:
     def __post_init__(self):
         if self.settings is None:
             object.__setattr__(self, "settings", run_settings.settings_for(self.env))
-        for name in ("iterations", "seeds", "fisher_subsample"):
+        for name in ("iterations", "seeds", "fisher_subsample", "value_epochs"):
             validation.integer(name, getattr(self, name), 1)
         validation.integer("seed", self.seed, 0)
         if self.learner not in LEARNERS:
@@ -98,7 +99,11 @@ class TrainRLConfig:
 
     @property
     def trpo_config(self) -> TRPOConfig:
-        return TRPOConfig(fisher=self.fisher, fisher_subsample=self.fisher_subsample)
+        return TRPOConfig(
+            num_value_epochs=self.value_epochs,
+            fisher=self.fisher,
+            fisher_subsample=self.fisher_subsample,
+        )
 
     @property
     def hyperparams(self) -> TRPOHyperparams:
@@ -171,6 +176,8 @@ def upgrade_document(document: dict) -> dict:
     their own ("trpo" held them beside TRPO's, whichever learner ran) in today's layout:
     "rollout", and "trpo" for a TRPO run; today's unchanged."""
     old = document.get("trpo")
+    if isinstance(old, dict) and "num_envs" not in old and "num_value_epochs" not in old:
+        return {**document, "trpo": {**old, "num_value_epochs": 1}}  # before value epochs
     if not isinstance(old, dict) or "num_envs" not in old:
         return document
     shared = {field.name for field in dataclasses.fields(RolloutConfig)}
@@ -178,6 +185,7 @@ def upgrade_document(document: dict) -> dict:
     upgraded["rollout"] = {key: value for key, value in old.items() if key in shared}
     if document.get("learner", "trpo") == "trpo":
         upgraded["trpo"] = {key: value for key, value in old.items() if key not in shared}
+        upgraded["trpo"].setdefault("num_value_epochs", 1)
     return upgraded
 
 

@@ -80,6 +80,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add("--fisher-subsample", type=int, default=1, help="Fisher products on every k-th step")
     add(
+        "--value-epochs",
+        type=int,
+        default=1,
+        help="passes of TRPO's value fit over each batch (default 1, the reference's)",
+    )
+    add(
         "--truncation-as-terminal",
         action="store_true",
         help="the reference's GAE: no bootstrapping through time limits",
@@ -117,7 +123,7 @@ def _check(parser, args) -> None:
         if args.solver not in (None, "fast"):
             parser.error("--fast-solver and --solver disagree")
         args.solver = "fast"
-    check_positive(parser, args, ("iterations", "seeds", "fisher_subsample"))
+    check_positive(parser, args, ("iterations", "seeds", "fisher_subsample", "value_epochs"))
     args.settings = flags.settings_from_flags(parser, args, args.env)
     if args.iterations % args.settings.eval_every:
         parser.error(

@@ -164,6 +164,8 @@ class TRPOConfig:
     rollout's shape and the networks are ``RolloutConfig``'s, which both learners share."""
 
     num_value_minibatches: int = 30
+    # Passes of the value fit over the batch, each a fresh permutation (the reference: 1).
+    num_value_epochs: int = 1
     num_cg_iterations: int = 10
     num_backtracks: int = 10
     # "hessian": Hessian of the mean KL times v, the reference's form (second-order autodiff).
@@ -176,7 +178,12 @@ class TRPOConfig:
     fisher_subsample: int = 1
 
     def __post_init__(self):
-        for name in ("num_value_minibatches", "num_cg_iterations", "num_backtracks"):
+        for name in (
+            "num_value_minibatches",
+            "num_value_epochs",
+            "num_cg_iterations",
+            "num_backtracks",
+        ):
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
                 raise ValueError(f"TRPOConfig.{name} must be a positive integer, got {value!r}")
@@ -374,13 +381,22 @@ class TRPO(OnPolicyLearner):
         return LearningTargets(normalizer, obs, advantages, targets)
 
     def fit_value(self, hyperparams, state, obs, targets, key):
-        """The update's value step: Adam over one permutation of the flattened batch (obs
-        float[B, O], targets float[B]) in ``num_value_minibatches`` steps. Returns the value
-        parameters, their optimiser state and the mean loss."""
+        """The update's value step: Adam over ``num_value_epochs`` permutations of the
+        flattened batch (obs float[B, O], targets float[B]), each in ``num_value_minibatches``
+        steps (the first permutation is ``key``'s, the e-th ``fold_in(key, e)``'s). Returns the
+        value parameters, their optimiser state and the mean loss."""
         num_minibatches = self.trpo.num_value_minibatches
         minibatch_size = self.config.batch_size // num_minibatches
-        order = jax.random.permutation(key, self.config.batch_size)
-        order = order[: num_minibatches * minibatch_size].reshape(num_minibatches, minibatch_size)
+        epoch_keys = [key] + [
+            jax.random.fold_in(key, epoch) for epoch in range(1, self.trpo.num_value_epochs)
+        ]
+        orders = [
+            jax.random.permutation(epoch_key, self.config.batch_size)[
+                : num_minibatches * minibatch_size
+            ].reshape(num_minibatches, minibatch_size)
+            for epoch_key in epoch_keys
+        ]
+        order = orders[0] if len(orders) == 1 else jnp.concatenate(orders)  # 1: the same program
 
         def loss_fn(params, indices):
             prediction = self.value.apply(params, obs[indices])
