@@ -4,6 +4,7 @@ each ``<!-- record-table NAME -->`` table of README.md and docs/*.md equals
 statistics recomputed from its metrics). ``python -m experiments.record --docs`` rewrites
 them."""
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -70,3 +71,58 @@ def test_a_glance_table_joins_records_by_task():
         run_records.RecordError, match="'bc-expert' on Pendulum-v1 is in another record"
     ):
         run_records.glance_table([records[0], records[0]])
+
+
+# The results tables of these documents, outside the record markers, each say where their
+# numbers rest: a record (``records/NAME``) or "record not kept", in the table or in the line
+# right above it. A results table is one whose header names a result or whose cells hold a
+# mean ± s.e. or an interval; throughput, fidelity and settings tables are not (their headers below).
+RESULT_DOCS = ("README.md", "docs/results.md", "docs/ppo.md", "docs/performance.md",
+               "docs/demonstrations.md")  # fmt: skip
+RESULT_HEADERS = ("final", "iqm", "return", "mae", "accuracy", "p(", "per seed", "average")
+NOT_RESULTS = ("steps/s", "envs x steps per iteration", "rows per step")
+INTERVAL = re.compile(r"\d ± \d|\d \[-?\d")  # a mean ± s.e. or an estimate [its interval]
+
+
+def results_tables(text: str):
+    """(line number, table text, the nearest non-blank line above) of each results table
+    outside ``<!-- record-... -->`` blocks."""
+    lines, inside = text.split("\n"), False
+    for number, line in enumerate(lines):
+        inside = (inside or line.startswith("<!-- record-")) and not line.startswith("<!-- /")
+        if not line.startswith("|") or (number and lines[number - 1].startswith("|")):
+            continue
+        end = number
+        while end < len(lines) and lines[end].startswith("|"):
+            end += 1
+        header, body = line.lower(), "\n".join(lines[number + 2 : end])
+        if inside or not (any(w in header for w in RESULT_HEADERS) or INTERVAL.search(body)):
+            continue
+        if any(word in header for word in NOT_RESULTS):
+            continue
+        above = next((lines[k] for k in range(number - 1, -1, -1) if lines[k].strip()), "")
+        yield number + 1, "\n".join(lines[number:end]), above
+
+
+def _says_where(table: str, above: str) -> bool:
+    text = f"{above}\n{table}".lower()
+    return "records/" in text or "record not kept" in text
+
+
+@pytest.mark.parametrize("name", RESULT_DOCS)
+def test_every_results_table_names_its_record_or_says_it_was_not_kept(name):
+    text = (ROOT / name).read_text()
+    silent = [number for number, table, above in results_tables(text)
+              if not _says_where(table, above)]  # fmt: skip
+    assert not silent, f"{name}: results tables on lines {silent} name no record"
+
+
+def test_an_unmarked_results_table_is_found():
+    table = "| method | final |\n|---|---:|\n| GAIL | 0.30 ± 0.00 |"
+    found = list(results_tables(f"Some text.\n\n{table}\n"))
+    assert [number for number, _, _ in found] == [3] and not _says_where(*found[0][1:])
+    marked = list(results_tables(f"(record not kept)\n\n{table}\n"))
+    assert _says_where(*marked[0][1:])
+    fenced = f"<!-- record-table x -->\n{table}\n<!-- /record-table -->\n"
+    assert list(results_tables(fenced)) == []
+    assert list(results_tables("| task | training steps/s |\n|---|---:|\n| a | 1 |")) == []
