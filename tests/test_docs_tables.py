@@ -76,7 +76,8 @@ def test_a_glance_table_joins_records_by_task():
 # The results tables of these documents, outside the record markers, each say where their
 # numbers rest: a record (``records/NAME``) or "record not kept", in the table or in the line
 # right above it. A results table is one whose header names a result or whose cells hold a
-# mean ± s.e. or an interval; throughput, fidelity and settings tables are not (their headers below).
+# mean ± s.e. or an interval; throughput, fidelity and settings tables are not (their headers
+# below).
 RESULT_DOCS = ("README.md", "docs/results.md", "docs/ppo.md", "docs/performance.md",
                "docs/demonstrations.md")  # fmt: skip
 RESULT_HEADERS = ("final", "iqm", "return", "mae", "accuracy", "p(", "per seed", "average")
