@@ -127,3 +127,11 @@ def test_an_unmarked_results_table_is_found():
     fenced = f"<!-- record-table x -->\n{table}\n<!-- /record-table -->\n"
     assert list(results_tables(fenced)) == []
     assert list(results_tables("| task | training steps/s |\n|---|---:|\n| a | 1 |")) == []
+
+
+def test_the_readme_states_the_records_total_size():
+    """The README's "(`records/`, X MB in all)" is the folder's size to the 0.1 MB."""
+    stated = re.search(r"`records/`, ([\d.]+) MB in all", (ROOT / "README.md").read_text())
+    assert stated, "README.md states no total size of records/"
+    total = sum(f.stat().st_size for f in (ROOT / "records").rglob("*") if f.is_file())
+    assert float(stated[1]) == round(total / 1e6, 1), f"records/ holds {total / 1e6:.2f} MB"
