@@ -99,3 +99,51 @@ def test_the_job_trains_evaluates_and_reuses_a_finished_arm(tmp_path, capsys):
     again = job.compare_settings(config, tmp_path / "cmp", overwrite=True)
     assert "table: finished run in" in capsys.readouterr().out
     assert again["arms"]["table"]["final_return"] == arm["final_return"]  # same keys, same policies
+
+
+def test_a_finished_comparison_is_recorded_checked_and_its_table_rendered(tmp_path, capsys):
+    """The comparison keeps its command, commit and curves; ``experiments.record`` makes a
+    record of it whose table is the comparison's own, and whose check recomputes every
+    statistic from the per-seed numbers (an edited return fails it)."""
+    from pngail_jax.jobs import comparison_record
+    from pngail_jax.programs import record as record_program
+    from pngail_jax.run_records import RecordError
+
+    config = job.CompareSettingsConfig(
+        env="Pendulum-v1", arms=("table", "reference-fisher5"), seeds=2, iterations=1,
+        eval_every=1, num_eval_episodes=2,
+    )  # fmt: skip
+    summary = job.compare_settings(config, tmp_path / "cmp", command=["--env", "Pendulum-v1"])
+    assert summary["provenance"]["command_line"][:3] == [
+        "python",
+        "-m",
+        "experiments.compare_settings",
+    ]
+    assert summary["provenance"]["arms_reused"] == []
+    assert np.asarray(summary["curves"]["table"]["eval_return"]).shape == (2, 1)
+    records = tmp_path / "records"
+    record_program.main([str(tmp_path / "cmp"), "--name", "cmp", "--records", str(records)])
+    record = comparison_record.check(records / "cmp")
+    assert (
+        comparison_record.table(record) + "\n" == (tmp_path / "cmp" / "comparison.md").read_text()
+    )
+    assert "compare_settings on Pendulum-v1" in capsys.readouterr().out
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "README.md").write_text("no tables\n")
+    page = tmp_path / "docs" / "performance.md"
+    page.write_text("<!-- record-comparison cmp -->\n| stale |\n<!-- /record-comparison -->\n")
+    assert record_program.rewrite_docs(tmp_path, records) == [page]
+    ((name, written, expected),) = record_program.marked_tables(page, records)
+    assert name == "cmp" and written == expected == comparison_record.table(record) + "\n"
+
+    edited = json.loads((records / "cmp" / "record.json").read_text())
+    edited["comparison"]["arms"]["table"]["final_return"]["own"][0] += 1.0
+    (records / "cmp" / "record.json").write_text(json.dumps(edited))
+    with pytest.raises(RecordError, match="arm table's statistics differ"):
+        comparison_record.check(records / "cmp")
+
+    old = json.loads((tmp_path / "cmp" / job.COMPARISON_FILE).read_text())
+    del old["provenance"]
+    (tmp_path / "cmp" / job.COMPARISON_FILE).write_text(json.dumps(old))
+    with pytest.raises(SystemExit, match="run its compare_settings command again"):
+        record_program.main([str(tmp_path / "cmp"), "--name", "other", "--records", str(records)])

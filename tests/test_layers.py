@@ -48,8 +48,8 @@ LAYERS = [
 # The jobs in their dependency order: each imports only those before it.
 JOB_ORDER = [
     "errors", "classify", "chunks", "early_rewards", "train_seeds", "make_demos",
-    "demonstrations", "train_rl", "compare_settings", "build", "record", "results", "sweep",
-    "offline",
+    "demonstrations", "train_rl", "compare_settings", "comparison_record", "build", "record",
+    "results", "sweep", "offline",
 ]  # fmt: skip
 LONGEST_MODULE = 700
 LONGEST_JOB = 400

@@ -22,6 +22,7 @@ import numpy as np
 import orbax.checkpoint as ocp
 
 from pngail_jax import envs, validation
+from pngail_jax.config_record import provenance
 from pngail_jax.integrity import atomic_path, atomic_write_text, write_json
 from pngail_jax.jobs.errors import refusals
 from pngail_jax.jobs.train_rl import TrainRLConfig, train_rl, upgrade_document
@@ -122,18 +123,26 @@ class CompareSettingsConfig:
         )
 
 
-def compare_settings(config: CompareSettingsConfig, out, *, overwrite: bool = False) -> dict:
+def compare_settings(
+    config: CompareSettingsConfig, out, *, overwrite: bool = False, command=None
+) -> dict:
     """Runs (or keeps) every arm of ``config`` into ``out/<arm>/``, evaluates them alike and
     writes the comparison; returns its summary. ``out`` is new, empty, an unfinished
     comparison (continued), or with ``overwrite`` a finished one (rewritten, its arms kept).
+    ``command``: the flags recorded in the summary's provenance (default: this process's).
     Raises ``RunError`` with one line."""
     out = Path(out)
     unfinished = not (out / COMPARISON_FILE).exists()
     with refusals(), claimed(out, PROGRAM, overwrite=overwrite or unfinished):
         prepare_output(out, PROGRAM)  # marked, never emptied: its finished arms are reused
+        reused = [arm for arm in config.arms if (out / arm / "policy.json").exists()]
         directories = {arm: run_arm(config, out, arm) for arm in config.arms}
         results, curves = evaluate_arms(config, directories)
-        return write_comparison(config, out, results, curves)
+        origin = {
+            **provenance(command, program="experiments.compare_settings"),
+            "arms_reused": reused,  # trained by an earlier process (its commit is not known)
+        }
+        return write_comparison(config, out, results, curves, origin)
 
 
 def run_arm(config: CompareSettingsConfig, out: Path, arm: str) -> Path:
@@ -148,8 +157,11 @@ def run_arm(config: CompareSettingsConfig, out: Path, arm: str) -> Path:
     return directory
 
 
-def write_comparison(config: CompareSettingsConfig, out: Path, results: dict, curves) -> dict:
-    """The verdicts, then comparison.md, .png and (last) .json."""
+def write_comparison(
+    config: CompareSettingsConfig, out: Path, results: dict, curves, origin=None
+) -> dict:
+    """The verdicts, then comparison.md, .png and (last) .json, which also keeps each arm's
+    evaluation curve and ``origin`` (the command, commit and machine: ``provenance``)."""
     trained_on = {
         arm: "fast" if result["env_options"] or config.env == "Ant" else "own"
         for arm, result in results.items()
@@ -168,6 +180,11 @@ def write_comparison(config: CompareSettingsConfig, out: Path, results: dict, cu
         "baseline": config.baseline,
         "eval_episodes": config.num_eval_episodes,
         "arms": results,
+        "curves": {
+            arm: {"env_steps": np.asarray(steps).tolist(), "eval_return": returns.tolist()}
+            for arm, (steps, returns) in curves.items()
+        },
+        **({} if origin is None else {"provenance": origin}),
     }
     markdown = comparison_markdown(summary)
     atomic_write_text(out / "comparison.md", markdown + "\n")

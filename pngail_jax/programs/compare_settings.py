@@ -97,6 +97,6 @@ def main(argv=None) -> dict:
     args = parse_args(argv)
     config = config_from(CompareSettingsConfig, args)
     try:
-        return compare_settings(config, args.out, overwrite=args.overwrite)
+        return compare_settings(config, args.out, overwrite=args.overwrite, command=argv)
     except RunError as error:
         raise SystemExit(str(error)) from None

@@ -13,8 +13,11 @@ A table in README.md or docs/ between ``<!-- record-table NAME -->`` and
 ``<!-- /record-table -->`` is ``run_records.record_table`` of ``records/NAME`` (with
 ``baseline=METHOD`` after the name: each method's probability of improvement over it), and one
 between ``<!-- record-glance NAME NAME ... -->`` and ``<!-- /record-glance -->`` is
-``run_records.glance_table`` of those records (a row per task): ``--docs`` writes them, and
-tests/test_docs_tables.py fails when one differs from its records.
+``run_records.glance_table`` of those records (a row per task), and one between
+``<!-- record-comparison NAME -->`` and ``<!-- /record-comparison -->`` the table of a
+recorded ``experiments.compare_settings`` comparison (``jobs.comparison_record``: RUN_DIR a
+finished comparison's folder): ``--docs`` writes them, and tests/test_docs_tables.py fails
+when one differs from its records.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ import re
 from pathlib import Path
 
 from pngail_jax import run_records
+from pngail_jax.jobs import comparison_record
 from pngail_jax.programs.cli import (
     ArgumentParser,
     HelpFormatter,
@@ -37,7 +41,8 @@ def parse_args(argv=None) -> argparse.Namespace:
         "record", description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
     )
     parser.add_argument("paths", nargs="*", type=path_argument, metavar="RUN_DIR",
-                        help="a sweep run to record; with --check, records to verify")  # fmt: skip
+                        help="a sweep or offline run, or a finished compare_settings comparison, "
+                        "to record; with --check, records to verify")  # fmt: skip
     parser.add_argument("--name", help="the record's folder name under --records")
     parser.add_argument(
         "--records", type=path_argument, default=Path("records"),
@@ -69,6 +74,12 @@ MARKED = re.compile(
     r"(?P<table>.*?)(?P<end><!-- /record-table -->)",
     re.S,
 )
+# A compare_settings comparison's table (``jobs.comparison_record``).
+COMPARED = re.compile(
+    r"(<!-- record-comparison (?P<name>[\w.-]+) -->\n)(?P<table>.*?)"
+    r"(?P<end><!-- /record-comparison -->)",
+    re.S,
+)
 # Several records in one table (``run_records.glance_table``): names separated by spaces.
 GLANCED = re.compile(
     r"(<!-- record-glance (?P<name>[\w.-]+(?: [\w.-]+)*) -->\n)"
@@ -84,6 +95,8 @@ def doc_files(root: Path = Path(".")) -> list[Path]:
 
 def _expected(match: re.Match, records: Path) -> str:
     """The table a marker's records give (RecordError for one missing or failing its check)."""
+    if match.re is COMPARED:
+        return comparison_record.table(comparison_record.check(records / match["name"])) + "\n"
     if match.re is GLANCED:
         names = match["name"].split()
         return run_records.glance_table([run_records.check_record(records / n) for n in names])
@@ -97,7 +110,7 @@ def marked_tables(path: Path, records: Path = Path("records")) -> list[tuple[str
     text = path.read_text()
     return [
         (match["name"], match["table"], _expected(match, records))
-        for pattern in (MARKED, GLANCED)
+        for pattern in (MARKED, GLANCED, COMPARED)
         for match in pattern.finditer(text)
     ]
 
@@ -109,7 +122,7 @@ def rewrite_docs(root: Path = Path("."), records: Path = Path("records")) -> lis
     for path in doc_files(root):
         text = path.read_text()
         new = text
-        for pattern in (MARKED, GLANCED):
+        for pattern in (MARKED, GLANCED, COMPARED):
             new = pattern.sub(lambda m: m[1] + _expected(m, records) + m["end"], new)
         if new != text:
             path.write_text(new)
@@ -128,13 +141,22 @@ def main(argv=None) -> list[Path]:
             return changed
         if args.check:
             for folder in args.paths:
-                print(f"ok  {run_records.describe(run_records.check_record(folder))}")
+                print(f"ok  {describe_checked(folder)}")
             return list(args.paths)
-        folder = run_records.write_record(
-            args.paths[0], args.name, args.records, allow_unsealed=args.allow_unsealed
-        )
+        if comparison_record.is_comparison(args.paths[0]):
+            folder = comparison_record.write(args.paths[0], args.name, args.records)
+        else:
+            folder = run_records.write_record(
+                args.paths[0], args.name, args.records, allow_unsealed=args.allow_unsealed
+            )
+        print(f"wrote {folder} and checked it\n    {describe_checked(folder)}")
     except run_records.RecordError as error:
         raise SystemExit(str(error)) from None
-    print(f"wrote {folder}/{{record.json,metrics.csv.gz}} and checked it")
-    print(f"    {run_records.describe(run_records.check_record(folder))}")
     return [folder]
+
+
+def describe_checked(folder: Path) -> str:
+    """The record in ``folder`` checked (a sweep's or a comparison's) and described."""
+    if (Path(folder) / run_records.METRICS_FILE).exists():
+        return run_records.describe(run_records.check_record(folder))
+    return comparison_record.describe(comparison_record.check(folder))

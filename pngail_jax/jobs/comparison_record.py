@@ -1,0 +1,142 @@
+"""Records of ``experiments.compare_settings`` comparisons: the settings tables of
+docs/performance.md as committed data, beside the sweep's run records (``run_records``).
+
+A comparison record is a folder (``records/<name>/``) holding one ``record.json``: the name,
+the command, the commit and the machine the comparison ran with (its ``provenance``), the arms
+an earlier process trained (whose commit is not known), and the comparison itself: every
+arm's settings, each seed's final return on each physics and each arm's evaluation curve
+(every seed at every evaluated iteration). No policies, checkpoints or plots: a few kB.
+``check`` recomputes every statistic of the table (means, standard errors, the average
+during training and the "not worse" verdicts) from the per-seed numbers it keeps.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from pngail_jax.integrity import IntegrityError, read_json, write_json
+from pngail_jax.jobs.compare_settings import (
+    COMPARISON_FILE,
+    PROGRAM,
+    comparison_markdown,
+    mean_and_standard_error,
+)
+from pngail_jax.outputs import output_owner
+from pngail_jax.run_records import FORMAT, MACHINE_KEYS, RECORD_FILE, RecordError
+
+KIND = "comparison"
+
+
+def is_comparison(run_dir: Path) -> bool:
+    """Whether ``run_dir`` is a folder of ``experiments.compare_settings``."""
+    return output_owner(Path(run_dir)) == PROGRAM
+
+
+def write(run_dir: Path, name: str, records: Path = Path("records")) -> Path:
+    """Records the finished comparison in ``run_dir`` as ``records/<name>/`` and checks it.
+    A record of that name already there is replaced only if it records the same comparison
+    (same command and commit). Returns the record's folder; RecordError naming the problem."""
+    run_dir = Path(run_dir)
+    try:
+        summary = read_json(run_dir / COMPARISON_FILE, "comparison")
+    except FileNotFoundError:
+        raise RecordError(f"{run_dir}: the comparison is not finished ({COMPARISON_FILE} is "
+                          "missing)") from None  # fmt: skip
+    except (OSError, IntegrityError) as error:
+        raise RecordError(str(error)) from None
+    origin = summary.get("provenance")
+    if origin is None or "curves" not in summary:
+        raise RecordError(
+            f"{run_dir}/{COMPARISON_FILE} was written before comparisons kept their command "
+            "and curves: run its compare_settings command again (its finished arms are reused)"
+        )
+    record = {
+        "format": FORMAT,
+        "kind": KIND,
+        "name": name,
+        "program": f"experiments.{PROGRAM}",
+        "command": origin.get("command_line"),
+        "commit": origin.get("git_commit"),
+        "machine": {key: origin.get(key) for key in MACHINE_KEYS},
+        "arms_reused": origin.get("arms_reused", []),
+        "comparison": {key: value for key, value in summary.items() if key != "provenance"},
+    }
+    folder = Path(records) / name
+    _check_replaceable(folder, record)
+    folder.mkdir(parents=True, exist_ok=True)
+    write_json(folder / RECORD_FILE, record)
+    check(folder)
+    return folder
+
+
+def _check_replaceable(folder: Path, record: dict) -> None:
+    if not folder.exists() or (folder.is_dir() and not any(folder.iterdir())):
+        return
+    found = {path.name for path in folder.iterdir()} if folder.is_dir() else None
+    if found != {RECORD_FILE}:
+        raise RecordError(f"{folder} holds something other than a comparison record: not replaced")
+    old = read_json(folder / RECORD_FILE, "run record")
+    if (old.get("command"), old.get("commit")) != (record["command"], record["commit"]):
+        raise RecordError(f"{folder} records another comparison: give another --name")
+
+
+def _numbers(values) -> np.ndarray:
+    return np.asarray([math.nan if v is None else v for v in values], float)
+
+
+def _same(stated, computed) -> bool:
+    return np.allclose(_numbers(stated), _numbers(computed), rtol=1e-12, atol=0, equal_nan=True)
+
+
+def check(folder: Path) -> dict:
+    """Verifies the comparison record in ``folder`` and returns it: each arm's means and
+    standard errors, its average during training and its verdict, recomputed from the
+    per-seed final returns and curves the record keeps. RecordError otherwise."""
+    path = Path(folder) / RECORD_FILE
+    try:
+        record = read_json(path, "run record")
+    except FileNotFoundError:
+        raise RecordError(f"{folder} holds no run record ({RECORD_FILE} is missing)") from None
+    except (OSError, IntegrityError) as error:
+        raise RecordError(f"{path}: unreadable ({error})") from None
+    if record.get("format") != FORMAT or record.get("kind") != KIND:
+        raise RecordError(f"{path}: not a comparison record of format {FORMAT}")
+    comparison = record["comparison"]
+    arms, curves = comparison["arms"], comparison["curves"]
+    baseline = arms[comparison["baseline"]]
+    base_mean, base_se = _numbers(baseline["final_return_mean_se"][baseline["trained_on"]])
+    for arm, result in arms.items():
+        returns = _numbers(curves[arm]["eval_return"])  # seeds x evaluations
+        computed = {
+            physics: mean_and_standard_error(_numbers(values))
+            for physics, values in result["final_return"].items()
+        }
+        mean, _ = computed[result["trained_on"]]
+        checks = [
+            *(_same(result["final_return_mean_se"][k], v) for k, v in computed.items()),
+            _same(
+                result["average_eval_return_mean_se"], mean_and_standard_error(returns.mean(axis=1))
+            ),  # fmt: skip
+            result["not_worse_than_baseline"] == bool(mean >= base_mean - base_se),
+        ]
+        if not all(checks):
+            raise RecordError(f"{path}: arm {arm}'s statistics differ from its per-seed numbers")
+    return record
+
+
+def table(record: dict) -> str:
+    """The comparison's markdown table, as ``experiments.compare_settings`` prints it."""
+    return comparison_markdown(record["comparison"])
+
+
+def describe(record: dict) -> str:
+    comparison = record["comparison"]
+    arms = ", ".join(comparison["arms"])
+    return (
+        f"{record['name']}: compare_settings on {comparison['env']}, {comparison['seeds']} "
+        f"seeds x {comparison['iterations']} iterations, arms {arms}; commit "
+        f"{str(record['commit'])[:7]}"
+    )
