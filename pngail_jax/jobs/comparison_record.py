@@ -43,8 +43,8 @@ def write(run_dir: Path, name: str, records: Path = Path("records")) -> Path:
     try:
         summary = read_json(run_dir / COMPARISON_FILE, "comparison")
     except FileNotFoundError:
-        raise RecordError(f"{run_dir}: the comparison is not finished ({COMPARISON_FILE} is "
-                          "missing)") from None  # fmt: skip
+        missing = f"the comparison is not finished ({COMPARISON_FILE} is missing)"
+        raise RecordError(f"{run_dir}: {missing}") from None
     except (OSError, IntegrityError) as error:
         raise RecordError(str(error)) from None
     origin = summary.get("provenance")
@@ -78,13 +78,19 @@ def _check_replaceable(folder: Path, record: dict) -> None:
     found = {path.name for path in folder.iterdir()} if folder.is_dir() else None
     if found != {RECORD_FILE}:
         raise RecordError(f"{folder} holds something other than a comparison record: not replaced")
-    old = read_json(folder / RECORD_FILE, "run record")
+    try:
+        old = read_json(folder / RECORD_FILE, "run record")
+    except (OSError, IntegrityError) as error:
+        unreadable = f"not replaced, its {RECORD_FILE} is unreadable ({error})"
+        raise RecordError(f"{folder}: {unreadable}") from None
     if (old.get("command"), old.get("commit")) != (record["command"], record["commit"]):
         raise RecordError(f"{folder} records another comparison: give another --name")
 
 
 def _numbers(values) -> np.ndarray:
-    return np.asarray([math.nan if v is None else v for v in values], float)
+    """A float array of JSON numbers, nested or not (null: NaN)."""
+    as_float = np.frompyfunc(lambda v: math.nan if v is None else v, 1, 1)
+    return as_float(np.asarray(values, dtype=object)).astype(float)
 
 
 def _same(stated, computed) -> bool:
@@ -117,14 +123,18 @@ def check(folder: Path) -> dict:
         mean, _ = computed[result["trained_on"]]
         checks = [
             *(_same(result["final_return_mean_se"][k], v) for k, v in computed.items()),
-            _same(
-                result["average_eval_return_mean_se"], mean_and_standard_error(returns.mean(axis=1))
-            ),  # fmt: skip
+            _same(result["average_eval_return_mean_se"], _average_during_training(returns)),
             result["not_worse_than_baseline"] == bool(mean >= base_mean - base_se),
         ]
         if not all(checks):
             raise RecordError(f"{path}: arm {arm}'s statistics differ from its per-seed numbers")
     return record
+
+
+def _average_during_training(returns: np.ndarray):
+    """Mean ± s.e. over seeds of each seed's mean evaluation (``returns``: seeds x
+    evaluations), as ``compare_settings.evaluate_arms`` computes it."""
+    return mean_and_standard_error(returns.mean(axis=1))
 
 
 def table(record: dict) -> str:
