@@ -421,3 +421,101 @@ def glance_table(records: list[dict], statistic: str = "late_average") -> str:
         seeds = "/".join(map(str, counts))
         lines.append(f"| {env} ({seeds}) | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def _mean_se(values: np.ndarray) -> str:
+    """ "mean ± s.e." over the finite values (s.e. with ddof 1)."""
+    finite = values[np.isfinite(values)]
+    if finite.size == 0:
+        return "-"
+    se = finite.std(ddof=1) / math.sqrt(finite.size) if finite.size > 1 else math.nan
+    return f"{finite.mean():.2f} ± {se:.2f}"
+
+
+def _block_label(block: int, block_steps: int, last_step: int) -> str:
+    """A block's span in M steps, its end at most the run's last step."""
+    low, high = block * block_steps, min((block + 1) * block_steps, last_step)
+    return f"{low / 1e6:g}-{high / 1e6:g}"
+
+
+def block_table(record: dict, folder: Path, block_steps: int) -> str:
+    """How a recorded run learned, per block of ``block_steps`` environment steps per run:
+    per method, each seed's mean normalised evaluation in the block (an evaluation at step s
+    is in block ceil(s / block_steps)), then mean ± s.e. over seeds; the last column the final
+    evaluation. ``folder`` holds the checked ``record``. The docs' tables between
+    ``<!-- record-blocks NAME block=STEPS -->`` markers are this text."""
+    from pngail_jax.methods import display_name
+    from pngail_jax.report import read_evaluations
+
+    if block_steps < 1:
+        raise RecordError(f"record {record['name']}: a block of {block_steps} steps")
+    groups = read_evaluations(
+        Path(folder) / METRICS_FILE, "normalized_return", evaluated_by="eval_return",
+        group_by=("method", "setting"),
+    )  # fmt: skip
+    if not groups:
+        raise RecordError(f"record {record['name']}: no evaluated iteration")
+    settings = {setting for _, setting in groups}
+    steps = next(iter(groups.values()))[0]
+    blocks = (np.asarray(steps) - 1) // block_steps
+    final = f"final ({steps[-1] / 1e6:g} M)"
+    labels = [_block_label(int(b), block_steps, int(steps[-1])) for b in np.unique(blocks)]
+    lines = [
+        "| M steps | " + " | ".join(labels) + f" | {final} |",
+        "|---|" + "---:|" * (len(labels) + 1),
+    ]
+    for (method, setting), (_, values) in groups.items():
+        name = display_name(method) + ("" if len(settings) == 1 else f" [{setting}]")
+        with np.errstate(all="ignore"):
+            cells = [
+                _mean_se(np.nanmean(values[:, blocks == b], axis=1)) for b in np.unique(blocks)
+            ]
+        lines.append(f"| {name} | " + " | ".join(cells) + f" | {_mean_se(values[:, -1])} |")
+    return "\n".join(lines) + "\n"
+
+
+# A recorded run's diagnostics columns as ``diagnostics_table`` names them.
+DIAGNOSTICS = {
+    "disc_acc_agent": ("D accuracy on agent rows", "{:.3f}"),
+    "disc_acc_demo": ("D accuracy on demonstration rows", "{:.2f}"),
+    "mean_reward": ("mean reward", "{:.3f}"),
+    "train_return": ("training return", "{:,.0f}"),
+    "beyond_bounds": ("action entries beyond the bounds", "{:.2f}"),
+}
+
+
+def diagnostics_table(
+    record: dict, folder: Path, block_steps: int, methods: list[str] | None = None
+) -> str:
+    """The discriminator and policy diagnostics of a recorded run per block of
+    ``block_steps`` environment steps per run: a row per method (``methods``, default all)
+    and column of ``DIAGNOSTICS``, each cell the mean over the block's iterations and seeds.
+    The docs' tables between ``<!-- record-diagnostics NAME block=STEPS [methods=A,B] -->``
+    markers are this text."""
+    from pngail_jax.methods import display_name
+    from pngail_jax.report import metrics_rows
+
+    sums: dict[tuple[str, str], dict[int, list[float]]] = {}
+    blocks: set[int] = set()
+    last_step = 0
+    for row in metrics_rows(Path(folder) / METRICS_FILE):
+        if methods is not None and row["method"] not in methods:
+            continue
+        last_step = max(last_step, int(row["env_steps"]))
+        block = (int(row["env_steps"]) - 1) // block_steps
+        blocks.add(block)
+        for column in DIAGNOSTICS:
+            if row.get(column) not in (None, "", "nan"):
+                sums.setdefault((row["method"], column), {}).setdefault(block, []).append(
+                    float(row[column])
+                )
+    order = sorted(blocks)
+    lines = [
+        "| M steps | " + " | ".join(_block_label(b, block_steps, last_step) for b in order) + " |",
+        "|---|" + "---:|" * len(order),
+    ]
+    for (method, column), values in sums.items():
+        title, form = DIAGNOSTICS[column]
+        cells = [form.format(np.mean(values[b])) if b in values else "-" for b in order]
+        lines.append(f"| {display_name(method)}: {title} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"

@@ -135,3 +135,61 @@ def test_the_readme_states_the_records_total_size():
     assert stated, "README.md states no total size of records/"
     total = sum(f.stat().st_size for f in (ROOT / "records").rglob("*") if f.is_file())
     assert float(stated[1]) == round(total / 1e6, 1), f"records/ holds {total / 1e6:.2f} MB"
+
+
+def _metrics(name: str) -> list[dict]:
+    import csv
+    import gzip
+
+    with gzip.open(ROOT / "records" / name / "metrics.csv.gz", "rt", newline="") as file:
+        return list(csv.DictReader(file))
+
+
+def test_the_block_table_is_each_seeds_block_mean_then_mean_and_se_over_seeds():
+    """A block table's cells recomputed from the record's metrics file in plain NumPy: each
+    seed's mean normalised evaluation over the evaluations in (0, 0.5 M], (0.5 M, 1 M], ...,
+    then mean ± s.e. (ddof 1) over seeds; the last column the final evaluation."""
+    folder = ROOT / "records" / "pendulum-500-5seeds"
+    record = run_records.check_record(folder)
+    table = run_records.block_table(record, folder, 500_000).splitlines()
+    assert table[0] == "| M steps | 0-0.5 | 0.5-1 | 1-1.5 | 1.5-2 | 2-2.5 | final (2.5 M) |"
+    rows = [
+        r for r in _metrics("pendulum-500-5seeds") if r["method"] == "pngail" and r["eval_return"]
+    ]
+    cells = []
+    for low in range(0, 2_500_000, 500_000):
+        per_seed = [
+            np.mean([float(r["normalized_return"]) for r in rows
+                     if r["seed"] == seed and low < int(r["env_steps"]) <= low + 500_000])
+            for seed in sorted({r["seed"] for r in rows})
+        ]  # fmt: skip
+        cells.append(f"{np.mean(per_seed):.2f} ± {np.std(per_seed, ddof=1) / np.sqrt(5):.2f}")
+    last = max(int(r["env_steps"]) for r in rows)
+    final = [float(r["normalized_return"]) for r in rows if int(r["env_steps"]) == last]
+    cells.append(f"{np.mean(final):.2f} ± {np.std(final, ddof=1) / np.sqrt(5):.2f}")
+    assert "| PN-GAIL | " + " | ".join(cells) + " |" in table
+
+
+def test_the_diagnostics_table_is_the_block_mean_over_iterations_and_seeds(tmp_path):
+    folder = ROOT / "records" / "pendulum-500-5seeds"
+    record = run_records.check_record(folder)
+    table = run_records.diagnostics_table(record, folder, 1_000_000, ["pngail"]).splitlines()
+    assert table[0] == "| M steps | 0-1 | 1-2 | 2-2.5 |" and len(table) == 2 + 5
+    rows = [r for r in _metrics("pendulum-500-5seeds") if r["method"] == "pngail"]
+    late = [float(r["mean_reward"]) for r in rows if int(r["env_steps"]) > 2_000_000]
+    assert table[4].startswith("| PN-GAIL: mean reward |")
+    assert table[4].endswith(f" | {np.mean(late):.3f} |")
+    # the markers: a stale table is rewritten from the record, and then equals it
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "README.md").write_text("none\n")
+    page = tmp_path / "docs" / "results.md"
+    page.write_text(
+        "<!-- record-blocks pendulum-500-5seeds block=500000 -->\n| old |\n"
+        "<!-- /record-blocks -->\n"
+        "<!-- record-diagnostics pendulum-500-5seeds block=1000000 methods=pngail -->\n| old |\n"
+        "<!-- /record-diagnostics -->\n"
+    )
+    assert program.rewrite_docs(tmp_path, ROOT / "records") == [page]
+    found = program.marked_tables(page, ROOT / "records")
+    assert len(found) == 2 and all(written == expected for _, written, expected in found)
+    assert "\n".join(table) + "\n" in page.read_text()

@@ -16,8 +16,11 @@ between ``<!-- record-glance NAME NAME ... -->`` and ``<!-- /record-glance -->``
 ``run_records.glance_table`` of those records (a row per task), and one between
 ``<!-- record-comparison NAME -->`` and ``<!-- /record-comparison -->`` the table of a
 recorded ``experiments.compare_settings`` comparison (``jobs.comparison_record``: RUN_DIR a
-finished comparison's folder): ``--docs`` writes them, and tests/test_docs_tables.py fails
-when one differs from its records.
+finished comparison's folder); ``<!-- record-blocks NAME block=STEPS -->`` and
+``<!-- record-diagnostics NAME block=STEPS [methods=A,B] -->`` (closed by ``<!--
+/record-blocks -->`` and ``<!-- /record-diagnostics -->``) give a record's learning and its
+diagnostics per block of environment steps: ``--docs`` writes them, and
+tests/test_docs_tables.py fails when one differs from its records.
 """
 
 from __future__ import annotations
@@ -80,12 +83,22 @@ COMPARED = re.compile(
     r"(?P<end><!-- /record-comparison -->)",
     re.S,
 )
+# A recorded run's learning or diagnostics per block of environment steps
+# (``run_records.block_table``, ``run_records.diagnostics_table``).
+BLOCKED = re.compile(
+    r"(<!-- record-(?P<kind>blocks|diagnostics) (?P<name>[\w.-]+) block=(?P<block>\d+)"
+    r"(?: methods=(?P<methods>[\w.+,-]+))? -->\n)(?P<table>.*?)(?P<end><!-- /record-(?P=kind) -->)",
+    re.S,
+)
 # Several records in one table (``run_records.glance_table``): names separated by spaces.
 GLANCED = re.compile(
     r"(<!-- record-glance (?P<name>[\w.-]+(?: [\w.-]+)*) -->\n)"
     r"(?P<table>.*?)(?P<end><!-- /record-glance -->)",
     re.S,
 )
+
+
+PATTERNS = (MARKED, GLANCED, COMPARED, BLOCKED)
 
 
 def doc_files(root: Path = Path(".")) -> list[Path]:
@@ -97,6 +110,13 @@ def _expected(match: re.Match, records: Path) -> str:
     """The table a marker's records give (RecordError for one missing or failing its check)."""
     if match.re is COMPARED:
         return comparison_record.table(comparison_record.check(records / match["name"])) + "\n"
+    if match.re is BLOCKED:
+        folder = records / match["name"]
+        record, block = run_records.check_record(folder), int(match["block"])
+        if match["kind"] == "blocks":
+            return run_records.block_table(record, folder, block)
+        methods = match["methods"].split(",") if match["methods"] else None
+        return run_records.diagnostics_table(record, folder, block, methods)
     if match.re is GLANCED:
         names = match["name"].split()
         return run_records.glance_table([run_records.check_record(records / n) for n in names])
@@ -110,7 +130,7 @@ def marked_tables(path: Path, records: Path = Path("records")) -> list[tuple[str
     text = path.read_text()
     return [
         (match["name"], match["table"], _expected(match, records))
-        for pattern in (MARKED, GLANCED, COMPARED)
+        for pattern in PATTERNS
         for match in pattern.finditer(text)
     ]
 
@@ -122,7 +142,7 @@ def rewrite_docs(root: Path = Path("."), records: Path = Path("records")) -> lis
     for path in doc_files(root):
         text = path.read_text()
         new = text
-        for pattern in (MARKED, GLANCED, COMPARED):
+        for pattern in PATTERNS:
             new = pattern.sub(lambda m: m[1] + _expected(m, records) + m["end"], new)
         if new != text:
             path.write_text(new)
