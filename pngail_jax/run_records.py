@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import gzip
 import math
+import re
 import shutil
 from pathlib import Path
 
@@ -78,8 +79,7 @@ def write_record(
     from pngail_jax.runs import run_scores, verify_run
 
     run_dir = Path(run_dir)
-    if not name or "/" in name or name.startswith("."):
-        raise RecordError(f"record name {name!r}: give a plain folder name, e.g. hopper-cpu")
+    check_name(name)
     try:  # verify_run refuses a folder of neither program
         for note in verify_run(run_dir, str(run_dir), allow_unsealed=allow_unsealed,
                                check_inputs=False):  # fmt: skip
@@ -123,6 +123,12 @@ def write_record(
     write_json(folder / RECORD_FILE, record)
     check_record(folder)
     return folder
+
+
+def check_name(name: str) -> None:
+    """RecordError unless ``name`` is a plain folder name a docs marker can name."""
+    if not name or not re.fullmatch(r"[\w.-]+", name) or name.startswith("."):
+        raise RecordError(f"record name {name!r}: give a plain folder name, e.g. hopper-cpu")
 
 
 def _check_replaceable(folder: Path, record: dict) -> None:
@@ -424,12 +430,11 @@ def glance_table(records: list[dict], statistic: str = "late_average") -> str:
 
 
 def _mean_se(values: np.ndarray) -> str:
-    """ "mean ± s.e." over the finite values (s.e. with ddof 1)."""
-    finite = values[np.isfinite(values)]
-    if finite.size == 0:
+    """ "mean ± s.e." of ``values`` (s.e. with ddof 1; "-" for none)."""
+    if values.size == 0:
         return "-"
-    se = finite.std(ddof=1) / math.sqrt(finite.size) if finite.size > 1 else math.nan
-    return f"{finite.mean():.2f} ± {se:.2f}"
+    se = values.std(ddof=1) / math.sqrt(values.size) if values.size > 1 else math.nan
+    return f"{values.mean():.2f} ± {se:.2f}"
 
 
 def _block_label(block: int, block_steps: int, last_step: int) -> str:
@@ -438,17 +443,27 @@ def _block_label(block: int, block_steps: int, last_step: int) -> str:
     return f"{low / 1e6:g}-{high / 1e6:g}"
 
 
+def _blocks_of(record: dict, steps, block_steps: int) -> np.ndarray:
+    """The block of each environment step count (step s in block ceil(s / block_steps) - 1);
+    RecordError for a block of no steps or a run without environment steps (offline)."""
+    steps = np.asarray(steps)
+    if block_steps < 1:
+        raise RecordError(f"record {record['name']}: a block of {block_steps} steps")
+    if steps.size == 0 or steps.max() < 1:
+        raise RecordError(f"record {record['name']}: no environment steps to cut into blocks")
+    return (steps - 1) // block_steps
+
+
 def block_table(record: dict, folder: Path, block_steps: int) -> str:
     """How a recorded run learned, per block of ``block_steps`` environment steps per run:
     per method, each seed's mean normalised evaluation in the block (an evaluation at step s
     is in block ceil(s / block_steps)), then mean ± s.e. over seeds; the last column the final
-    evaluation. ``folder`` holds the checked ``record``. The docs' tables between
-    ``<!-- record-blocks NAME block=STEPS -->`` markers are this text."""
+    evaluation. A seed without a final evaluation (diverged) is left out of every column, as
+    from the record's headline. ``folder`` holds the checked ``record``. The docs' tables
+    between ``<!-- record-blocks NAME block=STEPS -->`` markers are this text."""
     from pngail_jax.methods import display_name
     from pngail_jax.report import read_evaluations
 
-    if block_steps < 1:
-        raise RecordError(f"record {record['name']}: a block of {block_steps} steps")
     groups = read_evaluations(
         Path(folder) / METRICS_FILE, "normalized_return", evaluated_by="eval_return",
         group_by=("method", "setting"),
@@ -456,20 +471,23 @@ def block_table(record: dict, folder: Path, block_steps: int) -> str:
     if not groups:
         raise RecordError(f"record {record['name']}: no evaluated iteration")
     settings = {setting for _, setting in groups}
-    steps = next(iter(groups.values()))[0]
-    blocks = (np.asarray(steps) - 1) // block_steps
-    final = f"final ({steps[-1] / 1e6:g} M)"
-    labels = [_block_label(int(b), block_steps, int(steps[-1])) for b in np.unique(blocks)]
+    last = max(int(steps[-1]) for steps, _ in groups.values())
+    order = sorted(
+        {int(b) for steps, _ in groups.values() for b in _blocks_of(record, steps, block_steps)}
+    )
     lines = [
-        "| M steps | " + " | ".join(labels) + f" | {final} |",
-        "|---|" + "---:|" * (len(labels) + 1),
+        "| M steps | "
+        + " | ".join(_block_label(b, block_steps, last) for b in order)
+        + f" | final ({last / 1e6:g} M) |",
+        "|---|" + "---:|" * (len(order) + 1),
     ]
-    for (method, setting), (_, values) in groups.items():
+    for (method, setting), (steps, values) in groups.items():
         name = display_name(method) + ("" if len(settings) == 1 else f" [{setting}]")
+        values = values[np.isfinite(values[:, -1])] if int(steps[-1]) == last else values[:0]
+        blocks = _blocks_of(record, steps, block_steps)
         with np.errstate(all="ignore"):
-            cells = [
-                _mean_se(np.nanmean(values[:, blocks == b], axis=1)) for b in np.unique(blocks)
-            ]
+            cells = [_mean_se(np.nanmean(values[:, blocks == b], axis=1)) if (blocks == b).any()
+                     else "-" for b in order]  # fmt: skip
         lines.append(f"| {name} | " + " | ".join(cells) + f" | {_mean_se(values[:, -1])} |")
     return "\n".join(lines) + "\n"
 
@@ -488,34 +506,36 @@ def diagnostics_table(
     record: dict, folder: Path, block_steps: int, methods: list[str] | None = None
 ) -> str:
     """The discriminator and policy diagnostics of a recorded run per block of
-    ``block_steps`` environment steps per run: a row per method (``methods``, default all)
-    and column of ``DIAGNOSTICS``, each cell the mean over the block's iterations and seeds.
-    The docs' tables between ``<!-- record-diagnostics NAME block=STEPS [methods=A,B] -->``
-    markers are this text."""
+    ``block_steps`` environment steps per run: a row per method (``methods``, default all;
+    per setting where the run has several) and column of ``DIAGNOSTICS``, each cell the mean
+    over every (iteration, seed) row of the block, all seeds pooled. The docs' tables between
+    ``<!-- record-diagnostics NAME block=STEPS [methods=A,B] -->`` markers are this text."""
     from pngail_jax.methods import display_name
     from pngail_jax.report import metrics_rows
 
-    sums: dict[tuple[str, str], dict[int, list[float]]] = {}
-    blocks: set[int] = set()
-    last_step = 0
-    for row in metrics_rows(Path(folder) / METRICS_FILE):
-        if methods is not None and row["method"] not in methods:
-            continue
-        last_step = max(last_step, int(row["env_steps"]))
-        block = (int(row["env_steps"]) - 1) // block_steps
-        blocks.add(block)
+    rows = list(metrics_rows(Path(folder) / METRICS_FILE))
+    known = list(dict.fromkeys(row["method"] for row in rows))
+    unknown = sorted(set(methods or ()) - set(known))
+    if unknown:
+        raise RecordError(f"record {record['name']} has no method {unknown[0]!r}: {known}")
+    rows = [row for row in rows if methods is None or row["method"] in methods]
+    steps = [int(row["env_steps"]) for row in rows]
+    blocks = _blocks_of(record, steps, block_steps)
+    settings = {row.get("setting") for row in rows}
+    sums: dict[tuple[str, str, str], dict[int, list[float]]] = {}
+    for row, block in zip(rows, blocks, strict=True):
         for column in DIAGNOSTICS:
             if row.get(column) not in (None, "", "nan"):
-                sums.setdefault((row["method"], column), {}).setdefault(block, []).append(
-                    float(row[column])
-                )
-    order = sorted(blocks)
+                key = (row["method"], row.get("setting"), column)
+                sums.setdefault(key, {}).setdefault(int(block), []).append(float(row[column]))
+    order = sorted({int(b) for b in blocks})
     lines = [
-        "| M steps | " + " | ".join(_block_label(b, block_steps, last_step) for b in order) + " |",
+        "| M steps | " + " | ".join(_block_label(b, block_steps, max(steps)) for b in order) + " |",
         "|---|" + "---:|" * len(order),
     ]
-    for (method, column), values in sums.items():
+    for (method, setting, column), values in sums.items():
         title, form = DIAGNOSTICS[column]
+        name = display_name(method) + ("" if len(settings) == 1 else f" [{setting}]")
         cells = [form.format(np.mean(values[b])) if b in values else "-" for b in order]
-        lines.append(f"| {display_name(method)}: {title} | " + " | ".join(cells) + " |")
+        lines.append(f"| {name}: {title} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

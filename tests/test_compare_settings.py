@@ -136,11 +136,36 @@ def test_a_finished_comparison_is_recorded_checked_and_its_table_rendered(tmp_pa
     ((name, written, expected),) = record_program.marked_tables(page, records)
     assert name == "cmp" and written == expected == comparison_record.table(record) + "\n"
 
-    edited = json.loads((records / "cmp" / "record.json").read_text())
-    edited["comparison"]["arms"]["table"]["final_return"]["own"][0] += 1.0
-    (records / "cmp" / "record.json").write_text(json.dumps(edited))
-    with pytest.raises(RecordError, match="arm table's statistics differ"):
-        comparison_record.check(records / "cmp")
+    kept = json.loads((records / "cmp" / "record.json").read_text())
+
+    def edited(change):
+        record = json.loads(json.dumps(kept))
+        change(record["comparison"]["arms"]["table"], record["comparison"])
+        comparison_record.verify(record, "edited")
+
+    comparison_record.verify(kept, "kept")
+
+    def seed_curve(comparison):
+        return comparison["curves"]["table"]["eval_return"][0]
+
+    edits = {
+        "final return on the own solver": lambda a, _: a["final_return"]["own"].__setitem__(0, 1),
+        "physics trained on": lambda arm, _: arm.__setitem__("trained_on", "fast"),
+        "verdict": lambda arm, _: arm.__setitem__("not_worse_than_baseline", False),
+        "set of physics": lambda arm, _: arm["final_return"].__setitem__("fast", [0.0, 0.0]),
+        "count of seeds or steps": lambda _, comparison: comparison.__setitem__("seeds", 3),
+        "average during training": lambda _, c: seed_curve(c).__setitem__(0, 9.0),
+    }  # fmt: skip
+    for problem, change in edits.items():
+        with pytest.raises(RecordError, match=f"arm table's {problem} differs"):
+            edited(change)
+    with pytest.raises(RecordError, match="not a whole comparison record"):
+        edited(lambda arm, _: arm.pop("final_return"))
+    with pytest.raises(SystemExit, match="plain folder name"):
+        record_program.main([str(tmp_path / "cmp"), "--name", "../x", "--records", str(records)])
+    one_seed = json.loads(json.dumps(kept))  # one seed: no standard error, JSON null
+    one_seed["comparison"]["arms"]["table"]["final_return_mean_se"]["own"][1] = None
+    assert "± nan" in comparison_record.table(one_seed)
 
     old = json.loads((tmp_path / "cmp" / job.COMPARISON_FILE).read_text())
     del old["provenance"]

@@ -85,16 +85,20 @@ NOT_RESULTS = ("steps/s", "envs x steps per iteration", "rows per step")
 INTERVAL = re.compile(r"\d ± \d|\d \[-?\d")  # a mean ± s.e. or an estimate [its interval]
 
 
+def _row(line: str) -> bool:
+    return line.lstrip().startswith("|")  # a table in a list item is indented
+
+
 def results_tables(text: str):
     """(line number, table text, the nearest non-blank line above) of each results table
     outside ``<!-- record-... -->`` blocks."""
     lines, inside = text.split("\n"), False
     for number, line in enumerate(lines):
         inside = (inside or line.startswith("<!-- record-")) and not line.startswith("<!-- /")
-        if not line.startswith("|") or (number and lines[number - 1].startswith("|")):
+        if not _row(line) or (number and _row(lines[number - 1])):
             continue
         end = number
-        while end < len(lines) and lines[end].startswith("|"):
+        while end < len(lines) and _row(lines[end]):
             end += 1
         header, body = line.lower(), "\n".join(lines[number + 2 : end])
         if inside or not (any(w in header for w in RESULT_HEADERS) or INTERVAL.search(body)):
@@ -193,3 +197,57 @@ def test_the_diagnostics_table_is_the_block_mean_over_iterations_and_seeds(tmp_p
     found = program.marked_tables(page, ROOT / "records")
     assert len(found) == 2 and all(written == expected for _, written, expected in found)
     assert "\n".join(table) + "\n" in page.read_text()
+
+
+def _synthetic_record(tmp_path, rows) -> Path:
+    """A folder holding only a metrics.csv.gz of ``rows`` (method, seed, env_steps,
+    normalised return or None for a diverged evaluation, mean reward)."""
+    import gzip
+
+    lines = ["method,seed,setting,iteration,env_steps,eval_return,normalized_return,mean_reward"]
+    for method, seed, steps, value, reward in rows:
+        ret = "" if value is None else f"{value}"
+        lines.append(f"{method},{seed},s,{steps // 100},{steps},{ret},{ret},{reward}")
+    tmp_path.mkdir(exist_ok=True)
+    with gzip.open(tmp_path / run_records.METRICS_FILE, "wt") as file:
+        file.write("\n".join(lines) + "\n")
+    return tmp_path
+
+
+def test_block_tables_leave_out_a_diverged_seed_and_refuse_what_has_no_blocks(tmp_path):
+    """A seed without a final evaluation is out of every column (as from the headline); a
+    block is a span of environment steps, so an offline run (0 steps) and a block of 0 are
+    refused in one line, and so is a method the run does not have."""
+    rows = [
+        ("gail", seed, steps, value, 0.5)
+        for seed, offset in ((0, 0.0), (1, 0.2))
+        for steps, value in ((100, 0.1 + offset), (200, 0.3 + offset), (300, 0.5 + offset))
+    ]
+    pngail = {0: (0.0, 0.2, 0.4), 1: (0.9, None, None)}  # seed 1 diverges after 100 steps
+    rows += [("pngail", seed, steps, value, 0.1 if steps < 300 else 0.3)
+             for seed, values in pngail.items()
+             for steps, value in zip((100, 200, 300), values, strict=True)]  # fmt: skip
+    folder, record = _synthetic_record(tmp_path, rows), {"name": "synthetic"}
+    table = run_records.block_table(record, folder, 200).splitlines()
+    assert table[0] == "| M steps | 0-0.0002 | 0.0002-0.0003 | final (0.0003 M) |"
+    assert table[2] == "| GAIL | 0.30 ± 0.10 | 0.60 ± 0.10 | 0.60 ± 0.10 |"  # (0.1+0.3)/2, +0.2
+    assert table[3] == "| PN-GAIL | 0.10 ± nan | 0.40 ± nan | 0.40 ± nan |"  # seed 1 left out
+    diagnostics = run_records.diagnostics_table(record, folder, 200, ["pngail"]).splitlines()
+    assert diagnostics[2] == "| PN-GAIL: mean reward | 0.100 | 0.300 |"
+    with pytest.raises(run_records.RecordError, match="no method 'wgail'"):
+        run_records.diagnostics_table(record, folder, 200, ["wgail"])
+    with pytest.raises(run_records.RecordError, match="a block of 0 steps"):
+        run_records.block_table(record, folder, 0)
+    offline = _synthetic_record(tmp_path / "offline", [("bc", 0, 0, 0.5, 0.0)])
+    with pytest.raises(run_records.RecordError, match="no environment steps"):
+        run_records.diagnostics_table(record, offline, 200)
+
+
+def test_every_record_marker_in_the_docs_is_one_the_program_reads():
+    """A marker with a typo would leave its table unchecked by both tests: every line of the
+    docs that opens a record marker matches one of experiments.record's patterns."""
+    for path in program.doc_files(ROOT):
+        text = path.read_text()
+        opened = [line for line in text.split("\n") if line.startswith("<!-- record-")]
+        matched = sum(len(pattern.findall(text)) for pattern in program.PATTERNS)
+        assert len(opened) == matched, f"{path.name}: a record marker no pattern reads"

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Walk a run's config through pngail_jax by static data flow (stdlib ``ast`` only).
 
-Usage:  python config_walk.py ROOT [--json OUT.json] [--trace]
+Usage:  python config_walk.py ROOT [--json OUT.json] [--trace] [--objects]
         ROOT holds ``pngail_jax/`` and ``tests/test_layers.py``.
 
 Definitions (applied identically to every checkout)
@@ -64,6 +64,13 @@ are not edges).  Climbs, counted over distinct edges:
       had already been visited (a function of it entered earlier in the walk), i.e. the walk
       comes back into a room it had been in.  (b') is the part of (b) whose callee module
       was still on the depth-first stack (a true A -> B -> A cycle, not a sibling return).
+Objects mode (``--objects``).  The same walk, but an expression carries only when its value
+is a config object: a carrying name, a carrying ``self.attr``, ``replace(obj, ..)`` of a
+config object, or an expression whose inferred class is data-like (no method assigns a
+``self.x``) and named ``*Config`` or ``*Settings``; a value read from a config (an int, a
+string) no longer carries.  A method called on an object that keeps a config object in an
+attribute (``self.config = config`` made ``(C, config)`` carrying) is followed too, its
+``self`` tracked: such a holder reaches the config through its attribute.
 Order.  Within a function, calls are taken in evaluation order (sorted by where each call
 ends, so ``f(g(config))`` visits ``g`` before ``f``); nested-def bodies are interleaved by
 position.

@@ -291,7 +291,7 @@ def evaluate_arms(config: CompareSettingsConfig, directories: dict) -> tuple[dic
 
 def comparison_markdown(summary: dict) -> str:
     def cell(pair):
-        mean, se = pair
+        mean, se = (math.nan if value is None else value for value in pair)  # JSON's null
         return f"{mean:.1f} ± {se:.1f}"
 
     lines = [

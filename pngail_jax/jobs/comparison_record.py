@@ -12,6 +12,7 @@ during training and the "not worse" verdicts) from the per-seed numbers it keeps
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -25,7 +26,7 @@ from pngail_jax.jobs.compare_settings import (
     mean_and_standard_error,
 )
 from pngail_jax.outputs import output_owner
-from pngail_jax.run_records import FORMAT, MACHINE_KEYS, RECORD_FILE, RecordError
+from pngail_jax.run_records import FORMAT, MACHINE_KEYS, RECORD_FILE, RecordError, check_name
 
 KIND = "comparison"
 
@@ -36,10 +37,12 @@ def is_comparison(run_dir: Path) -> bool:
 
 
 def write(run_dir: Path, name: str, records: Path = Path("records")) -> Path:
-    """Records the finished comparison in ``run_dir`` as ``records/<name>/`` and checks it.
-    A record of that name already there is replaced only if it records the same comparison
-    (same command and commit). Returns the record's folder; RecordError naming the problem."""
+    """Records the finished comparison in ``run_dir`` as ``records/<name>/`` and checks it
+    before writing. A record of that name already there is replaced only if it records the
+    same comparison (same command, commit and machine). Returns the record's folder;
+    RecordError naming the problem."""
     run_dir = Path(run_dir)
+    check_name(name)
     try:
         summary = read_json(run_dir / COMPARISON_FILE, "comparison")
     except FileNotFoundError:
@@ -65,10 +68,10 @@ def write(run_dir: Path, name: str, records: Path = Path("records")) -> Path:
         "comparison": {key: value for key, value in summary.items() if key != "provenance"},
     }
     folder = Path(records) / name
+    verify(json.loads(json.dumps(record)), f"{run_dir}/{COMPARISON_FILE}")  # before writing
     _check_replaceable(folder, record)
     folder.mkdir(parents=True, exist_ok=True)
     write_json(folder / RECORD_FILE, record)
-    check(folder)
     return folder
 
 
@@ -83,7 +86,8 @@ def _check_replaceable(folder: Path, record: dict) -> None:
     except (OSError, IntegrityError) as error:
         unreadable = f"not replaced, its {RECORD_FILE} is unreadable ({error})"
         raise RecordError(f"{folder}: {unreadable}") from None
-    if (old.get("command"), old.get("commit")) != (record["command"], record["commit"]):
+    same = ("command", "commit", "machine")
+    if [old.get(key) for key in same] != [record[key] for key in same]:
         raise RecordError(f"{folder} records another comparison: give another --name")
 
 
@@ -98,9 +102,7 @@ def _same(stated, computed) -> bool:
 
 
 def check(folder: Path) -> dict:
-    """Verifies the comparison record in ``folder`` and returns it: each arm's means and
-    standard errors, its average during training and its verdict, recomputed from the
-    per-seed final returns and curves the record keeps. RecordError otherwise."""
+    """Verifies the comparison record in ``folder`` (``verify``) and returns it."""
     path = Path(folder) / RECORD_FILE
     try:
         record = read_json(path, "run record")
@@ -108,27 +110,67 @@ def check(folder: Path) -> dict:
         raise RecordError(f"{folder} holds no run record ({RECORD_FILE} is missing)") from None
     except (OSError, IntegrityError) as error:
         raise RecordError(f"{path}: unreadable ({error})") from None
-    if record.get("format") != FORMAT or record.get("kind") != KIND:
-        raise RecordError(f"{path}: not a comparison record of format {FORMAT}")
-    comparison = record["comparison"]
-    arms, curves = comparison["arms"], comparison["curves"]
-    baseline = arms[comparison["baseline"]]
-    base_mean, base_se = _numbers(baseline["final_return_mean_se"][baseline["trained_on"]])
-    for arm, result in arms.items():
-        returns = _numbers(curves[arm]["eval_return"])  # seeds x evaluations
-        computed = {
-            physics: mean_and_standard_error(_numbers(values))
-            for physics, values in result["final_return"].items()
-        }
-        mean, _ = computed[result["trained_on"]]
-        checks = [
-            *(_same(result["final_return_mean_se"][k], v) for k, v in computed.items()),
-            _same(result["average_eval_return_mean_se"], _average_during_training(returns)),
-            result["not_worse_than_baseline"] == bool(mean >= base_mean - base_se),
-        ]
-        if not all(checks):
-            raise RecordError(f"{path}: arm {arm}'s statistics differ from its per-seed numbers")
+    verify(record, path)
     return record
+
+
+def verify(record: dict, where) -> None:
+    """RecordError (naming ``where``) unless every figure the record's table shows follows
+    from the per-seed numbers it keeps: which physics each arm trained on, its means and
+    standard errors on each physics, its average during training, its verdict, and the
+    title's seeds and iterations."""
+    if record.get("format") != FORMAT or record.get("kind") != KIND:
+        raise RecordError(f"{where}: not a comparison record of format {FORMAT}")
+    try:
+        comparison = record["comparison"]
+        arms, curves = comparison["arms"], comparison["curves"]
+        physics = {"own"} if comparison["env"] == "Pendulum-v1" else {"own", "fast"}
+        trained_on = {
+            arm: "fast" if result["env_options"] or comparison["env"] == "Ant" else "own"
+            for arm, result in arms.items()
+        }
+        baseline = arms[comparison["baseline"]]
+        base_mean, base_se = _numbers(
+            baseline["final_return_mean_se"][trained_on[comparison["baseline"]]]
+        )
+        for arm, result in arms.items():
+            problem = _arm_problem(comparison, result, curves[arm], physics, trained_on[arm])
+            mean = _numbers(result["final_return"][trained_on[arm]]).mean()
+            if problem is None and result["not_worse_than_baseline"] != bool(
+                mean >= base_mean - base_se
+            ):
+                problem = "verdict"
+            if problem is not None:
+                raise RecordError(f"{where}: arm {arm}'s {problem} differs from its numbers")
+    except (KeyError, TypeError, ValueError, IndexError) as error:
+        raise RecordError(f"{where}: not a whole comparison record ({error!r})") from None
+
+
+def _arm_problem(comparison, result, curve, physics, trained_on) -> str | None:
+    """What of one arm's figures does not follow from its per-seed numbers (None: all do)."""
+    finals = result["final_return"]
+    if set(finals) != physics or set(result["final_return_mean_se"]) != physics:
+        return "set of physics"
+    if result["trained_on"] != trained_on:
+        return "physics trained on"
+    returns = _numbers(curve["eval_return"])  # seeds x evaluations
+    rollout = result["rollout"]
+    steps = comparison["iterations"] * rollout["num_envs"] * rollout["unroll_length"]
+    seeds = comparison["seeds"]
+    if any(len(values) != seeds for values in finals.values()) or returns.shape != (
+        seeds, len(curve["env_steps"])
+    ) or curve["env_steps"][-1] != steps:  # fmt: skip
+        return "count of seeds or steps"
+    for name, values in finals.items():
+        if not _same(result["final_return_mean_se"][name], _mean_se(values)):
+            return f"final return on the {name} solver"
+    if not _same(result["average_eval_return_mean_se"], _average_during_training(returns)):
+        return "average during training"
+    return None
+
+
+def _mean_se(values):
+    return mean_and_standard_error(_numbers(values))
 
 
 def _average_during_training(returns: np.ndarray):

@@ -52,11 +52,13 @@ def parse_args(argv=None) -> argparse.Namespace:
         help="where records are kept (default records/; experiments.paper's runs go to results/)",
     )  # fmt: skip
     parser.add_argument("--check", action="store_true", help="verify records instead")
-    add_allow_unsealed(parser.add_argument, "record a run")
+    add_allow_unsealed(
+        parser.add_argument, "record a sweep or offline run (a comparison has no seal)"
+    )
     parser.add_argument(
         "--docs", action="store_true",
-        help="rewrite every <!-- record-table NAME --> and <!-- record-glance NAME ... --> "
-        "table of README.md and docs/*.md from its records (checked first)",
+        help="rewrite every record-table, record-glance, record-comparison, record-blocks and "
+        "record-diagnostics table of README.md and docs/*.md from its records (checked first)",
     )  # fmt: skip
     args = parser.parse_args(argv)
     if args.docs:

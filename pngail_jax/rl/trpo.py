@@ -164,7 +164,8 @@ class TRPOConfig:
     rollout's shape and the networks are ``RolloutConfig``'s, which both learners share."""
 
     num_value_minibatches: int = 30
-    # Passes of the value fit over the batch, each a fresh permutation (the reference: 1).
+    # Passes of the value fit over the batch, each a fresh permutation (the reference: 1);
+    # the logged value/loss is the mean over every pass's minibatches.
     num_value_epochs: int = 1
     num_cg_iterations: int = 10
     num_backtracks: int = 10
