@@ -122,6 +122,8 @@ class RunConfig:
     bsc_eps: float | None = None  # None: the task's (TASK_BSC_EPS, else 0.01)
     fisher: str = "gauss_newton"
     fisher_subsample: int = 1
+    # TRPO's value fit: passes over each batch (1: the reference's; rl.TRPOConfig)
+    value_epochs: int = 1
     # The policy learner: "trpo" (the paper's) or "ppo" (pngail_jax.rl.learners); the rollout's
     # shape and the networks are the settings' either way.
     learner: str = "trpo"
@@ -175,7 +177,7 @@ class RunConfig:
 
     def _check_numbers(self) -> None:
         """Counts, grid axes and the optional numbers, each in its stored type."""
-        for name in ("seeds", "iterations", "chunk_iterations", "fisher_subsample"):
+        for name in ("seeds", "iterations", "chunk_iterations", "fisher_subsample", "value_epochs"):
             self._set(name, integer(name, getattr(self, name), minimum=1))
         self._set("seed", integer("seed", self.seed, minimum=0, below=SEED_LIMIT))
         for name, minimum, below in (("num_demos", 2, 2**31), ("cpu_devices", 1, None)):
@@ -259,7 +261,11 @@ class RunConfig:
         return AdversarialConfig(
             rollout=self.settings.rollout_config(self.iterations),
             learner=self.learner,
-            trpo=TRPOConfig(fisher=self.fisher, fisher_subsample=self.fisher_subsample),
+            trpo=TRPOConfig(
+                num_value_epochs=self.value_epochs,
+                fisher=self.fisher,
+                fisher_subsample=self.fisher_subsample,
+            ),
             classifier=classifier,
             num_demos=num_demos,
             discriminator_hidden_sizes=self.discriminator_hidden_sizes,

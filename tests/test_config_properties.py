@@ -95,6 +95,7 @@ FIELD_VALUES = {
     "fisher": st.sampled_from(FISHER_FORMS) | JUNK,
     "learner": st.sampled_from(LEARNERS) | JUNK,
     "fisher_subsample": COUNTS,
+    "value_epochs": COUNTS,
     "discriminator_hidden_sizes": tuples_of(COUNTS),
     "cpu_devices": COUNTS,
     "log": tuples_of(st.sampled_from(LOG_BACKENDS) | SCALARS),
@@ -147,7 +148,8 @@ def assert_stored_types(config: RunConfig) -> None:
     assert type(config.env) is str and kinds(config.methods, str) and kinds(config.log, str)
     assert kinds(config.label_ratios, float) and kinds(config.noise_stds, float)
     assert kinds(config.discriminator_hidden_sizes, int)
-    for name in ("seeds", "iterations", "seed", "chunk_iterations", "fisher_subsample"):
+    for name in ("seeds", "iterations", "seed", "chunk_iterations", "fisher_subsample",
+                 "value_epochs"):  # fmt: skip
         assert type(getattr(config, name)) is int, name
     for name in ("num_demos", "cpu_devices"):
         assert getattr(config, name) is None or type(getattr(config, name)) is int, name

@@ -73,6 +73,7 @@ def test_settings_flags_override_the_table_or_the_reference(capsys):
         (["--label-ratio", "0.2,0.2"], "--label-ratio values must not repeat"),
         (["--random-return", "-5"], "--random-return needs optimal_return"),
         (["--num-envs", "0"], "--num-envs must be a positive integer, got 0"),
+        (["--value-epochs", "0"], "--value-epochs must be a positive integer, got 0"),
         (["--iterations", "25"], "--iterations (25) must be a multiple of the evaluation"),
         (["--conf", __file__], "--conf: a confidence file needs demos"),
     ],
@@ -114,3 +115,9 @@ def test_a_resume_refuses_a_method_whose_preset_changed(tmp_path):
     record["coefficients"]["pn_coef"] = 0.5
     with pytest.raises(record_job.RunError, match="'pngail' is not the preset the run began with"):
         record_job.check_methods_unchanged(tmp_path, {"pngail": record})
+
+
+def test_value_epochs_reach_the_learners_config(tmp_path):
+    config = sweep.parse_args(["--value-epochs", "3", "--out", str(tmp_path / "out")]).config
+    assert config.value_epochs == 3
+    assert config.adversarial_config().trpo.num_value_epochs == 3

@@ -351,6 +351,12 @@ RUN_FLAGS = (
         "fisher_subsample", "Fisher products on every k-th time step (default 1: all)", type=int
     ),
     FieldFlag(
+        "value_epochs",
+        "passes of TRPO's value fit over each batch (default 1, the reference's; "
+        "docs/performance.md)",
+        type=int,
+    ),
+    FieldFlag(
         "cpu_devices",
         "on a CPU, split it into this many XLA devices and shard the grid over them "
         "(default 1: on 2 cores one device already uses both, and 2 measured no faster)",
