@@ -81,14 +81,16 @@ def test_one_seed_has_no_standard_error():
     assert mean == 3.0 and math.isnan(se)
 
 
-def test_the_job_trains_evaluates_and_reuses_a_finished_arm(tmp_path, capsys):
+def test_the_job_trains_evaluates_and_reuses_a_finished_arm(tmp_path, capsys, monkeypatch):
     """The whole job on one Pendulum-v1 arm, one iteration: the arm is a train_rl run, its
-    policies are evaluated again on fresh keys, and a second call reuses the finished arm."""
+    policies are evaluated again on fresh keys, and a second call reuses the finished arm. The
+    output path is relative, as on a command line (orbax restores absolute paths only)."""
     config = job.CompareSettingsConfig(
         env="Pendulum-v1", arms=("table",), seeds=2, iterations=1, eval_every=1,
         num_eval_episodes=2,
     )  # fmt: skip
-    summary = job.compare_settings(config, tmp_path / "cmp")
+    monkeypatch.chdir(tmp_path)
+    summary = job.compare_settings(config, "cmp")
     arm = summary["arms"]["table"]
     assert len(arm["final_return"]["own"]) == 2 and "fast" not in arm["final_return"]
     assert arm["rollout"] == {"num_envs": 25, "unroll_length": 200, "normalize_observations": False}

@@ -220,7 +220,8 @@ def make_evaluator(env_name: str, solver: dict, metadata: dict, num_episodes: in
 def saved_policies(directory: Path):
     """(policy.json metadata, {"policy_params", "normalizer"} stacked over seeds)."""
     metadata = json.loads((directory / "policy.json").read_text())
-    return metadata, ocp.StandardCheckpointer().restore(directory / "policy_params")
+    # orbax takes absolute paths only: a comparison's --out may be relative
+    return metadata, ocp.StandardCheckpointer().restore((directory / "policy_params").absolute())
 
 
 def mean_and_standard_error(values) -> tuple[float, float]:
