@@ -45,6 +45,7 @@ ARMS = {
     "mid-fast": {"settings": "reference", "solver": "fast", "num_envs": 100, "unroll_length": 50},
     "wide-fast": {"settings": "reference", "solver": "fast", "num_envs": 250, "unroll_length": 20},
     "reference-fast-value10": {"settings": "reference", "solver": "fast", "value_epochs": 10},
+    "reference-value10": {"settings": "reference", "value_epochs": 10},
     "wide-fast-value10": {
         "settings": "reference",
         "solver": "fast",
