@@ -103,49 +103,64 @@ def test_the_job_trains_evaluates_and_reuses_a_finished_arm(tmp_path, capsys, mo
     assert again["arms"]["table"]["final_return"] == arm["final_return"]  # same keys, same policies
 
 
-def test_a_finished_comparison_is_recorded_checked_and_its_table_rendered(tmp_path, capsys):
-    """The comparison keeps its command, commit and curves; ``experiments.record`` makes a
-    record of it whose table is the comparison's own, and whose check recomputes every
-    statistic from the per-seed numbers (an edited return fails it)."""
-    from pngail_jax.jobs import comparison_record
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    """A finished two-arm Pendulum-v1 comparison (one iteration) and its record."""
     from pngail_jax.programs import record as record_program
-    from pngail_jax.run_records import RecordError
 
+    tmp_path = tmp_path_factory.mktemp("recorded")
     config = job.CompareSettingsConfig(
         env="Pendulum-v1", arms=("table", "reference-fisher5"), seeds=2, iterations=1,
         eval_every=1, num_eval_episodes=2,
     )  # fmt: skip
     summary = job.compare_settings(config, tmp_path / "cmp", command=["--env", "Pendulum-v1"])
-    assert summary["provenance"]["command_line"][:3] == [
-        "python",
-        "-m",
-        "experiments.compare_settings",
-    ]
-    assert summary["provenance"]["arms_reused"] == []
-    assert np.asarray(summary["curves"]["table"]["eval_return"]).shape == (2, 1)
     records = tmp_path / "records"
     record_program.main([str(tmp_path / "cmp"), "--name", "cmp", "--records", str(records)])
+    return tmp_path, summary, records
+
+
+def test_a_finished_comparison_is_recorded_and_its_table_rendered(recorded):
+    """The comparison keeps its command, commit and curves; ``experiments.record`` makes a
+    record of it whose table is the comparison's own, and a docs marker is rewritten to it."""
+    from pngail_jax.jobs import comparison_record
+    from pngail_jax.programs import record as record_program
+
+    tmp_path, summary, records = recorded
+    command = summary["provenance"]["command_line"]
+    assert command[:3] == ["python", "-m", "experiments.compare_settings"]
+    assert summary["provenance"]["arms_reused"] == []
+    assert np.asarray(summary["curves"]["table"]["eval_return"]).shape == (2, 1)
     record = comparison_record.check(records / "cmp")
-    assert (
-        comparison_record.table(record) + "\n" == (tmp_path / "cmp" / "comparison.md").read_text()
-    )
-    assert "compare_settings on Pendulum-v1" in capsys.readouterr().out
+    rendered = comparison_record.table(record) + "\n"
+    assert rendered == (tmp_path / "cmp" / "comparison.md").read_text()
+    assert "compare_settings on Pendulum-v1" in comparison_record.describe(record)
     (tmp_path / "docs").mkdir()
     (tmp_path / "README.md").write_text("no tables\n")
     page = tmp_path / "docs" / "performance.md"
     page.write_text("<!-- record-comparison cmp -->\n| stale |\n<!-- /record-comparison -->\n")
     assert record_program.rewrite_docs(tmp_path, records) == [page]
     ((name, written, expected),) = record_program.marked_tables(page, records)
-    assert name == "cmp" and written == expected == comparison_record.table(record) + "\n"
+    assert name == "cmp" and written == expected == rendered
+    one_seed = json.loads(json.dumps(record))  # one seed: no standard error, JSON null
+    one_seed["comparison"]["arms"]["table"]["final_return_mean_se"]["own"][1] = None
+    assert "± nan" in comparison_record.table(one_seed)
 
+
+def test_a_comparison_records_check_recomputes_every_figure_of_its_table(recorded):
+    """Each figure the table shows, edited in the record, fails the check, naming it; a
+    record missing a part, a bad name and a comparison from before provenance are refused."""
+    from pngail_jax.jobs import comparison_record
+    from pngail_jax.programs import record as record_program
+    from pngail_jax.run_records import RecordError
+
+    tmp_path, _, records = recorded
     kept = json.loads((records / "cmp" / "record.json").read_text())
+    comparison_record.verify(kept, "kept")
 
     def edited(change):
         record = json.loads(json.dumps(kept))
         change(record["comparison"]["arms"]["table"], record["comparison"])
         comparison_record.verify(record, "edited")
-
-    comparison_record.verify(kept, "kept")
 
     def seed_curve(comparison):
         return comparison["curves"]["table"]["eval_return"][0]
@@ -165,12 +180,14 @@ def test_a_finished_comparison_is_recorded_checked_and_its_table_rendered(tmp_pa
         edited(lambda arm, _: arm.pop("final_return"))
     with pytest.raises(SystemExit, match="plain folder name"):
         record_program.main([str(tmp_path / "cmp"), "--name", "../x", "--records", str(records)])
-    one_seed = json.loads(json.dumps(kept))  # one seed: no standard error, JSON null
-    one_seed["comparison"]["arms"]["table"]["final_return_mean_se"]["own"][1] = None
-    assert "± nan" in comparison_record.table(one_seed)
-
     old = json.loads((tmp_path / "cmp" / job.COMPARISON_FILE).read_text())
     del old["provenance"]
-    (tmp_path / "cmp" / job.COMPARISON_FILE).write_text(json.dumps(old))
+    (tmp_path / "before").mkdir()
+    (tmp_path / "before" / job.COMPARISON_FILE).write_text(json.dumps(old))
+    (tmp_path / "before" / ".pngail-run.json").write_text(
+        (tmp_path / "cmp" / ".pngail-run.json").read_text()
+    )
     with pytest.raises(SystemExit, match="run its compare_settings command again"):
-        record_program.main([str(tmp_path / "cmp"), "--name", "other", "--records", str(records)])
+        record_program.main(
+            [str(tmp_path / "before"), "--name", "other", "--records", str(records)]
+        )

@@ -136,13 +136,13 @@ def compare_settings(
     unfinished = not (out / COMPARISON_FILE).exists()
     with refusals(), claimed(out, PROGRAM, overwrite=overwrite or unfinished):
         prepare_output(out, PROGRAM)  # marked, never emptied: its finished arms are reused
-        reused = [arm for arm in config.arms if (out / arm / "policy.json").exists()]
+        origin = {  # taken before training: the commit the arms train at
+            **provenance(command, program="experiments.compare_settings"),
+            # trained by an earlier process (its commit is not known)
+            "arms_reused": [arm for arm in config.arms if (out / arm / "policy.json").exists()],
+        }
         directories = {arm: run_arm(config, out, arm) for arm in config.arms}
         results, curves = evaluate_arms(config, directories)
-        origin = {
-            **provenance(command, program="experiments.compare_settings"),
-            "arms_reused": reused,  # trained by an earlier process (its commit is not known)
-        }
         return write_comparison(config, out, results, curves, origin)
 
 
