@@ -82,6 +82,8 @@ def check_names(config) -> None:
 def check_between_fields(config) -> None:
     """The checks between fields: the run's length and its task's settings, the
     normalised return's ends, the demonstrations and their companion fields."""
+    if config.learner == "ppo" and config.value_epochs != 1:
+        fail("value_epochs", "is TRPO's value fit; PPO fits its value in its own epochs")
     if config.iterations % config.settings.eval_every:
         fail(
             "iterations",

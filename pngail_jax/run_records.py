@@ -226,9 +226,17 @@ _NOT_NUMBERS = ("demos", "conf", "resolved", "log", "chunk_iterations", "cpu_dev
 def config_differences(config: dict, record: dict) -> list[str]:
     """The config fields (``config.json``'s top level) in which a run differs from the
     record's run, leaving out those that do not change the numbers."""
+    from pngail_jax.run_config import RunConfig
+
     reference = record["config"]
     keys = sorted((set(config) | set(reference)) - set(_NOT_NUMBERS))
-    return [key for key in keys if config.get(key) != reference.get(key)]
+    # A field one side lacks (a record from before the field existed) has its default.
+    defaults = RunConfig().to_dict()
+
+    def value(document: dict, key: str):
+        return document[key] if key in document else defaults.get(key)
+
+    return [key for key in keys if value(config, key) != value(reference, key)]
 
 
 def expected_rows(scores, record: dict) -> list[dict]:

@@ -74,6 +74,7 @@ def test_settings_flags_override_the_table_or_the_reference(capsys):
         (["--random-return", "-5"], "--random-return needs optimal_return"),
         (["--num-envs", "0"], "--num-envs must be a positive integer, got 0"),
         (["--value-epochs", "0"], "--value-epochs must be a positive integer, got 0"),
+        (["--value-epochs", "3", "--learner", "ppo"], "--value-epochs is TRPO's value fit"),
         (["--iterations", "25"], "--iterations (25) must be a multiple of the evaluation"),
         (["--conf", __file__], "--conf: a confidence file needs demos"),
     ],

@@ -608,6 +608,12 @@ def test_compare_expected_says_where_a_run_lies_against_a_record(finished, tmp_p
         run_records.expected_rows(other, record)
     changed = {**record["config"], "iterations": 8, "log": ["x"]}
     assert run_records.config_differences(changed, record) == ["iterations"]
+    # a field the record's run did not have yet is its default there
+    older = {**record, "config": {k: v for k, v in record["config"].items() if k != "value_epochs"}}
+    assert run_records.config_differences(record["config"], older) == []
+    assert run_records.config_differences({**record["config"], "value_epochs": 3}, older) == [
+        "value_epochs"
+    ]
     # The spread a re-run shows: 5 of a record's 10 seeds drawn 2,000 times. Seeds 0.0-0.9
     # (IQM 0.45): a 5-seed re-run's IQM lands within about 0.15 of it.
     ten = [k / 10 for k in range(10)]

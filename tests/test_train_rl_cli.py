@@ -265,3 +265,12 @@ def test_a_sigterm_releases_the_lock_and_says_how_to_resume(tmp_path, monkeypatc
     with pytest.raises(SystemExit, match="interrupted: finished blocks are kept; --resume"):
         train_rl.main(argv)
     assert not (tmp_path / "run" / LOCK).exists()
+
+
+def test_value_epochs_are_refused_for_ppo_in_one_line():
+    from pngail_jax.jobs.train_rl import TrainRLConfig
+    from pngail_jax.validation import ConfigError
+
+    with pytest.raises(ConfigError, match="value_epochs is TRPO's value fit"):
+        TrainRLConfig(learner="ppo", value_epochs=3)
+    assert TrainRLConfig(value_epochs=3).trpo_config.num_value_epochs == 3

@@ -81,6 +81,10 @@ class TrainRLConfig:
         validation.integer("seed", self.seed, 0)
         if self.learner not in LEARNERS:
             validation.fail("learner", f"must be one of {LEARNERS}, got {self.learner!r}")
+        if self.learner == "ppo" and self.value_epochs != 1:
+            validation.fail(
+                "value_epochs", "is TRPO's value fit; PPO fits its value in its own epochs"
+            )
         if self.iterations % self.settings.eval_every:
             validation.fail(
                 "iterations",
