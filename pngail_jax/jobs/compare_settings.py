@@ -139,17 +139,39 @@ def compare_settings(
         origin = {  # taken before training: the commit the arms train at
             **provenance(command, program="experiments.compare_settings"),
             # trained by an earlier process (its commit is not known)
-            "arms_reused": [arm for arm in config.arms if (out / arm / "policy.json").exists()],
+            "arms_reused": [arm for arm in config.arms if arm_finished(out / arm)],
         }
         directories = {arm: run_arm(config, out, arm) for arm in config.arms}
         results, curves = evaluate_arms(config, directories)
         return write_comparison(config, out, results, curves, origin)
 
 
+def arm_finished(directory: Path) -> bool:
+    """Whether an arm's train_rl run in ``directory`` is finished (its policy written)."""
+    return (directory / "policy.json").exists()
+
+
+def judged_physics(env: str) -> dict[str, dict]:
+    """The physics every arm's final policies are evaluated on, by name: the task's own,
+    and MJX's fast solver beside it on the MuJoCo tasks."""
+    return {"own": {}} if env == "Pendulum-v1" else {"own": {}, "fast": dict(envs.FAST_SOLVER)}
+
+
+def trained_on(env: str, env_options: dict) -> str:
+    """Which of ``judged_physics`` an arm trained on (its verdict is read there)."""
+    return "fast" if env_options or env == "Ant" else "own"
+
+
+def average_during_training(returns: np.ndarray) -> tuple[float, float]:
+    """Mean ± s.e. over seeds of each seed's mean evaluation (``returns``: seeds x
+    evaluations)."""
+    return mean_and_standard_error(np.asarray(returns).mean(axis=1))
+
+
 def run_arm(config: CompareSettingsConfig, out: Path, arm: str) -> Path:
     """``arm``'s train_rl run in ``out/<arm>/``, or the finished one there."""
     directory = out / arm
-    if (directory / "policy.json").exists():
+    if arm_finished(directory):
         print(f"{arm}: finished run in {directory}, reused", flush=True)
         return directory
     print(f"{arm}: train_rl {' '.join(arm_flags(arm)) or '(the table)'}", flush=True)
@@ -163,16 +185,13 @@ def write_comparison(
 ) -> dict:
     """The verdicts, then comparison.md, .png and (last) .json, which also keeps each arm's
     evaluation curve and ``origin`` (the command, commit and machine: ``provenance``)."""
-    trained_on = {
-        arm: "fast" if result["env_options"] or config.env == "Ant" else "own"
-        for arm, result in results.items()
-    }
-    baseline_mean, baseline_se = results[config.baseline]["final_return_mean_se"][
-        trained_on[config.baseline]
+    baseline = results[config.baseline]
+    baseline_mean, baseline_se = baseline["final_return_mean_se"][
+        trained_on(config.env, baseline["env_options"])
     ]
-    for arm, result in results.items():
-        mean, _ = result["final_return_mean_se"][trained_on[arm]]
-        result["trained_on"] = trained_on[arm]
+    for result in results.values():
+        result["trained_on"] = trained_on(config.env, result["env_options"])
+        mean, _ = result["final_return_mean_se"][result["trained_on"]]
         result["not_worse_than_baseline"] = bool(mean >= baseline_mean - baseline_se)
     summary = {
         "env": config.env,
@@ -257,9 +276,7 @@ def evaluate_arms(config: CompareSettingsConfig, directories: dict) -> tuple[dic
     """Each arm's saved policies evaluated on the task's own physics (and MJX's fast solver
     beside it on the MuJoCo tasks), with its TRPO settings and learning curves."""
     key = jax.random.key(config.seed + 10_000)  # evaluation keys unused by any training run
-    physics = {"own": {}}
-    if config.env != "Pendulum-v1":
-        physics["fast"] = dict(envs.FAST_SOLVER)
+    physics = judged_physics(config.env)
     evaluators = {}
     results, curves = {}, {}
     for arm, directory in directories.items():
@@ -286,7 +303,7 @@ def evaluate_arms(config: CompareSettingsConfig, directories: dict) -> tuple[dic
             "final_return_mean_se": {
                 name: mean_and_standard_error(values) for name, values in final.items()
             },
-            "average_eval_return_mean_se": mean_and_standard_error(curves[arm][1].mean(axis=1)),
+            "average_eval_return_mean_se": average_during_training(curves[arm][1]),
         }
     return results, curves
 

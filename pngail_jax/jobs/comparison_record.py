@@ -22,8 +22,11 @@ from pngail_jax.integrity import IntegrityError, read_json, write_json
 from pngail_jax.jobs.compare_settings import (
     COMPARISON_FILE,
     PROGRAM,
+    average_during_training,
     comparison_markdown,
+    judged_physics,
     mean_and_standard_error,
+    trained_on,
 )
 from pngail_jax.outputs import output_owner
 from pngail_jax.run_records import FORMAT, MACHINE_KEYS, RECORD_FILE, RecordError, check_name
@@ -124,18 +127,15 @@ def verify(record: dict, where) -> None:
     try:
         comparison = record["comparison"]
         arms, curves = comparison["arms"], comparison["curves"]
-        physics = {"own"} if comparison["env"] == "Pendulum-v1" else {"own", "fast"}
-        trained_on = {
-            arm: "fast" if result["env_options"] or comparison["env"] == "Ant" else "own"
-            for arm, result in arms.items()
-        }
+        env, physics = comparison["env"], set(judged_physics(comparison["env"]))
         baseline = arms[comparison["baseline"]]
         base_mean, base_se = _numbers(
-            baseline["final_return_mean_se"][trained_on[comparison["baseline"]]]
+            baseline["final_return_mean_se"][trained_on(env, baseline["env_options"])]
         )
         for arm, result in arms.items():
-            problem = _arm_problem(comparison, result, curves[arm], physics, trained_on[arm])
-            mean = _numbers(result["final_return"][trained_on[arm]]).mean()
+            on = trained_on(env, result["env_options"])
+            problem = _arm_problem(comparison, result, curves[arm], physics, on)
+            mean = _numbers(result["final_return"][on]).mean()
             if problem is None and result["not_worse_than_baseline"] != bool(
                 mean >= base_mean - base_se
             ):
@@ -146,12 +146,12 @@ def verify(record: dict, where) -> None:
         raise RecordError(f"{where}: not a whole comparison record ({error!r})") from None
 
 
-def _arm_problem(comparison, result, curve, physics, trained_on) -> str | None:
+def _arm_problem(comparison, result, curve, physics, on) -> str | None:
     """What of one arm's figures does not follow from its per-seed numbers (None: all do)."""
     finals = result["final_return"]
     if set(finals) != physics or set(result["final_return_mean_se"]) != physics:
         return "set of physics"
-    if result["trained_on"] != trained_on:
+    if result["trained_on"] != on:
         return "physics trained on"
     returns = _numbers(curve["eval_return"])  # seeds x evaluations
     rollout = result["rollout"]
@@ -164,19 +164,13 @@ def _arm_problem(comparison, result, curve, physics, trained_on) -> str | None:
     for name, values in finals.items():
         if not _same(result["final_return_mean_se"][name], _mean_se(values)):
             return f"final return on the {name} solver"
-    if not _same(result["average_eval_return_mean_se"], _average_during_training(returns)):
+    if not _same(result["average_eval_return_mean_se"], average_during_training(returns)):
         return "average during training"
     return None
 
 
 def _mean_se(values):
     return mean_and_standard_error(_numbers(values))
-
-
-def _average_during_training(returns: np.ndarray):
-    """Mean ± s.e. over seeds of each seed's mean evaluation (``returns``: seeds x
-    evaluations), as ``compare_settings.evaluate_arms`` computes it."""
-    return mean_and_standard_error(returns.mean(axis=1))
 
 
 def table(record: dict) -> str:

@@ -176,20 +176,21 @@ def train_rl(
 
 
 def upgrade_document(document: dict) -> dict:
-    """A train_rl config.json of the layout before the rollout's settings had a section of
-    their own ("trpo" held them beside TRPO's, whichever learner ran) in today's layout:
-    "rollout", and "trpo" for a TRPO run; today's unchanged."""
-    old = document.get("trpo")
-    if isinstance(old, dict) and "num_envs" not in old and "num_value_epochs" not in old:
-        return {**document, "trpo": {**old, "num_value_epochs": 1}}  # before value epochs
-    if not isinstance(old, dict) or "num_envs" not in old:
-        return document
-    shared = {field.name for field in dataclasses.fields(RolloutConfig)}
-    upgraded = {key: value for key, value in document.items() if key != "trpo"}
-    upgraded["rollout"] = {key: value for key, value in old.items() if key in shared}
-    if document.get("learner", "trpo") == "trpo":
-        upgraded["trpo"] = {key: value for key, value in old.items() if key not in shared}
-        upgraded["trpo"].setdefault("num_value_epochs", 1)
+    """A train_rl config.json of an older layout in today's (today's unchanged): the rollout's
+    settings moved from "trpo" (which held them beside TRPO's, whichever learner ran) to
+    "rollout"; a TRPO section lacking a field added since (``num_value_epochs``) has its
+    default."""
+    upgraded, old = document, document.get("trpo")
+    if isinstance(old, dict) and "num_envs" in old:
+        shared = {field.name for field in dataclasses.fields(RolloutConfig)}
+        upgraded = {key: value for key, value in document.items() if key != "trpo"}
+        upgraded["rollout"] = {key: value for key, value in old.items() if key in shared}
+        if document.get("learner", "trpo") == "trpo":
+            upgraded["trpo"] = {key: value for key, value in old.items() if key not in shared}
+    trpo = upgraded.get("trpo")
+    defaults = dataclasses.asdict(TRPOConfig())
+    if isinstance(trpo, dict) and not defaults.keys() <= trpo.keys():
+        upgraded = {**upgraded, "trpo": {**defaults, **trpo}}
     return upgraded
 
 
