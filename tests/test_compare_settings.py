@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from pngail_jax import outputs
+from pngail_jax import envs, outputs
 from pngail_jax.jobs import compare_settings as job
 from pngail_jax.jobs.train_rl import TrainRLConfig
 from pngail_jax.programs import train_rl
@@ -61,7 +61,7 @@ def test_the_verdict_is_mean_at_least_the_baselines_mean_minus_one_standard_erro
     results = {
         "table": _result([90, 110]),
         "reference": _result([89, 89]),
-        "wide-fast": _result([0, 0], [91, 91], env_options={"solver_iterations": 1}),
+        "wide-fast": _result([0, 0], [91, 91], env_options=dict(envs.FAST_SOLVER)),
     }
     steps = np.array([10, 20])
     curves = {arm: (steps, np.ones((2, 2))) for arm in results}
@@ -74,6 +74,19 @@ def test_the_verdict_is_mean_at_least_the_baselines_mean_minus_one_standard_erro
     markdown = (tmp_path / "comparison.md").read_text()
     assert "| reference | 25 x 200, own solver | 89.0 ± 0.0 |" in markdown
     assert "| NO |" in markdown
+
+
+def test_an_arm_between_the_fast_caps_and_the_own_ones_is_judged_on_the_own_physics():
+    """4 / 16 is neither physics the final evaluation runs: its verdict reads the task's own
+    (the physics its caps approximate), the fast caps' reads the fast one, Ant's always
+    the fast one (its own caps are the fast ones)."""
+    middle = job.CompareSettingsConfig(env="Hopper-v4", arms=("reference-solver-4-16",))
+    options = middle.arm_config("reference-solver-4-16").settings
+    assert (options.solver_iterations, options.ls_iterations) == (4, 16)
+    assert job.trained_on("Hopper-v4", {"solver_iterations": 4, "ls_iterations": 16}) == "own"
+    assert job.trained_on("Hopper-v4", dict(envs.FAST_SOLVER)) == "fast"
+    assert job.trained_on("Hopper-v4", {}) == "own"
+    assert job.trained_on("Ant", {}) == "fast"
 
 
 def test_one_seed_has_no_standard_error():
