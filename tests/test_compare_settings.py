@@ -204,3 +204,66 @@ def test_a_comparison_records_check_recomputes_every_figure_of_its_table(recorde
         record_program.main(
             [str(tmp_path / "before"), "--name", "other", "--records", str(records)]
         )
+
+
+def _contrast_record(env, finals_by_arm, env_options_by_arm):
+    arms = {}
+    for arm, finals in finals_by_arm.items():
+        result = _result(finals, finals, env_options=env_options_by_arm.get(arm))
+        result["average_eval_return_mean_se"] = (float(np.mean(finals)) / 2, 1.0)
+        arms[arm] = result
+    return {"comparison": {"env": env, "arms": arms}}
+
+
+def test_a_contrast_table_puts_each_tasks_arms_beside_its_baseline_on_the_own_physics():
+    """Each row's mean ± s.e. and P(arm > baseline) against NumPy on the per-seed finals
+    (every pair of seeds, ties counting a half); arms a comparison lacks are left out."""
+    from pngail_jax.jobs import comparison_record
+
+    rng = np.random.default_rng(3)
+    hopper = {"reference": rng.normal(100, 10, 5), "reference-fast": rng.normal(110, 10, 5)}
+    hopper["reference-fast"][0] = hopper["reference"][0]  # a tie
+    swimmer = {"reference": rng.normal(30, 3, 5), "reference-solver-4-16": rng.normal(20, 3, 5)}
+    options = {"reference-fast": dict(envs.FAST_SOLVER),
+               "reference-solver-4-16": {"solver_iterations": 4, "ls_iterations": 16}}  # fmt: skip
+    records = [_contrast_record("Hopper-v4", hopper, options),
+               _contrast_record("Swimmer-v4", swimmer, options)]  # fmt: skip
+    table = comparison_record.contrast_table(
+        records, ["reference-solver-4-16", "reference-fast"], "reference"
+    )
+    rows = [line.split(" | ") for line in table.splitlines()[2:]]
+    assert [(row[0], row[1], row[2]) for row in rows] == [
+        ("| Hopper-v4", "reference", "own solver"),
+        ("| Hopper-v4", "reference-fast", "fast solver"),
+        ("| Swimmer-v4", "reference", "own solver"),
+        ("| Swimmer-v4", "reference-solver-4-16", "solver 4 / 16"),
+    ]
+    for row, (finals, base) in zip(
+        [rows[1], rows[3]],
+        [(hopper["reference-fast"], hopper["reference"]),
+         (swimmer["reference-solver-4-16"], swimmer["reference"])],
+        strict=True,
+    ):  # fmt: skip
+        pairs = finals[:, None] - base[None, :]
+        p = np.mean(pairs > 0) + 0.5 * np.mean(pairs == 0)
+        assert row[4].startswith(f"{p:.2f} [")
+        se = finals.std(ddof=1) / np.sqrt(5)
+        assert row[3] == f"{finals.mean():,.1f} ± {se:,.1f}"
+    assert rows[0][4] == "(baseline)"
+
+
+def test_a_contrast_marker_is_rewritten_from_its_checked_records(recorded):
+    from pngail_jax.jobs import comparison_record
+    from pngail_jax.programs import record as record_program
+
+    tmp_path, _, records = recorded
+    (tmp_path / "contrast" / "docs").mkdir(parents=True)
+    (tmp_path / "contrast" / "README.md").write_text("no tables\n")
+    page = tmp_path / "contrast" / "docs" / "performance.md"
+    marker = "<!-- record-contrast cmp cmp baseline=table arms=reference-fisher5 -->\n"
+    page.write_text(marker + "| stale |\n<!-- /record-contrast -->\n")
+    assert record_program.rewrite_docs(tmp_path / "contrast", records) == [page]
+    record = comparison_record.check(records / "cmp")
+    expected = comparison_record.contrast_table([record, record], ["reference-fisher5"], "table")
+    assert page.read_text() == marker + expected + "<!-- /record-contrast -->\n"
+    assert expected.count("| Pendulum-v1 | reference-fisher5 |") == 2

@@ -167,6 +167,15 @@ def trained_on(env: str, env_options: dict) -> str:
     return "fast" if fast or env == "Ant" else "own"
 
 
+def solver_label(env: str, env_options: dict) -> str:
+    """The solver an arm trained on, in words: "own solver", "fast solver" or "solver I / L"."""
+    if trained_on(env, env_options) == "fast":
+        return "fast solver"
+    if not env_options:
+        return "own solver"
+    return f"solver {env_options['solver_iterations']} / {env_options['ls_iterations']}"
+
+
 def average_during_training(returns: np.ndarray) -> tuple[float, float]:
     """Mean ± s.e. over seeds of each seed's mean evaluation (``returns``: seeds x
     evaluations)."""
@@ -332,14 +341,14 @@ def comparison_markdown(summary: dict) -> str:
     for arm, result in summary["arms"].items():
         settings = result["rollout"]
         shape = f"{settings['num_envs']} x {settings['unroll_length']}"
-        solver = "fast" if result["trained_on"] == "fast" else "own"
+        solver = solver_label(summary["env"], result["env_options"])
         normalized = ", norm. obs" if settings["normalize_observations"] else ""
         if result["fisher_subsample"] > 1:
             normalized += f", Fisher on every {result['fisher_subsample']}th step"
         if result.get("value_epochs", 1) > 1:
             normalized += f", {result['value_epochs']} value epochs"
         lines.append(
-            f"| {arm} | {shape}, {solver} solver{normalized} | "
+            f"| {arm} | {shape}, {solver}{normalized} | "
             f"{cell(result['final_return_mean_se']['own'])} | "
             f"{cell(result['final_return_mean_se'].get('fast', (math.nan, math.nan)))} | "
             f"{cell(result['average_eval_return_mean_se'])} | "

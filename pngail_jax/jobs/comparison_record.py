@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pngail_jax import stats
 from pngail_jax.integrity import IntegrityError, read_json, write_json
 from pngail_jax.jobs.compare_settings import (
     COMPARISON_FILE,
@@ -26,6 +27,7 @@ from pngail_jax.jobs.compare_settings import (
     comparison_markdown,
     judged_physics,
     mean_and_standard_error,
+    solver_label,
     trained_on,
 )
 from pngail_jax.outputs import output_owner
@@ -176,6 +178,39 @@ def _mean_se(values):
 def table(record: dict) -> str:
     """The comparison's markdown table, as ``experiments.compare_settings`` prints it."""
     return comparison_markdown(record["comparison"])
+
+
+def contrast_table(records: list[dict], arms: list[str], baseline: str) -> str:
+    """One table across comparisons (one per task): each task's ``baseline`` arm and each of
+    ``arms`` it has, every arm's final return on the task's own physics (the real task,
+    whatever it trained on; mean ± s.e. over seeds), the probability that a seed of the arm
+    ends above a seed of the baseline there (with its 95% bootstrap interval), and the
+    average during training. Arms a comparison lacks are left out."""
+    lines = [
+        "| task | arm | settings | final, own solver | P(arm > baseline) [95% CI] "
+        "| average during training |",
+        "|---|---|---|---:|---:|---:|",
+    ]
+    for record in records:
+        comparison = record["comparison"]
+        env, results = comparison["env"], comparison["arms"]
+        base = _numbers(results[baseline]["final_return"]["own"])
+        for arm in [baseline, *[arm for arm in arms if arm in results and arm != baseline]]:
+            result = results[arm]
+            finals = _numbers(result["final_return"]["own"])
+            if arm == baseline:
+                improvement = "(baseline)"
+            else:
+                low, high = stats.probability_of_improvement_ci(finals, base)
+                p = stats.probability_of_improvement(finals, base)
+                improvement = f"{p:.2f} [{low:.2f}, {high:.2f}]"
+            mean, se = mean_and_standard_error(finals)
+            during, during_se = _numbers(result["average_eval_return_mean_se"])
+            lines.append(
+                f"| {env} | {arm} | {solver_label(env, result['env_options'])} | "
+                f"{mean:,.1f} ± {se:,.1f} | {improvement} | {during:,.1f} ± {during_se:,.1f} |"
+            )
+    return "\n".join(lines) + "\n"
 
 
 def describe(record: dict) -> str:

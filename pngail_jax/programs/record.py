@@ -16,7 +16,10 @@ between ``<!-- record-glance NAME NAME ... -->`` and ``<!-- /record-glance -->``
 ``run_records.glance_table`` of those records (a row per task), and one between
 ``<!-- record-comparison NAME -->`` and ``<!-- /record-comparison -->`` the table of a
 recorded ``experiments.compare_settings`` comparison (``jobs.comparison_record``: RUN_DIR a
-finished comparison's folder); ``<!-- record-blocks NAME block=STEPS -->`` and
+finished comparison's folder); ``<!-- record-contrast NAME NAME ... baseline=ARM
+arms=A,B -->`` (closed by ``<!-- /record-contrast -->``) puts several comparisons' arms beside
+each one's baseline on the task's own physics, with each arm's probability of improvement;
+``<!-- record-blocks NAME block=STEPS -->`` and
 ``<!-- record-diagnostics NAME block=STEPS [methods=A,B] -->`` (closed by ``<!--
 /record-blocks -->`` and ``<!-- /record-diagnostics -->``) give a record's learning and its
 diagnostics per block of environment steps: ``--docs`` writes them, and
@@ -57,8 +60,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     )
     parser.add_argument(
         "--docs", action="store_true",
-        help="rewrite every record-table, record-glance, record-comparison, record-blocks and "
-        "record-diagnostics table of README.md and docs/*.md from its records (checked first)",
+        help="rewrite every record-table, record-glance, record-comparison, record-contrast, "
+        "record-blocks and record-diagnostics table of README.md and docs/*.md from its "
+        "records (checked first)",
     )  # fmt: skip
     args = parser.parse_args(argv)
     if args.docs:
@@ -92,6 +96,12 @@ BLOCKED = re.compile(
     r"(?: methods=(?P<methods>[\w.+,-]+))? -->\n)(?P<table>.*?)(?P<end><!-- /record-(?P=kind) -->)",
     re.S,
 )
+# Several comparisons' arms against each one's baseline (``comparison_record.contrast_table``).
+CONTRASTED = re.compile(
+    r"(<!-- record-contrast (?P<name>[\w.-]+(?: [\w.-]+)*) baseline=(?P<baseline>[\w.-]+) "
+    r"arms=(?P<arms>[\w.,-]+) -->\n)(?P<table>.*?)(?P<end><!-- /record-contrast -->)",
+    re.S,
+)
 # Several records in one table (``run_records.glance_table``): names separated by spaces.
 GLANCED = re.compile(
     r"(<!-- record-glance (?P<name>[\w.-]+(?: [\w.-]+)*) -->\n)"
@@ -100,7 +110,7 @@ GLANCED = re.compile(
 )
 
 
-PATTERNS = (MARKED, GLANCED, COMPARED, BLOCKED)
+PATTERNS = (MARKED, GLANCED, COMPARED, BLOCKED, CONTRASTED)
 
 
 def doc_files(root: Path = Path(".")) -> list[Path]:
@@ -119,6 +129,11 @@ def _expected(match: re.Match, records: Path) -> str:
             return run_records.block_table(record, folder, block)
         methods = match["methods"].split(",") if match["methods"] else None
         return run_records.diagnostics_table(record, folder, block, methods)
+    if match.re is CONTRASTED:
+        checked = [comparison_record.check(records / name) for name in match["name"].split()]
+        return comparison_record.contrast_table(
+            checked, match["arms"].split(","), match["baseline"]
+        )
     if match.re is GLANCED:
         names = match["name"].split()
         return run_records.glance_table([run_records.check_record(records / n) for n in names])
