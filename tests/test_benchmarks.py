@@ -154,3 +154,11 @@ def test_gpu_check(tmp_path):
     assert "the paper's grid" in module.table(rows)
     skipped = module.run_step(module.plan(tiny=True)[0], 0.0, tmp_path)
     assert skipped[0]["status"] == "skipped: no time left"
+
+
+def test_fisher_roofline(tmp_path):
+    argv = ["--samples", "50", "--hidden", "8", "--products", "2", "--repeats", "1"]
+    rows = rows_of("fisher_roofline", argv, tmp_path / "rows.json")
+    assert [row["name"] for row in rows] == ["fisher_roofline/products", "fisher_roofline/matmuls"]
+    assert all(positive(row["milliseconds"]) and positive(row["over_matmuls"]) for row in rows)
+    assert rows[1]["over_matmuls"] == 1.0
