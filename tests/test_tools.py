@@ -88,3 +88,25 @@ def test_the_record_trend_ends_with_the_records_headline(capsys):
         assert row["windows"][-1] == pytest.approx(np.mean(headline[row["method"]]), abs=1e-6)
         assert row["change"] == pytest.approx(row["windows"][-1] - row["windows"][-2], abs=1e-9)
     assert "| offline-ant | ILID |" in capsys.readouterr().out
+
+
+def test_the_contrast_figure_draws_a_panel_per_record_and_refuses_a_broken_one(tmp_path):
+    """From two committed comparison records: one panel each, the arms a record lacks left
+    out; a record whose numbers do not add up stops it with the check's one line."""
+    import json
+    import shutil
+
+    tool = _tool("contrast_figure")
+    records = [ROOT / "records" / name for name in
+               ("settings-swimmer-v4-value-epochs", "settings-hopper-v4-value-epochs")]  # fmt: skip
+    out = tool.main([*map(str, records), "--arms", "reference,reference-fast", "--out",
+                     str(tmp_path / "figure.png")])  # fmt: skip
+    assert out.read_bytes().startswith(b"\x89PNG")
+    broken = tmp_path / "broken"
+    shutil.copytree(records[0], broken)
+    record = json.loads((broken / "record.json").read_text())
+    record["comparison"]["arms"]["reference"]["final_return"]["own"][0] += 1.0
+    (broken / "record.json").write_text(json.dumps(record))
+    with pytest.raises(SystemExit, match="arm reference's final return on the own solver"):
+        tool.main([str(broken), "--arms", "reference", "--out", str(tmp_path / "no.png")])
+    assert not (tmp_path / "no.png").exists()
