@@ -15,7 +15,8 @@ such and the next begins:
    times as wide.
 3. 35-cell adversarial training steps/s with evaluation on Hopper-v4 for each engine, with the
    cold and warm compile (two fresh processes, an empty then a filled cache), then the other
-   tasks without compile times, for as long as time is left.
+   tasks without compile times, for as long as time is left; each task on the solver caps
+   ``experiments.paper --preset gpu`` gives it (``paper.plan.GPU_SOLVERS``).
 
 Every row carries the step, engine and task it measured, and ``status``: ``ok``, ``timed out
 after N s``, ``failed: <last line>`` or ``skipped: no time left``.
@@ -35,6 +36,7 @@ from pathlib import Path
 from common import markdown_table, write_rows
 
 from pngail_jax import envs
+from pngail_jax.paper.plan import GPU_SOLVERS
 
 HERE = Path(__file__).resolve().parent
 TASKS = ("Hopper-v4", "HalfCheetah-v4", "Walker2d-v4", "Swimmer-v4", "Ant-v4")
@@ -81,7 +83,9 @@ def plan(tiny: bool) -> list[Step]:
     for index, task in enumerate(tasks):
         compiles = "--compile-times" if index == 0 and not tiny else "--no-compile-times"
         for engine in engines:
-            argv = ("--env", task, "--physics", engine, compiles, *grid)
+            # the caps the GPU preset trains this task on (gymnasium's own where none named)
+            caps = ("--solver", GPU_SOLVERS[task]) if task in GPU_SOLVERS else ()
+            argv = ("--env", task, "--physics", engine, compiles, *caps, *grid)
             steps.append(Step("training", "grid_throughput.py", argv, engine, task))
     return steps
 

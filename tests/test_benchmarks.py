@@ -154,6 +154,10 @@ def test_gpu_check(tmp_path):
     assert "the paper's grid" in module.table(rows)
     skipped = module.run_step(module.plan(tiny=True)[0], 0.0, tmp_path)
     assert skipped[0]["status"] == "skipped: no time left"
+    full = [step for step in module.plan(tiny=False) if step.name == "training"]
+    for step in full:  # each task trains on the GPU preset's caps
+        caps = module.GPU_SOLVERS.get(step.task)
+        assert (("--solver", caps) == step.argv[5:7]) if caps else "--solver" not in step.argv
 
 
 def test_fisher_roofline(tmp_path):

@@ -233,10 +233,10 @@ def test_a_contrast_table_puts_each_tasks_arms_beside_its_baseline_on_the_own_ph
     )
     rows = [line.split(" | ") for line in table.splitlines()[2:]]
     assert [(row[0], row[1], row[2]) for row in rows] == [
-        ("| Hopper-v4", "reference", "own solver"),
-        ("| Hopper-v4", "reference-fast", "fast solver"),
-        ("| Swimmer-v4", "reference", "own solver"),
-        ("| Swimmer-v4", "reference-solver-4-16", "solver 4 / 16"),
+        ("| Hopper-v4", "reference", "25 x 200, own solver"),
+        ("| Hopper-v4", "reference-fast", "25 x 200, fast solver"),
+        ("| Swimmer-v4", "reference", "25 x 200, own solver"),
+        ("| Swimmer-v4", "reference-solver-4-16", "25 x 200, solver 4 / 16"),
     ]
     for row, (finals, base) in zip(
         [rows[1], rows[3]],

@@ -27,6 +27,32 @@ def test_fig2_and_fig3_share_one_grid_per_task_and_each_figure_has_its_grids():
     assert grids["Pendulum-v1-main"].demos.ratio == (1, 4)
 
 
+def test_the_gpu_preset_takes_each_tasks_solver_caps_from_the_study_and_nothing_else():
+    """Its -v4 tasks' grids and demonstration runs get GPU_SOLVERS' caps (gymnasium's own
+    where a task is not named); every other field is the paper preset's; Pendulum-v1 has
+    no solver and is untouched."""
+    import dataclasses
+
+    from pngail_jax.paper.plan import BUDGETS, GPU_SOLVERS, MUJOCO_TASKS
+    from pngail_jax.settings import parse_solver
+
+    gpu, paper_budget = BUDGETS["gpu"], BUDGETS["paper"]
+    assert set(GPU_SOLVERS) <= set(MUJOCO_TASKS) and GPU_SOLVERS
+    for task in MUJOCO_TASKS:
+        for demos in (False, True):
+            row, base = (
+                gpu.run_settings(task, "mjx", demos),
+                paper_budget.run_settings(task, "mjx", demos),
+            )
+            caps = parse_solver(GPU_SOLVERS.get(task, "own"))
+            assert (row.solver_iterations, row.ls_iterations) == (
+                caps["solver_iterations"], caps["ls_iterations"]
+            )  # fmt: skip
+            assert dataclasses.replace(row, **parse_solver("own")) == base
+    assert gpu.run_settings("Pendulum-v1", None) == paper_budget.run_settings("Pendulum-v1", None)
+    assert BUDGETS["cpu"].solvers == {} and paper_budget.solvers == {}
+
+
 def test_every_built_figure_plans_on_all_six_tasks():
     figures, grids = paper.plan(paper.FIGURES, list(paper.envs.ENV_NAMES), set())
     assert [figure.name for figure in figures] == list(paper.FIGURES)

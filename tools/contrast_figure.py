@@ -18,7 +18,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from pngail_jax.jobs import comparison_record  # noqa: E402
-from pngail_jax.jobs.compare_settings import solver_label  # noqa: E402
+from pngail_jax.jobs.compare_settings import arm_description  # noqa: E402
 from pngail_jax.run_records import RecordError  # noqa: E402
 
 
@@ -39,6 +39,7 @@ def draw(records: list[dict], arms: list[str], out: Path) -> None:
     columns = min(len(records), 3)
     rows = math.ceil(len(records) / columns)
     figure, axes = plt.subplots(rows, columns, figsize=(4.6 * columns, 3.6 * rows), squeeze=False)
+    colors = dict(zip(arms, plt.rcParams["axes.prop_cycle"].by_key()["color"], strict=False))
     for axis, record in zip(axes.flat, records, strict=False):
         comparison = record["comparison"]
         for arm in [arm for arm in arms if arm in comparison["arms"]]:
@@ -47,14 +48,14 @@ def draw(records: list[dict], arms: list[str], out: Path) -> None:
             returns = np.asarray(curve["eval_return"], float)  # seeds x evaluations
             mean = returns.mean(axis=0)
             error = returns.std(axis=0, ddof=1) / math.sqrt(len(returns))
-            solver = solver_label(comparison["env"], comparison["arms"][arm]["env_options"])
-            label = f"{arm} ({solver})"
-            axis.plot(steps, mean, lw=2, marker="o", ms=3, label=label)
-            axis.fill_between(steps, mean - error, mean + error, alpha=0.2)
+            label = f"{arm} ({arm_description(comparison['env'], comparison['arms'][arm])})"
+            color = colors.get(arm)  # one colour per arm in every panel
+            axis.plot(steps, mean, lw=2, marker="o", ms=3, label=label, color=color)
+            axis.fill_between(steps, mean - error, mean + error, alpha=0.2, color=color)
         axis.set(title=comparison["env"], xlabel="environment steps per run (M)",
                  ylabel="evaluation return")  # fmt: skip
         axis.grid(alpha=0.3)
-        axis.legend(fontsize=7)
+        axis.legend(fontsize=6.5)
     for axis in list(axes.flat)[len(records) :]:
         axis.set_visible(False)
     figure.suptitle(f"TRPO on the true reward, {records[0]['comparison']['seeds']} seeds each")

@@ -322,6 +322,20 @@ def evaluate_arms(config: CompareSettingsConfig, directories: dict) -> tuple[dic
     return results, curves
 
 
+def arm_description(env: str, result: dict) -> str:
+    """An evaluated arm's settings in words: "25 x 200, own solver, 10 value epochs"."""
+    settings = result["rollout"]
+    words = [f"{settings['num_envs']} x {settings['unroll_length']}"]
+    words.append(solver_label(env, result["env_options"]))
+    if settings["normalize_observations"]:
+        words.append("norm. obs")
+    if result["fisher_subsample"] > 1:
+        words.append(f"Fisher on every {result['fisher_subsample']}th step")
+    if result.get("value_epochs", 1) > 1:
+        words.append(f"{result['value_epochs']} value epochs")
+    return ", ".join(words)
+
+
 def comparison_markdown(summary: dict) -> str:
     def cell(pair):
         mean, se = (math.nan if value is None else value for value in pair)  # JSON's null
@@ -339,16 +353,8 @@ def comparison_markdown(summary: dict) -> str:
         "|---|---|---:|---:|---:|---|",
     ]
     for arm, result in summary["arms"].items():
-        settings = result["rollout"]
-        shape = f"{settings['num_envs']} x {settings['unroll_length']}"
-        solver = solver_label(summary["env"], result["env_options"])
-        normalized = ", norm. obs" if settings["normalize_observations"] else ""
-        if result["fisher_subsample"] > 1:
-            normalized += f", Fisher on every {result['fisher_subsample']}th step"
-        if result.get("value_epochs", 1) > 1:
-            normalized += f", {result['value_epochs']} value epochs"
         lines.append(
-            f"| {arm} | {shape}, {solver}{normalized} | "
+            f"| {arm} | {arm_description(summary['env'], result)} | "
             f"{cell(result['final_return_mean_se']['own'])} | "
             f"{cell(result['final_return_mean_se'].get('fast', (math.nan, math.nan)))} | "
             f"{cell(result['average_eval_return_mean_se'])} | "

@@ -23,11 +23,11 @@ from pngail_jax.integrity import IntegrityError, read_json, write_json
 from pngail_jax.jobs.compare_settings import (
     COMPARISON_FILE,
     PROGRAM,
+    arm_description,
     average_during_training,
     comparison_markdown,
     judged_physics,
     mean_and_standard_error,
-    solver_label,
     trained_on,
 )
 from pngail_jax.outputs import output_owner
@@ -207,7 +207,7 @@ def contrast_table(records: list[dict], arms: list[str], baseline: str) -> str:
             mean, se = mean_and_standard_error(finals)
             during, during_se = _numbers(result["average_eval_return_mean_se"])
             lines.append(
-                f"| {env} | {arm} | {solver_label(env, result['env_options'])} | "
+                f"| {env} | {arm} | {arm_description(env, result)} | "
                 f"{mean:,.1f} ± {se:,.1f} | {improvement} | {during:,.1f} ± {during_se:,.1f} |"
             )
     return "\n".join(lines) + "\n"

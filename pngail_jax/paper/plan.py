@@ -66,15 +66,20 @@ class Budget:
     measure_episodes: int
     settings: dict[str, dict[str, int]]  # per task kind
     demo_settings: dict[str, dict[str, int]]
+    # Solver caps of a task's grids and demonstration runs ("fast" or "I/L", as --solver
+    # takes them); a task not named keeps its row's (gymnasium's own on the -v4 tasks).
+    solvers: dict[str, str] = dataclasses.field(default_factory=dict)
 
     def run_settings(self, task: str, physics: str | None, demos: bool = False):
         """The ``RunSettings`` of ``task``'s grids (``demos``: of its demonstration making,
         which evaluates every 10 iterations unless the budget says otherwise) on
         ``physics`` (gymnasium's MuJoCo tasks only; None: the platform's engine)."""
-        from pngail_jax.settings import settings_for
+        from pngail_jax.settings import parse_solver, settings_for
 
         kind = task_kind(task)
         fields = {"eval_every": 10, **self.demo_settings[kind]} if demos else self.settings[kind]
+        if task in self.solvers:
+            fields = {**parse_solver(self.solvers[task]), **fields}
         engine = physics if task in envs.GYM_TASKS else None
         return settings_for(task, **fields, physics=engine)
 
@@ -91,6 +96,15 @@ PAPER_BUDGET = Budget(
     settings=NO_SETTINGS,
     demo_settings=NO_SETTINGS,
 )
+# The accelerator's solver caps per -v4 task: the fewest caps (of the fast ones, 4 / 16 and
+# gymnasium's own) whose TRPO learned not worse than gymnasium's own solver, judged on the
+# task's own physics over 5 seeds x 2 M steps (docs/performance.md, "The solver caps on
+# gymnasium's tasks"). Fewer caps are cheaper on MJX, where every env of a batch waits for the
+# slowest one's solver; the C engine on a CPU keeps gymnasium's own unless a preset says.
+GPU_SOLVERS = {
+    "Swimmer-v4": "fast",
+    "HalfCheetah-v4": "4/16",
+}
 BUDGETS = {
     # Every figure on a 2-core CPU: a check that everything runs, not a result.
     "check": Budget(
@@ -123,10 +137,10 @@ BUDGETS = {
     # The paper's budget: 5,000 TRPO iterations of about 5,000 steps, 5 seeds (a GPU).
     "paper": PAPER_BUDGET,
     # The paper's budget on an accelerator: its iterations and seeds, each task's own row of
-    # the settings table (25 envs x 200 steps: the wide, short rollout learned worse on the
-    # CPU, docs/performance.md), longer chunks (fewer round trips to the host), and with
-    # --throughput an estimate of the wall time before it starts.
-    "gpu": dataclasses.replace(PAPER_BUDGET, chunk_iterations=500),
+    # the settings table (25 envs x 200 steps, TRPO's one value pass: the reference's), the
+    # solver caps that learned not worse (GPU_SOLVERS), longer chunks (fewer round trips to
+    # the host), and with --throughput an estimate of the wall time before it starts.
+    "gpu": dataclasses.replace(PAPER_BUDGET, chunk_iterations=500, solvers=GPU_SOLVERS),
     # A tenth of the paper's budget (2.5 M steps per run): Pendulum-v1 grids in about half
     # an hour each on a 2-core CPU, the MuJoCo grids of the authors' files on the C engine in
     # 1.5-2 hours each (Hopper-v4: 122 minutes beside other jobs; docs/results.md).
