@@ -250,6 +250,10 @@ def test_a_contrast_table_puts_each_tasks_arms_beside_its_baseline_on_the_own_ph
         se = finals.std(ddof=1) / np.sqrt(5)
         assert row[3] == f"{finals.mean():,.1f} ± {se:,.1f}"
     assert rows[0][4] == "(baseline)"
+    from pngail_jax.run_records import RecordError
+
+    with pytest.raises(RecordError, match="has no arm 'table' to contrast with"):
+        comparison_record.contrast_table(records, ["reference-fast"], "table")
 
 
 def test_a_contrast_marker_is_rewritten_from_its_checked_records(recorded):

@@ -194,6 +194,9 @@ def contrast_table(records: list[dict], arms: list[str], baseline: str) -> str:
     for record in records:
         comparison = record["comparison"]
         env, results = comparison["env"], comparison["arms"]
+        if baseline not in results:
+            missing = f"has no arm {baseline!r} to contrast with"
+            raise RecordError(f"record {record.get('name')} {missing}")
         base = _numbers(results[baseline]["final_return"]["own"])
         for arm in [baseline, *[arm for arm in arms if arm in results and arm != baseline]]:
             result = results[arm]
