@@ -26,12 +26,10 @@ departure from the reference's Fisher on every sample).
 from __future__ import annotations
 
 import argparse
-import statistics
-import time
 
 import jax
 import jax.numpy as jnp
-from common import context, markdown_table, write_rows
+from common import context, markdown_table, median_seconds, write_rows
 from jax.flatten_util import ravel_pytree
 
 from pngail_jax.networks import GaussianPolicy
@@ -58,8 +56,11 @@ def fisher_products(args):
 
     def run(flat, obs, v):
         product = gauss_newton_fisher_product(policy, unravel, flat, obs, 0.1)
-        # normalised each round so that ten rounds stay finite, as CG's directions do
-        step = lambda _, x: (y := product(x)) / jnp.linalg.norm(y)  # noqa: E731
+
+        def step(_, x):  # normalised each round so that the rounds stay finite, as CG's do
+            y = product(x)
+            return y / jnp.linalg.norm(y)
+
         return jax.lax.fori_loop(0, args.products, step, v)
 
     program = jax.jit(run)
@@ -84,22 +85,12 @@ def bare_matmuls(args):
     return lambda: program(rows, tangent)
 
 
-def median_seconds(call, repeats: int) -> float:
-    jax.block_until_ready(call())  # compiles and warms
-    timings = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        jax.block_until_ready(call())
-        timings.append(time.perf_counter() - start)
-    return statistics.median(timings)
-
-
 def main(argv=None) -> list[dict]:
     args = parse_args(argv)
     flops = args.products * 4 * 2 * args.samples * args.hidden**2
     measured = {
-        "products": median_seconds(fisher_products(args), args.repeats),
-        "matmuls": median_seconds(bare_matmuls(args), args.repeats),
+        "products": median_seconds(fisher_products(args), repeats=args.repeats),
+        "matmuls": median_seconds(bare_matmuls(args), repeats=args.repeats),
     }
     common = {**context(), "samples": args.samples, "hidden": args.hidden}
     rows = [

@@ -18,7 +18,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from pngail_jax.jobs import comparison_record  # noqa: E402
-from pngail_jax.jobs.compare_settings import arm_description  # noqa: E402
+from pngail_jax.jobs.compare_settings import arm_description, draw_curve  # noqa: E402
 from pngail_jax.run_records import RecordError  # noqa: E402
 
 
@@ -45,13 +45,9 @@ def draw(records: list[dict], arms: list[str], out: Path) -> None:
         for arm in [arm for arm in arms if arm in comparison["arms"]]:
             curve = comparison["curves"][arm]
             steps = np.asarray(curve["env_steps"]) / 1e6
-            returns = np.asarray(curve["eval_return"], float)  # seeds x evaluations
-            mean = returns.mean(axis=0)
-            error = returns.std(axis=0, ddof=1) / math.sqrt(len(returns))
             label = f"{arm} ({arm_description(comparison['env'], comparison['arms'][arm])})"
-            color = colors.get(arm)  # one colour per arm in every panel
-            axis.plot(steps, mean, lw=2, marker="o", ms=3, label=label, color=color)
-            axis.fill_between(steps, mean - error, mean + error, alpha=0.2, color=color)
+            # one colour per arm in every panel
+            draw_curve(axis, steps, curve["eval_return"], label, colors.get(arm), alpha=0.2)
         axis.set(title=comparison["env"], xlabel="environment steps per run (M)",
                  ylabel="evaluation return")  # fmt: skip
         axis.grid(alpha=0.3)

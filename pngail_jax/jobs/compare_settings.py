@@ -265,6 +265,16 @@ def mean_and_standard_error(values) -> tuple[float, float]:
     return float(values.mean()), float(values.std(ddof=1) / math.sqrt(len(values)))
 
 
+def draw_curve(axis, steps, returns, label: str, color=None, alpha: float = 0.25) -> None:
+    """One arm's evaluation returns (float[seeds, evaluations]) on ``axis``: the mean over
+    seeds, and a band of one standard error around it."""
+    returns = np.asarray(returns, float)
+    mean = returns.mean(axis=0)
+    error = returns.std(axis=0, ddof=1) / math.sqrt(len(returns))
+    axis.plot(steps, mean, lw=2, marker="o", ms=3, label=label, color=color)
+    axis.fill_between(steps, mean - error, mean + error, alpha=alpha, color=color)
+
+
 def plot(path: Path, curves: dict, title: str) -> None:
     import matplotlib
 
@@ -273,10 +283,7 @@ def plot(path: Path, curves: dict, title: str) -> None:
 
     figure, axis = plt.subplots(figsize=(7, 4.5))
     for arm, (steps, returns) in curves.items():
-        mean = returns.mean(axis=0)
-        error = returns.std(axis=0, ddof=1) / math.sqrt(len(returns))
-        axis.plot(steps, mean, lw=2, marker="o", ms=3, label=f"{arm} ({len(returns)} seeds)")
-        axis.fill_between(steps, mean - error, mean + error, alpha=0.25)
+        draw_curve(axis, steps, returns, f"{arm} ({len(returns)} seeds)")
     axis.set(xlabel="environment steps per run", ylabel="evaluation return", title=title)
     axis.grid(alpha=0.3)
     axis.legend()
