@@ -58,6 +58,19 @@ def _per_seed(scores: dict[str, np.ndarray]) -> dict[str, list[float | None]]:
     }
 
 
+def _confidence_errors(summary: dict) -> dict[str, list[float | None]]:
+    """Per method label, each seed's confidence MAE on D_u as ``summary.json`` states it
+    (None where it has none). The classifier is trained before the grid, so its error is
+    not in metrics.csv: a record keeps it as the run stated it."""
+    return {
+        label: [
+            seed.get("confidence_mae") for seed in sorted(row["per_seed"], key=lambda s: s["seed"])
+        ]
+        for label, row in summary.get("methods", {}).items()
+        if row.get("per_seed")
+    }
+
+
 def _training_seconds(metrics_path: Path) -> float | None:
     """The run's training seconds so far: the largest ``wall_seconds`` of its metrics file."""
     from pngail_jax.report import metrics_rows
@@ -108,6 +121,7 @@ def write_record(
         "compile_seconds": summary.get("compile_seconds"),
         "late_share": LATE_SHARE,
         **{_key(name): _per_seed(values) for name, values in scores.items()},
+        "confidence_mae": _confidence_errors(summary),
     }
     folder = Path(records) / name
     _check_replaceable(folder, record)
@@ -193,7 +207,27 @@ def check_record(folder: Path) -> dict:
             raise RecordError(
                 f"{folder / RECORD_FILE}: its {_key(name)} differs from that of {METRICS_FILE}"
             )
+    _check_confidence_errors(folder, record)
     return record
+
+
+def _check_confidence_errors(folder: Path, record: dict) -> None:
+    """RecordError unless the record's ``confidence_mae`` (where it has one) holds, for
+    methods of the record, one number (or None) per seed."""
+    errors = record.get("confidence_mae")
+    if errors is None:
+        return
+    seeds = record[_key("final")]
+    if not isinstance(errors, dict) or any(
+        label not in seeds
+        or not isinstance(values, list)
+        or len(values) != len(seeds[label])
+        or not all(v is None or isinstance(v, (int, float)) for v in values)
+        for label, values in errors.items()
+    ):
+        raise RecordError(
+            f"{folder / RECORD_FILE}: its confidence_mae is not one number per seed of its methods"
+        )
 
 
 def _key(statistic: str) -> str:
@@ -500,6 +534,14 @@ def block_table(record: dict, folder: Path, block_steps: int) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _check_methods(record: dict, known, methods: list[str] | None) -> None:
+    """RecordError naming the first of ``methods`` that is not among ``known``."""
+    known = list(dict.fromkeys(known))
+    unknown = sorted(set(methods or ()) - set(known))
+    if unknown:
+        raise RecordError(f"record {record['name']} has no method {unknown[0]!r}: {known}")
+
+
 # A recorded run's diagnostics columns as ``diagnostics_table`` names them.
 DIAGNOSTICS = {
     "disc_acc_agent": ("D accuracy on agent rows", "{:.3f}"),
@@ -522,10 +564,7 @@ def diagnostics_table(
     from pngail_jax.report import metrics_rows
 
     rows = list(metrics_rows(Path(folder) / METRICS_FILE))
-    known = list(dict.fromkeys(row["method"] for row in rows))
-    unknown = sorted(set(methods or ()) - set(known))
-    if unknown:
-        raise RecordError(f"record {record['name']} has no method {unknown[0]!r}: {known}")
+    _check_methods(record, [row["method"] for row in rows], methods)
     rows = [row for row in rows if methods is None or row["method"] in methods]
     steps = [int(row["env_steps"]) for row in rows]
     blocks = _blocks_of(record, steps, block_steps)
@@ -546,4 +585,57 @@ def diagnostics_table(
         name = display_name(method) + ("" if len(settings) == 1 else f" [{setting}]")
         cells = [form.format(np.mean(values[b])) if b in values else "-" for b in order]
         lines.append(f"| {name}: {title} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _turn(steps: np.ndarray, values: np.ndarray, level: float) -> str:
+    """The M steps of the first of three evaluations in a row above ``level``, or "never"."""
+    above = values > level
+    for first in range(len(values) - 2):
+        if above[first : first + 3].all():
+            return f"{steps[first] / 1e6:g}"
+    return "never"
+
+
+def seed_table(record: dict, folder: Path, turn: float, methods: list[str] | None = None) -> str:
+    """Each seed of a recorded run, a row per (method, seed) (``methods``, default all):
+    its final and late-average normalised return (the record's), its lowest evaluation and
+    where, where it turned (the first of three evaluations in a row above ``turn``), and its
+    confidence classifier's MAE on D_u (the record's ``confidence_mae``, for methods whose
+    loss reads confidences). ``folder`` holds the checked ``record``. The docs' tables between
+    ``<!-- record-seeds NAME turn=LEVEL [methods=A,B] -->`` markers are this text."""
+    from pngail_jax.methods import display_name, reads_confidences
+    from pngail_jax.report import LATE_LABEL, read_evaluations
+
+    groups = read_evaluations(
+        Path(folder) / METRICS_FILE, "normalized_return", evaluated_by="eval_return",
+        group_by=("method", "setting"),
+    )  # fmt: skip
+    _check_methods(record, [method for method, _ in groups], methods)
+    settings = {setting for _, setting in groups}
+    lines = [
+        f"| method | seed | final | {LATE_LABEL} | lowest evaluation (at M steps) | "
+        f"turned above {turn:g} (M steps) | confidence MAE on D_u |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    for (method, setting), (steps, values) in groups.items():
+        if methods is not None and method not in methods:
+            continue
+        label = method if len(settings) == 1 else f"{method} [{setting}]"
+        errors = (record.get("confidence_mae") or {}).get(label)
+        for seed, row in enumerate(values):
+            final, late = (record[_key(name)][label][seed] for name in ("final", "late_average"))
+            low = int(np.nanargmin(row)) if np.isfinite(row).any() else None
+            lowest = "-" if low is None else f"{row[low]:.2f} ({steps[low] / 1e6:g})"
+            if not reads_confidences(method):
+                error = "reads none"
+            elif errors is None or errors[seed] is None:
+                error = "not recorded"
+            else:
+                error = f"{errors[seed]:.3f}"
+            cells = [display_name(method) + ("" if len(settings) == 1 else f" [{setting}]"),
+                     str(seed), "diverged" if final is None else f"{final:.2f}",
+                     "diverged" if late is None else f"{late:.2f}", lowest,
+                     _turn(steps, row, turn), error]  # fmt: skip
+            lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

@@ -243,6 +243,49 @@ def test_block_tables_leave_out_a_diverged_seed_and_refuse_what_has_no_blocks(tm
         run_records.diagnostics_table(record, offline, 200)
 
 
+def test_the_seed_table_names_each_seeds_low_point_turn_and_classifier_error(tmp_path):
+    """A seed's lowest evaluation and where, the first of three evaluations in a row above
+    the level (a dip after two above does not count), the record's final and late figures
+    and its classifier error; GAIL reads no confidences; a marker rewrites it."""
+    pngail = {0: (0.2, -0.1, 0.4, 0.1, 0.5, 0.6, 0.7), 1: (0.5, 0.6, 0.7, 0.8, 0.2, 0.1, 0.0)}
+    rows = [("pngail", seed, 100 * (i + 1), value, 0.1)
+            for seed, values in pngail.items() for i, value in enumerate(values)]  # fmt: skip
+    rows += [("gail", seed, 100 * (i + 1), 0.1, 0.4) for seed in (0, 1) for i in range(7)]
+    folder = _synthetic_record(tmp_path / "synthetic", rows)
+    record = {
+        "name": "synthetic",
+        "final_normalized_return": {"gail": [0.1, 0.1], "pngail": [0.7, None]},
+        "late_average_normalized_return": {"gail": [0.1, 0.1], "pngail": [0.65, 0.05]},
+        "confidence_mae": {"gail": [0.2, 0.3], "pngail": [0.25, None]},
+    }
+    table = run_records.seed_table(record, folder, 0.3).splitlines()
+    assert table[0] == (
+        "| method | seed | final | last 20% of training | lowest evaluation (at M steps) | "
+        "turned above 0.3 (M steps) | confidence MAE on D_u |"
+    )
+    assert table[2:] == [
+        "| PN-GAIL | 0 | 0.70 | 0.65 | -0.10 (0.0002) | 0.0005 | 0.250 |",
+        "| PN-GAIL | 1 | diverged | 0.05 | 0.00 (0.0007) | 0.0001 | not recorded |",
+        "| GAIL | 0 | 0.10 | 0.10 | 0.10 (0.0001) | never | reads none |",
+        "| GAIL | 1 | 0.10 | 0.10 | 0.10 (0.0001) | never | reads none |",
+    ]
+    assert run_records.seed_table(record, folder, 0.3, ["gail"]).splitlines()[2:] == table[4:]
+    with pytest.raises(run_records.RecordError, match="no method 'wgail'"):
+        run_records.seed_table(record, folder, 0.3, ["wgail"])
+    # the marker, on a real record (made before classifier errors were kept)
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "README.md").write_text("none\n")
+    page = tmp_path / "docs" / "results.md"
+    page.write_text(
+        "<!-- record-seeds pendulum-500-5seeds turn=0.5 methods=pngail -->\n| old |\n"
+        "<!-- /record-seeds -->\n"
+    )
+    assert program.rewrite_docs(tmp_path, ROOT / "records") == [page]
+    [(_, written, expected)] = program.marked_tables(page, ROOT / "records")
+    assert written == expected and len(expected.splitlines()) == 2 + 5
+    assert expected.splitlines()[2].endswith(" | not recorded |")
+
+
 def test_every_record_marker_in_the_docs_is_one_the_program_reads():
     """A marker with a typo would leave its table unchecked by both tests: every line of the
     docs that opens a record marker matches one of experiments.record's patterns."""

@@ -526,6 +526,12 @@ def test_a_record_keeps_the_run_small_and_checks_itself(finished, tmp_path, caps
             assert len(values) == 2 and np.mean(values) == pytest.approx(
                 summary["methods"][method][f"{key}_mean"], rel=1e-5, abs=1e-6
             )
+    # each seed's classifier error as the summary states it (not in metrics.csv)
+    assert record["confidence_mae"] == {
+        method: [seed["confidence_mae"] for seed in row["per_seed"]]
+        for method, row in summary["methods"].items()
+    }
+    assert all(isinstance(v, float) for v in record["confidence_mae"]["pngail"])
     with gzip.open(folder / "metrics.csv.gz", "rt") as file:
         assert file.read() == (finished / "metrics.csv").read_text()
     assert "ok  tiny: Pendulum-v1, 2 methods, 4 runs, complete" in (
@@ -562,6 +568,10 @@ def test_record_check_finds_each_kind_of_damage(finished, tmp_path):
         edited[key][first][0] += 0.5
         (folder / "record.json").write_text(json.dumps(edited))
         with pytest.raises(SystemExit, match=f"its {key} differs from that of metrics.csv"):
+            program.main(["--check", str(folder)])
+    for errors in ({"pngail": [0.1]}, {"icgail": [0.1, 0.2]}, {"pngail": ["0.1", 0.2]}):
+        (folder / "record.json").write_text(json.dumps({**record, "confidence_mae": errors}))
+        with pytest.raises(SystemExit, match="confidence_mae is not one number per seed"):
             program.main(["--check", str(folder)])
     (folder / "record.json").write_text(json.dumps({**record, "late_share": 0.1}))
     with pytest.raises(SystemExit, match="last 0.1 of training, this version's over 0.2"):

@@ -22,8 +22,10 @@ each one's baseline on the task's own physics, with each arm's probability of im
 ``<!-- record-blocks NAME block=STEPS -->`` and
 ``<!-- record-diagnostics NAME block=STEPS [methods=A,B] -->`` (closed by ``<!--
 /record-blocks -->`` and ``<!-- /record-diagnostics -->``) give a record's learning and its
-diagnostics per block of environment steps: ``--docs`` writes them, and
-tests/test_docs_tables.py fails when one differs from its records.
+diagnostics per block of environment steps, and ``<!-- record-seeds NAME turn=LEVEL
+[methods=A,B] -->`` (closed by ``<!-- /record-seeds -->``) its seeds side by side (the
+lowest evaluation, the turn above LEVEL, the classifier's error): ``--docs`` writes them,
+and tests/test_docs_tables.py fails when one differs from its records.
 """
 
 from __future__ import annotations
@@ -61,8 +63,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument(
         "--docs", action="store_true",
         help="rewrite every record-table, record-glance, record-comparison, record-contrast, "
-        "record-blocks and record-diagnostics table of README.md and docs/*.md from its "
-        "records (checked first)",
+        "record-blocks, record-diagnostics and record-seeds table of README.md and docs/*.md "
+        "from its records (checked first)",
     )  # fmt: skip
     args = parser.parse_args(argv)
     if args.docs:
@@ -96,6 +98,12 @@ BLOCKED = re.compile(
     r"(?: methods=(?P<methods>[\w.+,-]+))? -->\n)(?P<table>.*?)(?P<end><!-- /record-(?P=kind) -->)",
     re.S,
 )
+# A recorded run's seeds side by side (``run_records.seed_table``).
+SEEDED = re.compile(
+    r"(<!-- record-seeds (?P<name>[\w.-]+) turn=(?P<turn>-?[\d.]+)"
+    r"(?: methods=(?P<methods>[\w.+,-]+))? -->\n)(?P<table>.*?)(?P<end><!-- /record-seeds -->)",
+    re.S,
+)
 # Several comparisons' arms against each one's baseline (``comparison_record.contrast_table``).
 CONTRASTED = re.compile(
     r"(<!-- record-contrast (?P<name>[\w.-]+(?: [\w.-]+)*) baseline=(?P<baseline>[\w.-]+) "
@@ -110,7 +118,7 @@ GLANCED = re.compile(
 )
 
 
-PATTERNS = (MARKED, GLANCED, COMPARED, BLOCKED, CONTRASTED)
+PATTERNS = (MARKED, GLANCED, COMPARED, BLOCKED, CONTRASTED, SEEDED)
 
 
 def doc_files(root: Path = Path(".")) -> list[Path]:
@@ -129,6 +137,12 @@ def _expected(match: re.Match, records: Path) -> str:
             return run_records.block_table(record, folder, block)
         methods = match["methods"].split(",") if match["methods"] else None
         return run_records.diagnostics_table(record, folder, block, methods)
+    if match.re is SEEDED:
+        folder = records / match["name"]
+        methods = match["methods"].split(",") if match["methods"] else None
+        return run_records.seed_table(
+            run_records.check_record(folder), folder, float(match["turn"]), methods
+        )
     if match.re is CONTRASTED:
         checked = [comparison_record.check(records / name) for name in match["name"].split()]
         return comparison_record.contrast_table(
