@@ -184,19 +184,26 @@ def test_the_diagnostics_table_is_the_block_mean_over_iterations_and_seeds(tmp_p
     assert table[4].startswith("| PN-GAIL: mean reward |")
     assert table[4].endswith(f" | {np.mean(late):.3f} |")
     # the markers: a stale table is rewritten from the record, and then equals it
-    (tmp_path / "docs").mkdir()
-    (tmp_path / "README.md").write_text("none\n")
-    page = tmp_path / "docs" / "results.md"
-    page.write_text(
+    page = _stale_page(
+        tmp_path,
         "<!-- record-blocks pendulum-500-5seeds block=500000 -->\n| old |\n"
         "<!-- /record-blocks -->\n"
         "<!-- record-diagnostics pendulum-500-5seeds block=1000000 methods=pngail -->\n| old |\n"
-        "<!-- /record-diagnostics -->\n"
+        "<!-- /record-diagnostics -->\n",
     )
     assert program.rewrite_docs(tmp_path, ROOT / "records") == [page]
     found = program.marked_tables(page, ROOT / "records")
     assert len(found) == 2 and all(written == expected for _, written, expected in found)
     assert "\n".join(table) + "\n" in page.read_text()
+
+
+def _stale_page(root: Path, text: str) -> Path:
+    """docs/results.md under ``root`` holding ``text`` (beside a README without markers)."""
+    (root / "docs").mkdir()
+    (root / "README.md").write_text("none\n")
+    page = root / "docs" / "results.md"
+    page.write_text(text)
+    return page
 
 
 def _synthetic_record(tmp_path, rows) -> Path:
@@ -273,12 +280,10 @@ def test_the_seed_table_names_each_seeds_low_point_turn_and_classifier_error(tmp
     with pytest.raises(run_records.RecordError, match="no method 'wgail'"):
         run_records.seed_table(record, folder, 0.3, ["wgail"])
     # the marker, on a real record (made before classifier errors were kept)
-    (tmp_path / "docs").mkdir()
-    (tmp_path / "README.md").write_text("none\n")
-    page = tmp_path / "docs" / "results.md"
-    page.write_text(
+    page = _stale_page(
+        tmp_path,
         "<!-- record-seeds pendulum-500-5seeds turn=0.5 methods=pngail -->\n| old |\n"
-        "<!-- /record-seeds -->\n"
+        "<!-- /record-seeds -->\n",
     )
     assert program.rewrite_docs(tmp_path, ROOT / "records") == [page]
     [(_, written, expected)] = program.marked_tables(page, ROOT / "records")
