@@ -604,8 +604,8 @@ def seed_table(record: dict, folder: Path, turn: float, methods: list[str] | Non
     confidence classifier's MAE on D_u (the record's ``confidence_mae``, for methods whose
     loss reads confidences). ``folder`` holds the checked ``record``. The docs' tables between
     ``<!-- record-seeds NAME turn=LEVEL [methods=A,B] -->`` markers are this text."""
-    from pngail_jax.methods import display_name, reads_confidences
-    from pngail_jax.report import LATE_LABEL, read_evaluations
+    from pngail_jax.methods import reads_confidences
+    from pngail_jax.report import LATE_LABEL, display_label, read_evaluations
 
     groups = read_evaluations(
         Path(folder) / METRICS_FILE, "normalized_return", evaluated_by="eval_return",
@@ -633,8 +633,8 @@ def seed_table(record: dict, folder: Path, turn: float, methods: list[str] | Non
                 error = "not recorded"
             else:
                 error = f"{errors[seed]:.3f}"
-            cells = [display_name(method) + ("" if len(settings) == 1 else f" [{setting}]"),
-                     str(seed), "diverged" if final is None else f"{final:.2f}",
+            cells = [display_label(label), str(seed),
+                     "diverged" if final is None else f"{final:.2f}",
                      "diverged" if late is None else f"{late:.2f}", lowest,
                      _turn(steps, row, turn), error]  # fmt: skip
             lines.append("| " + " | ".join(cells) + " |")

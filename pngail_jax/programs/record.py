@@ -126,6 +126,11 @@ def doc_files(root: Path = Path(".")) -> list[Path]:
     return [root / "README.md", *sorted((root / "docs").glob("*.md"))]
 
 
+def _methods(match: re.Match) -> list[str] | None:
+    """A marker's ``methods=A,B`` as a list (None where it names none: every method)."""
+    return match["methods"].split(",") if match["methods"] else None
+
+
 def _expected(match: re.Match, records: Path) -> str:
     """The table a marker's records give (RecordError for one missing or failing its check)."""
     if match.re is COMPARED:
@@ -135,13 +140,11 @@ def _expected(match: re.Match, records: Path) -> str:
         record, block = run_records.check_record(folder), int(match["block"])
         if match["kind"] == "blocks":
             return run_records.block_table(record, folder, block)
-        methods = match["methods"].split(",") if match["methods"] else None
-        return run_records.diagnostics_table(record, folder, block, methods)
+        return run_records.diagnostics_table(record, folder, block, _methods(match))
     if match.re is SEEDED:
         folder = records / match["name"]
-        methods = match["methods"].split(",") if match["methods"] else None
         return run_records.seed_table(
-            run_records.check_record(folder), folder, float(match["turn"]), methods
+            run_records.check_record(folder), folder, float(match["turn"]), _methods(match)
         )
     if match.re is CONTRASTED:
         checked = [comparison_record.check(records / name) for name in match["name"].split()]
