@@ -31,6 +31,7 @@ from pathlib import Path
 
 from pngail_jax import envs
 from pngail_jax.jobs.errors import RunError
+from pngail_jax.paper.estimate import read_throughput
 from pngail_jax.paper.grids import grid_config, plan_eta
 from pngail_jax.paper.page import weak_expert_notes
 from pngail_jax.paper.plan import (
@@ -177,6 +178,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     if args.page is not None:
         _check_page(parser, args)
         return args
+    if args.throughput is not None:
+        _check_throughput(parser, args.throughput)
     if args.resume is not None:
         _check_resume(parser, args)
         return args
@@ -225,6 +228,16 @@ def _check_resume(parser: argparse.ArgumentParser, args) -> None:
         parser.error(f"--resume takes its options from the run: drop {given[0]}")
     if not (args.resume / "paper.json").exists():
         parser.error(f"--resume {args.resume}: no paper.json there (not a run of this)")
+
+
+def _check_throughput(parser: argparse.ArgumentParser, path: Path) -> None:
+    """``--throughput FILE`` is read and each number the estimate reads checked now, before
+    an output folder is claimed or made (``paper.estimate.read_throughput``): a bad row is one
+    line naming the file, the row, the field and its value."""
+    try:
+        read_throughput(path)
+    except RunError as error:
+        parser.error(str(error))
 
 
 def _check_page(parser: argparse.ArgumentParser, args) -> None:
