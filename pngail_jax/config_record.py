@@ -52,10 +52,13 @@ def upgrade_saved_config(data: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def provenance(argv: list[str] | None = None, program: str | None = None) -> dict[str, Any]:
+def provenance(
+    argv: list[str] | None = None, program: str | None = None, command=None
+) -> dict[str, Any]:
     """Where and with what a run ran: versions, git commit, devices, the command line
-    (``python -m <program> <argv>`` when ``program`` names the module, so that it can be run
-    again as it stands)."""
+    (``command`` as given, the words that start the program included; else ``python -m
+    <program> <argv>`` when ``program`` names the module, so that it can be run again as it
+    stands)."""
     import jax
 
     def version(package: str) -> str | None:
@@ -82,7 +85,9 @@ def provenance(argv: list[str] | None = None, program: str | None = None) -> dic
         "device_count": len(devices),
         "local_device_count": len(jax.local_devices()),
         "process_count": jax.process_count(),
-        "command_line": [
+        "command_line": list(command)
+        if command is not None
+        else [
             *(["python", "-m", program] if program else [Path(sys.argv[0]).name]),
             *(sys.argv[1:] if argv is None else argv),
         ],

@@ -26,6 +26,9 @@ _TEMPORARY_MARK = ".tmp-"
 # A run directory's lock file, there only while a process writes the run (held by
 # pngail_jax.outputs.run_lock); here, beside the atomic writes, because manifests leave it out.
 LOCK = ".pngail-run.lock"
+# A run's list of the files it wrote, updated until its process ends (pngail_jax.outputs
+# .record_outputs): here for the same reason.
+OUTPUT_LIST = ".pngail-outputs.json"
 
 
 class IntegrityError(ValueError):
@@ -108,13 +111,13 @@ def _tree_digest(directory: Path) -> str:
 
 
 def _files(directory: Path) -> list[Path]:
-    """The files a manifest lists: not itself, temporaries, or a run's lock (there only while
-    a process writes: pngail_jax.outputs.run_lock)."""
+    """The files a manifest lists: not itself, temporaries, a run's lock (there only while a
+    process writes: pngail_jax.outputs.run_lock) or its list of files (updated after)."""
     return sorted(
         path
         for path in directory.rglob("*")
         if path.is_file()
-        and path.name not in (MANIFEST_NAME, LOCK)
+        and path.name not in (MANIFEST_NAME, LOCK, OUTPUT_LIST)
         and _TEMPORARY_MARK not in path.name
     )
 

@@ -26,17 +26,28 @@ from pathlib import Path
 
 import numpy as np
 
-from pngail_jax.integrity import IntegrityError, atomic_path, file_digest, read_json, write_json
+from pngail_jax.integrity import (
+    IntegrityError,
+    atomic_path,
+    file_digest,
+    json_digest,
+    read_json,
+    write_json,
+)
 from pngail_jax.report import LATE_SHARE
 from pngail_jax.runs import (
     STATISTICS,
     RunReadError,
+    read_scored_rows,
+    run_normalizer,
     run_progress_numbers,
     run_settings,
     scores_of_metrics,
 )
 
-FORMAT = 2  # 2: both statistics per seed (1 held the final evaluation only)
+# 3: its digest and whether its run's seal was checked; 2: both statistics per seed (1 held
+# the final evaluation only). ``upgrade_record`` brings a format-2 record to 3.
+FORMAT = 3
 RECORD_FILE = "record.json"
 METRICS_FILE = "metrics.csv.gz"
 MACHINE_KEYS = (
@@ -94,8 +105,9 @@ def write_record(
     run_dir = Path(run_dir)
     check_name(name)
     try:  # verify_run refuses a folder of neither program
-        for note in verify_run(run_dir, str(run_dir), allow_unsealed=allow_unsealed,
-                               check_inputs=False):  # fmt: skip
+        notes = verify_run(run_dir, str(run_dir), allow_unsealed=allow_unsealed,
+                           check_inputs=False)  # fmt: skip
+        for note in notes:
             print(f"note: {note}")
         config = read_json(run_dir / "config.json", "run config")
         summary = read_json(run_dir / "summary.json", "run summary")
@@ -116,11 +128,13 @@ def write_record(
         "config": {key: value for key, value in config.items() if key != "provenance"},
         "complete": summary.get("complete") is not False,
         "iterations_done": progress[0] if progress else None,
-        "iterations": progress[1] if progress else run_settings(config).get("iterations"),
+        "iterations": progress[1] if progress else planned_iterations(config),
+        # Made with --allow-unsealed: the run's config.json was taken as it stood.
+        "unsealed": bool(notes),
         "training_seconds": _training_seconds(run_dir / "metrics.csv"),
         "compile_seconds": summary.get("compile_seconds"),
         "late_share": LATE_SHARE,
-        **{_key(name): _per_seed(values) for name, values in scores.items()},
+        **{statistic_key(name): _per_seed(values) for name, values in scores.items()},
         "confidence_mae": _confidence_errors(summary),
     }
     folder = Path(records) / name
@@ -134,9 +148,30 @@ def write_record(
                 shutil.copyfileobj(source, target)
     record["metrics"] = {"file": METRICS_FILE, "bytes": metrics.stat().st_size,
                          "sha256": file_digest(metrics)}  # fmt: skip
-    write_json(folder / RECORD_FILE, record)
+    write_json(folder / RECORD_FILE, sealed_record(record))
     check_record(folder)
     return folder
+
+
+def sealed_record(record: dict) -> dict:
+    """``record`` with its ``digest``: the SHA-256 of everything else in it, so that what
+    ``check_record`` cannot recompute from the metrics (the commit, the command, the machine,
+    each seed's classifier error) cannot change unseen either."""
+    unsealed = {key: value for key, value in record.items() if key != "digest"}
+    return {**unsealed, "digest": json_digest(unsealed)}
+
+
+def planned_iterations(config: dict) -> int | None:
+    """The iterations a run's ``config.json`` (or a record's config) plans: the sweep's
+    ``iterations``, the offline program's gradient steps over its steps per iteration."""
+    if config.get("program") == "offline":
+        settings = config.get("config") or {}
+        steps, per_iteration = settings.get("gradient_steps"), settings.get("steps_per_iteration")
+        if isinstance(steps, int) and isinstance(per_iteration, int) and per_iteration > 0:
+            return steps // per_iteration
+        return None
+    planned = config.get("iterations")
+    return planned if isinstance(planned, int) else None
 
 
 def check_name(name: str) -> None:
@@ -181,7 +216,18 @@ def check_record(folder: Path) -> dict:
     except (OSError, IntegrityError) as error:
         raise RecordError(f"{folder / RECORD_FILE}: unreadable ({error})") from None
     if not isinstance(record, dict) or record.get("format") != FORMAT:
-        raise RecordError(f"{folder / RECORD_FILE}: not a run record of format {FORMAT}")
+        found = record.get("format") if isinstance(record, dict) else None
+        remedy = (
+            f": bring it up to date with python -m experiments.record --upgrade {folder}"
+            if found == FORMAT - 1
+            else ""
+        )
+        raise RecordError(f"{folder / RECORD_FILE}: not a run record of format {FORMAT}{remedy}")
+    if record.get("digest") != json_digest({k: v for k, v in record.items() if k != "digest"}):
+        raise RecordError(
+            f"{folder / RECORD_FILE} was changed since it was written (its digest differs): "
+            "record the run again"
+        )
     metrics = folder / METRICS_FILE
     expected = record.get("metrics", {})
     if not metrics.is_file():
@@ -198,17 +244,152 @@ def check_record(folder: Path) -> dict:
             f"{record.get('late_share')} of training, this version's over {LATE_SHARE}: "
             "record the run again"
         )
+    _check_config_facts(folder, record)
     for name in STATISTICS:
         try:
             scores = scores_of_metrics(metrics, run_settings(record["config"]), progress, name)
         except RunReadError as error:
             raise RecordError(str(error)) from None
-        if _per_seed(scores) != record.get(_key(name)):
+        if _per_seed(scores) != record.get(statistic_key(name)):
             raise RecordError(
-                f"{folder / RECORD_FILE}: its {_key(name)} differs from that of {METRICS_FILE}"
+                f"{folder / RECORD_FILE}: its {statistic_key(name)} differs from that of "
+                f"{METRICS_FILE}"
             )
     _check_confidence_errors(folder, record)
     return record
+
+
+def _check_config_facts(folder: Path, record: dict) -> None:
+    """RecordError unless the facts of the record's config are those its metrics file
+    gives: every normalised return is its evaluation through the config's normaliser
+    (``runs.read_scored_rows``), the methods, the seeds of each, the label ratios and
+    confidence noises, the iterations done (and the environment steps each took, for a
+    sweep) and planned, whether it is complete, and the task, where the normaliser is the
+    paper's Table 3 row of an authors' file (that row's task is the config's)."""
+    from pngail_jax.demos.tables import PAPER_NORMALIZERS
+    from pngail_jax.report import metrics_rows
+
+    where = folder / RECORD_FILE
+    config = record.get("config")
+    if not isinstance(config, dict):
+        raise RecordError(f"{where}: no config")
+    settings = run_settings(config)
+    metrics = folder / METRICS_FILE
+    try:
+        normalizer = run_normalizer(config)
+        read_scored_rows(metrics, normalizer)
+        cells: dict[tuple[str, str], set[int]] = {}
+        ratios, noises, reached, steps = set(), set(), 0, {}
+        for row in metrics_rows(metrics):
+            cells.setdefault((row["method"], row["setting"]), set()).add(int(row["seed"]))
+            ratios.add(float(row["label_ratio"]))
+            noises.add(float(row["noise"]))
+            iteration = int(row["iteration"])
+            reached = max(reached, iteration)
+            steps.setdefault(iteration, set()).add(int(float(row["env_steps"])))
+    except RunReadError as error:
+        raise RecordError(str(error)) from None
+    except (KeyError, ValueError, TypeError, EOFError, OSError) as error:
+        raise RecordError(f"{metrics} is damaged ({error})") from None
+
+    def refuse(fact: str, stated, found) -> None:
+        raise RecordError(
+            f"{where}: its config says {fact} {stated!r}, its {METRICS_FILE} {found!r}: the "
+            "record or its metrics were edited"
+        )
+
+    methods = sorted({method for method, _ in cells})
+    if sorted(settings.get("methods") or []) != methods:
+        refuse("methods", settings.get("methods"), methods)
+    seeds = settings.get("seeds")
+    for (method, _), found in cells.items():
+        if found != set(range(seeds if isinstance(seeds, int) else -1)):
+            refuse(f"{method} has seeds", seeds, len(found))
+    offline = config.get("program") == "offline"
+    stated_ratios = [settings.get("label_ratio")] if offline else settings.get("label_ratios")
+    stated_noises = [settings.get("noise_std")] if offline else settings.get("noise_stds")
+    if sorted(map(float, stated_ratios or [])) != sorted(ratios):
+        refuse("label ratios", stated_ratios, sorted(ratios))
+    if sorted(map(float, stated_noises or [])) != sorted(noises):
+        refuse("confidence noises", stated_noises, sorted(noises))
+    if record.get("iterations_done") != reached:
+        refuse("iterations done", record.get("iterations_done"), reached)
+    planned = planned_iterations(config)
+    if record.get("iterations") != planned or record.get("complete") is not (reached == planned):
+        raise RecordError(
+            f"{where}: it says {record.get('iterations_done')!r} of {record.get('iterations')!r} "
+            f"iterations (complete: {record.get('complete')!r}), its config plans {planned!r} and "
+            f"its {METRICS_FILE} ends at {reached}: the record or its metrics were edited"
+        )
+    rollout = settings.get("settings") or {}
+    if not offline and isinstance(rollout.get("num_envs"), int):
+        per_iteration = rollout["num_envs"] * rollout.get("unroll_length", 0)
+        wrong = [i for i, found in steps.items() if found != {i * per_iteration}]
+        if wrong:
+            refuse(
+                f"{per_iteration} environment steps an iteration; at iteration {wrong[0]}",
+                wrong[0] * per_iteration,
+                sorted(steps[wrong[0]]),
+            )
+    source = (
+        config.get("normalizer_source")
+        if offline
+        else ((config.get("resolved") or {}).get("normalizer_source"))
+    )
+    demos = Path(str(settings.get("demos") or "")).name.removesuffix("_mixture.npy")
+    if source == "paper Table 3" and demos in PAPER_NORMALIZERS:
+        task = str(settings.get("env"))
+        if list(PAPER_NORMALIZERS[demos]) != normalizer:
+            raise RecordError(
+                f"{where}: its normaliser {normalizer} is not the paper's Table 3 row of "
+                f"{demos}, {list(PAPER_NORMALIZERS[demos])}, which it names as its source: the "
+                "record was edited"
+            )
+        if task.split("-v")[0] != demos.split("-v")[0]:
+            raise RecordError(
+                f"{where}: its config says the task is {task}, its demonstrations and "
+                f"normaliser (which its {METRICS_FILE} scores agree with) are {demos}'s: the "
+                "record was edited"
+            )
+
+
+def upgrade_record(folder: Path) -> dict:
+    """Brings a record of the format before this one (2) to ``FORMAT``: an offline record's
+    iterations done and planned (which format 2 left empty) from its config and metrics,
+    ``unsealed`` None (format 2 did not keep whether the run's seal was checked), and its
+    digest; then checks it whole, and puts the old file back when the check fails. Returns
+    the checked record."""
+    from pngail_jax.report import iterations_per_cell
+
+    folder = Path(folder)
+    path = folder / RECORD_FILE
+    try:
+        original = path.read_bytes()
+        record = read_json(path, "run record")
+    except FileNotFoundError:
+        raise RecordError(f"{folder} holds no run record ({RECORD_FILE} is missing)") from None
+    except (OSError, IntegrityError) as error:
+        raise RecordError(f"{path}: unreadable ({error})") from None
+    if not isinstance(record, dict) or record.get("format") != FORMAT - 1:
+        raise RecordError(f"{path}: not a run record of format {FORMAT - 1}, nothing to upgrade")
+    command = record.get("command")
+    if isinstance(command, list) and command[:3] == ["python", "-m", "offline"]:
+        record["command"] = ["python", "-m", "experiments.offline", *command[3:]]  # format 2's slip
+    if record.get("config", {}).get("program") == "offline" and record.get("iterations") is None:
+        try:
+            reached = max(iterations_per_cell(folder / METRICS_FILE).values())
+        except (ValueError, KeyError, TypeError, EOFError, OSError) as error:
+            raise RecordError(f"{folder / METRICS_FILE} is damaged ({error})") from None
+        record["iterations_done"] = reached
+        record["iterations"] = planned_iterations(record["config"])
+    record = sealed_record({**record, "format": FORMAT, "unsealed": record.get("unsealed")})
+    write_json(path, record)
+    try:
+        return check_record(folder)
+    except RecordError:
+        with atomic_path(path) as temporary:
+            temporary.write_bytes(original)
+        raise
 
 
 def _check_confidence_errors(folder: Path, record: dict) -> None:
@@ -217,7 +398,7 @@ def _check_confidence_errors(folder: Path, record: dict) -> None:
     errors = record.get("confidence_mae")
     if errors is None:
         return
-    seeds = record[_key("final")]
+    seeds = record[statistic_key("final")]
     if not isinstance(errors, dict) or any(
         label not in seeds
         or not isinstance(values, list)
@@ -230,47 +411,105 @@ def _check_confidence_errors(folder: Path, record: dict) -> None:
         )
 
 
-def _key(statistic: str) -> str:
+def statistic_key(statistic: str) -> str:
     """record.json's key of a statistic's per-seed scores."""
     return f"{statistic}_normalized_return"
 
 
 def describe(record: dict) -> str:
     """One paragraph for the terminal: what the record holds."""
-    finals = record[_key("final")]
+    finals = record[statistic_key("final")]
     cells = sum(len(values) for values in finals.values())
     how_far = (
         "complete"
         if record["complete"]
         else f"{record['iterations_done']:,} of {record['iterations']:,} iterations"
     )
+    unsealed = (
+        "; made with --allow-unsealed (its run's config.json unchecked)"
+        if record.get("unsealed")
+        else ""
+    )
     return (
         f"{record['name']}: {run_settings(record['config']).get('env')}, {len(finals)} methods, "
         f"{cells} runs, {how_far}; commit {str(record['commit'])[:10]}, "
         f"{record['machine'].get('cpu_model') or 'CPU not recorded'}; "
-        f"metrics {record['metrics']['bytes']:,} bytes"
+        f"metrics {record['metrics']['bytes']:,} bytes{unsealed}"
     )
 
 
-# Keys of a run config that do not change its numbers (or say where its files were).
+# Keys of a run config that do not change its numbers (or say where its files were, how
+# long the run took, or on what machine).
 _NOT_NUMBERS = ("demos", "conf", "resolved", "log", "chunk_iterations", "cpu_devices",
-                "preset_name", "provenance")  # fmt: skip
+                "preset_name", "provenance", "resumed_provenance", "complete", "wall_seconds",
+                "train_seconds", "demonstrations", "input_files")  # fmt: skip
 
 
 def config_differences(config: dict, record: dict) -> list[str]:
-    """The config fields (``config.json``'s top level) in which a run differs from the
-    record's run, leaving out those that do not change the numbers."""
+    """The config fields in which a run (its ``config.json``) differs from the record's run,
+    leaving out those that do not change the numbers: the top-level fields of a sweep's, the
+    settings (``config``) of an offline run's with its normaliser and trainer fields."""
     from pngail_jax.run_config import RunConfig
 
-    reference = record["config"]
-    keys = sorted((set(config) | set(reference)) - set(_NOT_NUMBERS))
+    def fields(document: dict) -> dict:
+        if document.get("program") != "offline":
+            return document
+        return {
+            **{f"{part}.{key}": value for part in ("config", "trainer")
+               for key, value in (document.get(part) or {}).items()},
+            "normalizer": document.get("normalizer"),
+        }  # fmt: skip
+
+    mine, reference = fields(config), fields(record["config"])
+    not_numbers = set(_NOT_NUMBERS) | {f"config.{key}" for key in _NOT_NUMBERS}
+    keys = sorted((set(mine) | set(reference)) - not_numbers)
     # A field one side lacks (a record from before the field existed) has its default.
-    defaults = RunConfig().to_dict()
+    defaults = {} if config.get("program") == "offline" else RunConfig().to_dict()
 
     def value(document: dict, key: str):
         return document[key] if key in document else defaults.get(key)
 
-    return [key for key in keys if value(config, key) != value(reference, key)]
+    return [key for key in keys if value(mine, key) != value(reference, key)]
+
+
+def check_comparable(run_dirs, record: dict) -> list[str]:
+    """RecordError unless each run in ``run_dirs`` can be set against ``record``: a run of
+    the record's program (a sweep's record against sweeps, an offline one against offline
+    runs), of the record's task, at the iterations the record reached (a late average or a
+    final evaluation of a shorter or longer training is another figure). Returns the lines
+    that say what is unfinished on either side (compared all the same, like with like)."""
+    from pngail_jax.outputs import output_owner
+
+    program = str(record.get("program", "")).removeprefix("experiments.")
+    task = run_settings(record["config"]).get("env")
+    done, planned = record.get("iterations_done"), record.get("iterations")
+    notes = []
+    if not record.get("complete"):
+        notes.append(f"the record {record['name']} is unfinished: {done:,} of {planned:,} "
+                     "iterations")  # fmt: skip
+    for run_dir in run_dirs:
+        run_dir = Path(run_dir)
+        owner = output_owner(run_dir)
+        if owner != program:
+            raise RecordError(
+                f"{run_dir} is a run of experiments.{owner}, the record {record['name']} of "
+                f"experiments.{program}: compare a run of the record's program"
+            )
+        config = read_json(run_dir / "config.json", "run config")
+        if run_settings(config).get("env") != task:
+            continue  # another task: expected_rows reads only the record's
+        progress = run_progress_numbers(run_dir, config)
+        if progress is None:
+            raise RecordError(f"{run_dir}: its progress is unknown (no summary.json to say it)")
+        if progress[0] != done:
+            raise RecordError(
+                f"{run_dir} reached {progress[0]:,} of {progress[1]:,} iterations, the record "
+                f"{record['name']} {done:,} of {planned:,}: compare like with like (finish the "
+                "run with --resume, or a record of the same length)"
+            )
+        if progress[0] != progress[1]:
+            notes.append(f"{run_dir} is unfinished: {progress[0]:,} of {progress[1]:,} iterations")
+    return notes
 
 
 def expected_rows(scores, record: dict) -> list[dict]:
@@ -286,7 +525,7 @@ def expected_rows(scores, record: dict) -> list[dict]:
             f"the record {record['name']} is of {task}; your runs are of {', '.join(scores.tasks)}"
         )
     rows = []
-    for method, seeds in record[_key(scores.statistic)].items():
+    for method, seeds in record[statistic_key(scores.statistic)].items():
         reference = stats.seed_summary([math.nan if v is None else v for v in seeds])
         row = {
             "method": method,
@@ -337,10 +576,15 @@ def rerun_spread(seeds, num_seeds: int, num_draws: int = 2000) -> float:
 
 
 def expected_markdown(
-    rows: list[dict], record: dict, differences: list[str], statistic: str
+    rows: list[dict],
+    record: dict,
+    differences: list[str],
+    statistic: str,
+    notes: list[str] = (),
 ) -> str:
     """The ``--expected`` table: your IQM against the record's interval, per method, both
-    under ``statistic`` (a key of ``compare.STATISTICS``)."""
+    under ``statistic`` (a key of ``compare.STATISTICS``); ``notes`` (``check_comparable``'s:
+    what is unfinished) above it."""
 
     lines = [
         f"## Against the record {record['name']} "
@@ -352,6 +596,7 @@ def expected_markdown(
         "reproducible).",
         "",
     ]
+    lines += [f"Note: {note}." for note in notes] + ([""] if notes else [])
     if differences:
         lines += [f"Your config differs from the record's in: {', '.join(differences)}.", ""]
     lines += ["| method | yours (IQM, seeds) | record: IQM [95% CI] (seeds) | verdict |",
@@ -378,264 +623,6 @@ def expected_markdown(
     return "\n".join(lines) + "\n"
 
 
-def _seed_values(seeds: list[float | None]) -> np.ndarray:
+def seed_values(seeds: list[float | None]) -> np.ndarray:
     """A record's per-seed list as float[seeds], NaN for a seed without a score."""
     return np.asarray([math.nan if v is None else v for v in seeds], float)
-
-
-def record_table(record: dict, baseline: str | None = None) -> str:
-    """A results table made from a checked record (``check_record``'s dictionary): per
-    method, the headline (the normalised return over the last ``late_share`` of training)
-    and the final evaluation, each as mean ± s.e. and IQM [95% bootstrap CI] over seeds, and
-    under both the probability of improvement (an interval holding 0.5 says so): PN-GAIL's
-    over each method when the record has PN-GAIL, or with ``baseline`` each method's over it.
-    The docs' tables between ``<!-- record-table NAME [baseline=METHOD] -->`` markers are
-    this text, and a test keeps them so (``experiments.record --docs`` rewrites them)."""
-    from pngail_jax import stats
-    from pngail_jax.methods import display_name
-
-    late, final = record[_key("late_average")], record[_key("final")]
-    share = f"last {record['late_share']:.0%} of training"
-    anchor = baseline or "pngail"
-    if baseline is not None and baseline not in late:
-        raise RecordError(f"record {record['name']} has no method {baseline!r}: {list(late)}")
-
-    def summary(seeds) -> tuple[str, str]:
-        row = stats.seed_summary(_seed_values(seeds))
-        low, high = row["ci95"]
-        return f"{row['mean']:.2f} ± {row['se']:.2f}", f"{row['iqm']:.2f} [{low:.2f}, {high:.2f}]"
-
-    def improvement(statistic, method) -> str:
-        ours, theirs = _seed_values(statistic[anchor]), _seed_values(statistic[method])
-        if baseline is not None:
-            ours, theirs = theirs, ours
-        low, high = stats.probability_of_improvement_ci(ours, theirs)
-        holds = ", holds 0.5" if low <= 0.5 <= high else ""
-        return (
-            f"{stats.probability_of_improvement(ours, theirs):.2f} [{low:.2f}, {high:.2f}]{holds}"
-        )
-
-    compared = anchor in late
-    pair = f"method > {display_name(baseline)}" if baseline else f"{display_name(anchor)} > method"
-    lines = [
-        f"| method | seeds | {share}: mean ± s.e. | {share}: IQM [95% CI] | final: mean ± s.e. "
-        "| final: IQM [95% CI] |" + (f" P({pair}), {share} | P, final |" if compared else ""),
-        "|---|---:|---:|---:|---:|---:|" + ("---:|---:|" if compared else ""),
-    ]
-    for method in late:
-        seeds = int(np.isfinite(_seed_values(late[method])).sum())
-        cells = [display_name(method), str(seeds), *summary(late[method]), *summary(final[method])]
-        if compared:
-            cells += (
-                ["-", "-"]
-                if method == anchor
-                else [improvement(late, method), improvement(final, method)]
-            )
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
-
-
-def glance_table(records: list[dict], statistic: str = "late_average") -> str:
-    """Several checked records in one table: a row per task (the records of one task
-    joined, each method from one record only), a column per method in the order met, each
-    cell the mean ± s.e. over seeds of ``statistic``'s normalised return ("-": not run).
-    The docs' tables between ``<!-- record-glance NAME NAME ... -->`` markers are this text
-    (``experiments.record --docs``)."""
-    from pngail_jax import stats
-    from pngail_jax.methods import display_name
-
-    rows: dict[str, dict[str, np.ndarray]] = {}
-    for record in records:
-        env = str(run_settings(record["config"]).get("env"))
-        task = rows.setdefault(env, {})
-        for method, seeds in record[_key(statistic)].items():
-            if method in task:
-                raise RecordError(
-                    f"record {record['name']}: {method!r} on {env} is in another record of "
-                    "the table too"
-                )
-            task[method] = _seed_values(seeds)
-    methods = list(dict.fromkeys(method for task in rows.values() for method in task))
-    lines = [
-        "| task (seeds) | " + " | ".join(display_name(method) for method in methods) + " |",
-        "|---|" + "---:|" * len(methods),
-    ]
-    for env, task in rows.items():
-        counts = sorted({int(np.isfinite(seeds).sum()) for seeds in task.values()})
-        cells = []
-        for method in methods:
-            row = stats.seed_summary(task[method]) if method in task else None
-            cells.append("-" if row is None else f"{row['mean']:.2f} ± {row['se']:.2f}")
-        seeds = "/".join(map(str, counts))
-        lines.append(f"| {env} ({seeds}) | " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
-
-
-def _mean_se(values: np.ndarray) -> str:
-    """ "mean ± s.e." of ``values`` (s.e. with ddof 1; "-" for none)."""
-    if values.size == 0:
-        return "-"
-    se = values.std(ddof=1) / math.sqrt(values.size) if values.size > 1 else math.nan
-    return f"{values.mean():.2f} ± {se:.2f}"
-
-
-def _block_label(block: int, block_steps: int, last_step: int) -> str:
-    """A block's span in M steps, its end at most the run's last step."""
-    low, high = block * block_steps, min((block + 1) * block_steps, last_step)
-    return f"{low / 1e6:g}-{high / 1e6:g}"
-
-
-def _blocks_of(record: dict, steps, block_steps: int) -> np.ndarray:
-    """The block of each environment step count (step s in block ceil(s / block_steps) - 1);
-    RecordError for a block of no steps or a run without environment steps (offline)."""
-    steps = np.asarray(steps)
-    if block_steps < 1:
-        raise RecordError(f"record {record['name']}: a block of {block_steps} steps")
-    if steps.size == 0 or steps.max() < 1:
-        raise RecordError(f"record {record['name']}: no environment steps to cut into blocks")
-    return (steps - 1) // block_steps
-
-
-def block_table(record: dict, folder: Path, block_steps: int) -> str:
-    """How a recorded run learned, per block of ``block_steps`` environment steps per run:
-    per method, each seed's mean normalised evaluation in the block (an evaluation at step s
-    is in block ceil(s / block_steps)), then mean ± s.e. over seeds; the last column the final
-    evaluation. A seed without a final evaluation (diverged) is left out of every column, as
-    from the record's headline. ``folder`` holds the checked ``record``. The docs' tables
-    between ``<!-- record-blocks NAME block=STEPS -->`` markers are this text."""
-    from pngail_jax.methods import display_name
-    from pngail_jax.report import read_evaluations
-
-    groups = read_evaluations(
-        Path(folder) / METRICS_FILE, "normalized_return", evaluated_by="eval_return",
-        group_by=("method", "setting"),
-    )  # fmt: skip
-    if not groups:
-        raise RecordError(f"record {record['name']}: no evaluated iteration")
-    settings = {setting for _, setting in groups}
-    last = max(int(steps[-1]) for steps, _ in groups.values())
-    order = sorted(
-        {int(b) for steps, _ in groups.values() for b in _blocks_of(record, steps, block_steps)}
-    )
-    lines = [
-        "| M steps | "
-        + " | ".join(_block_label(b, block_steps, last) for b in order)
-        + f" | final ({last / 1e6:g} M) |",
-        "|---|" + "---:|" * (len(order) + 1),
-    ]
-    for (method, setting), (steps, values) in groups.items():
-        name = display_name(method) + ("" if len(settings) == 1 else f" [{setting}]")
-        values = values[np.isfinite(values[:, -1])] if int(steps[-1]) == last else values[:0]
-        blocks = _blocks_of(record, steps, block_steps)
-        with np.errstate(all="ignore"):
-            cells = [_mean_se(np.nanmean(values[:, blocks == b], axis=1)) if (blocks == b).any()
-                     else "-" for b in order]  # fmt: skip
-        lines.append(f"| {name} | " + " | ".join(cells) + f" | {_mean_se(values[:, -1])} |")
-    return "\n".join(lines) + "\n"
-
-
-def _check_methods(record: dict, known, methods: list[str] | None) -> None:
-    """RecordError naming the first of ``methods`` that is not among ``known``."""
-    known = list(dict.fromkeys(known))
-    unknown = sorted(set(methods or ()) - set(known))
-    if unknown:
-        raise RecordError(f"record {record['name']} has no method {unknown[0]!r}: {known}")
-
-
-# A recorded run's diagnostics columns as ``diagnostics_table`` names them.
-DIAGNOSTICS = {
-    "disc_acc_agent": ("D accuracy on agent rows", "{:.3f}"),
-    "disc_acc_demo": ("D accuracy on demonstration rows", "{:.2f}"),
-    "mean_reward": ("mean reward", "{:.3f}"),
-    "train_return": ("training return", "{:,.0f}"),
-    "beyond_bounds": ("action entries beyond the bounds", "{:.2f}"),
-}
-
-
-def diagnostics_table(
-    record: dict, folder: Path, block_steps: int, methods: list[str] | None = None
-) -> str:
-    """The discriminator and policy diagnostics of a recorded run per block of
-    ``block_steps`` environment steps per run: a row per method (``methods``, default all;
-    per setting where the run has several) and column of ``DIAGNOSTICS``, each cell the mean
-    over every (iteration, seed) row of the block, all seeds pooled. The docs' tables between
-    ``<!-- record-diagnostics NAME block=STEPS [methods=A,B] -->`` markers are this text."""
-    from pngail_jax.methods import display_name
-    from pngail_jax.report import metrics_rows
-
-    rows = list(metrics_rows(Path(folder) / METRICS_FILE))
-    _check_methods(record, [row["method"] for row in rows], methods)
-    rows = [row for row in rows if methods is None or row["method"] in methods]
-    steps = [int(row["env_steps"]) for row in rows]
-    blocks = _blocks_of(record, steps, block_steps)
-    settings = {row.get("setting") for row in rows}
-    sums: dict[tuple[str, str, str], dict[int, list[float]]] = {}
-    for row, block in zip(rows, blocks, strict=True):
-        for column in DIAGNOSTICS:
-            if row.get(column) not in (None, "", "nan"):
-                key = (row["method"], row.get("setting"), column)
-                sums.setdefault(key, {}).setdefault(int(block), []).append(float(row[column]))
-    order = sorted({int(b) for b in blocks})
-    lines = [
-        "| M steps | " + " | ".join(_block_label(b, block_steps, max(steps)) for b in order) + " |",
-        "|---|" + "---:|" * len(order),
-    ]
-    for (method, setting, column), values in sums.items():
-        title, form = DIAGNOSTICS[column]
-        name = display_name(method) + ("" if len(settings) == 1 else f" [{setting}]")
-        cells = [form.format(np.mean(values[b])) if b in values else "-" for b in order]
-        lines.append(f"| {name}: {title} | " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
-
-
-def _turn(steps: np.ndarray, values: np.ndarray, level: float) -> str:
-    """The M steps of the first of three evaluations in a row above ``level``, or "never"."""
-    above = values > level
-    for first in range(len(values) - 2):
-        if above[first : first + 3].all():
-            return f"{steps[first] / 1e6:g}"
-    return "never"
-
-
-def seed_table(record: dict, folder: Path, turn: float, methods: list[str] | None = None) -> str:
-    """Each seed of a recorded run, a row per (method, seed) (``methods``, default all):
-    its final and late-average normalised return (the record's), its lowest evaluation and
-    where, where it turned (the first of three evaluations in a row above ``turn``), and its
-    confidence classifier's MAE on D_u (the record's ``confidence_mae``, for methods whose
-    loss reads confidences). ``folder`` holds the checked ``record``. The docs' tables between
-    ``<!-- record-seeds NAME turn=LEVEL [methods=A,B] -->`` markers are this text."""
-    from pngail_jax.methods import reads_confidences
-    from pngail_jax.report import LATE_LABEL, display_label, read_evaluations
-
-    groups = read_evaluations(
-        Path(folder) / METRICS_FILE, "normalized_return", evaluated_by="eval_return",
-        group_by=("method", "setting"),
-    )  # fmt: skip
-    _check_methods(record, [method for method, _ in groups], methods)
-    settings = {setting for _, setting in groups}
-    lines = [
-        f"| method | seed | final | {LATE_LABEL} | lowest evaluation (at M steps) | "
-        f"turned above {turn:g} (M steps) | confidence MAE on D_u |",
-        "|---|---:|---:|---:|---:|---:|---:|",
-    ]
-    for (method, setting), (steps, values) in groups.items():
-        if methods is not None and method not in methods:
-            continue
-        label = method if len(settings) == 1 else f"{method} [{setting}]"
-        errors = (record.get("confidence_mae") or {}).get(label)
-        for seed, row in enumerate(values):
-            final, late = (record[_key(name)][label][seed] for name in ("final", "late_average"))
-            low = int(np.nanargmin(row)) if np.isfinite(row).any() else None
-            lowest = "-" if low is None else f"{row[low]:.2f} ({steps[low] / 1e6:g})"
-            if not reads_confidences(method):
-                error = "reads none"
-            elif errors is None or errors[seed] is None:
-                error = "not recorded"
-            else:
-                error = f"{errors[seed]:.3f}"
-            cells = [display_label(label), str(seed),
-                     "diverged" if final is None else f"{final:.2f}",
-                     "diverged" if late is None else f"{late:.2f}", lowest,
-                     _turn(steps, row, turn), error]  # fmt: skip
-            lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"

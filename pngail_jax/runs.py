@@ -132,8 +132,18 @@ def _check_whole(path: Path, reached: dict, progress: tuple[int, int] | None, co
         )
 
 
-def run_progress_numbers(run_dir: Path) -> tuple[int, int] | None:
-    """(iterations done, planned) from a run's summary.json, None where it does not say."""
+def run_progress_numbers(run_dir: Path, document: dict | None = None) -> tuple[int, int] | None:
+    """(iterations done, planned) from a run's summary.json (a sweep's), or for an offline
+    run its config.json (``document`` where already read: its iterations are its gradient
+    steps over the steps per iteration, done when it says it is complete); None where
+    neither says."""
+    if document is None and (Path(run_dir) / "config.json").is_file():
+        try:
+            document = read_json(Path(run_dir) / "config.json", "run config")
+        except (OSError, IntegrityError):
+            document = None
+    if isinstance(document, dict) and document.get("program") == "offline":
+        return _offline_progress(document)
     try:
         summary = read_json(Path(run_dir) / "summary.json", "run summary")
     except (OSError, IntegrityError):
@@ -145,6 +155,17 @@ def run_progress_numbers(run_dir: Path) -> tuple[int, int] | None:
     if isinstance(done, int) and isinstance(planned, int):
         return done, planned
     return None
+
+
+def _offline_progress(document: dict) -> tuple[int, int] | None:
+    """An offline run's (iterations done, planned), known once its config.json says it is
+    complete (its summary keeps no progress; a run cut short has no summary to compare)."""
+    config = document.get("config") or {}
+    steps, per_iteration = config.get("gradient_steps"), config.get("steps_per_iteration")
+    if not (isinstance(steps, int) and isinstance(per_iteration, int) and per_iteration > 0):
+        return None
+    planned = steps // per_iteration
+    return (planned, planned) if document.get("complete") is True else None
 
 
 def run_progress(run_dir: Path) -> str | None:
@@ -291,29 +312,190 @@ def sealed_document(
     return document, unsealed if changes is None else []
 
 
+def run_normalizer(document: dict) -> list[float] | None:
+    """The (random, optimal) returns a run's config.json (or a record's config) sealed: the
+    sweep's ``resolved.normalizer``, the offline program's ``normalizer``; None when the run
+    knew none (its normalised column is then empty)."""
+    value = (
+        document.get("normalizer")
+        if document.get("program") == "offline"
+        else (document.get("resolved") or {}).get("normalizer")
+    )
+    if value is None:
+        return None
+    if (
+        not isinstance(value, list)
+        or len(value) != 2
+        or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+        or not value[1] != value[0]
+    ):
+        raise RunReadError(f"its normaliser {value!r} is not two different returns")
+    return [float(value[0]), float(value[1])]
+
+
+# metrics.csv writes 6 significant digits: a written value is within 5e-6 of the value's
+# magnitude of what was computed. Checks of written numbers allow twice that per value.
+WRITTEN_RELATIVE = 1e-5
+
+
+def _written_close(stated: float, recomputed: float, scale: float) -> bool:
+    """Whether ``stated`` and ``recomputed`` (from values of magnitude up to ``scale``, each
+    written to 6 significant digits) agree within that rounding."""
+    return abs(stated - recomputed) <= WRITTEN_RELATIVE * max(abs(scale), 1e-300) + 1e-9
+
+
+def read_scored_rows(path: Path, normalizer: list[float] | None) -> dict:
+    """Every evaluated row of a metrics file (a run's ``metrics.csv`` or a record's
+    ``metrics.csv.gz``), checked: its ``normalized_return`` is its ``eval_return`` through
+    ``normalizer`` (empty when there is none, and in a row without an evaluation), to the
+    file's rounding. Returns, per (method, setting) and seed, {iteration: eval_return}.
+    RunReadError naming the file, method, seed and iteration of the first row that
+    disagrees (a score edited, or the normaliser)."""
+    from pngail_jax.report import metrics_rows
+
+    rows: dict[tuple[str, str], dict[int, dict[int, float]]] = {}
+    try:
+        for row in metrics_rows(path):
+            evaluated, score = row["eval_return"], row["normalized_return"]
+            where = f"{path}: {row['method']} seed {row['seed']} iteration {row['iteration']}"
+            if evaluated in ("", "nan"):
+                if score not in ("", "nan"):
+                    raise RunReadError(
+                        f"{where} has a normalised return ({score}) but no evaluation: the "
+                        "file was edited"
+                    )
+                continue
+            value = float(evaluated)
+            if normalizer is None:
+                if score not in ("", "nan"):
+                    raise RunReadError(
+                        f"{where}: normalised return {score} where the run knew no random "
+                        "and optimal returns: the file was edited"
+                    )
+            elif math.isfinite(value):
+                random_return, optimal_return = normalizer
+                span = optimal_return - random_return
+                expected = (value - random_return) / span
+                written = float(score) if score not in ("", "nan") else math.nan
+                if not (
+                    math.isfinite(written)
+                    and _written_close(written, expected, abs(value / span) + abs(expected))
+                ):
+                    raise RunReadError(
+                        f"{where}: normalised return {score or 'empty'} is not its evaluation "
+                        f"{evaluated} through the run's normaliser ({expected:.6g}): one of "
+                        "them was edited"
+                    )
+            group = rows.setdefault((row["method"], row["setting"]), {})
+            group.setdefault(int(row["seed"]), {})[int(row["iteration"])] = value
+    except RunReadError:
+        raise
+    except UNREADABLE as error:
+        raise damaged(path, error) from None
+    return rows
+
+
+# summary.json's per-seed figures, recomputed from metrics.csv's evaluations.
+_SEED_FIGURES = ("final_return", "late_average_return", "average_return")
+
+
+def _seed_figures(evaluations: dict[int, float]) -> dict[str, tuple[float, list[int], float]]:
+    """A seed's figures from its evaluations {iteration: return}: per figure of
+    ``_SEED_FIGURES``, (value, the iterations it reads, the largest |return| among them),
+    as ``report.summarize`` computes them (NaN evaluations left out of the averages)."""
+    from pngail_jax.report import late_evaluations
+
+    iterations = sorted(evaluations)
+    late = iterations[len(iterations) - late_evaluations(len(iterations)) :]
+    figures = {}
+    for name, read in (("final_return", iterations[-1:]), ("late_average_return", late),
+                       ("average_return", iterations)):  # fmt: skip
+        values = np.array([evaluations[i] for i in read], np.float64)
+        finite = values[np.isfinite(values)]
+        mean = float(finite.mean()) if finite.size else math.nan
+        figures[name] = (mean, read, float(np.abs(finite).max()) if finite.size else 0.0)
+    return figures
+
+
+def _check_summary_figures(
+    rows: dict, summary: dict, normalizer: list[float] | None, who: str
+) -> None:
+    """UntrustedRun unless each seed's final, late-average and training-average returns
+    (raw and normalised) in ``summary.json`` are those its evaluations in metrics.csv give
+    (``rows``, ``read_scored_rows``'), to the file's rounding; the message names the method,
+    the seed, the figure and the iterations it reads. A seed the summary leaves null
+    (diverged) is not compared."""
+    settings = {setting for _, setting in rows}
+    for (method, setting), seeds in rows.items():
+        label = method if len(settings) == 1 else f"{method} [{setting}]"
+        row = summary.get("methods", {}).get(label)
+        if row is None:
+            raise UntrustedRun(f"{who}: summary.json has no {label}, which metrics.csv has")
+        for stated_seed in row.get("per_seed", []):
+            seed = stated_seed.get("seed")
+            if seed not in seeds:
+                raise UntrustedRun(
+                    f"{who}: summary.json has {label} seed {seed}, which metrics.csv has not"
+                )
+            for name, (value, read, scale) in _seed_figures(seeds[seed]).items():
+                span = (
+                    f"iteration {read[0]}"
+                    if len(read) == 1
+                    else (f"iterations {read[0]}-{read[-1]}")
+                )
+                checks = [(name, value, scale)]
+                if normalizer is not None:
+                    width = normalizer[1] - normalizer[0]
+                    checks.append((
+                        name.replace("_return", "_normalized_return"),
+                        (value - normalizer[0]) / width,
+                        scale / abs(width),
+                    ))  # fmt: skip
+                for field, recomputed, magnitude in checks:
+                    stated = stated_seed.get(field)
+                    if stated is None or not math.isfinite(recomputed):
+                        continue
+                    number = isinstance(stated, (int, float)) and not isinstance(stated, bool)
+                    if number and _written_close(stated, recomputed, magnitude):
+                        continue
+                    shown = f"{stated:.6g}" if number else repr(stated)
+                    if field == "final_return":
+                        raise UntrustedRun(
+                            f"{who}: summary.json says {label} seed {seed} ended at {shown}, "
+                            f"metrics.csv at {recomputed:.6g} ({span}): one of them was edited"
+                        )
+                    raise UntrustedRun(
+                        f"{who}: summary.json gives {label} seed {seed} {field} {shown}, "
+                        f"metrics.csv's evaluations ({span}) {recomputed:.6g}: one of them was "
+                        "edited"
+                    )
+
+
 def _check_metrics_agree_with_summary(directory: Path, document: dict, who: str) -> None:
     """UntrustedRun unless metrics.csv is whole (every cell of the config, each to the
-    iteration summary.json says), and each seed's final return in summary.json is its
-    evaluation at that iteration in metrics.csv (6 significant digits there; a diverged seed,
-    null in the summary, is not compared). A summary behind metrics.csv (a stop between the
-    two writes of a chunk) is not compared: the next chunk writes both again."""
-    from pngail_jax.report import iterations_per_cell, read_evaluations
+    iteration summary.json says), its every normalised return is its evaluation through the
+    sealed normaliser (``read_scored_rows``), summary.json states the same normaliser, and
+    each seed's final, late-average and training-average figures in summary.json are those
+    metrics.csv gives (``_check_summary_figures``; 6 significant digits there; a diverged
+    seed, null in the summary, is not compared). A summary behind metrics.csv (a stop
+    between the two writes of a chunk) is not compared: the next chunk writes both again."""
+    from pngail_jax.report import iterations_per_cell
 
     metrics, summary_path = directory / "metrics.csv", directory / "summary.json"
     if not metrics.exists():
         return  # no chunk finished yet, or outputs a resume writes again: nothing to agree
-    progress = run_progress_numbers(directory)
+    progress = run_progress_numbers(directory, document)
     try:
         summary = read_json(summary_path, "run summary") if summary_path.exists() else None
-    except (OSError, IntegrityError) as error:
+        normalizer = run_normalizer(document)
+    except (OSError, IntegrityError, RunReadError) as error:
         raise UntrustedRun(f"{who}: {error}") from None
     try:
         reached = iterations_per_cell(metrics)
-        finals = read_evaluations(metrics, "eval_return", group_by=("method", "setting"))
+        _check_whole(metrics, reached, progress, run_settings(document))
+        rows = read_scored_rows(metrics, normalizer)
     except UNREADABLE as error:
         raise damaged(metrics, error, UntrustedRun) from None
-    try:
-        _check_whole(metrics, reached, progress, run_settings(document))
     except RunReadError as error:
         raise UntrustedRun(str(error)) from None
     done = max(reached.values()) if reached else None
@@ -321,19 +503,12 @@ def _check_metrics_agree_with_summary(directory: Path, document: dict, who: str)
         return  # none, or cut to its progress fields: nothing stated to compare
     if progress is None or done != progress[0]:
         return
-    settings = {setting for _, setting in finals}
-    for (method, setting), (_, values) in finals.items():
-        label = method if len(settings) == 1 else f"{method} [{setting}]"
-        row = summary.get("methods", {}).get(label)
-        if row is None:
-            raise UntrustedRun(f"{who}: summary.json has no {label}, which metrics.csv has")
-        for index, seed in enumerate(row.get("per_seed", [])):
-            stated = seed.get("final_return")
-            written = values[index, -1] if index < len(values) else math.nan
-            if stated is None or not math.isfinite(written):
-                continue
-            if not math.isclose(stated, written, rel_tol=1e-5, abs_tol=1e-6):
-                raise UntrustedRun(
-                    f"{who}: summary.json says {label} seed {seed.get('seed')} ended at "
-                    f"{stated:.6g}, metrics.csv at {written:.6g}: one of them was edited"
-                )
+    stated = summary.get("normalizer")
+    if "normalizer" in summary and (
+        stated is not None if normalizer is None else stated != normalizer
+    ):
+        raise UntrustedRun(
+            f"{who}: summary.json's normaliser {stated!r} is not config.json's {normalizer!r}: "
+            "one of them was edited"
+        )
+    _check_summary_figures(rows, summary, normalizer, who)

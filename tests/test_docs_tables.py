@@ -1,6 +1,6 @@
 """The docs' results tables that rest on committed run records are what their records give:
 each ``<!-- record-table NAME -->`` table of README.md and docs/*.md equals
-``run_records.record_table`` of ``records/NAME`` (checked first: digest, whole, both
+``record_tables.record_table`` of ``records/NAME`` (checked first: digest, whole, both
 statistics recomputed from its metrics). ``python -m experiments.record --docs`` rewrites
 them."""
 
@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pngail_jax import run_records
+from pngail_jax import record_tables, run_records
 from pngail_jax.programs import record as program
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -33,7 +33,7 @@ def test_a_table_edited_by_hand_is_found_and_rewritten(tmp_path):
     (tmp_path / "docs").mkdir()
     (tmp_path / "README.md").write_text("no tables here\n")
     record = run_records.check_record(ROOT / "records" / "offline-pendulum")
-    table = run_records.record_table(record, "bc-all")
+    table = record_tables.record_table(record, "bc-all")
     edited = table.replace("0.48 ± 0.04", "0.58 ± 0.04", 1)
     assert edited != table
     doc = tmp_path / "docs" / "results.md"
@@ -48,7 +48,7 @@ def test_a_table_edited_by_hand_is_found_and_rewritten(tmp_path):
     assert table in doc.read_text() and doc.read_text().endswith("\n\nafter\n")
     assert program.rewrite_docs(tmp_path, ROOT / "records") == []  # now current
     with pytest.raises(run_records.RecordError, match="has no method 'gail'"):
-        run_records.record_table(record, "gail")
+        record_tables.record_table(record, "gail")
 
 
 def test_a_glance_table_joins_records_by_task():
@@ -57,7 +57,7 @@ def test_a_glance_table_joins_records_by_task():
     method in two records of one task is refused."""
     names = ["offline-pendulum", "offline-pendulum-ilid", "offline-hopper"]
     records = [run_records.check_record(ROOT / "records" / name) for name in names]
-    lines = run_records.glance_table(records).splitlines()
+    lines = record_tables.glance_table(records).splitlines()
     assert lines[0] == (
         "| task (seeds) | BC (expert rows) | BC (all rows) | DWBC | ISW-BC | ILID |"
     )
@@ -70,7 +70,7 @@ def test_a_glance_table_joins_records_by_task():
     with pytest.raises(
         run_records.RecordError, match="'bc-expert' on Pendulum-v1 is in another record"
     ):
-        run_records.glance_table([records[0], records[0]])
+        record_tables.glance_table([records[0], records[0]])
 
 
 # The results tables of these documents, outside the record markers, each say where their
@@ -155,7 +155,7 @@ def test_the_block_table_is_each_seeds_block_mean_then_mean_and_se_over_seeds():
     then mean ± s.e. (ddof 1) over seeds; the last column the final evaluation."""
     folder = ROOT / "records" / "pendulum-500-5seeds"
     record = run_records.check_record(folder)
-    table = run_records.block_table(record, folder, 500_000).splitlines()
+    table = record_tables.block_table(record, folder, 500_000).splitlines()
     assert table[0] == "| M steps | 0-0.5 | 0.5-1 | 1-1.5 | 1.5-2 | 2-2.5 | final (2.5 M) |"
     rows = [
         r for r in _metrics("pendulum-500-5seeds") if r["method"] == "pngail" and r["eval_return"]
@@ -177,7 +177,7 @@ def test_the_block_table_is_each_seeds_block_mean_then_mean_and_se_over_seeds():
 def test_the_diagnostics_table_is_the_block_mean_over_iterations_and_seeds(tmp_path):
     folder = ROOT / "records" / "pendulum-500-5seeds"
     record = run_records.check_record(folder)
-    table = run_records.diagnostics_table(record, folder, 1_000_000, ["pngail"]).splitlines()
+    table = record_tables.diagnostics_table(record, folder, 1_000_000, ["pngail"]).splitlines()
     assert table[0] == "| M steps | 0-1 | 1-2 | 2-2.5 |" and len(table) == 2 + 5
     rows = [r for r in _metrics("pendulum-500-5seeds") if r["method"] == "pngail"]
     late = [float(r["mean_reward"]) for r in rows if int(r["env_steps"]) > 2_000_000]
@@ -235,19 +235,19 @@ def test_block_tables_leave_out_a_diverged_seed_and_refuse_what_has_no_blocks(tm
              for seed, values in pngail.items()
              for steps, value in zip((100, 200, 300), values, strict=True)]  # fmt: skip
     folder, record = _synthetic_record(tmp_path, rows), {"name": "synthetic"}
-    table = run_records.block_table(record, folder, 200).splitlines()
+    table = record_tables.block_table(record, folder, 200).splitlines()
     assert table[0] == "| M steps | 0-0.0002 | 0.0002-0.0003 | final (0.0003 M) |"
     assert table[2] == "| GAIL | 0.30 ± 0.10 | 0.60 ± 0.10 | 0.60 ± 0.10 |"  # (0.1+0.3)/2, +0.2
     assert table[3] == "| PN-GAIL | 0.10 ± nan | 0.40 ± nan | 0.40 ± nan |"  # seed 1 left out
-    diagnostics = run_records.diagnostics_table(record, folder, 200, ["pngail"]).splitlines()
+    diagnostics = record_tables.diagnostics_table(record, folder, 200, ["pngail"]).splitlines()
     assert diagnostics[2] == "| PN-GAIL: mean reward | 0.100 | 0.300 |"
     with pytest.raises(run_records.RecordError, match="no method 'wgail'"):
-        run_records.diagnostics_table(record, folder, 200, ["wgail"])
+        record_tables.diagnostics_table(record, folder, 200, ["wgail"])
     with pytest.raises(run_records.RecordError, match="a block of 0 steps"):
-        run_records.block_table(record, folder, 0)
+        record_tables.block_table(record, folder, 0)
     offline = _synthetic_record(tmp_path / "offline", [("bc", 0, 0, 0.5, 0.0)])
     with pytest.raises(run_records.RecordError, match="no environment steps"):
-        run_records.diagnostics_table(record, offline, 200)
+        record_tables.diagnostics_table(record, offline, 200)
 
 
 def test_the_seed_table_names_each_seeds_low_point_turn_and_classifier_error(tmp_path):
@@ -265,7 +265,7 @@ def test_the_seed_table_names_each_seeds_low_point_turn_and_classifier_error(tmp
         "late_average_normalized_return": {"gail": [0.1, 0.1], "pngail": [0.65, 0.05]},
         "confidence_mae": {"gail": [0.2, 0.3], "pngail": [0.25, None]},
     }
-    table = run_records.seed_table(record, folder, 0.3).splitlines()
+    table = record_tables.seed_table(record, folder, 0.3).splitlines()
     assert table[0] == (
         "| method | seed | final | last 20% of training | lowest evaluation (at M steps) | "
         "turned above 0.3 (M steps) | confidence MAE on D_u |"
@@ -276,9 +276,9 @@ def test_the_seed_table_names_each_seeds_low_point_turn_and_classifier_error(tmp
         "| GAIL | 0 | 0.10 | 0.10 | 0.10 (0.0001) | never | reads none |",
         "| GAIL | 1 | 0.10 | 0.10 | 0.10 (0.0001) | never | reads none |",
     ]
-    assert run_records.seed_table(record, folder, 0.3, ["gail"]).splitlines()[2:] == table[4:]
+    assert record_tables.seed_table(record, folder, 0.3, ["gail"]).splitlines()[2:] == table[4:]
     with pytest.raises(run_records.RecordError, match="no method 'wgail'"):
-        run_records.seed_table(record, folder, 0.3, ["wgail"])
+        record_tables.seed_table(record, folder, 0.3, ["wgail"])
     # the marker, on a real record (made before classifier errors were kept)
     page = _stale_page(
         tmp_path,
@@ -293,9 +293,153 @@ def test_the_seed_table_names_each_seeds_low_point_turn_and_classifier_error(tmp
 
 def test_every_record_marker_in_the_docs_is_one_the_program_reads():
     """A marker with a typo would leave its table unchecked by both tests: every line of the
-    docs that opens a record marker matches one of experiments.record's patterns."""
+    docs that opens a record marker is a marked table of the program's parser (which refuses
+    a marker it cannot read)."""
     for path in program.doc_files(ROOT):
         text = path.read_text()
         opened = [line for line in text.split("\n") if line.startswith("<!-- record-")]
-        matched = sum(len(pattern.findall(text)) for pattern in program.PATTERNS)
-        assert len(opened) == matched, f"{path.name}: a record marker no pattern reads"
+        markers = program.parse_markers(path, text)
+        assert len(opened) == len(markers), f"{path.name}: a record marker the parser skips"
+
+
+# -- broken markers: refused in one line naming file:line, before anything is written ------
+
+COMPARISON = "settings-hopper-v4-value-epochs"  # a committed comparison record
+STALE_COMPARISON = (
+    f"<!-- record-comparison {COMPARISON} -->\n| stale |\n<!-- /record-comparison -->\n"
+)
+
+
+def _run_docs(root: Path, monkeypatch) -> None:
+    """``python -m experiments.record --docs`` run in ``root`` on the committed records."""
+    monkeypatch.chdir(root)
+    program.main(["--docs", "--records", str(ROOT / "records")])
+
+
+def test_a_missing_closing_marker_writes_nothing_and_names_the_line(tmp_path, monkeypatch):
+    """The red team's page: the first table's closing marker deleted. Matched from its
+    opening to the next table's closing marker, --docs used to delete the prose, the code
+    block and the next table between them; now it names the opening marker's line and
+    leaves every file byte for byte, the README's stale table (which reads fine) included."""
+    page = _stale_page(
+        tmp_path,
+        "# Results\n\n"
+        "<!-- record-table pendulum-1000-5seeds -->\n| method | final |\n|---|---:|\n\n"
+        "Prose that explains the table.\n\n```python\nprint('a code block')\n```\n\n"
+        "<!-- record-table pendulum-500-5seeds -->\n| method | final |\n"
+        "<!-- /record-table -->\n\nafter\n",
+    )
+    readme = tmp_path / "README.md"
+    readme.write_text(STALE_COMPARISON)
+    before = {path: path.read_bytes() for path in (page, readme)}
+    with pytest.raises(SystemExit, match=re.escape(
+        "docs/results.md:3: the record-table marker is not closed by <!-- /record-table --> "
+        "before the next marker, on line 13"
+    )):  # fmt: skip
+        _run_docs(tmp_path, monkeypatch)
+    assert {path: path.read_bytes() for path in (page, readme)} == before
+    with pytest.raises(run_records.RecordError, match=r"results\.md:3: .* not closed"):
+        program.marked_tables(page, ROOT / "records")  # so the docs test fails on it too
+    page.write_text("<!-- record-table pendulum-1000-5seeds -->\n| method | final |\n")
+    with pytest.raises(run_records.RecordError, match=r"results\.md:1: .* never closed by"):
+        program.rewrite_docs(tmp_path, ROOT / "records")
+
+
+@pytest.mark.parametrize(
+    ("marker", "message"),
+    [
+        ("<!-- record-tabel pendulum-10seeds -->", "unknown record marker kind 'record-tabel'"),
+        ("<!-- record-blocks swimmer-25M block=500k -->",
+         "record-blocks block=500k: block= must be a positive whole number"),
+        ("<!-- record-blocks swimmer-25M block=0 -->",
+         "record-blocks block=0: block= must be a positive whole number"),
+        ("<!-- record-table pendulum-10seeds basline=gail -->",
+         "record-table takes no option 'basline='"),
+        ("<!-- record-blocks swimmer-25M block=500000 methods=gail -->",
+         "record-blocks takes no option 'methods='"),  # block_table shows every method
+        ("<!-- record-seeds swimmer-25M turn=high -->",
+         "record-seeds turn=high: turn= must be a number"),
+        ("<!-- record-diagnostics swimmer-25M block=500000 methods=gail,,pngail -->",
+         "record-diagnostics methods=gail,,pngail: methods= must be methods' names, A,B"),
+        ("<!-- record-diagnostics swimmer-25M -->", "record-diagnostics needs block="),
+        ("<!-- record-contrast a b baseline=reference -->", "record-contrast needs arms="),
+        ("<!-- record-table pendulum-10seeds pendulum-1000-5seeds -->",
+         "record-table takes one record name, not 2"),
+        ("<!-- record-glance -->", "record-glance takes one record name or more, not 0"),
+        ("<!-- record-table pendulum-10seeds baseline=gail baseline=bc -->",
+         "record-table has baseline= twice"),
+    ],
+)  # fmt: skip
+def test_a_marker_the_program_cannot_read_is_refused(tmp_path, marker, message):
+    """A misspelt kind, an option the kind does not take or whose value does not parse, a
+    required option missing: each used to leave its table unmatched, silently unchecked."""
+    kind = marker.split()[1].removeprefix("record-")
+    page = _stale_page(tmp_path, f"before\n{marker}\n| old |\n<!-- /record-{kind} -->\n")
+    before = page.read_bytes()
+    with pytest.raises(run_records.RecordError, match=re.escape(f"results.md:2: {message}")):
+        program.rewrite_docs(tmp_path, ROOT / "records")
+    assert page.read_bytes() == before
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("| old |\n<!-- /record-table -->\n",
+         "results.md:2: <!-- /record-table --> closes no marker (none is open)"),
+        ("<!-- record-table pendulum-10seeds -->\n| old |\n<!-- /record-blocks -->\n",
+         "results.md:3: <!-- /record-blocks --> cannot close the record-table marker of line 1"),
+        ("<!-- record-table pendulum-10seeds -->\n<!-- record-glance pendulum-10seeds -->\n",
+         "results.md:1: the record-table marker is not closed by <!-- /record-table --> "
+         "before the next marker, on line 2"),  # nested
+        ("<!-- record-table pendulum-10seeds -->\n| old |\n<!-- /record-table x -->\n",
+         "results.md:3: a closing marker is <!-- /record-table -->, with nothing more"),
+        ("  <!-- record-table pendulum-10seeds -->\n",
+         "results.md:1: a record marker must stand alone on its line, unindented"),
+        ("Text <!-- record-table pendulum-10seeds -->\n",
+         "results.md:1: a record marker must stand alone on its line"),
+        ("<!-- record-table pendulum-10seeds\n", "results.md:1: a record marker must end with"),
+        ("<!-- record-table pendulum-10seeds --> | old |\n",
+         "results.md:1: nothing may follow a record marker on its line"),
+        ("```\n<!-- record-table pendulum-10seeds -->\n",
+         "results.md:1: this code fence is never closed, and hides the record marker of line 2"),
+    ],
+)  # fmt: skip
+def test_a_stray_or_misplaced_marker_is_refused(tmp_path, text, message):
+    page = _stale_page(tmp_path, text)
+    with pytest.raises(run_records.RecordError, match=re.escape(message)):
+        program.rewrite_docs(tmp_path, ROOT / "records")
+    assert page.read_text() == text
+
+
+def test_a_good_page_is_rewritten_and_markers_in_prose_or_code_are_text(tmp_path, monkeypatch):
+    """--docs rewrites a stale table between good markers and nothing else: a marker quoted
+    in prose (even across lines) or shown in a fenced code block is text, not a marker."""
+    prose = (
+        "Between `<!-- record-table NAME -->` and `<!-- /record-table -->`; between `<!--\n"
+        "record-seeds NAME turn=LEVEL -->` and `<!-- /record-seeds -->`.\n\n"
+        "````markdown\n<!-- record-tabel x -->\n```\n<!-- /record-table -->\n````\n\n"
+    )
+    page = _stale_page(tmp_path, prose + STALE_COMPARISON + "\nafter\n")
+    _run_docs(tmp_path, monkeypatch)
+    table = program.comparison_record.table(
+        program.comparison_record.check(ROOT / "records" / COMPARISON)
+    )
+    marker = f"<!-- record-comparison {COMPARISON} -->\n"
+    assert page.read_text() == f"{prose}{marker}{table}\n<!-- /record-comparison -->\n\nafter\n"
+    [(name, written, expected)] = program.marked_tables(page, ROOT / "records")
+    assert name == COMPARISON and written == expected == table + "\n"
+    before = page.stat().st_mtime_ns
+    _run_docs(tmp_path, monkeypatch)
+    assert page.stat().st_mtime_ns == before  # current: not written again
+
+
+def test_a_record_that_fails_its_check_names_the_marker_and_nothing_is_written(tmp_path):
+    """A well-formed marker whose record is missing: the record's error after the marker's
+    file and line, and the README's stale table, whose record checks, is not written either
+    (every table is computed before the first write)."""
+    text = "x\n<!-- record-table no-such-record -->\n<!-- /record-table -->\n"
+    page = _stale_page(tmp_path, text)
+    (tmp_path / "README.md").write_text(STALE_COMPARISON)
+    with pytest.raises(run_records.RecordError, match=r"results\.md:2: .*no-such-record"):
+        program.rewrite_docs(tmp_path, ROOT / "records")
+    assert page.read_text() == text and (tmp_path / "README.md").read_text() == STALE_COMPARISON

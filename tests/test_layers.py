@@ -36,7 +36,7 @@ LAYERS = [
         (
             "adversarial", "grid", "train", "run_config", "run_config_checks", "config_record",
             "report", "plots", "tracking", "compare",
-            "run_records", "offline", "runs",
+            "run_records", "record_tables", "offline", "runs",
         ),
     ),
     ("jobs", ("jobs", "jobs.*", "runner")),
@@ -49,7 +49,7 @@ LAYERS = [
 JOB_ORDER = [
     "errors", "classify", "chunks", "early_rewards", "train_seeds", "make_demos",
     "demonstrations", "train_rl", "compare_settings", "comparison_record", "build", "record",
-    "results", "sweep", "offline",
+    "results", "sweep", "offline_config", "offline",
 ]  # fmt: skip
 LONGEST_MODULE = 700
 LONGEST_JOB = 400

@@ -38,7 +38,8 @@ def test_make_demos_tiny_pendulum(tmp_path):
         ]
     )
     # Written through temporary siblings that were renamed: none is left behind.
-    names = [".pngail-run.json", "checkpoints", "demos.npz", "normalizer.json"]
+    names = [".pngail-outputs.json", ".pngail-run.json", "checkpoints", "demos.npz",
+             "normalizer.json"]  # fmt: skip
     assert sorted(p.name for p in tmp_path.iterdir()) == names
     # Finished work is not replaced by a second run without --overwrite.
     with pytest.raises(SystemExit):

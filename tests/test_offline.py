@@ -5,6 +5,7 @@ its grid compiles for other methods, the discriminator schedules, and bad config
 import csv
 import dataclasses
 import json
+import shutil
 
 import jax
 import jax.numpy as jnp
@@ -307,7 +308,7 @@ def test_the_program_writes_the_sweeps_outputs_and_refuses_a_second_run(
 def assert_compare_and_the_record_read_it(out, rows, records):
     """An offline run's rows join the online methods' tables: compare reads its headline,
     and a record keeps it."""
-    from pngail_jax import compare, run_records
+    from pngail_jax import compare, record_tables, run_records
 
     scores = compare.load_scores([out])
     evaluated = [
@@ -318,7 +319,7 @@ def assert_compare_and_the_record_read_it(out, rows, records):
     )
     record = run_records.check_record(run_records.write_record(out, "tiny-offline", records))
     assert record["program"] == "experiments.offline" and record["complete"]
-    assert "BC (all rows)" in run_records.record_table(record, "bc-all")
+    assert "BC (all rows)" in record_tables.record_table(record, "bc-all")
 
 
 @pytest.mark.heavy
@@ -425,6 +426,64 @@ def test_a_run_resumed_from_a_checkpoint_equals_the_uninterrupted_run(demos_path
         run_offline(other, cut, resume=True)
     with pytest.raises(SystemExit):
         program.main(["--resume", str(tmp_path / "nothing")])
+
+
+def test_the_offline_program_is_checked_as_the_sweep_is(demos_path, tmp_path, capsys, monkeypatch):
+    """The offline program under the sweep's rules: its stored command runs as written (the
+    program's own parser takes it); a copy without its dot-files is named by its missing seal
+    when resumed, compared or recorded, and --allow-unsealed resumes it and says so; Ctrl-C
+    is one line; compare --expected against its own record finds no difference (its timings
+    are not settings)."""
+    from pngail_jax.jobs import offline as offline_job
+    from pngail_jax.programs import compare as compare_program
+    from pngail_jax.programs import offline as program
+    from pngail_jax.programs import record as record_program
+
+    out = tmp_path / "offline"
+    argv = [
+        "--demos", str(demos_path), "--methods", "bc-all,dwbc", "--seeds", "2",
+        "--gradient-steps", "40", "--steps-per-iteration", "10", "--eval-every", "2",
+        "--chunk-iterations", "2", "--batch-size", "8", "--out", str(out),
+    ]  # fmt: skip
+    program.main(argv)
+    command = json.loads((out / "config.json").read_text())["provenance"]["command_line"]
+    assert command == ["python", "-m", "experiments.offline", *argv]
+    stored = program.build_parser().parse_args(command[3:])
+    assert stored.methods == "bc-all,dwbc" and stored.out == out
+
+    bare = tmp_path / "bare"  # copied without its dot-files
+    shutil.copytree(out, bare, ignore=lambda folder, names: [n for n in names if n[0] == "."])
+    seal = "its seal .config.sealed.json is missing"
+    for run, argv_of in (
+        (program, ["--resume", str(bare)]),
+        (compare_program, [str(bare), "--out", str(tmp_path / "cmp")]),
+        (record_program, [str(bare), "--name", "b", "--records", str(tmp_path / "r")]),
+    ):
+        with pytest.raises(SystemExit, match=seal) as refused:
+            run.main(argv_of)
+        assert "\n" not in str(refused.value.code)
+    capsys.readouterr()
+    program.main(["--resume", str(bare), "--allow-unsealed"])
+    assert "no seal, config.json unchecked (--allow-unsealed)" in capsys.readouterr().out
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(program, "run_offline", interrupted)
+    with pytest.raises(SystemExit) as stopped:
+        program.main(["--resume", str(out)])
+    assert str(stopped.value.code).strip() == (
+        f"interrupted: finished chunks are kept; --resume {out} continues from the last one"
+    )
+    monkeypatch.undo()
+    assert offline_job.run_offline is not interrupted
+
+    [record] = record_program.main([str(out), "--name", "mine", "--records", str(tmp_path / "r")])
+    result = compare_program.main([str(out), "--expected", str(record),
+                                   "--out", str(tmp_path / "against")])  # fmt: skip
+    expected = json.loads((result / "compare.json").read_text())["expected"]
+    assert expected["config_differences"] == [] and expected["unfinished"] == []
+    assert {row["verdict"] for row in expected["rows"]} == {"within"}
 
 
 def test_an_authors_file_picks_its_task(tmp_path):

@@ -1,18 +1,33 @@
 """The output contract every program follows: an output directory is new, or empty, or a run
 of the same program (marked when it was created) that the user asked to resume or to replace
 with --overwrite; anything else is refused before any computation, naming what is in the way,
-and nothing is written."""
+and nothing is written. --overwrite removes exactly the files the run listed as written."""
 
 import argparse
+import dataclasses
 import json
+import shutil
+import time
+from collections.abc import Callable
 from fnmatch import fnmatch
+from pathlib import Path
 
 import pytest
+from conftest import tiny_sweep_args
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from pngail_jax import outputs
-from pngail_jax.outputs import MARKER, output_owner, prepare_output
+from pngail_jax.jobs import chunks
+from pngail_jax.outputs import (
+    MARKER,
+    OUTPUT_LIST,
+    OutputRefused,
+    claimed,
+    output_owner,
+    prepare_output,
+    record_outputs,
+)
 from pngail_jax.programs import cli, paper, sweep, train_rl
 from pngail_jax.programs.cli import claim_output
 
@@ -35,51 +50,64 @@ def listing(directory):
     )
 
 
+NAMES = ["README.md", "results.json", "metrics.csv", "notes", "config.json", "fig.png"] + [
+    name for names in outputs.LEGACY_MARKS.values() for name in names
+]
+
+
 @settings(
-    max_examples=60,
+    max_examples=80,
     deadline=None,
     derandomize=True,
     suppress_health_check=[HealthCheck.function_scoped_fixture],
 )
 @given(
-    names=st.lists(
-        st.sampled_from(
-            ["README.md", "results.json", "metrics.csv", "notes", "config.json"]
-            + [name for names in outputs.LEGACY_MARKS.values() for name in names]
-        ),
-        max_size=3,
-        unique=True,
-    ),
+    names=st.lists(st.sampled_from(NAMES), max_size=3, unique=True),
     marker=st.none() | st.sampled_from(PROGRAMS),
+    listed=st.none() | st.sets(st.sampled_from(NAMES), max_size=3),
     program=st.sampled_from(PROGRAMS),
     overwrite=st.booleans(),
     exists=st.booleans(),
 )
 def test_the_decision_over_any_contents_and_flags(
-    tmp_path_factory, names, marker, program, overwrite, exists
+    tmp_path_factory, names, marker, listed, program, overwrite, exists
 ):
     directory = tmp_path_factory.mktemp("out") / "run"
+    has_list = exists and marker is not None and listed is not None
     if exists:
         directory.mkdir()
         for name in names:
             (directory / name).write_text("theirs")
         if marker is not None:
             (directory / MARKER).write_text(json.dumps({"program": marker}))
+        if has_list:
+            (directory / OUTPUT_LIST).write_text(
+                json.dumps({"program": marker, "files": sorted(listed)})
+            )
     before = listing(directory) if exists else None
     empty = not exists or not (names or marker)
     owner = output_owner(directory) if exists else None
     marker_alone = not names and marker == program  # left by a start that failed: empty
-    foreign = [n for n in names if not any(fnmatch(n, p) for p in outputs.OWNED[program])]
-    allowed = empty or marker_alone or (owner == program and overwrite and not foreign)
+    if has_list:  # only what the run listed is its own
+        foreign, unknown = [n for n in names if n not in listed], []
+    else:  # a run from before the lists: only names it writes exactly (no wildcard) are its own
+        foreign = [n for n in names if not any(fnmatch(n, p) for p in outputs.OWNED[program])]
+        unknown = [n for n in names if n not in foreign and n not in outputs.OWNED[program]]
+    allowed = (
+        empty or marker_alone or (owner == program and overwrite and not foreign and not unknown)
+    )
     try:
         claim_output(Parser(), directory, program, overwrite)
-        assert allowed, (names, marker, program, overwrite)
+        assert allowed, (names, marker, listed, program, overwrite)
     except Refused as refusal:
         assert not allowed
         message = str(refusal)
-        if owner == program and overwrite:  # its run, and files it never writes
+        if owner == program and overwrite and foreign:  # its run, and files it never wrote
             assert "--overwrite replaces only its own" in message
             assert all(name in message for name in foreign)
+        elif owner == program and overwrite:  # fig.png beside a page's *.png: whose?
+            assert f"made before runs listed their files ({OUTPUT_LIST})" in message
+            assert "delete the run yourself" in message and unknown[0] in message
         elif owner == program:
             assert "pass --overwrite to replace it" in message
         elif owner is not None:
@@ -90,25 +118,112 @@ def test_the_decision_over_any_contents_and_flags(
     assert exists or not directory.exists()
 
 
-def test_a_marker_wins_over_legacy_files_and_prepare_marks_and_empties_only_its_own(tmp_path):
+def test_prepare_marks_a_run_and_overwrite_removes_exactly_what_it_listed(tmp_path):
     run = tmp_path / "run"
     prepare_output(run, "sweep")
     assert output_owner(run) == "sweep"
+    assert json.loads((run / OUTPUT_LIST).read_text()) == {"program": "sweep", "files": []}
     (run / "metrics.csv").write_text("old")
-    (run / "checkpoints").mkdir()
+    (run / "checkpoints" / "chunk_0001").mkdir(parents=True)
+    (run / "checkpoints" / "chunk_0001" / "state").write_text("old")
+    (run / "policies").mkdir()  # an empty folder of the run's: listed with a trailing /
+    (run / "notes.txt").write_text("mine")  # not a name the sweep writes: never listed
+    listed = record_outputs(run, "sweep", since=0.0)  # as if the run wrote all of them
+    assert listed == ["checkpoints/chunk_0001/state", "metrics.csv", "policies/"]
+    before = listing(run)
+    with pytest.raises(OutputRefused, match=r"files it did not make \(notes.txt\)"):
+        prepare_output(run, "sweep", overwrite=True)  # removes nothing then
+    assert listing(run) == before
+    (run / "notes.txt").unlink()
     prepare_output(run, "sweep", overwrite=True)  # its own run: emptied, marked again
-    assert sorted(p.name for p in run.iterdir()) == [MARKER]
+    assert sorted(p.name for p in run.iterdir()) == sorted([MARKER, OUTPUT_LIST])
     (run / "summary.md").write_text("old")
+    record_outputs(run, "sweep", 0.0)
     (run / "my-notes.txt").write_text("mine")  # a user's file: never removed
     (run / "plots").mkdir()
-    prepare_output(run, "sweep", overwrite=True)
-    assert sorted(p.name for p in run.iterdir()) == [MARKER, "my-notes.txt", "plots"]
+    with pytest.raises(OutputRefused, match=r"files it did not make \(my-notes.txt, plots\)"):
+        prepare_output(run, "sweep", overwrite=True)
+    assert sorted(p.name for p in run.iterdir()) == sorted(
+        [MARKER, OUTPUT_LIST, "my-notes.txt", "plots", "summary.md"]
+    )
     theirs = tmp_path / "theirs"
     theirs.mkdir()
     (theirs / "keep.txt").write_text("mine")
     (theirs / MARKER).write_text(json.dumps({"program": "paper"}))
     prepare_output(theirs, "sweep", overwrite=True)  # not its own: nothing removed
     assert (theirs / "keep.txt").read_text() == "mine"
+
+
+def test_a_run_lists_only_what_appeared_after_its_claim_began(tmp_path, capsys):
+    """A user's file put into a run between two of its sessions (older than the resumed
+    claim) is not taken for the run's, though it lies in the run's own checkpoints/."""
+    run = tmp_path / "run"
+    with claimed(run, "sweep") as claim:
+        claim.prepare()
+        (run / "checkpoints").mkdir()
+        (run / "checkpoints" / "chunk_0001").write_text("the run's")
+    users = run / "checkpoints" / "mine.txt"
+    users.write_text("the user's")
+    while filesystem_now(tmp_path) <= users.stat().st_ctime:  # the file older than the claim
+        time.sleep(0.01)
+    with claimed(run, "sweep", resume=True):
+        (run / "summary.md").write_text("the run's")
+    listed = json.loads((run / OUTPUT_LIST).read_text())["files"]
+    assert listed == ["checkpoints/chunk_0001", "summary.md"]
+    with pytest.raises(SystemExit):
+        sweep.parse_args(["--out", str(run), "--overwrite"])
+    assert "files it did not make (checkpoints/mine.txt)" in capsys.readouterr().err
+
+
+def test_a_run_inside_a_run_is_in_both_lists_once_it_ends(tmp_path):
+    """A plan's grid is a sweep of its own inside the plan's folder: when the grid's claim
+    ends, the plan lists what it wrote too (a plan killed then has them listed)."""
+    plan = tmp_path / "plan"
+    with claimed(plan, "paper") as outer:
+        outer.prepare()
+        grid = plan / "grids" / "Pendulum-v1-main"
+        with claimed(grid, "sweep") as inner:
+            inner.prepare()
+            (grid / "summary.json").write_text("{}")
+        assert json.loads((grid / OUTPUT_LIST).read_text())["files"] == ["summary.json"]
+        assert "grids/Pendulum-v1-main/summary.json" in listed_files(plan)
+    assert outputs.overwrite_refusal(plan, "paper") is None
+    prepare_output(plan, "paper", overwrite=True)
+    assert sorted(p.name for p in plan.iterdir()) == sorted([MARKER, OUTPUT_LIST])
+
+
+def test_a_run_from_before_the_lists_is_replaced_only_where_names_tell(tmp_path, capsys):
+    """Without a list, a folder (checkpoints/) or a wildcard's name (mine.png beside a page's
+    *.png) cannot be told from the user's: refused, the user deletes the run; a run holding
+    only files of names its program writes exactly is replaced as before."""
+    old = tmp_path / "old-sweep"
+    (old / "checkpoints" / "chunk_0001").mkdir(parents=True)
+    (old / "checkpoints" / "chunk_0001" / "state").write_text("the run's, or the user's?")
+    (old / "config.json").write_text(json.dumps({"resolved": {}}))
+    before = listing(old)
+    with pytest.raises(SystemExit):
+        sweep.parse_args(["--out", str(old), "--overwrite"])
+    assert (
+        f"--out {old} holds a run of experiments.sweep made before runs listed their files "
+        f"({OUTPUT_LIST}): --overwrite cannot tell its files in checkpoints from others; delete "
+        "the run yourself, or choose another --out"
+    ) in capsys.readouterr().err
+    with pytest.raises(OutputRefused, match="made before runs listed their files"):
+        prepare_output(old, "sweep", overwrite=True)
+    assert listing(old) == before
+    page = tmp_path / "old-page"
+    page.mkdir()
+    (page / MARKER).write_text(json.dumps({"program": "paper-page"}))
+    for name in ("README.md", "results.json", "mine.png"):
+        (page / name).write_text("?")
+    assert "its files in mine.png from others" in outputs.output_refusal(page, "paper-page", True)
+    (page / "mine.png").unlink()
+    assert outputs.output_refusal(page, "paper-page", True) is None
+    prepare_output(page, "paper-page", overwrite=True)
+    assert sorted(p.name for p in page.iterdir()) == sorted([MARKER, OUTPUT_LIST])
+    (page / "README.md").write_text("the page's")
+    (page / OUTPUT_LIST).write_text("[")  # a damaged list: nothing is taken for the run's
+    assert "delete the run yourself" in outputs.output_refusal(page, "paper-page", True)
 
 
 @pytest.mark.parametrize(
@@ -146,6 +261,7 @@ def test_each_program_refuses_a_directory_it_did_not_make(tmp_path, capsys):
     finished_sweep = tmp_path / "sweep-run"
     prepare_output(finished_sweep, "sweep")
     (finished_sweep / "config.json").write_text("{}")
+    record_outputs(finished_sweep, "sweep", since=0.0)  # listed, as the run lists what it wrote
     with pytest.raises(SystemExit):
         train_rl.parse_args(["--out", str(finished_sweep)])
     assert "it holds a run of experiments.sweep" in capsys.readouterr().err
@@ -289,3 +405,181 @@ def test_runs_made_before_the_marker_are_known_by_their_own_files(tmp_path):
     assert output_owner(folder("mine", {"config.json": '{"lr": 3}'})) is None  # not ours
     reason = outputs.output_refusal(tmp_path / "mine", "sweep", overwrite=True)
     assert "files it did not make (config.json)" in reason  # --overwrite cannot empty it
+
+
+# -- real runs: a user's file anywhere in a run folder stops --overwrite, which deletes nothing;
+# without one, --overwrite replaces the run and leaves no file of the old one.
+
+OFFLINE_FLAGS = [
+    "--methods", "bc-all", "--seeds", "2", "--gradient-steps", "40", "--steps-per-iteration",
+    "10", "--eval-every", "2", "--chunk-iterations", "2", "--batch-size", "8",
+]  # fmt: skip
+
+
+@dataclasses.dataclass
+class TinyRun:
+    """A finished tiny run of ``program`` in ``out``; ``main(out, *flags)`` runs it again into
+    ``out``; ``lists``: its list of files after each chunk (what a run killed then keeps)."""
+
+    program: str
+    out: Path
+    main: Callable
+    lists: list
+
+
+def tiny_run(program, main, out) -> TinyRun:
+    lists = []
+    real = chunks.record_held_outputs
+
+    def recording(path):
+        real(path)
+        lists.append(json.loads((out / OUTPUT_LIST).read_text())["files"])
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(chunks, "record_held_outputs", recording)
+        main(out)
+    return TinyRun(program, out, main, lists)
+
+
+@pytest.fixture(scope="module")
+def sweep_run(demos_path, tmp_path_factory):
+    def main(out, *flags):
+        return sweep.main([*tiny_sweep_args(demos_path, out), *flags])
+
+    return tiny_run("sweep", main, tmp_path_factory.mktemp("sweep") / "run")
+
+
+@pytest.fixture(scope="module")
+def offline_run(demos_path, tmp_path_factory):
+    from pngail_jax.programs import offline
+
+    def main(out, *flags):
+        return offline.main(["--demos", str(demos_path), *OFFLINE_FLAGS, "--out", str(out), *flags])
+
+    return tiny_run("offline", main, tmp_path_factory.mktemp("offline") / "run")
+
+
+def newest(folder: Path) -> str:
+    return sorted(path.name for path in folder.iterdir())[-1]
+
+
+def listed_files(run: Path) -> set[str]:
+    return {name for name in json.loads((run / OUTPUT_LIST).read_text())["files"]
+            if not name.endswith("/")}  # fmt: skip
+
+
+def files_in(run: Path) -> set[str]:
+    found = {path.relative_to(run).as_posix() for path in run.rglob("*") if path.is_file()}
+    return found - {MARKER, OUTPUT_LIST}
+
+
+def filesystem_now(folder: Path) -> float:
+    """The time by the filesystem's own clock (which lags ``time.time()`` by up to a tick)."""
+    probe = folder / "now"
+    probe.write_text("")
+    return probe.stat().st_mtime
+
+
+def test_each_run_lists_every_file_it_wrote_and_did_so_after_each_chunk(sweep_run, offline_run):
+    for run in (sweep_run, offline_run):
+        assert listed_files(run.out) == files_in(run.out)
+        assert len(run.lists) == 2  # two chunks
+        first = run.lists[0]  # the list a run killed after its first chunk keeps
+        assert "config.json" in first
+        assert any(name.startswith("checkpoints/") and "chunk_0001/" in name for name in first)
+
+
+USERS_FILES = {
+    "sweep": ["notes.txt", "checkpoints/mine.txt", "checkpoints/{newest}/mine.txt",
+              "policies/mine.txt", "policies/gail/mine.txt", "wandb/mine.txt", "mine.png"],
+    "offline": ["notes.txt", "checkpoints/mine.txt", "checkpoints/bc-all/mine.txt",
+                "checkpoints/bc-all/{newest}/mine.txt", "wandb/mine.txt", "mine.png"],
+}  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("program", "where"), [(p, where) for p, places in USERS_FILES.items() for where in places]
+)
+def test_overwrite_refuses_a_users_file_anywhere_in_a_run_and_deletes_nothing(
+    program, where, request, tmp_path, capsys
+):
+    run = request.getfixturevalue(f"{program}_run")
+    copy = tmp_path / "run"
+    shutil.copytree(run.out, copy)
+    if "{newest}" in where:  # the newest checkpoint's folder
+        where = where.format(newest=newest(copy / Path(where).parent.parent))
+    users = copy / where
+    users.parent.mkdir(parents=True, exist_ok=True)
+    users.write_text("the user's")
+    before = listing(copy)
+    named = "wandb" if where.startswith("wandb/") else where  # a folder the run never wrote
+    with pytest.raises(SystemExit):
+        run.main(copy, "--overwrite")
+    assert f"files it did not make ({named}): --overwrite replaces only its own" in (
+        capsys.readouterr().err
+    )
+    with pytest.raises(OutputRefused, match="files it did not make"):  # past the parser
+        with claimed(copy, program, overwrite=True):
+            pass
+    with pytest.raises(OutputRefused, match="files it did not make"):
+        prepare_output(copy, program, overwrite=True)
+    assert listing(copy) == before  # the user's file, and every file of the run's, kept
+
+
+@pytest.mark.parametrize("program", ["sweep", "offline"])
+def test_overwrite_replaces_a_run_and_leaves_no_stale_file(program, request, tmp_path):
+    run = request.getfixturevalue(f"{program}_run")
+    copy = tmp_path / "run"
+    shutil.copytree(run.out, copy)
+    checkpoints = copy / "checkpoints" / ("" if program == "sweep" else "bc-all")
+    stale = checkpoints / "chunk_0000" / "progress.json"  # one the new run does not write
+    stale.parent.mkdir()
+    stale.write_text("{}")
+    record_outputs(copy, program, since=0.0)  # listed, as the old run would have
+    started = filesystem_now(tmp_path)
+    run.main(copy, "--overwrite")
+    assert not stale.parent.exists()
+    assert files_in(copy) == listed_files(copy)
+    for name in files_in(copy):  # each written by the new run
+        status = (copy / name).lstat()
+        assert max(status.st_mtime, status.st_ctime) >= started, name
+
+
+def test_a_comparison_keeps_a_users_png_and_is_replaced_without_it(sweep_run, tmp_path, capsys):
+    """The compare program writes *.png: a user's mine.png there is not its own."""
+    from pngail_jax.programs import compare
+
+    out = tmp_path / "comparison"
+    argv = [str(sweep_run.out), "--out", str(out)]
+    compare.main(argv)
+    assert listed_files(out) == files_in(out)
+    (out / "mine.png").write_text("the user's")
+    before = listing(out)
+    with pytest.raises(SystemExit):
+        compare.main([*argv, "--overwrite"])
+    assert "files it did not make (mine.png)" in capsys.readouterr().err
+    assert listing(out) == before
+    (out / "mine.png").unlink()
+    (out / "old.png").write_text("a figure the comparison no longer draws")
+    record_outputs(out, "compare", since=0.0)
+    compare.main([*argv, "--overwrite"])
+    assert not (out / "old.png").exists() and files_in(out) == listed_files(out)
+
+
+def test_a_page_folder_keeps_a_users_png(tmp_path):
+    """A results page (paper --page) writes README.md, results.json and *.png, as here."""
+    page = tmp_path / "page"
+    with claimed(page, "paper-page") as claim:
+        claim.prepare()
+        for name in ("README.md", "results.json", "fig2.png"):
+            (page / name).write_text("the page's")
+    (page / "mine.png").write_text("the user's")
+    before = listing(page)
+    assert "files it did not make (mine.png)" in outputs.output_refusal(page, "paper-page", True)
+    with pytest.raises(OutputRefused, match=r"\(mine.png\)"):
+        prepare_output(page, "paper-page", overwrite=True)
+    assert listing(page) == before
+    (page / "mine.png").unlink()
+    with claimed(page, "paper-page", overwrite=True) as claim:
+        claim.prepare()
+    assert sorted(p.name for p in page.iterdir()) == sorted([MARKER, OUTPUT_LIST])

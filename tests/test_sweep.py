@@ -519,7 +519,7 @@ def test_a_record_keeps_the_run_small_and_checks_itself(finished, tmp_path, caps
     assert record["machine"]["cpu_model"] and record["complete"] is True
     assert record["iterations_done"] == record["iterations"] == 4
     summary = json.loads((finished / "summary.json").read_text())
-    assert record["late_share"] == 0.2 and record["format"] == 2
+    assert record["late_share"] == 0.2 and record["format"] == 3 and record["unsealed"] is False
     for key in ("final_normalized_return", "late_average_normalized_return"):
         for method, values in record[key].items():
             # metrics.csv keeps 6 significant digits; the summary, the full float.
@@ -547,9 +547,19 @@ def test_a_record_keeps_the_run_small_and_checks_itself(finished, tmp_path, caps
         program.main([str(finished), "--name", "other", "--records", str(tmp_path)])
 
 
+def write_edited(folder, record, reseal=True):
+    """A record.json edited by hand: with ``reseal``, its digest made again, as a careful
+    forger would (so that the checks behind the digest are what refuses it)."""
+    from pngail_jax import run_records
+
+    edited = run_records.sealed_record(record) if reseal else record
+    (folder / "record.json").write_text(json.dumps(edited))
+
+
 def test_record_check_finds_each_kind_of_damage(finished, tmp_path):
-    """--check refuses a changed metrics file, an edited stated return or late share, and a
-    cell cut out; a folder without a run is named."""
+    """--check refuses a changed metrics file, an edited record (by its digest), an edited
+    stated return or late share behind a remade digest, and a cell cut out; a folder without
+    a run is named."""
     import gzip
 
     from pngail_jax import run_records
@@ -562,29 +572,200 @@ def test_record_check_finds_each_kind_of_damage(finished, tmp_path):
     with pytest.raises(SystemExit, match="metrics.csv.gz differs from what the record wrote"):
         program.main(["--check", str(folder)])
     (folder / "metrics.csv.gz").write_bytes(good)
+    for field, value in (("commit", "0" * 40), ("command", ["python", "-m", "x"])):
+        write_edited(folder, {**record, field: value}, reseal=False)
+        with pytest.raises(SystemExit, match="record.json was changed since it was written"):
+            program.main(["--check", str(folder)])
     for key in ("final_normalized_return", "late_average_normalized_return"):
         edited = json.loads(json.dumps(record))
         first = next(iter(edited[key]))
         edited[key][first][0] += 0.5
-        (folder / "record.json").write_text(json.dumps(edited))
+        write_edited(folder, edited)
         with pytest.raises(SystemExit, match=f"its {key} differs from that of metrics.csv"):
             program.main(["--check", str(folder)])
     for errors in ({"pngail": [0.1]}, {"icgail": [0.1, 0.2]}, {"pngail": ["0.1", 0.2]}):
-        (folder / "record.json").write_text(json.dumps({**record, "confidence_mae": errors}))
+        write_edited(folder, {**record, "confidence_mae": errors})
         with pytest.raises(SystemExit, match="confidence_mae is not one number per seed"):
             program.main(["--check", str(folder)])
-    (folder / "record.json").write_text(json.dumps({**record, "late_share": 0.1}))
+    write_edited(folder, {**record, "late_share": 0.1})
     with pytest.raises(SystemExit, match="last 0.1 of training, this version's over 0.2"):
         program.main(["--check", str(folder)])
     text = (finished / "metrics.csv").read_text().splitlines(keepends=True)
     cut = gzip.compress("".join(text[:-4]).encode(), mtime=0)
     (folder / "metrics.csv.gz").write_bytes(cut)
     record["metrics"] |= {"bytes": len(cut), "sha256": f"sha256:{hashlib.sha256(cut).hexdigest()}"}
-    (folder / "record.json").write_text(json.dumps(record))
-    with pytest.raises(run_records.RecordError, match="is cut short"):
+    write_edited(folder, record)
+    with pytest.raises(run_records.RecordError, match="pngail has seeds 2, its metrics.csv.gz 1"):
         run_records.check_record(folder)
     with pytest.raises(SystemExit, match="holds no sweep or offline run"):
         program.main([str(tmp_path), "--name", "x", "--records", str(tmp_path / "r")])
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda c, r: c.update(label_ratios=[0.4]), r"label ratios \[0.4\], its metrics"),
+        (lambda c, r: c.update(noise_stds=[0.1]), r"confidence noises \[0.1\], its metrics"),
+        (lambda c, r: c.update(iterations=40), "config plans 40 and its metrics.csv.gz ends at 4"),
+        (lambda c, r: r.update(iterations_done=3), "iterations done 3, its metrics.csv.gz 4"),
+        (lambda c, r: r.update(complete=False), "complete: False"),
+        (lambda c, r: c.update(seeds=3), "gail has seeds 3, its metrics.csv.gz 2"),
+        (lambda c, r: c.update(methods=["gail"]), r"methods \['gail'\], its metrics"),
+        (lambda c, r: c["settings"].update(num_envs=5), "250 environment steps an iteration"),
+        (
+            lambda c, r: c["resolved"].update(normalizer=[-1300.0, -100.0]),
+            "normalised return .* is not its evaluation .* through the run's normaliser",
+        ),
+    ],
+    ids=["label_ratios", "noise", "iterations", "done", "complete", "seeds", "methods",
+         "steps", "normalizer"],
+)  # fmt: skip
+def test_record_check_recomputes_its_config_from_its_metrics(
+    finished, tmp_path, edit, message, capsys
+):
+    """A record's config facts (task, methods, seeds, label ratios and noises, iterations done
+    and planned, completeness, steps per iteration, normaliser) edited with the digest made
+    again are refused, each naming what its metrics say; the record itself passes."""
+    from pngail_jax.programs import record as program
+
+    [folder] = program.main([str(finished), "--name", "tiny", "--records", str(tmp_path)])
+    record = json.loads((folder / "record.json").read_text())
+    record.pop("digest")
+    edit(record["config"], record)
+    write_edited(folder, record)
+    with pytest.raises(SystemExit, match=message) as refused:
+        program.main(["--check", str(folder)])
+    assert "\n" not in str(refused.value.code)
+
+
+def test_a_records_task_is_that_of_its_authors_file_and_normaliser(tmp_path):
+    """The task of a record on an authors' file (the paper's Table 3 normaliser, which its
+    scores agree with) cannot be changed, even with the digest made again. (On a made set
+    the task has no witness in the metrics: the digest alone keeps it.)"""
+    from pngail_jax.programs import record as program
+
+    folder = tmp_path / "offline-pendulum"
+    shutil.copytree(Path(__file__).parents[1] / "records" / "offline-pendulum", folder)
+    program.main(["--check", str(folder)])
+    record = json.loads((folder / "record.json").read_text())
+    record["config"]["config"]["env"] = "HalfCheetah-v4"
+    write_edited(folder, record)
+    with pytest.raises(SystemExit, match="the task is HalfCheetah-v4, its demonstrations and "
+                       "normaliser .* are Pendulum-v1's"):  # fmt: skip
+        program.main(["--check", str(folder)])
+
+
+def test_a_record_made_unsealed_says_so(finished, tmp_path, capsys):
+    """A record of a run without its seal (--allow-unsealed) keeps that in record.json and
+    --check says it on its line."""
+    from pngail_jax.programs import record as program
+
+    copy = copy_run(finished, tmp_path)
+    (copy / record.SEAL).unlink()
+    [folder] = program.main([str(copy), "--name", "loose", "--records", str(tmp_path / "r"),
+                             "--allow-unsealed"])  # fmt: skip
+    assert json.loads((folder / "record.json").read_text())["unsealed"] is True
+    capsys.readouterr()
+    program.main(["--check", str(folder)])
+    assert "made with --allow-unsealed (its run's config.json unchecked)" in capsys.readouterr().out
+
+
+def test_a_record_of_the_format_before_is_upgraded_once_it_checks(finished, tmp_path):
+    """--check names --upgrade for a format-2 record; --upgrade adds the digest after checking
+    the record whole, and leaves a record that does not check as it was."""
+    from pngail_jax.programs import record as program
+
+    [folder] = program.main([str(finished), "--name", "old", "--records", str(tmp_path)])
+    record = json.loads((folder / "record.json").read_text())
+    old = {k: v for k, v in record.items() if k not in ("digest", "unsealed")} | {"format": 2}
+    (folder / "record.json").write_text(json.dumps(old))
+    with pytest.raises(SystemExit, match="not a run record of format 3: bring it up to date "
+                       f"with python -m experiments.record --upgrade {folder}"):  # fmt: skip
+        program.main(["--check", str(folder)])
+    program.main(["--upgrade", str(folder)])
+    upgraded = json.loads((folder / "record.json").read_text())
+    assert upgraded == {**record, "unsealed": None, "digest": upgraded["digest"]}
+    program.main(["--check", str(folder)])
+    bad = json.loads(json.dumps(old))
+    bad["final_normalized_return"]["gail"][0] += 0.5
+    (folder / "record.json").write_text(json.dumps(bad))
+    before = (folder / "record.json").read_bytes()
+    with pytest.raises(SystemExit, match="its final_normalized_return differs"):
+        program.main(["--upgrade", str(folder)])
+    assert (folder / "record.json").read_bytes() == before
+
+
+def edit_metrics(run, change):
+    """``change(row)`` applied to every row of ``run``'s metrics.csv (a dict per row)."""
+    path = run / "metrics.csv"
+    rows = read_csv(path)
+    for row in rows:
+        change(row)
+    with path.open("w", newline="") as file:
+        writer = csv.DictWriter(file, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def test_the_verification_reads_every_number_it_passes_on(finished, tmp_path):
+    """Every program that reads a run (compare, record, resume) refuses, in one line naming
+    the file, method, seed and iteration: a normalised return edited alone; evaluations
+    edited in both columns, consistently, before the last (the training average no longer
+    the summary's) or at it (the final return no longer the summary's); a late average edited
+    in summary.json; a normaliser edited in summary.json."""
+    from pngail_jax.programs import compare as compare_program
+    from pngail_jax.programs import record as record_program
+
+    config = json.loads((finished / "config.json").read_text())
+    random_return, optimal_return = config["resolved"]["normalizer"]
+
+    def both(iteration, value):
+        def change(row):
+            if (row["method"], row["seed"], row["iteration"]) == ("pngail", "1", iteration):
+                row["eval_return"] = f"{value:.6g}"
+                row["normalized_return"] = (
+                    f"{(value - random_return) / (optimal_return - random_return):.6g}"
+                )
+
+        return change
+
+    def alone(row):
+        if (row["method"], row["seed"], row["iteration"]) == ("gail", "0", "4"):
+            row["normalized_return"] = "0.9"
+
+    def summary_edit(run, edit):
+        path = run / "summary.json"
+        summary = json.loads(path.read_text())
+        edit(summary)
+        path.write_text(json.dumps(summary))
+
+    cases = [
+        (lambda run: edit_metrics(run, alone),
+         r"metrics.csv: gail seed 0 iteration 4: normalised return 0.9 is not its evaluation"),
+        (lambda run: edit_metrics(run, both("2", -150.0)),
+         r"summary.json gives pngail seed 1 average_return .* \(iterations 1-4\)"),
+        (lambda run: edit_metrics(run, both("4", -150.0)),
+         r"summary.json says pngail seed 1 ended at .* \(iteration 4\)"),
+        (lambda run: summary_edit(run, lambda s: s["methods"]["gail"]["per_seed"][0].update(
+            late_average_normalized_return=0.7)),
+         r"summary.json gives gail seed 0 late_average_normalized_return 0.7, metrics.csv's "
+         r"evaluations \(iteration 4\)"),
+        (lambda run: summary_edit(run, lambda s: s.update(normalizer=[-1000.0, 0.0])),
+         r"summary.json's normaliser \[-1000.0, 0.0\] is not config.json's"),
+    ]  # fmt: skip
+    for index, (damage, message) in enumerate(cases):
+        run = tmp_path / f"run{index}"
+        shutil.copytree(finished, run)
+        damage(run)
+        for program, argv in (
+            (compare_program, [str(run), "--out", str(tmp_path / f"cmp{index}")]),
+            (record_program, [str(run), "--name", "r", "--records", str(tmp_path / "rec")]),
+            (sweep, ["--resume", str(run)]),
+        ):
+            with pytest.raises(SystemExit, match=message) as refused:
+                program.main(argv)
+            assert "\n" not in str(refused.value.code), refused.value.code
+        assert not (tmp_path / f"cmp{index}").exists() and not (tmp_path / "rec").exists()
 
 
 def test_compare_expected_says_where_a_run_lies_against_a_record(finished, tmp_path):
@@ -645,6 +826,46 @@ def test_compare_expected_says_where_a_run_lies_against_a_record(finished, tmp_p
         run_records.expected_rows(Scores(far.values, statistic="final"), record)[0]["verdict"]
         == "within"
     )
+
+
+def test_compare_expected_compares_like_with_like(finished, demos_path, tmp_path, monkeypatch):
+    """compare --expected says when either side is unfinished and compares only runs at the
+    record's iterations: a run stopped at 2 of 4 iterations is refused against the finished
+    record (not "below by ..."), and set against a record of itself it is compared with a
+    note saying both are unfinished; a run of another program than the record's is refused."""
+    from pngail_jax.programs import compare as compare_program
+    from pngail_jax.programs import record as record_program
+
+    [whole] = record_program.main([str(finished), "--name", "whole", "--records",
+                                   str(tmp_path / "r")])  # fmt: skip
+    partial = tmp_path / "partial"
+    save = chunks.save_checkpoint
+
+    def killed_at_the_second_checkpoint(directory, progress, host_state, writer):
+        if progress.chunks_done == 2:
+            raise Killed
+        save(directory, progress, host_state, writer)
+
+    monkeypatch.setattr(chunks, "save_checkpoint", killed_at_the_second_checkpoint)
+    with pytest.raises(Killed):
+        sweep.main(tiny_sweep_args(demos_path, partial))
+    monkeypatch.undo()
+    with pytest.raises(SystemExit, match=f"{partial} reached 2 of 4 iterations, the record whole "
+                       "4 of 4: compare like with like"):  # fmt: skip
+        compare_program.main([str(partial), "--expected", str(whole),
+                              "--out", str(tmp_path / "c1")])  # fmt: skip
+    assert not (tmp_path / "c1").exists()
+    [cut] = record_program.main([str(partial), "--name", "cut", "--records", str(tmp_path / "r")])
+    out = compare_program.main([str(partial), "--expected", str(cut),
+                                "--out", str(tmp_path / "c2")])  # fmt: skip
+    text = (out / "compare.md").read_text()
+    assert "Note: the record cut is unfinished: 2 of 4 iterations." in text
+    assert f"Note: {partial} is unfinished: 2 of 4 iterations." in text
+    offline_record = Path(__file__).parents[1] / "records" / "offline-pendulum"
+    with pytest.raises(SystemExit, match=f"{finished} is a run of experiments.sweep, the record "
+                       "offline-pendulum of experiments.offline"):  # fmt: skip
+        compare_program.main([str(finished), "--expected", str(offline_record),
+                              "--out", str(tmp_path / "c3")])  # fmt: skip
 
 
 def test_every_program_that_reads_a_run_verifies_it_the_same_way(finished, tmp_path, capsys):

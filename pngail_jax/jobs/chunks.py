@@ -32,6 +32,7 @@ from pngail_jax.integrity import (
     write_manifest,
 )
 from pngail_jax.jobs.errors import RunError
+from pngail_jax.outputs import record_held_outputs
 
 
 @dataclasses.dataclass
@@ -94,10 +95,11 @@ def run_chunks(
     chunk step: run, fetch, join the metrics, time (``steps_per_chunk`` environment steps),
     print ``line(progress, chunk_metrics)``, checkpoint into ``checkpoints`` (when given;
     every process takes part, ``writer`` writes) and call ``after(state, host_state,
-    chunk_metrics)``. A chunk expected to run long gets a line when it starts. A stop asked
-    for meanwhile (``stop_after_this_chunk``) raises ``KeyboardInterrupt`` once the chunk's
-    checkpoint is written. Returns the state and the last host copy of it (None without
-    checkpoints)."""
+    chunk_metrics)``, then bring the list of files of the run ``checkpoints`` lies in up to
+    date (``outputs.record_held_outputs``). A chunk expected to run long gets a line when it
+    starts. A stop asked for meanwhile (``stop_after_this_chunk``) raises ``KeyboardInterrupt``
+    once the chunk's checkpoint is written. Returns the state and the last host copy of it
+    (None without checkpoints)."""
     host_state = None
     while progress.chunks_done < num_chunks:
         notice = long_chunk_notice(progress, num_chunks, grid.iterations_per_chunk)
@@ -114,6 +116,7 @@ def run_chunks(
                 save_checkpoint(checkpoints, progress, host_state, writer)
             if after is not None:
                 after(state, host_state, chunk_metrics)
+            record_held_outputs(checkpoints)  # a run killed later lists what it wrote so far
     return state, host_state
 
 

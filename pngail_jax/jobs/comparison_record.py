@@ -31,7 +31,9 @@ from pngail_jax.jobs.compare_settings import (
     trained_on,
 )
 from pngail_jax.outputs import output_owner
-from pngail_jax.run_records import FORMAT, MACHINE_KEYS, RECORD_FILE, RecordError, check_name
+from pngail_jax.run_records import MACHINE_KEYS, RECORD_FILE, RecordError, check_name
+
+FORMAT = 2  # a comparison record's own (a run record's is run_records.FORMAT)
 
 KIND = "comparison"
 

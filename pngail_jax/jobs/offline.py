@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import jax
@@ -24,7 +25,7 @@ from pngail_jax import settings as run_settings
 from pngail_jax.config_record import provenance
 from pngail_jax.demos import DemonstrationError
 from pngail_jax.grid import Grid, make_cells, nonfinite_cells
-from pngail_jax.integrity import CONFIG_SEAL, IntegrityError, read_json, write_json, write_sealed
+from pngail_jax.integrity import CONFIG_SEAL, read_json, write_json, write_sealed
 from pngail_jax.jobs.chunks import (
     Progress,
     blocks_per_chunk,
@@ -35,8 +36,8 @@ from pngail_jax.jobs.chunks import (
 )
 from pngail_jax.jobs.demonstrations import input_files, load_or_make_demos, resolve_normalizer
 from pngail_jax.jobs.errors import RunError, refusals
+from pngail_jax.jobs.offline_config import PROGRAM, OfflineRunConfig, load_offline_config
 from pngail_jax.offline import (
-    DEFAULT_OFFLINE_METHODS,
     OfflineConfig,
     OfflineTrainer,
     program_groups,
@@ -44,107 +45,26 @@ from pngail_jax.offline import (
     stack_offline_cells,
 )
 from pngail_jax.outputs import claimed
-from pngail_jax.run_config import RunConfig
 from pngail_jax.runs import UntrustedRun, sealed_part, verify_run
 from pngail_jax.tracking import ticking
 
-PROGRAM = "offline"
-
-
-@dataclasses.dataclass(frozen=True)
-class OfflineRunConfig:
-    """One offline grid: methods x seeds on one task's demonstrations."""
-
-    env: str = "Pendulum-v1"
-    demos: str | None = None  # None: made once and cached, as the sweep's
-    conf: str | None = None
-    action_scale: float | None = None
-    methods: tuple[str, ...] = DEFAULT_OFFLINE_METHODS
-    seeds: int = 5
-    seed: int = 0
-    label_ratio: float = 0.2
-    noise_std: float = 0.0
-    gradient_steps: int = 50_000
-    steps_per_iteration: int = 1_000
-    eval_every: int = 5  # iterations (of steps_per_iteration) per evaluation
-    chunk_iterations: int = 10
-    batch_size: int = 256
-    num_eval_episodes: int | None = None  # None: the task's (RunSettings)
-    hidden_sizes: tuple[int, ...] = (100, 100)
-    ilid_discriminator_steps: int = 100_000  # each of ILID's two, before its policy (codebase's)
-    ilid_discriminator_learning_rate: float = 1e-5  # its codebase's Adam step size
-
-    def __post_init__(self):
-        if not self.methods or len(set(self.methods)) != len(self.methods):
-            raise ValueError(f"methods must be distinct and not empty, got {self.methods!r}")
-        required_components(self.methods)  # unknown names: one line naming them
-        for name in ("seeds", "gradient_steps", "steps_per_iteration", "eval_every",
-                     "chunk_iterations", "batch_size", "ilid_discriminator_steps"):  # fmt: skip
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"{name} must be a positive integer, got {value!r}")
-        block = self.steps_per_iteration * self.eval_every
-        if self.gradient_steps % block:
-            raise ValueError(
-                f"gradient_steps ({self.gradient_steps}) must be a multiple of "
-                f"steps_per_iteration x eval_every = {block} (one evaluation each)"
-            )
-        if not 0 < self.label_ratio < 1:
-            raise ValueError(f"label_ratio must lie in (0, 1), got {self.label_ratio!r}")
-        if not 0 < self.ilid_discriminator_learning_rate < 1:
-            raise ValueError(
-                "ilid_discriminator_learning_rate must lie in (0, 1), got "
-                f"{self.ilid_discriminator_learning_rate!r}"
-            )
-
-    @property
-    def run_config(self) -> RunConfig:
-        """The sweep's config of the same task and files: what the demonstrations, the
-        normaliser and the environment are read with."""
-        return RunConfig(
-            env=self.env, demos=self.demos, conf=self.conf, action_scale=self.action_scale,
-            methods=("gail",), seeds=self.seeds, seed=self.seed,
-            label_ratios=(self.label_ratio,), noise_stds=(self.noise_std,),
-        )  # fmt: skip
-
-    def trainer_config(self, num_rows: int) -> OfflineConfig:
-        run_config = self.run_config
-        return OfflineConfig(
-            num_iterations=self.gradient_steps // self.steps_per_iteration,
-            steps_per_iteration=self.steps_per_iteration,
-            eval_every=self.eval_every,
-            num_eval_episodes=self.num_eval_episodes or run_config.settings.num_eval_episodes,
-            batch_size=self.batch_size,
-            hidden_sizes=self.hidden_sizes,
-            num_demos=run_config.task_num_demos(num_rows),
-            classifier=run_config.adversarial_config(num_rows).classifier,
-            ilid_discriminator_steps=self.ilid_discriminator_steps,
-            components=required_components(self.methods),
-        )
-
-
-def load_offline_config(out: str | Path) -> OfflineRunConfig:
-    """The config an offline run in ``out`` began with (its config.json), or RunError."""
-    path = Path(out) / "config.json"
-    try:
-        document = read_json(path, "offline run config")
-        values = dict(document["config"])
-        if document.get("program") != PROGRAM:
-            raise ValueError(f"written by {document.get('program')!r}")
-        for name in ("methods", "hidden_sizes"):
-            values[name] = tuple(values[name])
-        return OfflineRunConfig(**values)
-    except (IntegrityError, KeyError, TypeError, ValueError) as error:
-        raise RunError(
-            f"cannot resume {out}: no offline run's config.json there ({error})"
-        ) from None
+__all__ = ["OfflineRunConfig", "load_offline_config", "run_offline"]
 
 
 def run_offline(
-    config: OfflineRunConfig, out: str | Path, overwrite: bool = False, resume: bool = False
+    config: OfflineRunConfig,
+    out: str | Path,
+    overwrite: bool = False,
+    resume: bool = False,
+    *,
+    command: Sequence[str] | None = None,
+    allow_unsealed: bool = False,
 ) -> dict:
     """Trains the grid and writes its outputs into ``out``; returns the summary. Raises
     ``RunError`` with one line for a refused output directory or unusable inputs.
+    ``command``: the command line recorded in ``config.json`` (default: this process's), as
+    it can be run again; ``allow_unsealed``: resume a run whose config seal is missing (its
+    config.json unchecked, which the output says).
 
     Each program keeps a checkpoint after every chunk (``checkpoints/<its methods>/``); with
     ``resume`` the run in ``out`` (begun with this ``config``, on the same input files)
@@ -158,7 +78,7 @@ def run_offline(
     with refusals(), claimed(out, PROGRAM, overwrite=overwrite, resume=resume) as claim:
         run_config = config.run_config
         if resume:
-            _check_resumable(out, config)
+            _check_resumable(out, config, allow_unsealed)
         env, demos, demos_path = _environment_and_demos(config)
         normalizer, normalizer_source = resolve_normalizer(run_config, demos, env)
         document = {
@@ -169,7 +89,7 @@ def run_offline(
             "normalizer": normalizer,
             "normalizer_source": normalizer_source,
             "complete": False,
-            "provenance": provenance(program=PROGRAM),
+            "provenance": provenance(command=command),
         }
         if not resume:
             _begin(claim, out, document)
@@ -192,17 +112,19 @@ def run_offline(
         compile_seconds = sum(grid.compile_seconds for grid, _, _ in runs)
         progress = _joined(cells, runs)
         summary = _write_outputs(out, config, cells, progress, normalizer, compile_seconds)
-        _complete(out, document, trainer_config, progress, start_time, resume)
+        _complete(out, document, trainer_config, progress, start_time, resume, command)
     print(f"-> {out}/{{config.json,metrics.csv,summary.md,summary.json,curves.png}}")
     return summary
 
 
-def _complete(out: Path, document, trainer_config, progress, start_time, resume) -> None:
+def _complete(
+    out: Path, document, trainer_config, progress, start_time, resume, command=None
+) -> None:
     """config.json marked complete, with the trainer's fields and the run's seconds (a resumed
     run keeps the document it began with, this session's machine beside it)."""
     if resume:
         document = read_json(out / "config.json", "offline run config")
-        document["resumed_provenance"] = provenance(program=PROGRAM)
+        document["resumed_provenance"] = provenance(command=command)
     trainer = _json_config(dataclasses.replace(trainer_config, components=()))
     seconds = {"wall_seconds": time.perf_counter() - start_time,
                "train_seconds": progress.timing["seconds"]}  # fmt: skip
@@ -225,11 +147,13 @@ def _begin(claim, out: Path, document: dict) -> None:
     write_sealed(out / "config.json", document, out / CONFIG_SEAL, sealed_part(document))
 
 
-def _check_resumable(out: Path, config: OfflineRunConfig) -> None:
+def _check_resumable(out: Path, config: OfflineRunConfig, allow_unsealed: bool = False) -> None:
     """RunError unless the run in ``out`` is one to continue with ``config``: trusted by
-    ``runs.verify_run`` (its seal, input files, metrics against summary) and begun with it."""
+    ``runs.verify_run`` (its seal, unless ``allow_unsealed``, input files, metrics against
+    summary) and begun with it."""
     try:
-        verify_run(out, f"cannot resume {out}")
+        for note in verify_run(out, f"cannot resume {out}", allow_unsealed=allow_unsealed):
+            print(f"note: {note}", flush=True)
     except UntrustedRun as error:
         raise RunError(str(error)) from None
     if load_offline_config(out) != config:

@@ -159,10 +159,7 @@ def write_config(out: Path, run: BuiltRun, command: Sequence[str] | None = None)
             "methods": {name: preset_record(name) for name in run.config.methods},
             "inputs": input_files(run.config, run.demos_path),
         },
-        "provenance": {
-            **provenance(),
-            **({} if command is None else {"command_line": list(command)}),
-        },
+        "provenance": provenance(command=command),
     }
     # What the run is created with, apart from the file a user may edit: every resume
     # compares config.json with it (provenance aside) and refuses a change, naming it.

@@ -237,6 +237,18 @@ def signals_stop_at_a_checkpoint():
             signal.signal(number, handler)
 
 
+def interrupted(out: Path, finished: str = "chunks") -> str:
+    """The one line a program ends with on Ctrl-C (or a scheduler's SIGTERM): what it kept in
+    ``out`` (its ``finished`` pieces: chunks, blocks) and how to continue, or that nothing
+    was written when the run had not begun."""
+    if (Path(out) / "config.json").exists():
+        return (
+            f"\ninterrupted: finished {finished} are kept; --resume {out} continues from the "
+            "last one"
+        )
+    return "\ninterrupted before the run began: nothing was written"
+
+
 def invoked_as(program: str) -> list[str]:
     """The words that start ``program`` as this process was started: the installed command
     (``pngail-sweep``) when it runs as one, else ``python -m experiments.<program>`` (a

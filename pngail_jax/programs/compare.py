@@ -116,9 +116,11 @@ def _against_record(args, scores) -> tuple[dict, str]:
     from pngail_jax.integrity import read_json
 
     record = run_records.check_record(args.expected)
+    notes = run_records.check_comparable(args.runs, record)
     rows = run_records.expected_rows(scores, record)
     config = read_json(args.runs[0] / "config.json", "run config")
     differences = run_records.config_differences(config, record)
-    text = "\n" + run_records.expected_markdown(rows, record, differences, scores.statistic)
-    info = {"record": str(args.expected), "config_differences": differences, "rows": rows}
+    text = "\n" + run_records.expected_markdown(rows, record, differences, scores.statistic, notes)
+    info = {"record": str(args.expected), "config_differences": differences, "rows": rows,
+            "unfinished": notes}  # fmt: skip
     return {"expected": info}, text

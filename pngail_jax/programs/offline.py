@@ -14,6 +14,7 @@ docs/methods.md ("Offline methods") has the losses and their codebases' settings
 from __future__ import annotations
 
 import argparse
+import sys
 
 from pngail_jax.demos import released_task
 from pngail_jax.jobs.errors import RunError
@@ -24,10 +25,14 @@ from pngail_jax.programs.cli import (
     ENV_HELP,
     ArgumentParser,
     HelpFormatter,
+    add_allow_unsealed,
     add_compile_cache_flags,
     check_env,
     claim_output,
+    interrupted,
+    invoked_as,
     path_argument,
+    signals_stop_at_a_checkpoint,
     use_compile_cache,
 )
 
@@ -92,6 +97,7 @@ def build_parser() -> ArgumentParser:
     parser.add_argument(
         "--overwrite", action="store_true", help="replace an earlier offline run in --out"
     )
+    add_allow_unsealed(parser.add_argument, "--resume a run")
     add_compile_cache_flags(parser)
     return parser
 
@@ -99,14 +105,20 @@ def build_parser() -> ArgumentParser:
 def parse_args(argv=None) -> argparse.Namespace:
     """The checked flags of ``argv``: a resumed run's folder, or a new run's config."""
     parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
     args = parser.parse_args(argv)
+    args.argv = argv
     if args.resume is not None:
         if args.out is not None and args.out != args.resume:
             parser.error("--resume DIR continues the run in DIR: drop --out")
-        if output_owner(args.resume) != "offline":
-            parser.error(f"--resume {args.resume}: not an offline run")
+        owner = output_owner(args.resume)
+        if owner != "offline":
+            held = f"it holds a run of experiments.{owner}" if owner else "no offline run there"
+            parser.error(f"--resume {args.resume}: {held}")
         args.out = args.resume
         return args
+    if args.allow_unsealed:
+        parser.error("--allow-unsealed is for --resume DIR (a new run writes its own seal)")
     if args.out is None:
         parser.error("--out is required (or --resume DIR)")
     claim_output(parser, args.out, "offline", args.overwrite)
@@ -131,10 +143,15 @@ def parse_args(argv=None) -> argparse.Namespace:
 def main(argv=None) -> dict:
     args = parse_args(argv)
     use_compile_cache(args)
+    command = [*invoked_as("offline"), *args.argv]
     try:
-        if args.resume is not None:
-            config = load_offline_config(args.resume)
-            return run_offline(config, args.resume, resume=True)
-        return run_offline(args.config, args.out, overwrite=args.overwrite)
+        with signals_stop_at_a_checkpoint():  # a scheduler's SIGTERM stops it as Ctrl-C does
+            if args.resume is not None:
+                config = load_offline_config(args.resume)
+                return run_offline(config, args.resume, resume=True, command=command,
+                                   allow_unsealed=args.allow_unsealed)  # fmt: skip
+            return run_offline(args.config, args.out, overwrite=args.overwrite, command=command)
     except RunError as error:
         raise SystemExit(str(error)) from None
+    except KeyboardInterrupt:
+        raise SystemExit(interrupted(args.out, "chunks")) from None

@@ -10,10 +10,10 @@ gzipped (every cell and iteration): what a results table in the docs rests on, w
 checkpoints, policies or plots. Writing one checks it; ``--check`` verifies kept ones (the
 metrics file against its digest, whole against the config, the final returns recomputed).
 A table in README.md or docs/ between ``<!-- record-table NAME -->`` and
-``<!-- /record-table -->`` is ``run_records.record_table`` of ``records/NAME`` (with
+``<!-- /record-table -->`` is ``record_tables.record_table`` of ``records/NAME`` (with
 ``baseline=METHOD`` after the name: each method's probability of improvement over it), and one
 between ``<!-- record-glance NAME NAME ... -->`` and ``<!-- /record-glance -->`` is
-``run_records.glance_table`` of those records (a row per task), and one between
+``record_tables.glance_table`` of those records (a row per task), and one between
 ``<!-- record-comparison NAME -->`` and ``<!-- /record-comparison -->`` the table of a
 recorded ``experiments.compare_settings`` comparison (``jobs.comparison_record``: RUN_DIR a
 finished comparison's folder); ``<!-- record-contrast NAME NAME ... baseline=ARM
@@ -25,16 +25,24 @@ each one's baseline on the task's own physics, with each arm's probability of im
 diagnostics per block of environment steps, and ``<!-- record-seeds NAME turn=LEVEL
 [methods=A,B] -->`` (closed by ``<!-- /record-seeds -->``) its seeds side by side (the
 lowest evaluation, the turn above LEVEL, the classifier's error): ``--docs`` writes them,
-and tests/test_docs_tables.py fails when one differs from its records.
+and tests/test_docs_tables.py fails when one differs from its records. Both read every
+marker of a document with ``parse_markers``, which refuses in one line naming the file and
+line a marker it cannot read (one not closed before the next, a closing one with none open,
+an unknown kind or option, a value that does not parse); ``--docs`` reads every document's
+markers and computes every table before it writes any, so a broken one writes nothing.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import math
 import re
+from collections.abc import Callable
 from pathlib import Path
 
-from pngail_jax import run_records
+from pngail_jax import record_tables, run_records
+from pngail_jax.integrity import atomic_write_text
 from pngail_jax.jobs import comparison_record
 from pngail_jax.programs.cli import (
     ArgumentParser,
@@ -57,6 +65,11 @@ def parse_args(argv=None) -> argparse.Namespace:
         help="where records are kept (default records/; experiments.paper's runs go to results/)",
     )  # fmt: skip
     parser.add_argument("--check", action="store_true", help="verify records instead")
+    parser.add_argument(
+        "--upgrade", action="store_true",
+        help="bring run records of the format before this one up to date (their digest added, "
+        "checked whole; the file is left as it was when the check fails)",
+    )  # fmt: skip
     add_allow_unsealed(
         parser.add_argument, "record a sweep or offline run (a comparison has no seal)"
     )
@@ -68,8 +81,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     )  # fmt: skip
     args = parser.parse_args(argv)
     if args.docs:
-        if args.paths or args.name or args.check:
-            parser.error("--docs takes no run, --name or --check")
+        if args.paths or args.name or args.check or args.upgrade:
+            parser.error("--docs takes no run, --name, --check or --upgrade")
+        return args
+    if args.upgrade:
+        if not args.paths or args.name or args.check:
+            parser.error("--upgrade takes the records to upgrade alone: --upgrade records/NAME ...")
         return args
     if not args.check and (len(args.paths) != 1 or not args.name):
         parser.error("record one run at a time: RUN_DIR --name NAME (or --check RECORD ...)")
@@ -80,45 +97,239 @@ def parse_args(argv=None) -> argparse.Namespace:
     return args
 
 
-MARKED = re.compile(
-    r"(<!-- record-table (?P<name>[\w.-]+)(?: baseline=(?P<baseline>[\w.+-]+))? -->\n)"
-    r"(?P<table>.*?)(?P<end><!-- /record-table -->)",
-    re.S,
-)
-# A compare_settings comparison's table (``jobs.comparison_record``).
-COMPARED = re.compile(
-    r"(<!-- record-comparison (?P<name>[\w.-]+) -->\n)(?P<table>.*?)"
-    r"(?P<end><!-- /record-comparison -->)",
-    re.S,
-)
-# A recorded run's learning or diagnostics per block of environment steps
-# (``run_records.block_table``, ``run_records.diagnostics_table``).
-BLOCKED = re.compile(
-    r"(<!-- record-(?P<kind>blocks|diagnostics) (?P<name>[\w.-]+) block=(?P<block>\d+)"
-    r"(?: methods=(?P<methods>[\w.+,-]+))? -->\n)(?P<table>.*?)(?P<end><!-- /record-(?P=kind) -->)",
-    re.S,
-)
-# A recorded run's seeds side by side (``run_records.seed_table``).
-SEEDED = re.compile(
-    r"(<!-- record-seeds (?P<name>[\w.-]+) turn=(?P<turn>-?[\d.]+)"
-    r"(?: methods=(?P<methods>[\w.+,-]+))? -->\n)(?P<table>.*?)(?P<end><!-- /record-seeds -->)",
-    re.S,
-)
-# Several comparisons' arms against each one's baseline (``comparison_record.contrast_table``).
-CONTRASTED = re.compile(
-    r"(<!-- record-contrast (?P<name>[\w.-]+(?: [\w.-]+)*) baseline=(?P<baseline>[\w.-]+) "
-    r"arms=(?P<arms>[\w.,-]+) -->\n)(?P<table>.*?)(?P<end><!-- /record-contrast -->)",
-    re.S,
-)
-# Several records in one table (``run_records.glance_table``): names separated by spaces.
-GLANCED = re.compile(
-    r"(<!-- record-glance (?P<name>[\w.-]+(?: [\w.-]+)*) -->\n)"
-    r"(?P<table>.*?)(?P<end><!-- /record-glance -->)",
-    re.S,
-)
+RECORD_NAME = re.compile(r"[\w.-]+")  # a folder of records/
+METHOD_NAME = re.compile(r"[\w.+-]+")  # a method of a record (bc-all, pngail)
+ARM_NAME = re.compile(r"[\w.-]+")  # an arm of a compare_settings comparison
 
 
-PATTERNS = (MARKED, GLANCED, COMPARED, BLOCKED, CONTRASTED, SEEDED)
+# Option parsers: each gives the value as the table wants it, or ValueError saying what the
+# value must be.
+
+
+def _word(value: str, pattern: re.Pattern, what: str) -> str:
+    if not pattern.fullmatch(value):
+        raise ValueError(f"must be {what}")
+    return value
+
+
+def _method(value: str) -> str:
+    return _word(value, METHOD_NAME, "a method's name")
+
+
+def _methods(value: str) -> list[str]:
+    return [_word(name, METHOD_NAME, "methods' names, A,B") for name in value.split(",")]
+
+
+def _arm(value: str) -> str:
+    return _word(value, ARM_NAME, "an arm's name")
+
+
+def _arms(value: str) -> list[str]:
+    return [_word(name, ARM_NAME, "arms' names, A,B") for name in value.split(",")]
+
+
+def _block_steps(value: str) -> int:
+    if not re.fullmatch(r"[0-9]+", value) or int(value) == 0:
+        raise ValueError("must be a positive whole number of environment steps")
+    return int(value)
+
+
+def _level(value: str) -> float:
+    try:
+        level = float(value)
+    except ValueError:
+        level = math.nan
+    if not math.isfinite(level):
+        raise ValueError("must be a number")
+    return level
+
+
+@dataclasses.dataclass(frozen=True)
+class MarkerKind:
+    """What one kind of record marker takes: one record name or several, and its options,
+    each with its parser (the value as the table wants it, or ValueError saying what the value
+    must be)."""
+
+    usage: str  # the marker as the docs write it
+    several_records: bool = False
+    required: dict[str, Callable[[str], object]] = dataclasses.field(default_factory=dict)
+    optional: dict[str, Callable[[str], object]] = dataclasses.field(default_factory=dict)
+
+
+# Every kind a marker may have, keyed by what follows ``record-``. record-blocks takes no
+# methods= (``record_tables.block_table`` shows every method), so one given there is refused
+# rather than ignored.
+MARKER_KINDS = {
+    "table": MarkerKind("record-table NAME [baseline=METHOD]", optional={"baseline": _method}),
+    "glance": MarkerKind("record-glance NAME NAME ...", several_records=True),
+    "comparison": MarkerKind("record-comparison NAME"),
+    "blocks": MarkerKind("record-blocks NAME block=STEPS", required={"block": _block_steps}),
+    "diagnostics": MarkerKind(
+        "record-diagnostics NAME block=STEPS [methods=A,B]",
+        required={"block": _block_steps},
+        optional={"methods": _methods},
+    ),
+    "seeds": MarkerKind(
+        "record-seeds NAME turn=LEVEL [methods=A,B]",
+        required={"turn": _level},
+        optional={"methods": _methods},
+    ),
+    "contrast": MarkerKind(
+        "record-contrast NAME NAME ... baseline=ARM arms=A,B",
+        several_records=True,
+        required={"baseline": _arm, "arms": _arms},
+    ),
+}
+
+# A record marker: a whole line ``<!-- record-KIND ... -->`` or ``<!-- /record-KIND -->``.
+MARKER_LINE = re.compile(r"<!--\s*(?P<closing>/?)record-(?P<body>.*?)\s*-->(?P<rest>.*)")
+# Anything that looks like one, wherever it is on a line.
+MARKER_START = re.compile(r"<!--\s*/?record-")
+FENCE = re.compile(r"\s*(?P<fence>`{3,}|~{3,})")
+
+
+@dataclasses.dataclass(frozen=True)
+class Marker:
+    """One marked table of a document: its kind, record names and options (parsed), the
+    opening marker's line number, and the table between the markers with its character
+    offsets in the document's text."""
+
+    kind: str
+    names: tuple[str, ...]
+    options: dict[str, object]
+    line: int
+    start: int
+    end: int
+    table: str
+
+
+def _marker_line(where: str, line: str) -> tuple[bool, str, list[str]] | None:
+    """(closing, kind, the words after the kind) of a marker line; None for a line holding
+    none. A marker not alone on its line, unindented, is refused: the table it would open
+    would be left unchecked (a mention in prose is quoted in backticks)."""
+    line = line.rstrip("\n")
+    for found in MARKER_START.finditer(line):
+        if found.start() > 0 and line[found.start() - 1] != "`":
+            raise run_records.RecordError(
+                f"{where}: a record marker must stand alone on its line, unindented "
+                "(to mention one in prose, quote it in backticks)"
+            )
+    if not MARKER_START.match(line):
+        return None
+    marker = MARKER_LINE.fullmatch(line)
+    if marker is None:
+        raise run_records.RecordError(f"{where}: a record marker must end with --> on its line")
+    if marker["rest"].strip():
+        raise run_records.RecordError(f"{where}: nothing may follow a record marker on its line")
+    kind, *words = marker["body"].split() or [""]
+    if kind not in MARKER_KINDS:
+        known = ", ".join(f"record-{name}" for name in MARKER_KINDS)
+        raise run_records.RecordError(
+            f"{where}: unknown record marker kind 'record-{kind}' (known: {known})"
+        )
+    return bool(marker["closing"]), kind, words
+
+
+def _opening(where: str, kind: str, words: list[str]) -> tuple[tuple[str, ...], dict]:
+    """The record names and parsed options of an opening marker's words; RecordError for a
+    wrong number of names, a name or option it does not take, a value that does not parse or
+    a required option missing."""
+    spec = MARKER_KINDS[kind]
+    usage = f"(<!-- {spec.usage} -->)"
+    names = tuple(word for word in words if "=" not in word)
+    if not names or (len(names) > 1 and not spec.several_records):
+        wanted = "one record name or more" if spec.several_records else "one record name"
+        raise run_records.RecordError(
+            f"{where}: record-{kind} takes {wanted}, not {len(names)} {usage}"
+        )
+    for name in names:
+        if not RECORD_NAME.fullmatch(name):
+            raise run_records.RecordError(f"{where}: '{name}' is not a record's name {usage}")
+    parsers, options = spec.required | spec.optional, {}
+    for word in words:
+        if "=" not in word:
+            continue
+        key, value = word.split("=", 1)
+        if key not in parsers:
+            raise run_records.RecordError(
+                f"{where}: record-{kind} takes no option '{key}=' {usage}"
+            )
+        if key in options:
+            raise run_records.RecordError(f"{where}: record-{kind} has {key}= twice")
+        try:
+            options[key] = parsers[key](value)
+        except ValueError as error:
+            raise run_records.RecordError(
+                f"{where}: record-{kind} {word}: {key}= {error}"
+            ) from None
+    missing = [f"{key}=" for key in spec.required if key not in options]
+    if missing:
+        raise run_records.RecordError(
+            f"{where}: record-{kind} needs {' and '.join(missing)} {usage}"
+        )
+    return names, options
+
+
+def parse_markers(path: Path, text: str) -> list[Marker]:
+    """Every marked table of ``text`` (the document at ``path``), read before anything is
+    written; RecordError naming ``path:line`` for a marker not closed by one of its kind
+    before the next marker (or the end), a closing marker with nothing open, an unknown kind
+    or option, a value that does not parse, a required option missing, or a marker not alone
+    on its line. Lines in fenced code blocks are text, not markers."""
+    markers, opened, offset = [], None, 0
+    fence, fence_line, hidden = "", 0, 0  # an open code fence, where, a marker line inside
+    for number, line in enumerate(re.split(r"(?<=\n)", text), start=1):
+        where, start, offset = f"{path}:{number}", offset, offset + len(line)
+        if fence:
+            closing = line.strip()
+            if closing and set(closing) == {fence[0]} and len(closing) >= len(fence):
+                fence = ""
+            elif not hidden and MARKER_START.search(line):
+                hidden = number
+            continue
+        if found := FENCE.match(line):
+            fence, fence_line, hidden = found["fence"], number, 0
+            continue
+        marker = _marker_line(where, line)
+        if marker is None:
+            continue
+        closing, kind, words = marker
+        if closing:
+            if words:
+                raise run_records.RecordError(
+                    f"{where}: a closing marker is <!-- /record-{kind} -->, with nothing more"
+                )
+            if opened is None:
+                raise run_records.RecordError(
+                    f"{where}: <!-- /record-{kind} --> closes no marker (none is open)"
+                )
+            if opened["kind"] != kind:
+                raise run_records.RecordError(
+                    f"{where}: <!-- /record-{kind} --> cannot close the record-{opened['kind']} "
+                    f"marker of line {opened['line']}"
+                )
+            table = text[opened["start"] : start]
+            markers.append(Marker(**opened, end=start, table=table))
+            opened = None
+            continue
+        if opened is not None:
+            raise run_records.RecordError(
+                f"{path}:{opened['line']}: the record-{opened['kind']} marker is not closed "
+                f"by <!-- /record-{opened['kind']} --> before the next marker, on line {number}"
+            )
+        names, options = _opening(where, kind, words)
+        opened = dict(kind=kind, names=names, options=options, line=number, start=offset)
+    if opened is not None:
+        raise run_records.RecordError(
+            f"{path}:{opened['line']}: the record-{opened['kind']} marker is never closed by "
+            f"<!-- /record-{opened['kind']} -->"
+        )
+    if fence and hidden:
+        raise run_records.RecordError(
+            f"{path}:{fence_line}: this code fence is never closed, and hides the record "
+            f"marker of line {hidden}"
+        )
+    return markers
 
 
 def doc_files(root: Path = Path(".")) -> list[Path]:
@@ -126,62 +337,78 @@ def doc_files(root: Path = Path(".")) -> list[Path]:
     return [root / "README.md", *sorted((root / "docs").glob("*.md"))]
 
 
-def _methods(match: re.Match) -> list[str] | None:
-    """A marker's ``methods=A,B`` as a list (None where it names none: every method)."""
-    return match["methods"].split(",") if match["methods"] else None
-
-
-def _expected(match: re.Match, records: Path) -> str:
+def _expected(marker: Marker, records: Path) -> str:
     """The table a marker's records give (RecordError for one missing or failing its check)."""
-    if match.re is COMPARED:
-        return comparison_record.table(comparison_record.check(records / match["name"])) + "\n"
-    if match.re is BLOCKED:
-        folder = records / match["name"]
-        record, block = run_records.check_record(folder), int(match["block"])
-        if match["kind"] == "blocks":
-            return run_records.block_table(record, folder, block)
-        return run_records.diagnostics_table(record, folder, block, _methods(match))
-    if match.re is SEEDED:
-        folder = records / match["name"]
-        return run_records.seed_table(
-            run_records.check_record(folder), folder, float(match["turn"]), _methods(match)
+    folders = [records / name for name in marker.names]
+    options = marker.options
+    if marker.kind == "comparison":
+        return comparison_record.table(comparison_record.check(folders[0])) + "\n"
+    if marker.kind == "contrast":
+        checked = [comparison_record.check(folder) for folder in folders]
+        return comparison_record.contrast_table(checked, options["arms"], options["baseline"])
+    checked = [run_records.check_record(folder) for folder in folders]
+    if marker.kind == "glance":
+        return record_tables.glance_table(checked)
+    if marker.kind == "table":
+        return record_tables.record_table(checked[0], options.get("baseline"))
+    if marker.kind == "blocks":
+        return record_tables.block_table(checked[0], folders[0], options["block"])
+    if marker.kind == "diagnostics":
+        return record_tables.diagnostics_table(
+            checked[0], folders[0], options["block"], options.get("methods")
         )
-    if match.re is CONTRASTED:
-        checked = [comparison_record.check(records / name) for name in match["name"].split()]
-        return comparison_record.contrast_table(
-            checked, match["arms"].split(","), match["baseline"]
-        )
-    if match.re is GLANCED:
-        names = match["name"].split()
-        return run_records.glance_table([run_records.check_record(records / n) for n in names])
-    record = run_records.check_record(records / match["name"])
-    return run_records.record_table(record, match["baseline"])
+    return record_tables.seed_table(checked[0], folders[0], options["turn"], options.get("methods"))
+
+
+def _expected_tables(path: Path, markers: list[Marker], records: Path) -> list[str]:
+    """Each marker's expected table; a record's RecordError is prefixed with the marker's
+    ``path:line``, so the failing marker is found."""
+    tables = []
+    for marker in markers:
+        try:
+            tables.append(_expected(marker, records))
+        except run_records.RecordError as error:
+            raise run_records.RecordError(f"{path}:{marker.line}: {error}") from None
+    return tables
 
 
 def marked_tables(path: Path, records: Path = Path("records")) -> list[tuple[str, str, str]]:
     """(record name or names, the table in ``path``, the table its records give) for each
-    marked table of ``path``; RecordError for a record missing or failing its check."""
-    text = path.read_text()
+    marked table of ``path``, in the file's order; RecordError for a broken marker
+    (``parse_markers``) or a record missing or failing its check."""
+    markers = parse_markers(path, path.read_text())
+    expected = _expected_tables(path, markers, records)
     return [
-        (match["name"], match["table"], _expected(match, records))
-        for pattern in PATTERNS
-        for match in pattern.finditer(text)
+        (" ".join(marker.names), marker.table, table)
+        for marker, table in zip(markers, expected, strict=True)
     ]
+
+
+def _with_tables(text: str, markers: list[Marker], tables: list[str]) -> str:
+    """``text`` with each marker's table replaced by the matching one of ``tables``."""
+    pieces, cursor = [], 0
+    for marker, table in zip(markers, tables, strict=True):
+        pieces += [text[cursor : marker.start], table]
+        cursor = marker.end
+    return "".join(pieces) + text[cursor:]
 
 
 def rewrite_docs(root: Path = Path("."), records: Path = Path("records")) -> list[Path]:
     """Every marked table of ``doc_files`` rewritten from its records; returns the files
-    changed."""
-    changed = []
-    for path in doc_files(root):
-        text = path.read_text()
-        new = text
-        for pattern in PATTERNS:
-            new = pattern.sub(lambda m: m[1] + _expected(m, records) + m["end"], new)
+    changed. Every file's markers are parsed first, then every table computed (its records
+    checked), and only then is anything written, so a broken marker or record anywhere raises
+    RecordError and leaves every file as it was; each changed file is written atomically."""
+    texts = {path: path.read_text() for path in doc_files(root)}
+    markers = {path: parse_markers(path, text) for path, text in texts.items()}
+    rewritten = {}
+    for path, text in texts.items():
+        tables = _expected_tables(path, markers[path], records)
+        new = _with_tables(text, markers[path], tables)
         if new != text:
-            path.write_text(new)
-            changed.append(path)
-    return changed
+            rewritten[path] = new
+    for path, new in rewritten.items():
+        atomic_write_text(path, new)
+    return list(rewritten)
 
 
 def main(argv=None) -> list[Path]:
@@ -196,6 +423,11 @@ def main(argv=None) -> list[Path]:
         if args.check:
             for folder in args.paths:
                 print(f"ok  {describe_checked(folder)}")
+            return list(args.paths)
+        if args.upgrade:
+            for folder in args.paths:
+                record = run_records.upgrade_record(folder)
+                print(f"upgraded {folder} to format {record['format']}, and checked it")
             return list(args.paths)
         if comparison_record.is_comparison(args.paths[0]):
             folder = comparison_record.write(args.paths[0], args.name, args.records)

@@ -41,6 +41,7 @@ from pngail_jax.programs.cli import (
     add_compile_cache_flags,
     check_env,
     claim_output,
+    interrupted,
     invoked_as,
     path_argument,
     signals_stop_at_a_checkpoint,
@@ -291,10 +292,5 @@ def main(argv=None, own_interrupt: bool = True) -> Path:
     except KeyboardInterrupt:
         if not own_interrupt:
             raise
-        out = invocation.out
-        if (out / "config.json").exists():
-            message = f": finished chunks are kept; --resume {out} continues from the last one"
-        else:
-            message = " before the run began: nothing was written"
-        raise SystemExit(f"\ninterrupted{message}") from None
+        raise SystemExit(interrupted(invocation.out)) from None
     return invocation.out

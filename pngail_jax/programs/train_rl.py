@@ -31,6 +31,7 @@ from pngail_jax.programs.cli import (
     check_positive,
     claim_output,
     config_from,
+    interrupted,
     note_deprecated,
     path_argument,
     signals_stop_at_a_checkpoint,
@@ -172,7 +173,4 @@ def main(argv=None) -> None:
     except RunError as error:
         raise SystemExit(str(error)) from None
     except KeyboardInterrupt:
-        raise SystemExit(
-            f"\ninterrupted: finished blocks are kept; --resume {args.out} continues from the "
-            "last one"
-        ) from None
+        raise SystemExit(interrupted(args.out, "blocks")) from None

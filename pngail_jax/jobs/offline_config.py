@@ -1,0 +1,106 @@
+"""``OfflineRunConfig``: what one offline grid is (methods x seeds on a task's
+demonstrations, the gradient-step budget, the batch, ILID's discriminators), checked when
+made, and ``load_offline_config``, the config an offline run in a folder began with. The
+job that runs it is ``jobs.offline.run_offline``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+from pngail_jax.integrity import IntegrityError, read_json
+from pngail_jax.jobs.errors import RunError
+from pngail_jax.offline import DEFAULT_OFFLINE_METHODS, OfflineConfig, required_components
+from pngail_jax.run_config import RunConfig
+
+PROGRAM = "offline"
+
+
+@dataclasses.dataclass(frozen=True)
+class OfflineRunConfig:
+    """One offline grid: methods x seeds on one task's demonstrations."""
+
+    env: str = "Pendulum-v1"
+    demos: str | None = None  # None: made once and cached, as the sweep's
+    conf: str | None = None
+    action_scale: float | None = None
+    methods: tuple[str, ...] = DEFAULT_OFFLINE_METHODS
+    seeds: int = 5
+    seed: int = 0
+    label_ratio: float = 0.2
+    noise_std: float = 0.0
+    gradient_steps: int = 50_000
+    steps_per_iteration: int = 1_000
+    eval_every: int = 5  # iterations (of steps_per_iteration) per evaluation
+    chunk_iterations: int = 10
+    batch_size: int = 256
+    num_eval_episodes: int | None = None  # None: the task's (RunSettings)
+    hidden_sizes: tuple[int, ...] = (100, 100)
+    ilid_discriminator_steps: int = 100_000  # each of ILID's two, before its policy (codebase's)
+    ilid_discriminator_learning_rate: float = 1e-5  # its codebase's Adam step size
+
+    def __post_init__(self):
+        if not self.methods or len(set(self.methods)) != len(self.methods):
+            raise ValueError(f"methods must be distinct and not empty, got {self.methods!r}")
+        required_components(self.methods)  # unknown names: one line naming them
+        for name in ("seeds", "gradient_steps", "steps_per_iteration", "eval_every",
+                     "chunk_iterations", "batch_size", "ilid_discriminator_steps"):  # fmt: skip
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        block = self.steps_per_iteration * self.eval_every
+        if self.gradient_steps % block:
+            raise ValueError(
+                f"gradient_steps ({self.gradient_steps}) must be a multiple of "
+                f"steps_per_iteration x eval_every = {block} (one evaluation each)"
+            )
+        if not 0 < self.label_ratio < 1:
+            raise ValueError(f"label_ratio must lie in (0, 1), got {self.label_ratio!r}")
+        if not 0 < self.ilid_discriminator_learning_rate < 1:
+            raise ValueError(
+                "ilid_discriminator_learning_rate must lie in (0, 1), got "
+                f"{self.ilid_discriminator_learning_rate!r}"
+            )
+
+    @property
+    def run_config(self) -> RunConfig:
+        """The sweep's config of the same task and files: what the demonstrations, the
+        normaliser and the environment are read with."""
+        return RunConfig(
+            env=self.env, demos=self.demos, conf=self.conf, action_scale=self.action_scale,
+            methods=("gail",), seeds=self.seeds, seed=self.seed,
+            label_ratios=(self.label_ratio,), noise_stds=(self.noise_std,),
+        )  # fmt: skip
+
+    def trainer_config(self, num_rows: int) -> OfflineConfig:
+        run_config = self.run_config
+        return OfflineConfig(
+            num_iterations=self.gradient_steps // self.steps_per_iteration,
+            steps_per_iteration=self.steps_per_iteration,
+            eval_every=self.eval_every,
+            num_eval_episodes=self.num_eval_episodes or run_config.settings.num_eval_episodes,
+            batch_size=self.batch_size,
+            hidden_sizes=self.hidden_sizes,
+            num_demos=run_config.task_num_demos(num_rows),
+            classifier=run_config.adversarial_config(num_rows).classifier,
+            ilid_discriminator_steps=self.ilid_discriminator_steps,
+            components=required_components(self.methods),
+        )
+
+
+def load_offline_config(out: str | Path) -> OfflineRunConfig:
+    """The config an offline run in ``out`` began with (its config.json), or RunError."""
+    path = Path(out) / "config.json"
+    try:
+        document = read_json(path, "offline run config")
+        values = dict(document["config"])
+        if document.get("program") != PROGRAM:
+            raise ValueError(f"written by {document.get('program')!r}")
+        for name in ("methods", "hidden_sizes"):
+            values[name] = tuple(values[name])
+        return OfflineRunConfig(**values)
+    except (IntegrityError, KeyError, TypeError, ValueError) as error:
+        raise RunError(
+            f"cannot resume {out}: no offline run's config.json there ({error})"
+        ) from None
