@@ -72,6 +72,21 @@ def authors_data() -> Path:
     return next((folder for folder in candidates if folder.exists()), candidates[0])
 
 
+def as_sweep_run(directory: Path, normalizer, **config) -> Path:
+    """``directory`` (a metrics.csv written by hand, perhaps a summary.json) made a sweep run
+    the programs trust (``runs.verify_run``): marked as the sweep's, with a sealed config.json
+    naming the ``normalizer`` its normalised returns were written with, and ``config``."""
+    from pngail_jax.integrity import CONFIG_SEAL, seal
+    from pngail_jax.outputs import prepare_output
+    from pngail_jax.runs import sealed_part
+
+    prepare_output(directory, "sweep")
+    document = {**config, "resolved": {"normalizer": list(normalizer)}}
+    (Path(directory) / "config.json").write_text(json.dumps(document))
+    seal(Path(directory) / CONFIG_SEAL, sealed_part(document))
+    return Path(directory)
+
+
 def metrics_numbers(path: Path) -> list[dict]:
     """A sweep's metrics.csv without its wall-clock column: what a resumed or repeated run must
     reproduce exactly (the wall clock is the one field that differs between two runs)."""

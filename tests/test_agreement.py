@@ -1,9 +1,11 @@
 """experiments.agreement: each statistic of a run's seeds scored by split-half agreement."""
 
+import csv
 import json
 
 import numpy as np
 import pytest
+from conftest import as_sweep_run
 
 from pngail_jax.grid import make_cells
 from pngail_jax.programs import agreement
@@ -23,7 +25,7 @@ def _run(tmp_path, num_seeds: int):
         returns[index, -1] = 0.5 + rng.uniform(-0.5, 0.5)
     metrics = {"eval/return": returns, "env_steps": np.tile(np.arange(1, 21), (len(cells), 1))}
     write_metrics_csv(tmp_path / "metrics.csv", cells, metrics, (0.0, 1.0))
-    return tmp_path
+    return as_sweep_run(tmp_path, (0.0, 1.0))
 
 
 def test_late_means_agree_where_the_final_evaluation_does_not(tmp_path, capsys):
@@ -50,3 +52,25 @@ def test_too_few_seeds_and_no_run_are_one_line(tmp_path, capsys):
     with pytest.raises(SystemExit):
         agreement.main([str(tmp_path / "nothing")])
     assert "no metrics.csv there" in capsys.readouterr().err
+
+
+def test_a_run_or_record_is_verified_before_it_is_read(tmp_path, capsys):
+    """agreement trusts a run only as every program does (runs.verify_run): a normalised
+    return edited by hand is refused in one line; a committed record is checked, then read."""
+    from pathlib import Path
+
+    run = _run(tmp_path, num_seeds=4)
+    with (run / "metrics.csv").open(newline="") as file:
+        rows = list(csv.DictReader(file))
+    evaluated = next(row for row in rows if row["eval_return"])
+    evaluated["normalized_return"] = "0.99"  # edited alone
+    with (run / "metrics.csv").open("w", newline="") as file:
+        writer = csv.DictWriter(file, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    with pytest.raises(SystemExit):
+        agreement.main([str(run)])
+    assert "normalised return 0.99 is not its evaluation" in capsys.readouterr().err
+    record = Path(__file__).parents[1] / "records" / "pendulum-10seeds"
+    rows = agreement.main([str(record), "--splits", "10"])
+    assert rows and "pendulum-10seeds" in capsys.readouterr().out

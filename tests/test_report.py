@@ -5,6 +5,7 @@ import json
 
 import numpy as np
 import pytest
+from conftest import as_sweep_run
 
 from pngail_jax import plots, report, stats
 from pngail_jax.grid import make_cells, nonfinite_cells
@@ -183,6 +184,7 @@ def test_seeds_puts_a_methods_seeds_side_by_side_with_their_training(tmp_path, c
     summary = report.summarize(cells, metrics, NORMALIZER, 1000.0, 2.0)
     report.write_metrics_csv(tmp_path / "metrics.csv", cells, metrics, NORMALIZER)
     report.write_summary(tmp_path / ".", summary, "")
+    as_sweep_run(tmp_path, NORMALIZER)
     table = seeds.main([str(tmp_path), "--method", "pngail", "--share", "0.25"])
     lates = [row["late_average_normalized_return"] for row in table]
     assert lates == sorted(lates, reverse=True) and len(table) == 3  # best seed first

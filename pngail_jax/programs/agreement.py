@@ -19,7 +19,13 @@ import math
 import numpy as np
 
 from pngail_jax.integrity import write_json
-from pngail_jax.programs.cli import ArgumentParser, HelpFormatter, path_argument
+from pngail_jax.programs.cli import (
+    ArgumentParser,
+    HelpFormatter,
+    add_allow_unsealed,
+    check_read_run,
+    path_argument,
+)
 from pngail_jax.report import LATE_LABEL, late_average, late_evaluations, read_evaluations
 from pngail_jax.stats import split_half_agreement
 
@@ -32,11 +38,13 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--lasts", default="1,3,5,10", help="K of 'the mean of the last K'")
     parser.add_argument("--splits", type=int, default=2000, help="random halvings")
     parser.add_argument("--json", type=path_argument, help="also write the rows here")
+    add_allow_unsealed(parser.add_argument, "read a run")
     args = parser.parse_args(argv)
     found = [args.run / name for name in ("metrics.csv", "metrics.csv.gz")]
     args.metrics = next((path for path in found if path.is_file()), None)
     if args.metrics is None:
         parser.error(f"{args.run}: no metrics.csv there (not a sweep run or record)")
+    check_read_run(parser, args.run, args.allow_unsealed)
     try:
         args.lasts = sorted({int(k) for k in args.lasts.split(",")})
     except ValueError:

@@ -272,6 +272,27 @@ def add_allow_unsealed(add, what: str) -> None:
     )
 
 
+def check_read_run(parser, directory: Path, allow_unsealed: bool = False) -> None:
+    """A program that reads results from a run folder or a record trusts it only as every
+    other does: a record (``record.json`` beside ``metrics.csv.gz``) once
+    ``run_records.check_record`` passes, a run once ``runs.verify_run`` does (its input files
+    not looked at: results are read, not data); else ``parser.error`` in one line. The notes
+    of what ``allow_unsealed`` let through are printed."""
+    from pngail_jax.run_records import METRICS_FILE, RECORD_FILE, RecordError, check_record
+    from pngail_jax.runs import UntrustedRun, verify_run
+
+    directory = Path(directory)
+    try:
+        if (directory / RECORD_FILE).is_file() and (directory / METRICS_FILE).is_file():
+            check_record(directory)
+            return
+        for note in verify_run(directory, str(directory), allow_unsealed=allow_unsealed,
+                               check_inputs=False):  # fmt: skip
+            print(f"note: {note}")
+    except (RecordError, UntrustedRun) as error:
+        parser.error(str(error))
+
+
 def add_compile_cache_flags(parser) -> None:
     """``--compile-cache DIR`` and ``--no-compile-cache``; ``use_compile_cache`` applies them."""
     from pngail_jax.compilation import CACHE_ENVIRONMENT_VARIABLE

@@ -21,7 +21,13 @@ from pathlib import Path
 import numpy as np
 
 from pngail_jax.integrity import IntegrityError, read_json, write_json
-from pngail_jax.programs.cli import ArgumentParser, HelpFormatter, path_argument
+from pngail_jax.programs.cli import (
+    ArgumentParser,
+    HelpFormatter,
+    add_allow_unsealed,
+    check_read_run,
+    path_argument,
+)
 from pngail_jax.report import LATE_LABEL, LATE_SHARE, metrics_rows
 
 TRAINING_COLUMNS = ("disc_acc_agent", "disc_acc_demo", "mean_reward", "kl")
@@ -44,12 +50,14 @@ def parse_args(argv=None):
         help="the last share of the iterations that 'late' columns average over",
     )
     parser.add_argument("--json", type=path_argument, help="also write the table here")
+    add_allow_unsealed(parser.add_argument, "read a run")
     args = parser.parse_args(argv)
     if not (math.isfinite(args.share) and 0 < args.share <= 1):
         parser.error(f"--share must lie in (0, 1], got {args.share}")
     for name in ("metrics.csv", "summary.json"):
         if not (args.run / name).is_file():
             parser.error(f"{args.run}: no {name} there (not a sweep run, or not started)")
+    check_read_run(parser, args.run, args.allow_unsealed)
     return args
 
 
