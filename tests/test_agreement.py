@@ -49,9 +49,11 @@ def test_too_few_seeds_and_no_run_are_one_line(tmp_path, capsys):
     run = _run(tmp_path, num_seeds=3)
     with pytest.raises(SystemExit, match="fewer than 4 seeds"):
         agreement.main([str(run)])
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):  # parser.error's; its line on stderr
         agreement.main([str(tmp_path / "nothing")])
-    assert "no metrics.csv there" in capsys.readouterr().err
+    assert f"{tmp_path / 'nothing'}: no metrics.csv there (not a sweep run or record)" in (
+        capsys.readouterr().err
+    )
 
 
 def test_a_run_or_record_is_verified_before_it_is_read(tmp_path, capsys):
@@ -68,9 +70,12 @@ def test_a_run_or_record_is_verified_before_it_is_read(tmp_path, capsys):
         writer = csv.DictWriter(file, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):  # parser.error's; its line on stderr
         agreement.main([str(run)])
-    assert "normalised return 0.99 is not its evaluation" in capsys.readouterr().err
+    assert (
+        f"{run / 'metrics.csv'}: good seed 0 iteration 2: normalised return 0.99 is not its "
+        "evaluation"
+    ) in capsys.readouterr().err
     record = Path(__file__).parents[1] / "records" / "pendulum-10seeds"
     rows = agreement.main([str(record), "--splits", "10"])
     assert rows and "pendulum-10seeds" in capsys.readouterr().out

@@ -35,9 +35,40 @@ def test_aggregates_equal_their_definitions_by_hand():
     for name, expected in by_hand.items():
         value = compare.aggregate(s, "a", name, num_resamples=500)
         assert value["estimate"] == pytest.approx(expected), name
-        low, high = value["ci95"]
-        assert low <= high
+        assert value["ci95"] == pytest.approx(bootstrap_by_hand(name), rel=1e-12), name
         assert compare.aggregate(s, "a", name, num_resamples=500) == value  # seeded
+
+
+def bootstrap_by_hand(name, num_resamples=500):
+    """The 2.5th and 97.5th percentiles of aggregate ``name`` of a's scores over stratified
+    resamples drawn as rliable's StratifiedBootstrap does: np.random.default_rng(0), each task
+    in turn (t1, then t2) redrawing its own seeds with replacement, float[R, seeds] at a time."""
+    rng = np.random.default_rng(0)
+    t1 = A["t1"][rng.integers(0, 3, size=(num_resamples, 3))]
+    t2 = A["t2"][rng.integers(0, 2, size=(num_resamples, 2))]
+    pooled = np.sort(np.concatenate([t1, t2], axis=1), axis=1)
+    task_means = np.stack([t1.mean(axis=1), t2.mean(axis=1)], axis=1)
+    estimates = {
+        "iqm": pooled[:, 1:4].mean(axis=1),  # 5 scores: 1 cut from each end
+        "mean": task_means.mean(axis=1),
+        "median": np.median(task_means, axis=1),  # of two task means: their mean
+        "optimality_gap": 1 - np.minimum(pooled, 1.0).mean(axis=1),
+    }[name]
+    return np.percentile(estimates, [2.5, 97.5]).tolist()
+
+
+def test_bootstrap_intervals_of_known_cases():
+    """Every score equal: every resample is the same, each interval that value exactly. Two
+    scores 0 and 1 on one task: a resample's mean is 0, 1/2 or 1 with chances 1/4, 1/2, 1/4,
+    so of 2,000 resamples about 500 are 0 and 500 are 1, far more than the 50 below the 2.5th
+    percentile or above the 97.5th: the interval is [0, 1]; the IQM of two scores (none cut)
+    is their mean, the same; the optimality gap 1 - mean, [0, 1] too."""
+    equal = Scores({"a": {"t1": np.full(3, 0.25), "t2": np.full(2, 0.25)}})
+    for name, value in [("iqm", 0.25), ("mean", 0.25), ("median", 0.25), ("optimality_gap", 0.75)]:
+        assert compare.aggregate(equal, "a", name) == {"estimate": value, "ci95": [value, value]}
+    two = Scores({"a": {"t": np.array([0.0, 1.0])}})
+    for name in ("iqm", "mean", "median", "optimality_gap"):
+        assert compare.aggregate(two, "a", name) == {"estimate": 0.5, "ci95": [0.0, 1.0]}, name
 
 
 def test_the_bootstrap_resamples_seeds_within_each_task():
@@ -53,7 +84,18 @@ def test_probability_of_improvement_is_the_mean_over_tasks_of_pairs_won():
     t1 = (1 + 2 + 3) / 9  # 0.1 > 0; 0.5 > 0, 0.3; 0.9 > all three
     t2 = 2 / 4  # only 1.4 beats 0.5 and 0.7
     assert value["estimate"] == pytest.approx((t1 + t2) / 2)
-    assert value["tasks"] == ["t1", "t2"] and value["ci95"][0] <= value["ci95"][1]
+    assert value["tasks"] == ["t1", "t2"]
+    # The interval by hand: a's then b's seeds redrawn within t1, then within t2, each
+    # resample's P(a > b) + P(a = b) / 2 counted pair by pair, averaged over the two tasks.
+    rng = np.random.default_rng(0)
+    per_task = []
+    for task in ("t1", "t2"):
+        a = A[task][rng.integers(0, A[task].size, size=(500, A[task].size))]
+        b = B[task][rng.integers(0, B[task].size, size=(500, B[task].size))]
+        pairs = a[:, :, None] - b[:, None, :]
+        per_task.append(((pairs > 0) + 0.5 * (pairs == 0)).mean(axis=(1, 2)))
+    by_hand = np.percentile(np.mean(per_task, axis=0), [2.5, 97.5])
+    assert value["ci95"] == pytest.approx(by_hand.tolist(), rel=1e-12)
     ties = Scores({"a": {"t": np.array([1.0])}, "b": {"t": np.array([1.0])}})
     assert compare.probability_of_improvement(ties, "a", "b")["estimate"] == 0.5
 
@@ -173,11 +215,14 @@ def test_the_program_reads_runs_and_writes_its_page(tmp_path, capsys):
     assert "P(method > b)" in capsys.readouterr().out
     with pytest.raises(SystemExit, match="holds no sweep or offline run"):
         program.main([str(out), "--out", str(tmp_path / "d")])
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):  # parser.error's; its line on stderr
         program.main([str(one), "--out", str(one)])
-    assert "is one of the runs" in capsys.readouterr().err
-    with pytest.raises(SystemExit):  # the comparison is not replaced without --overwrite
+    assert f"--out {one} is one of the runs: give another directory" in capsys.readouterr().err
+    with pytest.raises(SystemExit, match="^2$"):  # not replaced without --overwrite
         program.main([str(one), str(two), "--out", str(out)])
+    assert (
+        f"--out {out} already holds a run of experiments.compare: pass --overwrite to replace it"
+    ) in capsys.readouterr().err
     assert "Unfinished" not in (out / "compare.md").read_text() and not result["unfinished"]
     # A run still going (its summary.json says so) is compared, and named as unfinished.
     (two / "summary.json").write_text(

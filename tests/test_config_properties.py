@@ -335,12 +335,19 @@ def test_check_positive_and_check_finite_give_a_valid_number_or_name_the_flag(te
         (["--noise", "inf"], "--noise values must be finite numbers, got 'inf'"),
         (["--noise", "nan"], "--noise values must be finite numbers, got 'nan'"),
         (["--noise", "0,,0.1"], "--noise: empty item in '0,,0.1'"),
-        (["--label-ratio", "0.2,1e999"], "--label-ratio values must be finite numbers"),
+        (
+            ["--label-ratio", "0.2,1e999"],
+            "--label-ratio values must be finite numbers, got '1e999'",
+        ),
         (["--cpu-devices", "0"], "--cpu-devices must be a positive integer, got 0"),
         (["--cpu-devices", "-1"], "--cpu-devices must be a positive integer, got -1"),
         (["--action-scale", "inf"], "--action-scale must be finite and positive, got inf"),
         (["--bsc-eps", "nan"], "--bsc-eps must lie in (0, 0.5), got nan"),
-        (["--env", ".relative:make"], "--env: "),
+        (
+            ["--env", ".relative:make"],  # the import's own words (a relative module path)
+            "--env: the 'package' argument is required to perform a relative import for "
+            "'.relative'",
+        ),
         # The sweep names the flag of a ConfigError's field (programs/flags.py), and the
         # comma lists' own errors name theirs.
         (["--seed", "-1"], "--seed must be an integer in [0, 2**63), got -1"),
@@ -349,38 +356,43 @@ def test_check_positive_and_check_finite_give_a_valid_number_or_name_the_flag(te
     ],
 )
 def test_sweep_flags_are_refused_while_parsing(argv, message, capsys):
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):  # parser.error's; its line on stderr
         sweep.parse_args(argv)
-    assert message in capsys.readouterr().err
+    assert f"python -m experiments.sweep: error: {message}" in capsys.readouterr().err
 
 
 def test_sweep_conf_without_demos_names_the_flags(tmp_path, capsys):
     conf = tmp_path / "conf.npy"
     conf.write_bytes(b"")
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):  # parser.error's; its line on stderr
         sweep.parse_args(["--conf", str(conf)])  # a ConfigError of field "conf"
-    assert "--conf: a confidence file needs demos" in capsys.readouterr().err
+    assert "error: --conf: a confidence file needs demos (made demonstrations carry their own)" in (
+        capsys.readouterr().err
+    )
 
 
 def test_compare_settings_refuses_a_file_and_finished_work(tmp_path, capsys):
     file = tmp_path / "file"
     file.write_text("")
     flags = ["--env", "Hopper", "--out"]
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):  # parser.error's; its line on stderr
         compare_settings.parse_args([*flags, str(file)])
     assert f"--out {file} is a file, not a directory" in capsys.readouterr().err
     (tmp_path / "comparison.json").write_text("{}")
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):
         compare_settings.parse_args([*flags, str(tmp_path)])
-    assert "already holds a run of experiments.compare_settings: pass --overwrite" in (
-        capsys.readouterr().err
-    )
-    with pytest.raises(SystemExit):  # the test's own file there: not the program's to remove
+    assert (
+        f"--out {tmp_path} already holds a run of experiments.compare_settings: pass --overwrite"
+    ) in capsys.readouterr().err
+    with pytest.raises(SystemExit, match="^2$"):  # the test's own file: not the program's
         compare_settings.parse_args([*flags, str(tmp_path), "--overwrite"])
-    assert "and files it did not make (file)" in capsys.readouterr().err
+    assert (
+        f"--out {tmp_path} holds a run of experiments.compare_settings and files it did not "
+        "make (file)"
+    ) in capsys.readouterr().err
     file.unlink()
     assert compare_settings.parse_args([*flags, str(tmp_path), "--overwrite"]).overwrite
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):
         compare_settings.parse_args([*flags, str(tmp_path / "new"), "--arms", "table,table"])
     assert "--arms: arm(s) ['table'] given more than once" in capsys.readouterr().err
 
@@ -402,7 +414,7 @@ def test_one_name_and_one_default_per_concept_across_programs(tmp_path, capsys):
     assert compare_settings.parse_args([*out, "--num-eval-episodes", "7"]).num_eval_episodes == 7
     assert train_rl.parse_args(["--env", "Hopper", "--fast-solver"]).solver == "fast"
     assert "--fast-solver is deprecated; it is now --solver fast" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):  # parser.error's; its line on stderr
         sweep.parse_args(["--seeds", "0"])
     err = capsys.readouterr().err
     assert err.splitlines() == [  # one line, no usage block above it

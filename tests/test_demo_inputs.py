@@ -650,31 +650,36 @@ def test_classify_speaks_the_sweeps_names_and_keeps_the_old_ones_with_a_note(cap
     assert "deprecated" not in capsys.readouterr().err
 
 
+NUM_DEMOS = "--num-demos must be at least 2 (one labelled and one unlabelled row)"
+
+
 @pytest.mark.parametrize(
-    "flags",
+    ("flags", "message"),
     [
-        ["--noise", "nan"],
-        ["--noise", "inf"],
-        ["--noise", "-0.1"],
-        ["--bsc-eps", "nan"],
-        ["--bsc-eps", "0"],
-        ["--label-ratio", "nan"],
-        ["--num-demos", "0"],
-        ["--num-demos", "-3"],
-        ["--action-scale", "0"],
-        ["--action-scale", "-2"],
-        ["--action-scale", "nan"],
-        ["--json", "."],
-        ["--json", "pyproject.toml"],  # finished work: replaced only with --overwrite
+        (["--noise", "nan"], "--noise must be a finite number >= 0, got nan"),
+        (["--noise", "inf"], "--noise must be a finite number >= 0, got inf"),
+        (["--noise", "-0.1"], "--noise must be a finite number >= 0, got -0.1"),
+        (["--bsc-eps", "nan"], "--bsc-eps must be a finite number > 0, got nan"),
+        (["--bsc-eps", "0"], "--bsc-eps must be a finite number > 0, got 0.0"),
+        (["--label-ratio", "nan"], "--label-ratio must be in (0, 1), got nan"),
+        (["--num-demos", "0"], f"{NUM_DEMOS}, got 0"),
+        (["--num-demos", "-3"], f"{NUM_DEMOS}, got -3"),
+        (["--action-scale", "0"], "--action-scale must be a finite number > 0, got 0.0"),
+        (["--action-scale", "-2"], "--action-scale must be a finite number > 0, got -2.0"),
+        (["--action-scale", "nan"], "--action-scale must be a finite number > 0, got nan"),
+        (["--json", "."], "--json . is a directory; give the path of a file to write"),
+        (  # finished work: replaced only with --overwrite
+            ["--json", "pyproject.toml"],
+            "--json pyproject.toml exists: choose another file, or pass --overwrite",
+        ),
     ],
 )
-def test_classify_refuses_bad_flags_naming_them(capsys, flags):
+def test_classify_refuses_bad_flags_naming_them(capsys, flags, message):
     from pngail_jax.programs import classify
 
-    with pytest.raises(SystemExit) as exit_info:
+    with pytest.raises(SystemExit, match="^2$"):  # parser.error's; its line on stderr
         classify.parse_args(["--demos", "any.npy", *flags])
-    assert exit_info.value.code == 2
-    assert f"error: {flags[0]}" in capsys.readouterr().err
+    assert f"python -m experiments.classify: error: {message} (usage:" in capsys.readouterr().err
     if flags[1] == "pyproject.toml":
         assert classify.parse_args(["--demos", "any.npy", *flags, "--overwrite"]).overwrite
 

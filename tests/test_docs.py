@@ -57,9 +57,11 @@ def test_the_docs_document_commands_at_all():
 @pytest.mark.parametrize("program", sorted({program for _, program, _ in COMMANDS}))
 def test_every_documented_flag_exists(program, capsys):
     module = importlib.import_module(f"pngail_jax.programs.{program}")
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^0$"):  # --help exits 0, its text on stdout
         module.parse_args(["--help"])
-    known = set(re.findall(r"--[a-z][a-z0-9-]*", capsys.readouterr().out))
+    help_text = capsys.readouterr().out
+    assert help_text.startswith(f"usage: python -m experiments.{program} "), help_text[:80]
+    known = set(re.findall(r"--[a-z][a-z0-9-]*", help_text))
     unknown = sorted(
         {
             (page, flag)

@@ -26,8 +26,8 @@ def test_early_rewards_reads_every_variant_at_every_reading(tmp_path):
     assert all(
         math.isfinite(value) for r in readings for value in r.values() if value != r["variant"]
     )
-    with pytest.raises(SystemExit):  # never over an existing file
-        early_rewards.main([*flags, "--out", str(out)])
+    with pytest.raises(SystemExit, match=f"^early_rewards: {out} exists: choose another output"):
+        early_rewards.main([*flags, "--out", str(out)])  # never over an existing file
 
 
 def test_the_job_refuses_bad_settings_and_an_existing_file_before_any_work(tmp_path):

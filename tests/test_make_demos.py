@@ -14,7 +14,7 @@ from pngail_jax.demos.generate import normalized_return, rollout_episodes
 from pngail_jax.programs import make_demos
 
 
-def test_make_demos_tiny_pendulum(tmp_path):
+def test_make_demos_tiny_pendulum(tmp_path, capsys):
     path = make_demos.main(
         [
             "--env",
@@ -42,8 +42,12 @@ def test_make_demos_tiny_pendulum(tmp_path):
              "normalizer.json"]  # fmt: skip
     assert sorted(p.name for p in tmp_path.iterdir()) == names
     # Finished work is not replaced by a second run without --overwrite.
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):  # parser.error's; its line on stderr
         make_demos.parse_args(["--out", str(tmp_path)])
+    assert (
+        f"--out {tmp_path} already holds a run of experiments.make_demos: pass --overwrite to "
+        "replace it"
+    ) in capsys.readouterr().err
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         demos = load_demonstrations(path)
@@ -112,20 +116,29 @@ def test_bad_output_directories_fail_before_any_training(tmp_path, capsys):
         (file, f"--out {file} is a file, not a directory"),
         (file / "sub", f"--out {file / 'sub'}: {file} is a file, not a directory"),
     ):
-        with pytest.raises(SystemExit):
+        with pytest.raises(SystemExit, match="^2$"):  # parser.error's; its line on stderr
             make_demos.parse_args(["--out", str(out)])
-        assert message in capsys.readouterr().err
+        assert f"python -m experiments.make_demos: error: {message} (usage:" in (
+            capsys.readouterr().err
+        )
     (tmp_path / "demos.npz").write_bytes(b"finished")
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):
         make_demos.parse_args(["--out", str(tmp_path)])
     err = capsys.readouterr().err
-    assert "already holds a run of experiments.make_demos: pass --overwrite" in err
-    with pytest.raises(SystemExit):  # the test's own file there: not the program's to remove
+    assert (
+        f"--out {tmp_path} already holds a run of experiments.make_demos: pass --overwrite" in err
+    )
+    with pytest.raises(SystemExit, match="^2$"):  # the test's own file: not the program's
         make_demos.parse_args(["--out", str(tmp_path), "--overwrite"])
-    assert "and files it did not make (file)" in capsys.readouterr().err
+    assert (
+        f"--out {tmp_path} holds a run of experiments.make_demos and files it did not make (file)"
+    ) in capsys.readouterr().err
     file.unlink()
     assert make_demos.parse_args(["--out", str(tmp_path), "--overwrite"]).overwrite
     assert make_demos.parse_args(["--out", str(tmp_path / "new" / "dir")]).out.name == "dir"
+
+
+RATIO_PARTS = "--ratio parts must be finite, non-negative and not both 0"
 
 
 @pytest.mark.parametrize(
@@ -133,18 +146,21 @@ def test_bad_output_directories_fail_before_any_training(tmp_path, capsys):
     [
         (["--seeds", "0"], "--seeds must be a positive integer, got 0"),
         (["--num-trajectories", "-1"], "--num-trajectories must be a positive integer, got -1"),
-        (["--measure-episodes", "0"], "--measure-episodes must be a positive integer"),
-        (["--ratio", "inf:1"], "--ratio parts must be finite"),
-        (["--ratio", "nan:1"], "--ratio parts must be finite"),
-        (["--ratio", "1e308:1e308"], "--ratio parts must be finite"),  # the sum overflows
-        (["--intermediate-target", "nan"], "--intermediate-target must be a finite number"),
-        (["--env", "CartPole"], "--env: unknown environment 'CartPole'"),
+        (["--measure-episodes", "0"], "--measure-episodes must be a positive integer, got 0"),
+        (["--ratio", "inf:1"], f"{RATIO_PARTS}, got 'inf:1'"),
+        (["--ratio", "nan:1"], f"{RATIO_PARTS}, got 'nan:1'"),
+        (["--ratio", "1e308:1e308"], f"{RATIO_PARTS}, got '1e308:1e308'"),  # the sum overflows
+        (
+            ["--intermediate-target", "nan"],
+            "--intermediate-target must be a finite number, got nan",
+        ),
+        (["--env", "CartPole"], "--env: unknown environment 'CartPole'; available: Pendulum-v1"),
     ],
 )
 def test_bad_flags_are_named(flags, message, tmp_path, capsys):
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):  # parser.error's; its line on stderr
         make_demos.parse_args(["--out", str(tmp_path), *flags])
-    assert message in capsys.readouterr().err
+    assert f"python -m experiments.make_demos: error: {message}" in capsys.readouterr().err
 
 
 def test_rollout_episodes_stop_counting_after_termination():

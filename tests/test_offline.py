@@ -293,9 +293,9 @@ def test_the_program_writes_the_sweeps_outputs_and_refuses_a_second_run(
     assert {row["env_steps"] for row in rows} == {"0"}  # no environment step taken
     assert all(row["wall_seconds"] for row in rows)
     assert sum(bool(row["normalized_return"]) for row in rows) == 4 * 2 * 2  # 2 evaluations
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):
         program.parse_args(argv)
-    assert "already holds a run of experiments.offline" in capsys.readouterr().err
+    assert f"--out {out} already holds a run of experiments.offline" in capsys.readouterr().err
     assert_compare_and_the_record_read_it(out, rows, tmp_path / "records")
     # Sealed as the sweep is: a config.json edited by hand is not resumed under its label.
     document = json.loads((out / "config.json").read_text())
@@ -424,8 +424,9 @@ def test_a_run_resumed_from_a_checkpoint_equals_the_uninterrupted_run(demos_path
     other = dataclasses.replace(load_offline_config(cut), seeds=3)
     with pytest.raises(RunError, match="began with another config"):
         run_offline(other, cut, resume=True)
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):
         program.main(["--resume", str(tmp_path / "nothing")])
+    assert f"--resume {tmp_path / 'nothing'}: no offline run there" in capsys.readouterr().err
 
 
 def test_the_offline_program_is_checked_as_the_sweep_is(demos_path, tmp_path, capsys, monkeypatch):

@@ -170,9 +170,12 @@ def test_a_run_lists_only_what_appeared_after_its_claim_began(tmp_path, capsys):
         (run / "summary.md").write_text("the run's")
     listed = json.loads((run / OUTPUT_LIST).read_text())["files"]
     assert listed == ["checkpoints/chunk_0001", "summary.md"]
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):  # parser.error's; its line on stderr
         sweep.parse_args(["--out", str(run), "--overwrite"])
-    assert "files it did not make (checkpoints/mine.txt)" in capsys.readouterr().err
+    assert (
+        f"--out {run} holds a run of experiments.sweep and files it did not make "
+        "(checkpoints/mine.txt): --overwrite replaces only its own"
+    ) in capsys.readouterr().err
 
 
 def test_a_run_inside_a_run_is_in_both_lists_once_it_ends(tmp_path):
@@ -201,7 +204,7 @@ def test_a_run_from_before_the_lists_is_replaced_only_where_names_tell(tmp_path,
     (old / "checkpoints" / "chunk_0001" / "state").write_text("the run's, or the user's?")
     (old / "config.json").write_text(json.dumps({"resolved": {}}))
     before = listing(old)
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):
         sweep.parse_args(["--out", str(old), "--overwrite"])
     assert (
         f"--out {old} holds a run of experiments.sweep made before runs listed their files "
@@ -231,16 +234,16 @@ def test_a_run_from_before_the_lists_is_replaced_only_where_names_tell(tmp_path,
     [
         (sweep, ["--out", ""], "argument --out: must name a path, got ''"),
         (paper, ["--out", ""], "argument --out: must name a path, got ''"),
-        (paper, ["--only", ""], "--only: empty item in ''"),
-        (paper, ["--envs", ""], "--envs: empty item in ''"),
+        (paper, ["--only", ""], "--only: empty item in '' (expected comma-separated figure names)"),
+        (paper, ["--envs", ""], "--envs: empty item in '' (expected comma-separated task names)"),
         (train_rl, ["--out", ""], "argument --out: must name a path, got ''"),
-        (sweep, ["--demos", ""], "argument --demos: must name a path"),
+        (sweep, ["--demos", ""], "argument --demos: must name a path, got ''"),
     ],
 )
 def test_empty_strings_are_refused_not_read_as_here_or_everything(program, argv, message, capsys):
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):  # parser.error's; its line on stderr
         program.parse_args(argv)
-    assert message in capsys.readouterr().err
+    assert f": error: {message} (usage: python -m experiments." in capsys.readouterr().err
 
 
 def test_each_program_refuses_a_directory_it_did_not_make(tmp_path, capsys):
@@ -248,42 +251,52 @@ def test_each_program_refuses_a_directory_it_did_not_make(tmp_path, capsys):
     checkout.mkdir()
     (checkout / "README.md").write_text("the project's")
     (checkout / "results.json").write_text("{}")
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):  # parser.error's; its line on stderr
         paper.parse_args(["--out", str(checkout)])
     err = capsys.readouterr().err
-    assert "is not empty: it holds files it did not make (README.md, results.json)" in err
+    assert f"--out {checkout} is not empty: it holds files it did not make (README.md, " in err
+    assert "results.json); experiments.paper writes only into a new or empty directory" in err
     metrics = tmp_path / "analysis"
     metrics.mkdir()
     (metrics / "metrics.csv").write_text("mine")
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):
         sweep.parse_args(["--out", str(metrics)])
-    assert "files it did not make (metrics.csv)" in capsys.readouterr().err
+    assert f"--out {metrics} is not empty: it holds files it did not make (metrics.csv)" in (
+        capsys.readouterr().err
+    )
     finished_sweep = tmp_path / "sweep-run"
     prepare_output(finished_sweep, "sweep")
     (finished_sweep / "config.json").write_text("{}")
     record_outputs(finished_sweep, "sweep", since=0.0)  # listed, as the run lists what it wrote
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):
         train_rl.parse_args(["--out", str(finished_sweep)])
-    assert "it holds a run of experiments.sweep" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
+    assert (
+        f"--out {finished_sweep} is not empty: it holds a run of experiments.sweep; "
+        "experiments.train_rl writes only into a new or empty directory"
+    ) in capsys.readouterr().err
+    with pytest.raises(SystemExit, match="^2$"):
         sweep.parse_args(["--out", str(finished_sweep)])
-    assert f"--resume {finished_sweep} to continue it, pass --overwrite" in (
-        capsys.readouterr().err
-    )
+    assert (
+        f"--out {finished_sweep} already holds a run of experiments.sweep: --resume "
+        f"{finished_sweep} to continue it, pass --overwrite"
+    ) in capsys.readouterr().err
     assert sweep.parse_args(["--out", str(finished_sweep), "--overwrite"]).out == finished_sweep
     (finished_sweep / "notes.txt").write_text("the user's")  # --overwrite would not remove it
     (finished_sweep / "my-plots").mkdir()
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):
         sweep.parse_args(["--out", str(finished_sweep), "--overwrite"])
-    assert "holds a run of experiments.sweep and files it did not make (my-plots, notes.txt)" in (
-        capsys.readouterr().err
-    )
+    assert (
+        f"--out {finished_sweep} holds a run of experiments.sweep and files it did not make "
+        "(my-plots, notes.txt)"
+    ) in capsys.readouterr().err
     assert (finished_sweep / "notes.txt").read_text() == "the user's"
     paper_run = tmp_path / "paper-run"
     prepare_output(paper_run, "paper")
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):
         sweep.parse_args(["--resume", str(paper_run)])
-    assert "holds a run of experiments.paper, not a sweep" in capsys.readouterr().err
+    assert f"--resume {paper_run} holds a run of experiments.paper, not a sweep" in (
+        capsys.readouterr().err
+    )
     for name in ("README.md", "results.json"):
         assert (checkout / name).exists()  # untouched
     assert (metrics / "metrics.csv").read_text() == "mine"
@@ -371,7 +384,7 @@ def test_a_config_files_log_backend_is_checked_before_anything_runs(tmp_path, mo
     monkeypatch.setattr(sweep, "check_backends", missing)
     config = tmp_path / "config.json"
     config.write_text(json.dumps({**RunConfig().to_dict(), "log": ["wandb"]}))
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):  # parser.error's; its line on stderr
         sweep.parse_args(["--config", str(config), "--out", str(tmp_path / "run")])
     assert "log ['wandb']: the 'wandb' tracking backend needs wandb" in capsys.readouterr().err
     assert not (tmp_path / "run").exists()
@@ -513,11 +526,12 @@ def test_overwrite_refuses_a_users_file_anywhere_in_a_run_and_deletes_nothing(
     users.write_text("the user's")
     before = listing(copy)
     named = "wandb" if where.startswith("wandb/") else where  # a folder the run never wrote
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):  # parser.error's; its line on stderr
         run.main(copy, "--overwrite")
-    assert f"files it did not make ({named}): --overwrite replaces only its own" in (
-        capsys.readouterr().err
-    )
+    assert (
+        f"--out {copy} holds a run of experiments.{program} and files it did not make "
+        f"({named}): --overwrite replaces only its own"
+    ) in capsys.readouterr().err
     with pytest.raises(OutputRefused, match="files it did not make"):  # past the parser
         with claimed(copy, program, overwrite=True):
             pass
@@ -555,9 +569,11 @@ def test_a_comparison_keeps_a_users_png_and_is_replaced_without_it(sweep_run, tm
     assert listed_files(out) == files_in(out)
     (out / "mine.png").write_text("the user's")
     before = listing(out)
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):  # parser.error's; its line on stderr
         compare.main([*argv, "--overwrite"])
-    assert "files it did not make (mine.png)" in capsys.readouterr().err
+    assert (
+        f"--out {out} holds a run of experiments.compare and files it did not make (mine.png)"
+    ) in capsys.readouterr().err
     assert listing(out) == before
     (out / "mine.png").unlink()
     (out / "old.png").write_text("a figure the comparison no longer draws")

@@ -129,19 +129,28 @@ def test_figures_without_a_panel_on_the_tasks_asked_for_are_refused(tmp_path):
 @pytest.mark.parametrize(
     ("flags", "message"),
     [
-        (["--only", "fig11"], "unknown figure"),
-        (["--envs", "Hoper"], "Hoper"),
-        (["--resume", "nowhere", "--only", "fig2"], "drop --only"),
-        (["--resume", "nowhere"], "no paper.json"),
-        (["--resume", "nowhere", "--preset", "cpu"], "drop --preset"),  # not silently ignored
-        (["--resume", "nowhere", "--demo-learner", "ppo"], "drop --demo-learner"),
-        (["--preset", "huge"], "invalid choice: 'huge'"),
+        (["--only", "fig11"], "--only: unknown figure(s) ['fig11']; available: fig2, fig3"),
+        (["--envs", "Hoper"], "--envs: unknown task(s) ['Hoper']; available: Pendulum-v1"),
+        (
+            ["--resume", "nowhere", "--only", "fig2"],
+            "--resume takes its options from the run: drop --only",
+        ),
+        (["--resume", "nowhere"], "--resume nowhere: no paper.json there (not a run of this)"),
+        (
+            ["--resume", "nowhere", "--preset", "cpu"],
+            "--resume takes its options from the run: drop --preset",
+        ),  # not silently ignored
+        (
+            ["--resume", "nowhere", "--demo-learner", "ppo"],
+            "--resume takes its options from the run: drop --demo-learner",
+        ),
+        (["--preset", "huge"], "argument --preset/--budget: invalid choice: 'huge' (choose from"),
     ],
 )
 def test_bad_flags_are_named(flags, message, capsys):
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):  # parser.error's; its line on stderr
         paper.parse_args(flags)
-    assert message in capsys.readouterr().err
+    assert f"python -m experiments.paper: error: {message}" in capsys.readouterr().err
 
 
 def test_old_spellings_still_work_with_a_note_naming_the_new_one(tmp_path, capsys):
@@ -173,8 +182,12 @@ def test_a_tiny_fig2_run_writes_the_page_with_every_method_resumes_and_adopts(
     assert summary["complete"] and sorted(summary["methods"]) == sorted(paper.SEVEN_METHODS)
     assert outputs.unaccounted(out, "paper") == []  # --overwrite knows all it wrote
     # The same run again is refused; --resume keeps the finished grid and rewrites the page.
-    with pytest.raises(SystemExit):
+    capsys.readouterr()
+    with pytest.raises(SystemExit, match="^2$"):
         paper.parse_args(argv)
+    assert (
+        f"--out {out} already holds a run of experiments.paper: --resume {out} to continue it"
+    ) in capsys.readouterr().err
     before = (out / "grids" / "Pendulum-v1-main" / "metrics.csv").read_bytes()
     assert paper.main(["--resume", str(out)]).read_text() == text
     assert (out / "grids" / "Pendulum-v1-main" / "metrics.csv").read_bytes() == before
@@ -198,12 +211,13 @@ def assert_a_page_so_far_shows_what_ran(out, text, capsys):
     assert rows(page) == rows(text)
     assert "](../paper/grids/Pendulum-v1-main/summary.md)" in page and "so far" not in page
     capsys.readouterr()
-    with pytest.raises(SystemExit):  # its own page again: --overwrite
+    with pytest.raises(SystemExit, match="^2$"):  # its own page again: --overwrite
         paper.main(["--page", str(out), "--out", str(out.parent / "page")])
     assert (
-        "already holds a run of experiments.paper-page: pass --overwrite" in capsys.readouterr().err
-    )
-    with pytest.raises(SystemExit):
+        f"--out {out.parent / 'page'} already holds a run of experiments.paper-page: pass "
+        "--overwrite"
+    ) in capsys.readouterr().err
+    with pytest.raises(SystemExit, match="^2$"):
         paper.parse_args(["--page", str(out), "--preset", "cpu"])
     assert "--page writes the page of the plan in DIR as it is: drop --preset" in (
         capsys.readouterr().err

@@ -70,9 +70,11 @@ def test_the_plan_prints_its_estimate_before_it_makes_anything(tmp_path, monkeyp
     assert "Pendulum-v1-main" in capsys.readouterr().out
     bad = tmp_path / "bad.json"
     bad.write_text("[]")
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):  # parser.error's; its line on stderr
         paper.main(["--resume", str(out), "--throughput", str(bad)])
-    assert f"--throughput {bad}: no row with a task" in capsys.readouterr().err
+    assert f"--throughput {bad}: no row with a task, cells and a training rate" in (
+        capsys.readouterr().err
+    )
 
 
 GOOD = {"env": "Pendulum-v1", "cells": 14, "steps_per_second": 5000.0, "compile_seconds": 5.0}

@@ -3,7 +3,9 @@
 import csv
 import dataclasses
 import hashlib
+import itertools
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -50,7 +52,7 @@ def copy_run(finished, tmp_path):
     return copy
 
 
-def test_sweep_writes_every_output(finished, tmp_path):
+def test_sweep_writes_every_output(finished, demos_path, tmp_path, capsys):
     out = finished
     for name in ("config.json", "metrics.csv", "curves.png", "summary.md", "summary.json"):
         assert (out / name).stat().st_size > 0, name
@@ -91,8 +93,17 @@ def test_sweep_writes_every_output(finished, tmp_path):
     assert metrics_numbers(copy / "metrics.csv") == metrics_numbers(out / "metrics.csv")
     assert json.loads((copy / "config.json").read_text())["log"] == ["tensorboard"]
     assert any((copy / "tensorboard").iterdir())
-    with pytest.raises(SystemExit):  # a second run into the same directory
-        sweep.parse_args(tiny_sweep_args(demos_path=finished, out=out))
+    with pytest.raises(SystemExit, match="^2$"):  # a second run into the same directory
+        sweep.parse_args(tiny_sweep_args(demos_path, out))
+    assert (
+        f"--out {out} already holds a run of experiments.sweep: --resume {out} to continue it"
+    ) in capsys.readouterr().err
+    # A folder as --demos (here the run's) is refused naming it, before any folder is made.
+    new = tmp_path / "new"
+    folder = re.escape(str(finished))
+    with pytest.raises(SystemExit, match=f"^demonstrations: {folder}: is a directory, not a file"):
+        sweep.main(tiny_sweep_args(demos_path=finished, out=new))
+    assert not new.exists()
 
 
 class Killed(BaseException):
@@ -237,33 +248,30 @@ def sweep_columns():
 
 
 def test_bad_flags_are_named(demos_path, tmp_path, capsys):
-    with pytest.raises(SystemExit):
-        sweep.parse_args(["--methods", "gail,pu-gail"])
-    assert "unknown method(s) ['pu-gail']" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
-        sweep.parse_args(["--env", "CartPole"])
-    assert "unknown environment 'CartPole'" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
-        sweep.parse_args(["--label-ratio", "0.2,1.5"])
-    assert "--label-ratio values must lie in (0, 1)" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
-        sweep.parse_args(["--resume", str(tmp_path), "--seeds", "3"])
-    assert "takes no other flags" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
-        sweep.parse_args(["--iterations", "25", "--eval-every", "10"])
-    assert "multiple of the evaluation interval (10" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
-        sweep.parse_args(["--env", "Hopper", "--iterations", "60"])  # the table: every 50
-    assert "multiple of the evaluation interval (50" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
-        sweep.parse_args(["--env", "Hopper", "--solver", "2"])
-    assert "--solver: solver must be 'own', 'fast' or 'I/L'" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
-        sweep.parse_args(["--num-envs", "0"])
-    assert "--num-envs must be a positive integer" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
-        sweep.parse_args(["--random-return", "-1200"])
-    assert "--random-return needs optimal_return" in capsys.readouterr().err
+    for argv, message in [
+        (["--methods", "gail,pu-gail"], "--methods: unknown method(s) ['pu-gail']; available: "),
+        (["--env", "CartPole"], "--env: unknown environment 'CartPole'; available: Pendulum-v1"),
+        (["--label-ratio", "0.2,1.5"], "--label-ratio values must lie in (0, 1), got [0.2, 1.5]"),
+        (["--resume", str(tmp_path), "--seeds", "3"], "--resume DIR takes no other flags"),
+        (
+            ["--iterations", "25", "--eval-every", "10"],
+            "--iterations (25) must be a multiple of the evaluation interval (10,",
+        ),
+        (
+            ["--env", "Hopper", "--iterations", "60"],  # the table: every 50
+            "--iterations (60) must be a multiple of the evaluation interval (50,",
+        ),
+        (
+            ["--env", "Hopper", "--solver", "2"],
+            "--solver: solver must be 'own', 'fast' or 'I/L' (positive Newton / line-search "
+            "iteration counts, e.g. 4/50), got '2'",
+        ),
+        (["--num-envs", "0"], "--num-envs must be a positive integer, got 0"),
+        (["--random-return", "-1200"], "--random-return needs optimal_return"),
+    ]:
+        with pytest.raises(SystemExit, match="^2$"):  # parser.error's; its line on stderr
+            sweep.parse_args(argv)
+        assert f"python -m experiments.sweep: error: {message}" in capsys.readouterr().err, argv
 
 
 def test_every_flag_has_help_and_its_default():
@@ -307,7 +315,7 @@ def test_a_damaged_demonstration_cache_is_made_again(demos_path, tmp_path, monke
 def test_out_naming_a_file_is_refused(tmp_path, capsys):
     a_file = tmp_path / "results.txt"
     a_file.write_text("mine")
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):
         sweep.parse_args(["--out", str(a_file)])
     assert f"--out {a_file} is a file, not a directory" in capsys.readouterr().err
     assert a_file.read_text() == "mine"
@@ -655,6 +663,48 @@ def test_a_records_task_is_that_of_its_authors_file_and_normaliser(tmp_path):
         program.main(["--check", str(folder)])
 
 
+def iqm_by_hand(values) -> float:
+    """The interquartile mean as rliable defines it: sort, drop int(k / 4) values from each
+    end, average the rest."""
+    ordered = np.sort(np.asarray(values, float))
+    cut = ordered.size // 4
+    return float(ordered[cut : ordered.size - cut].mean())
+
+
+def test_rerun_spread_is_the_95th_percentile_of_the_iqm_shifts_of_draws():
+    """run_records.rerun_spread against its definition, redone here with NumPy alone: the
+    95th percentile of |IQM(k of the record's seeds, drawn without replacement) - IQM(all)|
+    over 2,000 draws of np.random.default_rng(0); and cases whose answer is known exactly."""
+    from pngail_jax import run_records
+
+    ten = [k / 10 for k in range(10)]
+    assert iqm_by_hand(ten) == pytest.approx(0.45)  # 10 seeds: 2 cut each end, 0.2..0.7 kept
+    assert iqm_by_hand([0.3, 0.0, 0.9, 0.6, 0.1]) == pytest.approx(1 / 3)  # 0.1, 0.3, 0.6
+    rng = np.random.default_rng(0)
+    shifts = [
+        abs(iqm_by_hand(rng.choice(ten, 5, replace=False)) - iqm_by_hand(ten)) for _ in range(2000)
+    ]
+    expected = np.percentile(shifts, 95)
+    assert run_records.rerun_spread(ten, 5) == pytest.approx(expected, rel=1e-12)
+    # Without the random stream: over all 252 draws of 5 of the 10, enumerated, the 95th
+    # percentile of the shifts is 13/60 too (the shifts take few values; the largest is 0.25).
+    every_draw = [abs(iqm_by_hand(draw) - 0.45) for draw in itertools.combinations(ten, 5)]
+    assert np.percentile(every_draw, 95) == pytest.approx(13 / 60)
+    assert expected == pytest.approx(13 / 60)
+    # Seeds that are not numbers are left out before drawing: the same draws, the same spread.
+    assert run_records.rerun_spread([*ten, None, float("nan")], 5) == pytest.approx(
+        expected, rel=1e-12
+    )
+    # Every seed the same: every draw's IQM is the record's, the spread 0.
+    assert run_records.rerun_spread([0.5] * 10, 5) == 0.0
+    # One seed of four drawn from [0, 0, 0, 1] (IQM 0, the middle two): a shift of 1 a quarter
+    # of the time, about 500 of 2,000 draws, far above the top 5% (100): the percentile is 1.
+    assert run_records.rerun_spread([0.0, 0.0, 0.0, 1.0], 1) == 1.0
+    # No more seeds than the re-run's (or none re-run): no draw differs from the record.
+    for num_seeds in (5, 6, 0):
+        assert np.isnan(run_records.rerun_spread(ten[:5], num_seeds)), num_seeds
+
+
 def test_a_record_made_unsealed_says_so(finished, tmp_path, capsys):
     """A record of a run without its seal (--allow-unsealed) keeps that in record.json and
     --check says it on its line."""
@@ -805,12 +855,9 @@ def test_compare_expected_says_where_a_run_lies_against_a_record(finished, tmp_p
     assert run_records.config_differences({**record["config"], "value_epochs": 3}, older) == [
         "value_epochs"
     ]
-    # The spread a re-run shows: 5 of a record's 10 seeds drawn 2,000 times. Seeds 0.0-0.9
-    # (IQM 0.45): a 5-seed re-run's IQM lands within about 0.15 of it.
+    # A record of seeds 0.0-0.9 (IQM 0.45): a 5-seed re-run's IQM lands within 13/60 of it
+    # (test_rerun_spread_is_the_95th_percentile_of_the_iqm_shifts_of_draws).
     ten = [k / 10 for k in range(10)]
-    spread = run_records.rerun_spread(ten, 5)
-    assert 0.05 < spread < 0.3
-    assert np.isnan(run_records.rerun_spread(ten[:5], 5))  # no draw differs from the record
     record["late_average_normalized_return"] = {"gail": ten}
     near = Scores({"gail": {"Pendulum-v1": np.array([0.3, 0.4, 0.5, 0.6, 0.55])}})
     far = Scores({"gail": {"Pendulum-v1": np.array([0.9, 0.95, 1.0, 0.97, 0.99])}})

@@ -101,23 +101,29 @@ def test_load_policy_errors(run_dir, tmp_path):
         pngail_jax.load_policy(run_dir, verbose=False)(np.zeros(4))
 
 
-def test_cli_rejects_bad_arguments():
-    with pytest.raises(SystemExit):
-        train_rl.parse_args(["--env", "CartPole-v1"])
-    with pytest.raises(SystemExit):
-        train_rl.parse_args(["--iterations", "15", "--eval-every", "10"])
+def test_cli_rejects_bad_arguments(capsys):
+    for argv, message in [
+        (["--env", "CartPole-v1"], "--env: unknown environment 'CartPole-v1'; available: "),
+        (
+            ["--iterations", "15", "--eval-every", "10"],
+            "--iterations (15) must be a multiple of the evaluation interval (10, --eval-every)",
+        ),
+    ]:
+        with pytest.raises(SystemExit, match="^2$"):  # parser.error's; its line on stderr
+            train_rl.parse_args(argv)
+        assert f"python -m experiments.train_rl: error: {message}" in capsys.readouterr().err
 
 
 def test_finished_work_is_not_overwritten_without_the_flag(run_dir, tmp_path, capsys):
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):  # parser.error's; its line on stderr
         train_rl.parse_args(["--out", str(run_dir)])
-    assert f"{run_dir} already holds a run of experiments.train_rl: pass --overwrite" in (
+    assert f"--out {run_dir} already holds a run of experiments.train_rl: pass --overwrite" in (
         capsys.readouterr().err
     )
     assert train_rl.parse_args(["--out", str(run_dir), "--overwrite"]).overwrite
     a_file = tmp_path / "notes.txt"
     a_file.write_text("mine")
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):
         train_rl.parse_args(["--out", str(a_file)])
     assert f"--out {a_file} is a file, not a directory" in capsys.readouterr().err
     assert a_file.read_text() == "mine"
@@ -172,9 +178,11 @@ def test_an_interrupted_run_resumes_to_the_same_numbers(run_dir, tmp_path, monke
     metrics.csv byte-identical to the uninterrupted run's."""
     out = tmp_path / "stopped"
     _stopped_after_first_block(run_dir, out, monkeypatch)
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):  # parser.error's; its line on stderr
         train_rl.main(["--resume", str(out), "--seeds", "3"])  # its own flags only
-    assert "takes no other flags" in capsys.readouterr().err
+    assert "--resume DIR takes no other flags: the run's config.json has them" in (
+        capsys.readouterr().err
+    )
     # config.json edited so that its flags and fields agree: refused by the seal, which keeps
     # what the run began with; a copy without its dot-files has no seal: refused too.
     config_path = out / "config.json"
@@ -195,9 +203,11 @@ def test_an_interrupted_run_resumes_to_the_same_numbers(run_dir, tmp_path, monke
     assert "resumed from" in capsys.readouterr().out
     assert (out / "metrics.csv").read_bytes() == (run_dir / "metrics.csv").read_bytes()
     assert not (out / "checkpoints").exists()
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):
         train_rl.main(["--resume", str(out)])
-    assert "the run is complete" in capsys.readouterr().err
+    assert f"--resume {out}: the run is complete (its policy.json is written)" in (
+        capsys.readouterr().err
+    )
 
 
 def test_a_run_begun_before_the_rollout_section_resumes(run_dir, tmp_path, monkeypatch):

@@ -48,6 +48,8 @@ def load_demonstrations(
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"demonstrations not found: {path}")
+    if path.is_dir():
+        raise DemonstrationError(f"{path}: is a directory, not a file of demonstrations")
     if path.suffix == ".npz":
         if action_scale not in (None, 1.0):
             raise DemonstrationError(
