@@ -443,3 +443,23 @@ def test_a_record_that_fails_its_check_names_the_marker_and_nothing_is_written(t
     with pytest.raises(run_records.RecordError, match=r"results\.md:2: .*no-such-record"):
         program.rewrite_docs(tmp_path, ROOT / "records")
     assert page.read_text() == text and (tmp_path / "README.md").read_text() == STALE_COMPARISON
+
+
+def test_every_records_command_runs_as_written():
+    """Each committed record's stored command is ``python -m experiments.<program> ...`` of a
+    program that exists, and that program's own parser takes its flags as written (a
+    command that named ``python -m offline`` or a flag since renamed fails here)."""
+    import importlib
+    import json
+
+    checked = 0
+    for path in sorted((ROOT / "records").glob("*/record.json")):
+        command = json.loads(path.read_text())["command"]
+        assert command[:2] == ["python", "-m"] and command[2].startswith("experiments."), path
+        program = importlib.import_module(
+            "pngail_jax.programs." + command[2].removeprefix("experiments.")
+        )
+        assert (ROOT / "experiments" / f"{command[2].split('.')[1]}.py").is_file(), path
+        program.build_parser().parse_args(command[3:])  # exits (a failure) on a bad flag
+        checked += 1
+    assert checked >= 20

@@ -523,6 +523,8 @@ def test_a_record_keeps_the_run_small_and_checks_itself(finished, tmp_path, caps
     config = json.loads((finished / "config.json").read_text())
     assert record["config"] == {k: v for k, v in config.items() if k != "provenance"}
     assert record["command"] == config["provenance"]["command_line"]
+    assert record["command"][:3] == ["python", "-m", "experiments.sweep"]  # runs as written
+    assert sweep.build_parser().parse_args(record["command"][3:]).out == finished
     assert record["commit"] == config["provenance"]["git_commit"]
     assert record["machine"]["cpu_model"] and record["complete"] is True
     assert record["iterations_done"] == record["iterations"] == 4

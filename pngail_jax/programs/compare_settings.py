@@ -45,7 +45,8 @@ from pngail_jax.programs.cli import (
 )
 
 
-def parse_args(argv=None) -> argparse.Namespace:
+def build_parser() -> argparse.ArgumentParser:
+    """The program's flags (``parse_args`` checks them)."""
     parser = ArgumentParser(
         "compare_settings",
         description=__doc__.split("\n\n")[0],
@@ -77,6 +78,11 @@ def parse_args(argv=None) -> argparse.Namespace:
         help="rewrite a finished comparison in --out (its finished arms are reused; "
         "default: refuse)",
     )
+    return parser
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    parser = build_parser()
     args = parser.parse_args(argv)
     note_deprecated(argv, {"--eval-episodes": "--num-eval-episodes"})
     # Running into an unfinished comparison again is its resume (finished arms are reused).
