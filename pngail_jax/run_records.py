@@ -100,6 +100,7 @@ def write_record(
     that name already there is replaced only if it records the same run (same config and
     commit); anything else in the way is refused. Returns the record's folder."""
     from pngail_jax.outputs import output_owner
+    from pngail_jax.report import iterations_per_cell
     from pngail_jax.runs import run_scores, verify_run
 
     run_dir = Path(run_dir)
@@ -127,7 +128,9 @@ def write_record(
         "machine": {key: provenance.get(key) for key in MACHINE_KEYS},
         "config": {key: value for key, value in config.items() if key != "provenance"},
         "complete": summary.get("complete") is not False,
-        "iterations_done": progress[0] if progress else None,
+        # What metrics.csv holds (a summary may be a chunk behind it, after a stop between
+        # the two writes; check_record recomputes this from the recorded file).
+        "iterations_done": max(iterations_per_cell(run_dir / "metrics.csv").values()),
         "iterations": progress[1] if progress else planned_iterations(config),
         # Made with --allow-unsealed: the run's config.json was taken as it stood.
         "unsealed": bool(notes),

@@ -395,13 +395,10 @@ def read_scored_rows(path: Path, normalizer: list[float] | None) -> dict:
     return rows
 
 
-# summary.json's per-seed figures, recomputed from metrics.csv's evaluations.
-_SEED_FIGURES = ("final_return", "late_average_return", "average_return")
-
-
 def _seed_figures(evaluations: dict[int, float]) -> dict[str, tuple[float, list[int], float]]:
-    """A seed's figures from its evaluations {iteration: return}: per figure of
-    ``_SEED_FIGURES``, (value, the iterations it reads, the largest |return| among them),
+    """A seed's figures from its evaluations {iteration: return}: per figure (final,
+    late-average and training-average return), (value, the iterations it reads, the largest
+    |return| among them),
     as ``report.summarize`` computes them (NaN evaluations left out of the averages)."""
     from pngail_jax.report import late_evaluations
 
@@ -415,6 +412,13 @@ def _seed_figures(evaluations: dict[int, float]) -> dict[str, tuple[float, list[
         mean = float(finite.mean()) if finite.size else math.nan
         figures[name] = (mean, read, float(np.abs(finite).max()) if finite.size else 0.0)
     return figures
+
+
+# summary.json's per-seed figures that metrics.csv's evaluations give.
+_FIGURE_FIELDS = tuple(
+    f"{name}_{kind}" for name in ("final", "late_average", "average")
+    for kind in ("return", "normalized_return")
+)  # fmt: skip
 
 
 def _check_summary_figures(
@@ -434,6 +438,8 @@ def _check_summary_figures(
         for stated_seed in row.get("per_seed", []):
             seed = stated_seed.get("seed")
             if seed not in seeds:
+                if all(stated_seed.get(field) is None for field in _FIGURE_FIELDS):
+                    continue  # diverged before its first evaluation: nothing to compare
                 raise UntrustedRun(
                     f"{who}: summary.json has {label} seed {seed}, which metrics.csv has not"
                 )
