@@ -42,6 +42,11 @@ def test_late_means_agree_where_the_final_evaluation_does_not(tmp_path, capsys):
     assert by_name["final evaluation"]["same_best"] < 0.9
     assert by_name["mean of the last 5"]["mean_abs_difference"] < 0.1
     assert json.loads((tmp_path / "a.json").read_text()) == rows
+    with pytest.raises(SystemExit, match="^2$"):  # never over a file it did not make
+        agreement.main([str(run), "--json", str(tmp_path / "a.json")])
+    assert f"--json {tmp_path / 'a.json'} exists: choose another file" in capsys.readouterr().err
+    assert agreement.main([str(run), "--splits", "10", "--json", str(tmp_path / "a.json"),
+                           "--overwrite"])  # fmt: skip
     assert "| final evaluation |" in capsys.readouterr().out
 
 

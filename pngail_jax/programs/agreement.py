@@ -23,6 +23,7 @@ from pngail_jax.programs.cli import (
     ArgumentParser,
     HelpFormatter,
     add_allow_unsealed,
+    check_json_output,
     check_read_run,
     path_argument,
 )
@@ -38,8 +39,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--lasts", default="1,3,5,10", help="K of 'the mean of the last K'")
     parser.add_argument("--splits", type=int, default=2000, help="random halvings")
     parser.add_argument("--json", type=path_argument, help="also write the rows here")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
     add_allow_unsealed(parser.add_argument, "read a run")
     args = parser.parse_args(argv)
+    check_json_output(parser, args.json, args.overwrite)
     found = [args.run / name for name in ("metrics.csv", "metrics.csv.gz")]
     args.metrics = next((path for path in found if path.is_file()), None)
     if args.metrics is None:

@@ -19,6 +19,7 @@ from pngail_jax.jobs.errors import RunError
 from pngail_jax.programs.cli import (
     ArgumentParser,
     HelpFormatter,
+    check_json_output,
     check_positive,
     config_from,
     known_names,
@@ -130,10 +131,7 @@ def check_arguments(parser: argparse.ArgumentParser, args) -> None:
         in_range = value >= 0 if minimum == ">= 0" else value > 0
         if not (math.isfinite(value) and in_range):
             parser.error(f"{flag} must be a finite number {minimum}, got {value}")
-    if args.json is not None and args.json.is_dir():
-        parser.error(f"--json {args.json} is a directory; give the path of a file to write")
-    if args.json is not None and args.json.exists() and not args.overwrite:
-        parser.error(f"--json {args.json} exists: choose another file, or pass --overwrite")
+    check_json_output(parser, args.json, args.overwrite)
 
 
 # The sweep's names for the same things (the old spellings still work, with a note).

@@ -272,6 +272,17 @@ def add_allow_unsealed(add, what: str) -> None:
     )
 
 
+def check_json_output(parser, path: Path | None, overwrite: bool) -> None:
+    """A ``--json FILE`` a program writes: not a folder, and not a file already there unless
+    ``overwrite`` (``--overwrite``); else ``parser.error`` in one line."""
+    if path is None:
+        return
+    if path.is_dir():
+        parser.error(f"--json {path} is a directory; give the path of a file to write")
+    if path.exists() and not overwrite:
+        parser.error(f"--json {path} exists: choose another file, or pass --overwrite")
+
+
 def check_read_run(parser, directory: Path, allow_unsealed: bool = False) -> None:
     """A program that reads results from a run folder or a record trusts it only as every
     other does: a record (``record.json`` beside ``metrics.csv.gz``) once

@@ -25,6 +25,7 @@ from pngail_jax.programs.cli import (
     ArgumentParser,
     HelpFormatter,
     add_allow_unsealed,
+    check_json_output,
     check_read_run,
     path_argument,
 )
@@ -50,8 +51,10 @@ def parse_args(argv=None):
         help="the last share of the iterations that 'late' columns average over",
     )
     parser.add_argument("--json", type=path_argument, help="also write the table here")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
     add_allow_unsealed(parser.add_argument, "read a run")
     args = parser.parse_args(argv)
+    check_json_output(parser, args.json, args.overwrite)
     if not (math.isfinite(args.share) and 0 < args.share <= 1):
         parser.error(f"--share must lie in (0, 1], got {args.share}")
     for name in ("metrics.csv", "summary.json"):
