@@ -155,6 +155,34 @@ def test_behaviour_cloning_learns_from_a_controllers_trajectory():
     assert np.median(final) > -800, final
 
 
+@pytest.mark.heavy
+@pytest.mark.slow
+def test_firl_reverse_kl_learns_from_a_controllers_trajectory():
+    """f-IRL with the reverse KL (its state reward from the divergence's gradient, refitted
+    each iteration) on one 200-step episode of conftest's swing-up controller (return -123;
+    random torques -1,130 to -1,580): 3 seeds x 400 iterations of 10 envs x 200 steps, its
+    state discriminator 100 Adam steps of 200 states a side per iteration (its codebase's:
+    1,200 of 800). Measured here (key 0): -165, -264, -192 (about 5 minutes on 2 cores beside
+    training jobs). The bar: a median above -800. (The
+    forward KL and Jensen-Shannon ended below random on one seed or both at this budget, so
+    they have no bar yet: docs/architecture.md, "Learning tests".)"""
+    from conftest import swing_up_demonstrations
+
+    optimal, returns = swing_up_demonstrations(num_episodes=1, seed=0)
+    assert returns[0] > -200
+    config = AdversarialConfig(
+        rollout=RolloutConfig(num_envs=10, num_iterations=400, eval_every=10, num_eval_episodes=8),
+        classifier=ClassifierConfig(num_steps=100),
+        phases=required_phases(("firl-rkl",)),
+        firl=FirlConfig(discriminator_iterations=100, discriminator_batch_size=200),
+    )
+    trainer = AdversarialTrainer(config, envs.make("Pendulum-v1"), optimal)
+    cells = make_cells(["firl-rkl"], num_seeds=3)
+    _, metrics = jax.jit(jax.vmap(trainer.train))(*stack_cells(cells, key(0)))
+    final = np.asarray(metrics["eval/return"])[:, -1]
+    assert np.median(final) > -800, final
+
+
 def ranked_problem(num_trajectories=4, steps=20):
     """Trajectories of known quality in separate regions of Pendulum's [s, a] space: each
     its own observation centre and its own action level; quality not in the order of either."""
