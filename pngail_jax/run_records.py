@@ -269,8 +269,6 @@ def _check_config_facts(folder: Path, record: dict) -> None:
     confidence noises, the iterations done (and the environment steps each took, for a
     sweep) and planned, whether it is complete, and the task, where the normaliser is the
     paper's Table 3 row of an authors' file (that row's task is the config's)."""
-    from pngail_jax.demos.tables import PAPER_NORMALIZERS
-    from pngail_jax.report import metrics_rows
 
     where = folder / RECORD_FILE
     config = record.get("config")
@@ -281,15 +279,7 @@ def _check_config_facts(folder: Path, record: dict) -> None:
     try:
         normalizer = run_normalizer(config)
         read_scored_rows(metrics, normalizer)
-        cells: dict[tuple[str, str], set[int]] = {}
-        ratios, noises, reached, steps = set(), set(), 0, {}
-        for row in metrics_rows(metrics):
-            cells.setdefault((row["method"], row["setting"]), set()).add(int(row["seed"]))
-            ratios.add(float(row["label_ratio"]))
-            noises.add(float(row["noise"]))
-            iteration = int(row["iteration"])
-            reached = max(reached, iteration)
-            steps.setdefault(iteration, set()).add(int(float(row["env_steps"])))
+        cells, ratios, noises, reached, steps = _metrics_facts(metrics)
     except RunReadError as error:
         raise RecordError(str(error)) from None
     except (KeyError, ValueError, TypeError, EOFError, OSError) as error:
@@ -334,6 +324,34 @@ def _check_config_facts(folder: Path, record: dict) -> None:
                 wrong[0] * per_iteration,
                 sorted(steps[wrong[0]]),
             )
+    _check_task(where, config, normalizer)
+
+
+def _metrics_facts(metrics: Path):
+    """What a record's metrics file says of its run: the seeds of each (method, setting),
+    the label ratios and noises, the last iteration, and the environment steps at each."""
+    from pngail_jax.report import metrics_rows
+
+    cells: dict[tuple[str, str], set[int]] = {}
+    ratios, noises, reached, steps = set(), set(), 0, {}
+    for row in metrics_rows(metrics):
+        cells.setdefault((row["method"], row["setting"]), set()).add(int(row["seed"]))
+        ratios.add(float(row["label_ratio"]))
+        noises.add(float(row["noise"]))
+        iteration = int(row["iteration"])
+        reached = max(reached, iteration)
+        steps.setdefault(iteration, set()).add(int(float(row["env_steps"])))
+    return cells, ratios, noises, reached, steps
+
+
+def _check_task(where: Path, config: dict, normalizer: list[float] | None) -> None:
+    """RecordError unless a record of an authors' file whose normaliser is the paper's Table
+    3 row has that row's normaliser and that file's task (on a made set the metrics carry no
+    witness of the task: the record's digest alone keeps it)."""
+    from pngail_jax.demos.tables import PAPER_NORMALIZERS
+
+    offline = config.get("program") == "offline"
+    settings = run_settings(config)
     source = (
         config.get("normalizer_source")
         if offline

@@ -106,19 +106,25 @@ def test_sweep_writes_every_output(finished, demos_path, tmp_path, capsys):
     assert not new.exists()
 
 
+def killed_at_checkpoint(number):
+    """chunks.save_checkpoint as a process killed when it reaches checkpoint ``number``."""
+    save = chunks.save_checkpoint
+
+    def killed(directory, progress, host_state, writer):
+        if progress.chunks_done == number:
+            raise Killed
+        save(directory, progress, host_state, writer)
+
+    return killed
+
+
 class Killed(BaseException):
     """A kill -9 stand-in: nothing after it runs."""
 
 
 def test_a_killed_run_says_partial_and_resumes_exactly(finished, demos_path, tmp_path, monkeypatch):
     out = tmp_path / "run"
-    save = chunks.save_checkpoint
-
-    def killed_at_the_second_checkpoint(directory, progress, host_state, writer):
-        if progress.chunks_done == 2:
-            raise Killed
-        save(directory, progress, host_state, writer)
-
+    killed_at_the_second_checkpoint = killed_at_checkpoint(2)
     monkeypatch.setattr(chunks, "save_checkpoint", killed_at_the_second_checkpoint)
     with pytest.raises(Killed):
         sweep.main(tiny_sweep_args(demos_path, out))
@@ -888,13 +894,7 @@ def test_compare_expected_compares_like_with_like(finished, demos_path, tmp_path
     [whole] = record_program.main([str(finished), "--name", "whole", "--records",
                                    str(tmp_path / "r")])  # fmt: skip
     partial = tmp_path / "partial"
-    save = chunks.save_checkpoint
-
-    def killed_at_the_second_checkpoint(directory, progress, host_state, writer):
-        if progress.chunks_done == 2:
-            raise Killed
-        save(directory, progress, host_state, writer)
-
+    killed_at_the_second_checkpoint = killed_at_checkpoint(2)
     monkeypatch.setattr(chunks, "save_checkpoint", killed_at_the_second_checkpoint)
     with pytest.raises(Killed):
         sweep.main(tiny_sweep_args(demos_path, partial))
