@@ -206,6 +206,23 @@ def swing_up_mixture(num_random: int = 4, seed: int = 0):
     return _pendulum_demonstrations(episodes, [1.0] + [0.0] * num_random)
 
 
+def swing_up_episodes_and_random(num_controller: int, num_random: int):
+    """``num_controller`` episodes of ``swing_up_action`` (seeds 0, 1, ...; confidence 1,
+    returns -240 to 0) and ``num_random`` of uniform random torques (seeds 100, 101, ...;
+    confidence 0, about -1,400), one trajectory each, and their returns: a mixture of many
+    trajectories, for methods that rank or weight whole trajectories or learn from a share of
+    labelled rows."""
+    rng = np.random.default_rng(0)
+
+    def random_torque(observation):
+        return rng.uniform(-2, 2)
+
+    episodes = [(swing_up_action, seed) for seed in range(num_controller)] + [
+        (random_torque, 100 + seed) for seed in range(num_random)
+    ]
+    return _pendulum_demonstrations(episodes, [1.0] * num_controller + [0.0] * num_random)
+
+
 def swing_up_demonstrations(num_episodes: int = 1, seed: int = 0):
     """``num_episodes`` episodes of ``swing_up_action`` on gymnasium's Pendulum-v1 (seeds
     ``seed``, ``seed + 1``, ...) as ``Demonstrations`` of confidence 1, one trajectory each,

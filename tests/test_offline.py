@@ -337,13 +337,9 @@ def test_each_method_beats_bc_on_every_row_on_a_mostly_poor_mixture():
     DWBC, ISW-BC and ILID 40 above; and on what each discriminator learned: DWBC's d higher on
     expert rows than on the others, ISW-BC's weight on expert rows at least twice the union's
     mean, ILID's selected rows richer in controller rows than those it chose from."""
-    from conftest import _pendulum_demonstrations, swing_up_action
+    from conftest import swing_up_episodes_and_random
 
-    rng = np.random.default_rng(0)
-    episodes = [(swing_up_action, seed) for seed in range(5)] + [
-        (lambda observation: rng.uniform(-2, 2), 100 + seed) for seed in range(20)
-    ]
-    demos, returns = _pendulum_demonstrations(episodes, [1.0] * 5 + [0.0] * 20)
+    demos, returns = swing_up_episodes_and_random(5, 20)
     assert max(returns[:5]) > -250 and max(returns[5:]) < -850
     config = OfflineConfig(
         num_iterations=20, steps_per_iteration=1000, eval_every=5, num_eval_episodes=8,
