@@ -13,8 +13,9 @@ expert rows, BC on every row, DWBC and ISW-BC train in one ``jit(vmap)`` grid:
 
 with E a batch of the expert rows, O of the other rows, U of every row, S of the rows ILID
 selects (other rows whose next K states reach an expert-like state; ILID's two
-discriminators train before the policy, in ``init``) (docs/methods.md, "Offline methods";
-the losses in ``offline_losses``). The data they see is what PN-GAIL sees:
+discriminators train before the policy, in ``init``, by ``offline_ilid``; ``ilid_union``
+"released" pads E+S with zero rows as its released code samples it) (docs/methods.md,
+"Offline methods"; the losses in ``offline_losses``). The data they see is what PN-GAIL sees:
 each seed's split of the demonstrations into a labelled share D_c (``label_ratio``) and the
 unlabelled rest D_u. The expert set is D_c's rows at confidence >= ``expert_threshold``, plus,
 where ``classifier_coef`` is 1, D_u's rows whose BSC-predicted confidence reaches it.
@@ -50,12 +51,11 @@ from pngail_jax.networks import (
     LogitDiscriminator,
     gaussian_log_density,
 )
+from pngail_jax.offline_ilid import IlidSelection, check_union, uniform_over, with_zero_rows
 from pngail_jax.offline_losses import (
-    clipped_probability,
     dwbc_discriminator_loss,
+    dwbc_evaluation_metrics,
     dwbc_policy_loss,
-    ilid_discriminator_loss,
-    ilid_selection,
     iswbc_discriminator_loss,
     iswbc_log_odds,
     iswbc_weights,
@@ -68,6 +68,14 @@ from pngail_jax.rl.rollout import evaluate
 
 # The parts a grid compiles only when one of its methods needs them.
 COMPONENTS = ("dwbc", "iswbc", "ilid", "classifier")
+# metrics.csv's columns beyond the sweep's (report.CSV_COLUMNS), where a cell records them:
+# DWBC's discriminator on the whole split at each evaluation (empty between evaluations).
+METRICS_CSV_COLUMNS = {
+    "dwbc_d_expert": "dwbc/eval_d_expert",
+    "dwbc_d_other": "dwbc/eval_d_other",
+    "dwbc_weight_expert": "dwbc/eval_weight_expert",
+    "dwbc_weight_other": "dwbc/eval_weight_other",
+}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -88,6 +96,7 @@ class OfflineConfig:
     ilid_hidden_sizes: tuple[int, ...] = (256, 256)  # both ILID discriminators (its codebase)
     ilid_rollback: int = 20  # K: a row is selected if one of its next K states is expert-like
     ilid_discriminator_steps: int = 100_000  # each ILID discriminator, before the policy
+    ilid_union: str = "intended"  # E+S, or "released": padded with zero rows (offline_ilid)
     classifier: ClassifierConfig = ClassifierConfig()
     components: tuple[str, ...] = ()  # of COMPONENTS; ``required_components(methods)``
 
@@ -117,6 +126,7 @@ class OfflineConfig:
         ):  # fmt: skip
             raise ValueError(f"OfflineConfig.num_demos must be an integer >= 2 or None, "
                              f"got {self.num_demos!r}")  # fmt: skip
+        check_union(self.ilid_union, "OfflineConfig.ilid_union")
 
     @property
     def num_evaluations(self) -> int:
@@ -190,12 +200,10 @@ class OfflineState:
     ilid_selected_probability: jax.Array | None = None  # float32[M]: uniform over S
     ilid_union_probability: jax.Array | None = None  # float32[M]: uniform over E and S
     ilid_weight: jax.Array | None = None  # float32[M]: d / (1 - d) of the (s, a) discriminator
-
-
-def _uniform_over(mask: jax.Array) -> jax.Array:
-    """float[M]: probabilities uniform over ``mask``'s rows (over every row if it has none)."""
-    count = mask.sum()
-    return jnp.where(count > 0, mask / jnp.maximum(count, 1), 1.0 / mask.shape[0])
+    # ilid_union "released" only: the share of union draws that are zero rows, float32[], and
+    # a zero row's weight d / (1 - d), float32[] (None otherwise: older checkpoints restore).
+    ilid_zero_share: jax.Array | None = None
+    ilid_zero_weight: jax.Array | None = None
 
 
 class OfflineTrainer:
@@ -207,7 +215,8 @@ class OfflineTrainer:
       ``offline/num_expert``, ``offline/expert_true_confidence`` (the expert rows' mean given
       confidence before noise: how clean the expert set is), ``confidence/mae`` and ``/rmse``;
     - ``run_blocks(hyperparams, spec, state, num_blocks) -> (state, metrics)``, metrics
-      float[num_blocks * eval_every] with ``eval/return`` NaN except at each block's end;
+      float[num_blocks * eval_every] with ``eval/return`` (and, where DWBC is compiled,
+      ``dwbc_evaluation``'s ``dwbc/eval_*``) NaN except at each block's end;
     - ``train(hyperparams, spec, key)``: both, for ``num_iterations``.
     """
 
@@ -224,7 +233,8 @@ class OfflineTrainer:
         self.policy = GaussianPolicy(env.action_size, config.hidden_sizes)
         self.dwbc = LogDensityDiscriminator(config.dwbc_branch_size, config.dwbc_hidden_size)
         self.iswbc = LogitDiscriminator(config.iswbc_hidden_sizes)
-        self.ilid = LogitDiscriminator(config.ilid_hidden_sizes)  # on states, or on (s, a)
+        self.ilid = IlidSelection(config.ilid_hidden_sizes, config.ilid_discriminator_steps,
+                                  config.batch_size, config.ilid_union)  # fmt: skip
         if "ilid" in config.components:
             if demos.trajectory_ids is None:
                 raise ValueError(
@@ -283,8 +293,8 @@ class OfflineTrainer:
             policy_optimizer_state=self.optimizer.init(policy_params),
             normalizer=normalizer,
             demo_rows=split.indices,
-            expert_probability=_uniform_over(expert),
-            other_probability=_uniform_over(~expert),
+            expert_probability=uniform_over(expert),
+            other_probability=uniform_over(~expert),
             step=jnp.zeros((), jnp.int32),
             eval_keys=jax.random.split(eval_key, self.config.num_eval_episodes),
             key=carry_key,
@@ -328,86 +338,17 @@ class OfflineTrainer:
     # -- ILID's selection, before the policy learns ------------------------------------------
 
     def _ilid_selection(self, spec: OfflineSpec, split, expert, normalizer, key):
-        """ILID's two phases, as its codebase runs them before the policy: a state
-        discriminator of the expert rows' states against the other rows' states; the other
-        rows whose next K states include one it puts at or above ``ilid_bar`` (S); a
-        state-action discriminator of the expert rows against E and S together, whose
-        d / (1 - d) weights the policy's BC on E and S. Returns the state's ILID fields and
-        the metrics of the selection (``ilid/num_selected`` of ``ilid/num_other``, and
-        ``ilid/selected_true_confidence`` against ``ilid/other_true_confidence``: how good
-        the selected rows are, by the confidences nobody read, against those it chose from)."""
+        """ILID's two phases on the split (``offline_ilid.IlidSelection.select``): the state's
+        ILID fields and the selection's metrics."""
         size = self.env.observation_size
-        state_key, pair_key = jax.random.split(key)
         inputs = self._inputs[split.indices]
-        split_inputs = jnp.concatenate([normalizer(inputs[:, :size]), inputs[:, size:]], -1)
+        rows = jnp.concatenate([normalizer(inputs[:, :size]), inputs[:, size:]], -1)
         observations = normalizer(self._inputs[:, :size])  # every row's state, the split's or not
-        other = ~expert
-        state_params, state_loss = self._ilid_discriminator(
-            spec, split_inputs[:, :size], expert, other, state_key
-        )
-        d_states = clipped_probability(self.ilid.apply(state_params, observations))
-        selected = other & ilid_selection(
-            d_states >= spec.ilid_bar, self._successors[split.indices]
-        )
-        union = expert | selected
-        pair_params, pair_loss = self._ilid_discriminator(
-            spec, split_inputs, expert, union, pair_key
-        )
-        d_pairs = clipped_probability(self.ilid.apply(pair_params, split_inputs))
-        num_selected = selected.sum()
-        fields = {  # nothing selected: the selected-rows term clones the expert rows instead
-            "ilid_selected_probability": jnp.where(
-                selected.any(), _uniform_over(selected), _uniform_over(expert)
-            ),
-            "ilid_union_probability": _uniform_over(union),
-            "ilid_weight": jax.lax.stop_gradient(d_pairs / (1 - d_pairs)),
-        }
-        metrics = {
-            "ilid/num_selected": num_selected.astype(jnp.float32),
-            "ilid/selected_true_confidence": jnp.sum(jnp.where(selected, split.true_confidence, 0))
-            / jnp.maximum(num_selected, 1),
-            "ilid/num_other": other.sum().astype(jnp.float32),  # what it selected from
-            "ilid/other_true_confidence": jnp.sum(jnp.where(other, split.true_confidence, 0))
-            / jnp.maximum(other.sum(), 1),
-            "ilid/state_disc_loss": state_loss,
-            "ilid/pair_disc_loss": pair_loss,
-        }
-        return fields, metrics
-
-    def _ilid_discriminator(self, spec: OfflineSpec, rows, positive, negative, key):
-        """An ILID discriminator on ``rows`` float[M, D] (normalised states, or states and
-        actions), trained ``ilid_discriminator_steps`` Adam steps with coupled weight decay on
-        batches drawn from the ``positive`` and ``negative`` rows (bool[M]); its parameters and
-        its last loss."""
-        init_key, loop_key = jax.random.split(key)
-        params = self.ilid.init(init_key, rows[0])
-        optimizer_state = self.optimizer.init(params)
-        p_positive, p_negative = _uniform_over(positive), _uniform_over(negative)
-        batch = self.config.batch_size
-
-        def step(index, carry):
-            params, optimizer_state, _ = carry
-            positive_key, negative_key = jax.random.split(jax.random.fold_in(loop_key, index))
-            pos = rows[jax.random.choice(positive_key, rows.shape[0], (batch,), p=p_positive)]
-            neg = rows[jax.random.choice(negative_key, rows.shape[0], (batch,), p=p_negative)]
-
-            def loss_fn(params):
-                d_pos = clipped_probability(self.ilid.apply(params, pos))
-                d_neg = clipped_probability(self.ilid.apply(params, neg))
-                loss, _ = ilid_discriminator_loss(d_pos, d_neg)
-                return loss + 0.5 * spec.ilid_discriminator_weight_decay * squared_norm(params)
-
-            loss, grads = jax.value_and_grad(loss_fn)(params)
-            params, optimizer_state = adam_step(
-                params, optimizer_state, grads, spec.ilid_discriminator_learning_rate
-            )
-            return params, optimizer_state, loss
-
-        params, _, loss = jax.lax.fori_loop(
-            0, self.config.ilid_discriminator_steps, step,
-            (params, optimizer_state, jnp.zeros((), jnp.float32)),
+        fields, metrics, _ = self.ilid.select(
+            spec, rows, observations, self._successors[split.indices], expert,
+            split.true_confidence, key,
         )  # fmt: skip
-        return params, loss
+        return fields, metrics
 
     # -- one gradient step --------------------------------------------------------------------
 
@@ -419,9 +360,14 @@ class OfflineTrainer:
         """(int[B] the split rows drawn with replacement, float[B, O + A] their inputs with
         observations normalised)."""
         rows = jax.random.choice(key, self.num_demos, (self.config.batch_size,), p=probability)
+        return rows, self._split_inputs(state, rows)
+
+    def _split_inputs(self, state: OfflineState, rows) -> jax.Array:
+        """float[R, O + A]: the inputs of the split's ``rows`` int[R], observations
+        normalised."""
         inputs = self._inputs[state.demo_rows[rows]]
         size = self.env.observation_size
-        return rows, jnp.concatenate([state.normalizer(inputs[:, :size]), inputs[:, size:]], -1)
+        return jnp.concatenate([state.normalizer(inputs[:, :size]), inputs[:, size:]], -1)
 
     def _log_density(self, params, batch) -> jax.Array:
         """float[B, A]: the policy's per-dimension log-density of the batch's actions."""
@@ -452,13 +398,11 @@ class OfflineTrainer:
             metrics |= iswbc_metrics
             fixed["iswbc_weights"] = weights
         if "ilid" in self.config.components:
-            selected_key, union_key_ilid = jax.random.split(ilid_key)
-            selected = self._batch(state, state.ilid_selected_probability, selected_key)
-            rows, ilid_union = self._batch_rows(state, state.ilid_union_probability, union_key_ilid)
-            fixed["ilid"] = (selected, ilid_union, state.ilid_weight[rows])
+            fixed["ilid"], ilid_metrics = self.ilid_batches(state, ilid_key)
+            metrics |= ilid_metrics
 
         def policy_loss(params):
-            return self._policy_loss(spec, params, expert, union, other, fixed)
+            return self.policy_loss(spec, params, expert, union, other, fixed)
 
         grads, policy_metrics = jax.grad(policy_loss, has_aux=True)(state.policy_params)
         params, optimizer_state = adam_step(
@@ -476,12 +420,30 @@ class OfflineTrainer:
         )
         return state, {**metrics, **policy_metrics}
 
-    def _policy_loss(self, spec: OfflineSpec, params, expert, union, other, fixed):
-        """The policy's loss on this step's batches: BC on the expert and union rows by
-        the spec's coefficients, plus DWBC's, ISW-BC's and ILID's weighted terms where
-        compiled (``fixed``: their discriminators' outputs, held fixed), plus weight decay.
-        Returns (loss, metrics)."""
-        nll_expert = -self._log_density(params, expert).sum(-1)
+    def ilid_batches(self, state: OfflineState, key):
+        """ILID's batches of a step: the selected rows float[B, O + A], the union's
+        float[B, O + A] and their weights float[B] (``ilid_union`` "released": each union row
+        a zero row with the state's ``ilid_zero_share``, weighted ``ilid_zero_weight``, and
+        the step's share of zero rows as ``ilid/union_zero_rows``); and the metrics."""
+        selected_key, union_key = jax.random.split(key)
+        selected = self._batch(state, state.ilid_selected_probability, selected_key)
+        rows, union = self._batch_rows(state, state.ilid_union_probability, union_key)
+        weights, metrics = state.ilid_weight[rows], {}
+        if self.config.ilid_union == "released":  # its own key: the intended draws unchanged
+            zero_key = jax.random.fold_in(union_key, 1)
+            union, zero = with_zero_rows(zero_key, union, state.ilid_zero_share)
+            weights = jnp.where(zero, state.ilid_zero_weight, weights)
+            metrics["ilid/union_zero_rows"] = zero.mean()
+        return (selected, union, weights), metrics
+
+    def policy_loss(self, spec: OfflineSpec, params, expert, union, other, fixed):
+        """The policy's loss on a step's batches float[B, O + A] each (observations
+        normalised): BC on the expert and union rows by the spec's coefficients, plus the
+        weighted terms of the parts compiled, their weights held fixed, from ``fixed``:
+        ``"dwbc"``: (d on expert, d on other) float[B] each; ``"iswbc_weights"``: float[B]
+        on ``union``; ``"ilid"``: (selected rows, union rows float[B, O + A], the union
+        rows' weights float[B]); plus weight decay. Returns (loss, metrics)."""
+        nll_expert = -self._log_density(params, expert).sum(-1)  # float[B] from here on
         nll_union = -self._log_density(params, union).sum(-1)
         loss = spec.expert_bc_coef * nll_expert.mean() + spec.union_bc_coef * nll_union.mean()
         terms = {"policy/nll_expert": nll_expert.mean(), "policy/nll_union": nll_union.mean()}
@@ -531,6 +493,22 @@ class OfflineTrainer:
             "dwbc_optimizer_state": tree_where(update, optimizer_state, state.dwbc_optimizer_state),
         }
         return fields, metrics, {"dwbc": outputs}
+
+    def dwbc_evaluation(self, spec: OfflineSpec, state: OfflineState) -> dict:
+        """DWBC's discriminator on every row of the split, with the state's policy and
+        discriminator (what its next step's weights read), reduced by
+        ``offline_losses.dwbc_evaluation_metrics`` (its mean d on E and on O, its mean BC
+        weights); float[] each. Rows go through in slices of 1,024."""
+
+        def d_of(row):  # float[O + A] -> float[]
+            batch = row[None]
+            feature = log_density_feature(self._log_density(state.policy_params, batch))
+            return self.dwbc.apply(state.dwbc_params, batch, feature)[0]
+
+        rows = self._split_inputs(state, jnp.arange(self.num_demos))
+        d = jax.lax.map(d_of, rows, batch_size=min(self.num_demos, 1024))
+        return dwbc_evaluation_metrics(d, state.expert_probability, state.other_probability,
+                                       spec.dwbc_alpha, spec.dwbc_eta)  # fmt: skip
 
     def _iswbc_update(self, spec, state: OfflineState, expert, union, key):
         """ISW-BC's discriminator of the expert batch against the union batch: its logistic
@@ -582,10 +560,13 @@ class OfflineTrainer:
             state, metrics = jax.lax.scan(
                 lambda s, _: self._iteration(spec, s), state, None, length=eval_every
             )
-            returns = evaluate(
+            evaluated = {"eval/return": evaluate(
                 self.env, self.policy, state.policy_params, state.normalizer, state.eval_keys
-            )
-            metrics["eval/return"] = jnp.full((eval_every,), jnp.nan).at[-1].set(returns)
+            )}  # fmt: skip
+            if "dwbc" in self.config.components:
+                evaluated |= self.dwbc_evaluation(spec, state)
+            for name, value in evaluated.items():  # NaN between evaluations
+                metrics[name] = jnp.full((eval_every,), jnp.nan).at[-1].set(value)
             return state, metrics
 
         state, metrics = jax.lax.scan(block, state, None, length=num_blocks)

@@ -38,6 +38,38 @@ def dwbc_discriminator_loss(d_expert: jax.Array, d_other: jax.Array, eta: jax.Ar
     return loss, {"dwbc/disc_loss": loss}
 
 
+def dwbc_weights(d_expert: jax.Array, d_other: jax.Array, eta: jax.Array):
+    """DWBC's weights of its policy loss from d float[...] (held fixed): (w_E, w_O),
+    w_E = eta / (d_E (1 - d_E)) + 1 (an expert row's nll gets alpha - w_E in all) and
+    w_O = d_O / (1 - d_O) where d_O >= 0.5, else 0 (the codebase's 1 / (1 - d) - 1 with d
+    below 0.5 set to 0)."""
+    kept = jnp.where(d_other >= 0.5, d_other, 0.0)
+    return eta / (d_expert * (1 - d_expert)) + 1, kept / (1 - kept)
+
+
+def dwbc_evaluation_metrics(
+    d: jax.Array,
+    expert_probability: jax.Array,
+    other_probability: jax.Array,
+    alpha: jax.Array,
+    eta: jax.Array,
+) -> dict[str, jax.Array]:
+    """What DWBC's discriminator says of the whole split at an evaluation: d float[M] on
+    every row, read under the probabilities float[M] its expert and other batches are drawn
+    with (uniform over E, over O): the mean d on E (``dwbc/eval_d_expert``) and on O
+    (``dwbc/eval_d_other``), the mean net weight alpha - w_E of an expert row's nll
+    (``dwbc/eval_weight_expert``) and the mean weight w_O of an other row's
+    (``dwbc/eval_weight_other``, ``dwbc_weights``). float[] each."""
+    chex.assert_equal_shape([d, expert_probability, other_probability])
+    weight_expert, weight_other = dwbc_weights(d, d, eta)
+    return {
+        "dwbc/eval_d_expert": jnp.sum(expert_probability * d),
+        "dwbc/eval_d_other": jnp.sum(other_probability * d),
+        "dwbc/eval_weight_expert": jnp.sum(expert_probability * (alpha - weight_expert)),
+        "dwbc/eval_weight_other": jnp.sum(other_probability * weight_other),
+    }
+
+
 def dwbc_policy_loss(
     nll_expert: jax.Array,
     nll_other: jax.Array,
@@ -55,9 +87,7 @@ def dwbc_policy_loss(
     alpha - 3]: positive at the codebase's alpha 7.5."""
     chex.assert_equal_shape([nll_expert, nll_other, d_expert, d_other])
     d_expert, d_other = jax.lax.stop_gradient((d_expert, d_other))
-    weight_expert = eta / (d_expert * (1 - d_expert)) + 1
-    kept = jnp.where(d_other >= 0.5, d_other, 0.0)
-    weight_other = kept / (1 - kept)
+    weight_expert, weight_other = dwbc_weights(d_expert, d_other, eta)
     loss = (
         alpha * jnp.mean(nll_expert)
         - jnp.mean(weight_expert * nll_expert)

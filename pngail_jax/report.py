@@ -78,7 +78,9 @@ def _format(value) -> str:
     return "" if not np.isfinite(value) else f"{value:.6g}"
 
 
-def write_metrics_csv(path: Path, cells, metrics, normalizer, chunk_seconds=()) -> None:
+def write_metrics_csv(
+    path: Path, cells, metrics, normalizer, chunk_seconds=(), extra_columns=None
+) -> None:
     """One row per cell and iteration; empty fields where a value is undefined (NaN).
 
     ``chunk_seconds``: the cumulative training seconds at the end of each chunk (all cells run
@@ -87,7 +89,8 @@ def write_metrics_csv(path: Path, cells, metrics, normalizer, chunk_seconds=()) 
     A list per cell instead (float[G][chunks]) gives each cell its own program's (the
     offline family runs its methods in several programs).
     A metric the run did not record (an appendix-only trainer, a checkpoint of an older
-    version) leaves its column empty."""
+    version) leaves its column empty. ``extra_columns`` ({column: metric}) adds columns after
+    ``CSV_COLUMNS`` (the offline program's ``offline.METRICS_CSV_COLUMNS``)."""
     normalized = normalize(metrics["eval/return"], normalizer)
     num_iterations = metrics["env_steps"].shape[1]
     per_cell = bool(chunk_seconds) and isinstance(chunk_seconds[0], (list, tuple, np.ndarray))
@@ -102,6 +105,8 @@ def write_metrics_csv(path: Path, cells, metrics, normalizer, chunk_seconds=()) 
     # A grid's further axes (grid_axes) get a column each, after label_ratio and noise.
     axes = list(dict.fromkeys(field for cell in cells for field, _ in cell.axes))
     columns = {column: _metric_of(column, metrics) for column in _METRIC_OF_COLUMN}
+    extra = {column: name if name in metrics else None
+             for column, name in (extra_columns or {}).items()}  # fmt: skip
 
     def rows():
         for index, cell in enumerate(cells):
@@ -110,7 +115,7 @@ def write_metrics_csv(path: Path, cells, metrics, normalizer, chunk_seconds=()) 
             for iteration in range(num_iterations):
                 values = {
                     column: _format(metrics[name][index, iteration]) if name else ""
-                    for column, name in columns.items()
+                    for column, name in (columns | extra).items()
                 }
                 values["env_steps"] = str(int(metrics["env_steps"][index, iteration]))
                 values["normalized_return"] = _format(normalized[index, iteration])
@@ -122,10 +127,10 @@ def write_metrics_csv(path: Path, cells, metrics, normalizer, chunk_seconds=()) 
                     [cell.method, cell.seed, cell.setting]
                     + [values[column] for column in CSV_COLUMNS[3:5]]
                     + [f"{axis_values[field]:g}" for field in axes]
-                    + [values[column] for column in CSV_COLUMNS[5:]]
+                    + [values[column] for column in (*CSV_COLUMNS[5:], *extra)]
                 )
 
-    _write_csv(path, [*CSV_COLUMNS[:5], *axes, *CSV_COLUMNS[5:]], rows())
+    _write_csv(path, [*CSV_COLUMNS[:5], *axes, *CSV_COLUMNS[5:], *extra], rows())
 
 
 def write_seed_metrics_csv(path: Path, metrics, columns: Sequence[str]) -> None:

@@ -28,7 +28,8 @@ LAYERS = [
         (
             "rl", "rl.rollout", "rl.on_policy", "rl.trpo", "rl.train", "rl.ppo", "rl.learners",
             "settings", "checkpoint", "phase", "bc", "firl", "ranking",
-            "confidence", "methods", "losses", "cail", "offline_losses", "method_checks",
+            "confidence", "methods", "losses", "cail", "offline_losses", "offline_ilid",
+            "method_checks",
         ),
     ),
     (

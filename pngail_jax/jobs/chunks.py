@@ -61,9 +61,12 @@ class Progress:
         self.last_chunk_seconds = seconds
         if self.metrics is None:
             self.metrics = chunk_metrics
-        else:
+        else:  # a metric the earlier chunks lack (a run begun by an older version): NaN there
+            before = next(iter(self.metrics.values())).shape[:2]
             self.metrics = {
-                name: np.concatenate([self.metrics[name], chunk_metrics[name]], axis=1)
+                name: np.concatenate(
+                    [self.metrics.get(name, np.full(before, np.nan)), chunk_metrics[name]], axis=1
+                )
                 for name in chunk_metrics
             }
         self.chunks_done = chunk + 1

@@ -38,6 +38,7 @@ from pngail_jax.jobs.demonstrations import input_files, load_or_make_demos, reso
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.jobs.offline_config import PROGRAM, OfflineRunConfig, load_offline_config
 from pngail_jax.offline import (
+    METRICS_CSV_COLUMNS,
     OfflineConfig,
     OfflineTrainer,
     program_groups,
@@ -292,22 +293,8 @@ def _write_outputs(out, config, cells, progress, normalizer, compile_seconds) ->
         f"rows at confidence >= 0.5 (mean {summary['offline/num_expert']:.0f} rows per seed)."
     ]
     if "ilid/num_selected" in progress.init_metrics:
-        ilid = {
-            name.removeprefix("ilid/"): float(np.nanmean(progress.init_metrics[name]))
-            for name in (
-                "ilid/num_selected",
-                "ilid/num_other",
-                "ilid/selected_true_confidence",
-                "ilid/other_true_confidence",
-            )  # fmt: skip
-        }
-        summary["ilid"] = ilid
-        notes.append(
-            f"ILID's selection: a mean {ilid['num_selected']:.0f} of {ilid['num_other']:.0f} "
-            "other rows per seed; their mean true confidence (which nothing read) "
-            f"{ilid['selected_true_confidence']:.2f}, against {ilid['other_true_confidence']:.2f} "
-            "for the rows it chose from."
-        )
+        summary["ilid"], note = _ilid_summary(progress.init_metrics, config.ilid_union)
+        notes.append(note)
     markdown = report.summary_markdown(summary, cells, metrics, title, notes)
     report.write_summary(out, summary, markdown)
     gradient = {**metrics, "env_steps": progress.metrics["gradient_steps"]}
@@ -317,8 +304,33 @@ def _write_outputs(out, config, cells, progress, normalizer, compile_seconds) ->
     return summary
 
 
+def _ilid_summary(init_metrics: dict, union: str) -> tuple[dict, str]:
+    """ILID's selection in the summary (means over its seeds), and the note that says it;
+    with the released code's union, the share of its draws that are zero rows."""
+    names = ["ilid/num_selected", "ilid/num_other", "ilid/selected_true_confidence",
+             "ilid/other_true_confidence"]  # fmt: skip
+    if "ilid/union_zero_share" in init_metrics:
+        names.append("ilid/union_zero_share")
+    ilid = {name.removeprefix("ilid/"): float(np.nanmean(init_metrics[name])) for name in names}
+    note = (
+        f"ILID's selection: a mean {ilid['num_selected']:.0f} of {ilid['num_other']:.0f} "
+        "other rows per seed; their mean true confidence (which nothing read) "
+        f"{ilid['selected_true_confidence']:.2f}, against {ilid['other_true_confidence']:.2f} "
+        "for the rows it chose from."
+    )
+    if union == "released":
+        note += (
+            " Its union as its released code samples it (--ilid-union released): a mean "
+            f"{ilid.get('union_zero_share', float('nan')):.6g} of its draws are zero rows."
+        )
+    return ilid, note
+
+
 def _write_metrics(path, cells, metrics, normalizer, timing) -> None:
     """metrics.csv by the sweep's writer, each cell with its own program's chunk ends as its
-    wall clock (the programs run one after another)."""
+    wall clock (the programs run one after another), and the columns of
+    ``offline.METRICS_CSV_COLUMNS`` whose metrics the run recorded (DWBC's discriminator at
+    each evaluation, where DWBC ran)."""
     per_cell = [timing["chunk_seconds"][timing["group_of_cell"][i]] for i in range(len(cells))]
-    report.write_metrics_csv(path, cells, metrics, normalizer, per_cell)
+    extra = {column: name for column, name in METRICS_CSV_COLUMNS.items() if name in metrics}
+    report.write_metrics_csv(path, cells, metrics, normalizer, per_cell, extra)

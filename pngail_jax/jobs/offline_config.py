@@ -1,5 +1,5 @@
 """``OfflineRunConfig``: what one offline grid is (methods x seeds on a task's
-demonstrations, the gradient-step budget, the batch, ILID's discriminators), checked when
+demonstrations, the gradient-step budget, the batch, ILID's discriminators and union), checked when
 made, and ``load_offline_config``, the config an offline run in a folder began with. The
 job that runs it is ``jobs.offline.run_offline``.
 """
@@ -12,6 +12,7 @@ from pathlib import Path
 from pngail_jax.integrity import IntegrityError, read_json
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.offline import DEFAULT_OFFLINE_METHODS, OfflineConfig, required_components
+from pngail_jax.offline_ilid import check_union
 from pngail_jax.run_config import RunConfig
 
 PROGRAM = "offline"
@@ -39,6 +40,7 @@ class OfflineRunConfig:
     hidden_sizes: tuple[int, ...] = (100, 100)
     ilid_discriminator_steps: int = 100_000  # each of ILID's two, before its policy (codebase's)
     ilid_discriminator_learning_rate: float = 1e-5  # its codebase's Adam step size
+    ilid_union: str = "intended"  # E+S; "released": padded with zero rows (offline_ilid)
 
     def __post_init__(self):
         if not self.methods or len(set(self.methods)) != len(self.methods):
@@ -62,6 +64,7 @@ class OfflineRunConfig:
                 "ilid_discriminator_learning_rate must lie in (0, 1), got "
                 f"{self.ilid_discriminator_learning_rate!r}"
             )
+        check_union(self.ilid_union)
 
     @property
     def run_config(self) -> RunConfig:
@@ -85,6 +88,7 @@ class OfflineRunConfig:
             num_demos=run_config.task_num_demos(num_rows),
             classifier=run_config.adversarial_config(num_rows).classifier,
             ilid_discriminator_steps=self.ilid_discriminator_steps,
+            ilid_union=self.ilid_union,
             components=required_components(self.methods),
         )
 

@@ -20,6 +20,7 @@ from pngail_jax.demos import released_task
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.jobs.offline import OfflineRunConfig, load_offline_config, run_offline
 from pngail_jax.offline import CLASSIFIED_SUFFIX, DEFAULT_OFFLINE_METHODS, OFFLINE_METHOD_NAMES
+from pngail_jax.offline_ilid import ILID_UNIONS
 from pngail_jax.outputs import output_owner
 from pngail_jax.programs.cli import (
     ENV_HELP,
@@ -76,18 +77,7 @@ def build_parser() -> ArgumentParser:
     parser.add_argument("--chunk-iterations", type=int, default=DEFAULTS.chunk_iterations,
                         help="iterations per compiled chunk (a progress line each)")  # fmt: skip
     parser.add_argument("--batch-size", type=int, default=DEFAULTS.batch_size)
-    parser.add_argument(
-        "--ilid-discriminator-steps", type=int, default=DEFAULTS.ilid_discriminator_steps,
-        help="Adam steps of each of ILID's two discriminators, before its policy learns "
-        "(its codebase's: 100,000, which a 5-seed grid had not finished after 20 minutes on 2 "
-        "CPU cores beside other jobs)",
-    )  # fmt: skip
-    parser.add_argument(
-        "--ilid-discriminator-learning-rate", type=float,
-        default=DEFAULTS.ilid_discriminator_learning_rate,
-        help="their Adam step size (its codebase's: 1e-5; with 20 times fewer steps, 2e-4 "
-        "covers the same distance)",
-    )  # fmt: skip
+    _add_ilid_flags(parser)
     parser.add_argument("--out", type=path_argument, help="output directory (required)")
     parser.add_argument(
         "--resume", type=path_argument, metavar="DIR",
@@ -100,6 +90,29 @@ def build_parser() -> ArgumentParser:
     add_allow_unsealed(parser.add_argument, "--resume a run")
     add_compile_cache_flags(parser)
     return parser
+
+
+def _add_ilid_flags(parser: ArgumentParser) -> None:
+    """ILID's flags: its discriminators' budget and the union it draws from."""
+    parser.add_argument(
+        "--ilid-discriminator-steps", type=int, default=DEFAULTS.ilid_discriminator_steps,
+        help="Adam steps of each of ILID's two discriminators, before its policy learns "
+        "(its codebase's: 100,000, which a 5-seed grid had not finished after 20 minutes on 2 "
+        "CPU cores beside other jobs)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--ilid-discriminator-learning-rate", type=float,
+        default=DEFAULTS.ilid_discriminator_learning_rate,
+        help="their Adam step size (its codebase's: 1e-5; with 20 times fewer steps, 2e-4 "
+        "covers the same distance)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--ilid-union", choices=ILID_UNIONS, default=DEFAULTS.ilid_union,
+        help="the union ILID's state-action discriminator and weighted BC draw from: intended "
+        "(the expert and selected rows) or released (as its released code samples it: each "
+        "draw a zero row with probability 1e6 / (1e6 + |E| + |S|), its buffer's 1,000,000 zero "
+        "rows in front; docs/methods.md)",
+    )  # fmt: skip
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -134,6 +147,7 @@ def parse_args(argv=None) -> argparse.Namespace:
             chunk_iterations=args.chunk_iterations, batch_size=args.batch_size,
             ilid_discriminator_steps=args.ilid_discriminator_steps,
             ilid_discriminator_learning_rate=args.ilid_discriminator_learning_rate,
+            ilid_union=args.ilid_union,
         )  # fmt: skip
     except ValueError as error:
         parser.error(str(error))
