@@ -1,6 +1,6 @@
 """Adversarial-training throughput of a grid of runs (1, 7, 35 cells) on one environment.
 
-``--env NAME`` (default Pendulum-v1) runs with that task's row of ``pngail_jax.settings``
+``--env NAME`` (default Pendulum-v1) runs with that task's row of ``pngail_jax.config.settings``
 (parallel envs x unroll length, MJX solver, evaluation episodes and frequency); the run-settings
 flags (``--num-envs``, ``--unroll-length``, ``--solver``, ``--eval-every``, ...) override it.
 
@@ -36,12 +36,13 @@ run; ``train_over_env_ratio`` = steps_per_second / env_steps_per_second, and
 cells). On a shared, noisy machine these same-run ratios are the numbers to trust.
 
 Compile seconds are the Grid's AOT compile (tracing, lowering and XLA; init + chunk programs)
-with JAX's persistent compilation cache (``pngail_jax.compilation.enable_compilation_cache``,
-which stores programs that take at least 1 s to compile), each in a fresh Python process (this
-script with ``--compile-worker``) that builds the grid as the measurement does: the cold
-compile on a new, empty temporary directory (``compile_seconds``), then the warm one on the
-directory it filled (``compile_seconds_warm``), as a repeated command would; ``cold_cache_hits``
-(0 expected) and ``warm_cache_hits`` (2 expected) count the programs read from the directory.
+with JAX's persistent compilation cache
+(``pngail_jax.storage.compilation.enable_compilation_cache``, which stores programs that take at
+least 1 s to compile), each in a fresh Python process (this script with ``--compile-worker``)
+that builds the grid as the measurement does: the cold compile on a new, empty temporary
+directory (``compile_seconds``), then the warm one on the directory it filled
+(``compile_seconds_warm``), as a repeated command would; ``cold_cache_hits`` (0 expected) and
+``warm_cache_hits`` (2 expected) count the programs read from the directory.
 Fresh processes because a rebuild in the same process need not lower to the same program: the
 names of the lowered inner functions depend on the state of JAX's trace caches (``_take_116``
 the first time, ``_take_118`` after another program was traced), and on Hopper an in-process
@@ -117,16 +118,16 @@ from common import (
 from jax import monitoring
 
 from pngail_jax import envs
-from pngail_jax import settings as run_settings
-from pngail_jax.adversarial import AdversarialConfig, AdversarialTrainer, TrainState
-from pngail_jax.compilation import enable_compilation_cache
+from pngail_jax.adversarial.methods import METHOD_NAMES
+from pngail_jax.adversarial.trainer import AdversarialConfig, AdversarialTrainer, TrainState
 from pngail_jax.confidence import ClassifierConfig
+from pngail_jax.config import settings as run_settings
 from pngail_jax.demos import Demonstrations, load_demonstrations
 from pngail_jax.grid import Grid, make_cells, nonfinite_cells, stack_cells
-from pngail_jax.methods import METHOD_NAMES
 from pngail_jax.programs import flags
 from pngail_jax.rl.learners import LEARNERS
 from pngail_jax.rl.trpo import TRPO, TRPOConfig
+from pngail_jax.storage.compilation import enable_compilation_cache
 
 DEFAULT_ENV = "Pendulum-v1"
 REPO_ROOT = Path(__file__).resolve().parents[1]

@@ -2,7 +2,7 @@
 
 Builds an ``AdversarialTrainer`` on synthetic demonstrations and ``--cells`` cells (PN-GAIL's
 ``MethodSpec``, ``AdversarialHyperparams`` defaults, one seed each, initialised by the trainer)
-with the environment's run settings (``pngail_jax.settings.settings_for``:
+with the environment's run settings (``pngail_jax.config.settings.settings_for``:
 parallel envs, unroll length, MJX solver, evaluation episodes; flags override the shape),
 initialises their TRPO states and runs a real rollout, so every phase sees realistic inputs.
 Each phase is then its own program, ``jax.jit(jax.vmap(phase))`` over the cells as in the real
@@ -11,11 +11,12 @@ phases are timed warm in ``--rounds`` (5) interleaved rounds, every phase once p
 that a change of load on a shared machine hits all phases alike; a round's sample of a phase
 is the mean of back-to-back calls (each ended by ``block_until_ready``) lasting at least
 ``SAMPLE_SECONDS``, and a phase's milliseconds are the median over rounds. Phases, in the
-order of ``pngail_jax.adversarial.AdversarialTrainer``'s iteration:
+order of ``pngail_jax.adversarial.trainer.AdversarialTrainer``'s iteration:
 
 - ``rollout``: ``trpo.rollout``, the ``unroll_length``-step ``lax.scan`` over the envs.
-- ``importance_weights``: WGAIL's w on every split row (``--demo-rows``). ``train.py`` puts it
-  in a ``jnp.where`` with its refresh schedule, so it is computed every iteration.
+- ``importance_weights``: WGAIL's w on every split row (``--demo-rows``).
+  ``adversarial/trainer.py`` puts it in a ``jnp.where`` with its refresh schedule, so it is
+  computed every iteration.
 - ``discriminator``: the trainer's own steps: its batch (the agent rows and as many
   demonstration rows drawn with replacement; random rows: the cost does not depend on their
   values), the gradient of PN-GAIL's loss, the policy's reward and the Adam step.
@@ -71,11 +72,16 @@ from common import context, markdown_table, write_rows
 from flax import struct
 
 from pngail_jax import envs
-from pngail_jax.adversarial import AdversarialConfig, AdversarialHyperparams, AdversarialTrainer
+from pngail_jax.adversarial.methods import method_spec, stack
+from pngail_jax.adversarial.trainer import (
+    AdversarialConfig,
+    AdversarialHyperparams,
+    AdversarialTrainer,
+)
 from pngail_jax.confidence import ClassifierConfig
+from pngail_jax.config.settings import describe, make_env, settings_for
 from pngail_jax.demos import Demonstrations
 from pngail_jax.fitting import adam_step
-from pngail_jax.methods import method_spec, stack
 from pngail_jax.rl.gae import generalized_advantages
 from pngail_jax.rl.trpo import (
     TRPO,
@@ -83,7 +89,6 @@ from pngail_jax.rl.trpo import (
     backtracking_line_search,
     conjugate_gradient,
 )
-from pngail_jax.settings import describe, make_env, settings_for
 
 NUM_ROUNDS = 5
 SAMPLE_SECONDS = 0.05  # fast phases: back-to-back calls per sample, each blocked, to last this

@@ -21,7 +21,7 @@ from common import context, markdown_table, time_grid_chunks, write_rows
 from pngail_jax import envs
 from pngail_jax.demos import load_released
 from pngail_jax.grid import Grid, make_cells
-from pngail_jax.offline import (
+from pngail_jax.offline.trainer import (
     OFFLINE_METHOD_NAMES,
     OfflineConfig,
     OfflineTrainer,

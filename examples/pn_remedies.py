@@ -29,7 +29,7 @@ grid with both says whether the penalty mends PN-GAIL's risk or is a better disc
 for every method.
 """
 
-from pngail_jax.methods import PRESETS, Preset
+from pngail_jax.adversarial.methods import PRESETS, Preset
 
 _PNGAIL = PRESETS["pngail"].coefficients
 _IWIL = PRESETS["2iwil"]

@@ -4,7 +4,7 @@
         --methods gail,pngail,examples.pu_methods:pu_gail,examples.pu_methods:uid
 
 Both read no confidences. Each is one of the two non-negative PU risks of
-``pngail_jax.losses`` (the core term they needed, ``docs/methods.md``):
+``pngail_jax.adversarial.losses`` (the core term they needed, ``docs/methods.md``):
 
 - PU-GAIL (Xu & Denil, 2019, "Positive-unlabeled reward learning"): the demonstrations are
   the labelled (expert) class and the agent's rows unlabelled, a share ``pu_prior`` of them
@@ -18,7 +18,7 @@ The priors are ours, 0.5 each: neither paper's value for these tasks is known he
 axis sweeps them (``--grid pu_prior=0.3,0.5,0.7``).
 """
 
-from pngail_jax.methods import Preset
+from pngail_jax.adversarial.methods import Preset
 
 pu_gail = Preset(
     "PU-GAIL: demonstrations positive, the agent's rows unlabelled (non-negative PU risk)",

@@ -15,10 +15,10 @@ _EXPORTS = {
     "run": "pngail_jax.jobs.sweep",
     "RunResult": "pngail_jax.jobs.results",
     "RunError": "pngail_jax.jobs.errors",
-    "RunConfig": "pngail_jax.run_config",
+    "RunConfig": "pngail_jax.config.run_config",
     "load_demonstrations": "pngail_jax.demos",
-    "AdversarialTrainer": "pngail_jax.adversarial",
-    "AdversarialConfig": "pngail_jax.adversarial",
+    "AdversarialTrainer": "pngail_jax.adversarial.trainer",
+    "AdversarialConfig": "pngail_jax.adversarial.trainer",
     "make_cells": "pngail_jax.grid",
     "stack_cells": "pngail_jax.grid",
     "Grid": "pngail_jax.grid",
@@ -33,7 +33,7 @@ def __getattr__(name: str):
 
 
 def load_policy(directory, seed=None, verbose=True):
-    """Loads a saved policy as ``policy(obs) -> action``; see ``pngail_jax.checkpoint``."""
-    from pngail_jax.checkpoint import load_policy as _load_policy
+    """Loads a saved policy as ``policy(obs) -> action``; see ``pngail_jax.storage.checkpoint``."""
+    from pngail_jax.storage.checkpoint import load_policy as _load_policy
 
     return _load_policy(directory, seed=seed, verbose=verbose)

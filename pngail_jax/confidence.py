@@ -20,7 +20,7 @@ import jax.numpy as jnp
 import optax
 from flax import struct
 
-from pngail_jax import validation
+from pngail_jax.config import validation
 from pngail_jax.networks import OUTPUT_SCALE, torch_like_init
 
 

@@ -26,9 +26,9 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import NamedSharding, PartitionSpec
 
-from pngail_jax.adversarial import AdversarialHyperparams
-from pngail_jax.checkpoint import is_key
-from pngail_jax.methods import MethodSpec, method_spec, stack
+from pngail_jax.adversarial.methods import MethodSpec, method_spec, stack
+from pngail_jax.adversarial.trainer import AdversarialHyperparams
+from pngail_jax.storage.checkpoint import is_key
 
 GRID_AXIS = "grid"
 

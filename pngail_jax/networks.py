@@ -86,7 +86,8 @@ class ReluMLP(nn.Module):
 
 class DeterministicPolicy(nn.Module):
     """A deterministic policy tanh(ReluMLP(obs)) in [-1, 1] per action dimension (the CAIL
-    codebase's ``DeterministicPolicy``; ``pngail_jax.bc`` scales it to the action bounds).
+    codebase's ``DeterministicPolicy``; ``pngail_jax.adversarial.bc`` scales it to the action
+    bounds).
 
     Input float[..., obs_size]; output float[..., action_size].
     """

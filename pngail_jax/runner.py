@@ -5,6 +5,7 @@ and will then be removed; import from ``pngail_jax`` (``run``, ``RunConfig``,
 
 import warnings
 
+from pngail_jax.analysis.runs import sealed_part  # noqa: F401
 from pngail_jax.jobs.build import BuiltRun  # noqa: F401
 from pngail_jax.jobs.build import build_run as build  # noqa: F401  (its old signature)
 from pngail_jax.jobs.chunks import (  # noqa: F401
@@ -46,7 +47,6 @@ from pngail_jax.jobs.results import (  # noqa: F401
 )
 from pngail_jax.jobs.sweep import PROGRAM, configure_devices, run  # noqa: F401
 from pngail_jax.jobs.train_seeds import train_seeds  # noqa: F401
-from pngail_jax.runs import sealed_part  # noqa: F401
 
 warnings.warn(
     "pngail_jax.runner is now pngail_jax.jobs (run, RunResult, RunError: from pngail_jax); "

@@ -17,7 +17,7 @@ def pytest_configure(config):
     same environment rolled out by two modules, both xdist workers) then compile it once; a
     second run of the suite on the same machine reads every program from disk. A test never
     depends on the cache: an empty folder gives the same results, only slower."""
-    from pngail_jax.compilation import enable_compilation_cache
+    from pngail_jax.storage.compilation import enable_compilation_cache
 
     directory = enable_compilation_cache()
     os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", str(directory))
@@ -76,9 +76,9 @@ def as_sweep_run(directory: Path, normalizer, **config) -> Path:
     """``directory`` (a metrics.csv written by hand, perhaps a summary.json) made a sweep run
     the programs trust (``runs.verify_run``): marked as the sweep's, with a sealed config.json
     naming the ``normalizer`` its normalised returns were written with, and ``config``."""
-    from pngail_jax.integrity import CONFIG_SEAL, seal
-    from pngail_jax.outputs import prepare_output
-    from pngail_jax.runs import sealed_part
+    from pngail_jax.analysis.runs import sealed_part
+    from pngail_jax.storage.integrity import CONFIG_SEAL, seal
+    from pngail_jax.storage.outputs import prepare_output
 
     prepare_output(directory, "sweep")
     document = {**config, "resolved": {"normalizer": list(normalizer)}}

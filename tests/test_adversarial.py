@@ -10,13 +10,13 @@ import pytest
 from conftest import authors_data, swing_up_demonstrations, swing_up_mixture
 
 from pngail_jax import envs
-from pngail_jax.adversarial import AdversarialConfig, AdversarialTrainer
-from pngail_jax.bc import BCConfig
+from pngail_jax.adversarial.bc import BCConfig
+from pngail_jax.adversarial.methods import PRESETS, required_phases
+from pngail_jax.adversarial.ranking import RankingConfig
+from pngail_jax.adversarial.trainer import AdversarialConfig, AdversarialTrainer
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import Demonstrations, load_demonstrations
 from pngail_jax.grid import make_cells, stack_cells
-from pngail_jax.methods import PRESETS, required_phases
-from pngail_jax.ranking import RankingConfig
 from pngail_jax.rl import RolloutConfig, TRPOConfig
 
 SHARED_PENDULUM = authors_data()
@@ -183,7 +183,7 @@ def _random_demos(num_rows=200):
 def test_gradient_penalty_against_finite_differences():
     """mean ||grad_x z||^2 at the points between each agent row and its demonstration row,
     against central differences of the discriminator (float64 throughout)."""
-    from pngail_jax.adversarial import DiscriminatorBatch
+    from pngail_jax.adversarial.trainer import DiscriminatorBatch
 
     trainer = _small_trainer(_random_demos(), gradient_penalty=True)
     rng = np.random.default_rng(2)
@@ -213,7 +213,7 @@ def test_gradient_penalty_is_compiled_only_when_asked_and_refused_otherwise():
     """A grid of PN-GAIL with the penalty at 0 and at 10: the cell at 0 trains as a trainer
     without the penalty compiled (same floats up to the programs' rounding), the cell at 10
     differently; a method that needs the penalty is refused by a trainer without it."""
-    from pngail_jax.methods import Preset, register
+    from pngail_jax.adversarial.methods import Preset, register
 
     demos = _random_demos()
     cells = make_cells(["pngail"], 1, axes=[("gradient_penalty_coef", (0.0, 10.0))])

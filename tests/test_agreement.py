@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from conftest import as_sweep_run
 
+from pngail_jax.analysis.report import write_metrics_csv
 from pngail_jax.grid import make_cells
 from pngail_jax.programs import agreement
-from pngail_jax.report import write_metrics_csv
 
 
 def _run(tmp_path, num_seeds: int):

@@ -13,19 +13,23 @@ import numpy as np
 import pytest
 
 from pngail_jax import envs
-from pngail_jax.adversarial import AdversarialConfig, AdversarialHyperparams, AdversarialTrainer
-from pngail_jax.bc import BCConfig, DeterministicBCConfig
-from pngail_jax.cail import CAILConfig, CailPhase
+from pngail_jax.adversarial.bc import BCConfig, DeterministicBCConfig
+from pngail_jax.adversarial.cail import CAILConfig, CailPhase
+from pngail_jax.adversarial.firl import FirlConfig
+from pngail_jax.adversarial.methods import METHOD_NAMES, method_spec, required_phases, stack
+from pngail_jax.adversarial.ranking import DrexConfig, RankingConfig
+from pngail_jax.adversarial.trainer import (
+    AdversarialConfig,
+    AdversarialHyperparams,
+    AdversarialTrainer,
+)
 from pngail_jax.confidence import ClassifierConfig
+from pngail_jax.config.run_config import RunConfig
 from pngail_jax.demos import DemonstrationError, Demonstrations
-from pngail_jax.firl import FirlConfig
 from pngail_jax.grid import make_cells, stack_cells
-from pngail_jax.methods import METHOD_NAMES, method_spec, required_phases, stack
 from pngail_jax.networks import orthogonal_init
-from pngail_jax.ranking import DrexConfig, RankingConfig
 from pngail_jax.rl import RolloutConfig, TRPOConfig
 from pngail_jax.rl.ppo import PPOConfig
-from pngail_jax.run_config import RunConfig
 
 METHODS = ("trex", "drex", "cail", "firl-fkl", "firl-rkl", "firl-js", "bc", "bc-weighted")
 # Tolerances between two compiled programs (vmapped vs single), as tests/test_grid.py's.
@@ -325,7 +329,7 @@ def test_orthogonal_init_under_vmap_equals_flax_matrix_by_matrix():
 TWO_CELL_DREX_INIT = """
 import dataclasses, jax
 import tests.test_appendix_methods as t
-from pngail_jax.bc import DeterministicBCConfig
+from pngail_jax.adversarial.bc import DeterministicBCConfig
 trainer = t.trainer_for(("drex",))
 drex = t.DrexConfig(
     bc=DeterministicBCConfig(num_steps=5, batch_size=16, hidden_sizes=(256, 256)),

@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from pngail_jax import bc, ranking
+from pngail_jax.adversarial import bc, ranking
 
 RNG = np.random.default_rng(0)
 # Compiled once per shape: op-by-op, the pair draws cost seconds each.

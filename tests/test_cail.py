@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from pngail_jax import cail
+from pngail_jax.adversarial import cail
 
 
 def np_softplus(x):

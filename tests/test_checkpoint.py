@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from pngail_jax.checkpoint import restore_tree, save_tree
+from pngail_jax.storage.checkpoint import restore_tree, save_tree
 
 
 def test_round_trip_with_keys_empty_leaves_and_dtypes(tmp_path):

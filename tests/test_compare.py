@@ -1,4 +1,4 @@
-"""Comparisons across runs and tasks (pngail_jax.compare, experiments.compare) against hand
+"""Comparisons across runs and tasks (pngail_jax.analysis.compare, experiments.compare) against hand
 computations of rliable's definitions."""
 
 import json
@@ -6,14 +6,15 @@ import json
 import numpy as np
 import pytest
 
-from pngail_jax import compare, outputs
-from pngail_jax.compare import Scores
+from pngail_jax.analysis import compare
+from pngail_jax.analysis.compare import Scores
+from pngail_jax.analysis.report import write_metrics_csv
+from pngail_jax.analysis.runs import sealed_part
 from pngail_jax.grid import Cell
-from pngail_jax.integrity import CONFIG_SEAL, seal
-from pngail_jax.outputs import prepare_output
 from pngail_jax.programs import compare as program
-from pngail_jax.report import write_metrics_csv
-from pngail_jax.runs import sealed_part
+from pngail_jax.storage import outputs
+from pngail_jax.storage.integrity import CONFIG_SEAL, seal
+from pngail_jax.storage.outputs import prepare_output
 
 A = {"t1": np.array([0.1, 0.5, 0.9]), "t2": np.array([0.2, 1.4])}
 B = {"t1": np.array([0.0, 0.3, 0.6]), "t2": np.array([0.5, 0.7])}

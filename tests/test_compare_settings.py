@@ -8,12 +8,13 @@ import math
 import numpy as np
 import pytest
 
-from pngail_jax import envs, outputs
+from pngail_jax import envs
+from pngail_jax.config.validation import ConfigError
 from pngail_jax.jobs import compare_settings as job
 from pngail_jax.jobs.train_rl import TrainRLConfig
 from pngail_jax.programs import train_rl
 from pngail_jax.programs.cli import config_from
-from pngail_jax.validation import ConfigError
+from pngail_jax.storage import outputs
 
 
 @pytest.mark.parametrize("arm", sorted(job.ARMS))
@@ -162,9 +163,9 @@ def test_a_finished_comparison_is_recorded_and_its_table_rendered(recorded):
 def test_a_comparison_records_check_recomputes_every_figure_of_its_table(recorded):
     """Each figure the table shows, edited in the record, fails the check, naming it; a
     record missing a part, a bad name and a comparison from before provenance are refused."""
+    from pngail_jax.analysis.run_records import RecordError
     from pngail_jax.jobs import comparison_record
     from pngail_jax.programs import record as record_program
-    from pngail_jax.run_records import RecordError
 
     tmp_path, _, records = recorded
     kept = json.loads((records / "cmp" / "record.json").read_text())
@@ -250,7 +251,7 @@ def test_a_contrast_table_puts_each_tasks_arms_beside_its_baseline_on_the_own_ph
         se = finals.std(ddof=1) / np.sqrt(5)
         assert row[3] == f"{finals.mean():,.1f} ± {se:,.1f}"
     assert rows[0][4] == "(baseline)"
-    from pngail_jax.run_records import RecordError
+    from pngail_jax.analysis.run_records import RecordError
 
     with pytest.raises(RecordError, match="has no arm 'table' to contrast with"):
         comparison_record.contrast_table(records, ["reference-fast"], "table")

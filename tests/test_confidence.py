@@ -7,7 +7,7 @@ import pytest
 from conftest import authors_data
 
 from pngail_jax.confidence import ClassifierConfig, bsc_loss, logistic_loss, sc_loss
-from pngail_jax.run_config import RunConfig
+from pngail_jax.config.run_config import RunConfig
 
 AUTHORS_PENDULUM = authors_data()
 

@@ -18,15 +18,15 @@ from hypothesis import settings as hypothesis_settings
 from hypothesis import strategies as st
 
 from pngail_jax import envs
+from pngail_jax.adversarial.methods import METHOD_NAMES
+from pngail_jax.analysis.tracking import BACKENDS as LOG_BACKENDS
 from pngail_jax.confidence import ClassifierConfig
-from pngail_jax.methods import METHOD_NAMES
+from pngail_jax.config.run_config import RunConfig
+from pngail_jax.config.run_config_checks import FISHER_FORMS
+from pngail_jax.config.settings import RunSettings
+from pngail_jax.config.validation import ConfigError
 from pngail_jax.programs import cli, compare_settings, sweep
 from pngail_jax.rl.learners import LEARNERS
-from pngail_jax.run_config import RunConfig
-from pngail_jax.run_config_checks import FISHER_FORMS
-from pngail_jax.settings import RunSettings
-from pngail_jax.tracking import BACKENDS as LOG_BACKENDS
-from pngail_jax.validation import ConfigError
 
 PROPERTY = hypothesis_settings(max_examples=50, deadline=None, database=None, derandomize=True)
 
@@ -427,7 +427,7 @@ def test_a_long_silent_step_shows_its_elapsed_time():
     import io
     import time
 
-    from pngail_jax.tracking import ticking
+    from pngail_jax.analysis.tracking import ticking
 
     stream = io.StringIO()  # not a terminal: whole lines, every `every` seconds
     with ticking("compiling", every=0.05, stream=stream):

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from pngail_jax import envs
-from pngail_jax.settings import REFERENCE_SETTINGS, settings_for
+from pngail_jax.config.settings import REFERENCE_SETTINGS, settings_for
 
 MODULE = "tests.test_custom_env"
 

@@ -16,7 +16,8 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from pngail_jax import adversarial, envs
+from pngail_jax import envs
+from pngail_jax.adversarial import trainer as adversarial
 from pngail_jax.demos import (
     ACTION_BOUND_MULTIPLE,
     DemonstrationError,
@@ -284,9 +285,9 @@ def test_actions_beyond_the_bound_multiple_are_refused():
 def test_an_authors_file_gets_its_known_action_scale_unless_one_is_given(tmp_path, capsys):
     """The authors' Pendulum file stores torque / 2: loaded by name it is multiplied by 2 (the
     sweep and classify say so and record it); a given scale, even 1, wins; other files get 1."""
+    from pngail_jax.config.run_config import RunConfig
     from pngail_jax.demos import action_scale_note
     from pngail_jax.jobs import demonstrations as demos_job
-    from pngail_jax.run_config import RunConfig
 
     mixture = write_released(tmp_path, GOOD_ROWS)
     known = load_demonstrations(mixture)
@@ -315,8 +316,8 @@ def test_an_authors_file_gets_its_known_action_scale_unless_one_is_given(tmp_pat
 def test_a_plain_file_of_rows_loads_for_any_environment_by_its_sizes(tmp_path):
     """Any .npy of rows [s, a] (not an authors' file): split by the environment's sizes, with a
     confidence file or none; without sizes the error says how to give them."""
+    from pngail_jax.config.run_config import RunConfig
     from pngail_jax.jobs import demonstrations as demos_job
-    from pngail_jax.run_config import RunConfig
 
     rows = np.random.default_rng(0).uniform(-1, 1, (6, 4)).astype(np.float32)
     path, conf = tmp_path / "mine.npy", tmp_path / "scores.npy"
@@ -341,8 +342,8 @@ def test_a_plain_file_of_rows_loads_for_any_environment_by_its_sizes(tmp_path):
 def test_normalisers_from_flags_or_a_measured_random_policy():
     """--optimal-return alone: the random end is measured (uniform random actions, a fixed
     key: the same number twice); both flags: taken as given; neither: the file's own."""
+    from pngail_jax.config.run_config import RunConfig
     from pngail_jax.jobs import demonstrations as demos_job
-    from pngail_jax.run_config import RunConfig
 
     env = envs.make("Pendulum-v1")
     plain = Demonstrations(np.zeros((4, 3), np.float32), np.zeros((4, 1), np.float32))
@@ -605,7 +606,7 @@ def test_classify_refuses_a_mask_that_allows_too_few_rows(tmp_path):
 
 
 def test_the_trainer_passes_the_mask_to_the_split_and_checks_ratios(tmp_path, monkeypatch):
-    from pngail_jax.methods import method_spec
+    from pngail_jax.adversarial.methods import method_spec
 
     demos = load_npz(_masked_npz(tmp_path / "masked.npz", num_allowed=6))
     trainer = adversarial.AdversarialTrainer(

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pngail_jax import record_tables, run_records
+from pngail_jax.analysis import record_tables, run_records
 from pngail_jax.programs import record as program
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -1,6 +1,7 @@
-"""f-IRL as its codebase runs it (pngail_jax.firl, the f-IRL networks of pngail_jax.networks):
-each loss, network and optimiser step against an independent NumPy computation of its
-formula, the discriminator's refit, the demonstration segments, and the config."""
+"""f-IRL as its codebase runs it (pngail_jax.adversarial.firl, the f-IRL networks of
+pngail_jax.networks): each loss, network and optimiser step against an independent NumPy
+computation of its formula, the discriminator's refit, the demonstration segments, and the
+config."""
 
 import types
 
@@ -9,13 +10,14 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from pngail_jax import envs, firl
-from pngail_jax.adversarial import AdversarialConfig, AdversarialTrainer
+from pngail_jax import envs
+from pngail_jax.adversarial import firl
+from pngail_jax.adversarial.methods import method_spec, stack
+from pngail_jax.adversarial.trainer import AdversarialConfig, AdversarialTrainer
+from pngail_jax.config.run_config import RunConfig
 from pngail_jax.demos import Demonstrations
-from pngail_jax.methods import method_spec, stack
 from pngail_jax.networks import ClampedStateReward, ResidualDiscriminator
 from pngail_jax.rl import RolloutConfig
-from pngail_jax.run_config import RunConfig
 
 RNG = np.random.default_rng(0)
 

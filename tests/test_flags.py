@@ -9,9 +9,9 @@ import re
 import pytest
 
 from pngail_jax import envs
+from pngail_jax.config.run_config import RunConfig
+from pngail_jax.config.settings import REFERENCE_SETTINGS, settings_for
 from pngail_jax.programs import flags, sweep
-from pngail_jax.run_config import RunConfig
-from pngail_jax.settings import REFERENCE_SETTINGS, settings_for
 
 # RunConfig fields the sweep sets through its own flags or not at all.
 NOT_FLAGS = {"env", "settings", "classifier", "discriminator_hidden_sizes", "preset_name"}
@@ -116,8 +116,8 @@ def test_a_config_files_baseline_and_axes_follow_the_flags(tmp_path):
 
 
 def test_a_resume_refuses_a_method_whose_preset_changed(tmp_path):
+    from pngail_jax.adversarial.methods import preset_record
     from pngail_jax.jobs import record as record_job
-    from pngail_jax.methods import preset_record
 
     record = json.loads(json.dumps(preset_record("pngail")))
     record_job.check_methods_unchanged(tmp_path, {"pngail": record})  # unchanged: passes

@@ -17,13 +17,17 @@ import numpy as np
 import pytest
 
 from pngail_jax import envs
-from pngail_jax.adversarial import AdversarialConfig, AdversarialHyperparams, AdversarialTrainer
-from pngail_jax.checkpoint import restore_tree, save_tree
+from pngail_jax.adversarial.methods import method_spec
+from pngail_jax.adversarial.trainer import (
+    AdversarialConfig,
+    AdversarialHyperparams,
+    AdversarialTrainer,
+)
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import DemonstrationError, Demonstrations
 from pngail_jax.grid import Grid, make_cells, nonfinite_cells, stack_cells
-from pngail_jax.methods import method_spec
 from pngail_jax.rl import RolloutConfig, TRPOConfig
+from pngail_jax.storage.checkpoint import restore_tree, save_tree
 
 COMPARED = ("eval/return", "disc/loss", "disc/acc_agent", "train/reward", "trpo/kl")
 
@@ -265,7 +269,7 @@ def test_wgail_weights_refresh_on_schedule():
 
 
 def test_policy_reward_comes_from_the_discriminator_before_its_step():
-    from pngail_jax.losses import policy_reward
+    from pngail_jax.adversarial.losses import policy_reward
 
     env, demos, config = small_setup(num_iterations=1)
     trainer = AdversarialTrainer(config, env, demos)
@@ -418,7 +422,7 @@ def test_a_grid_over_further_axes_equals_its_cells_run_alone():
     """Axes over a TRPO hyperparameter and a loss coefficient (3 x 2 settings, one program: the
     6-cell grid's of ``test_grid_matches_runs_one_at_a_time``, so compiled once): each cell's
     inputs are its values set by hand, and its metrics those of the cell alone."""
-    from pngail_jax.adversarial import AdversarialHyperparams
+    from pngail_jax.adversarial.trainer import AdversarialHyperparams
 
     env, demos, config = small_setup()
     trainer = AdversarialTrainer(config, env, demos)

@@ -137,7 +137,7 @@ def _hopper_grid_setup():
     """3 methods x 2 seeds on Hopper-v4 (C engine), 4 envs x 20 steps, 50-step episodes."""
     from test_grid import small_grid_inputs
 
-    from pngail_jax.adversarial import AdversarialConfig, AdversarialTrainer
+    from pngail_jax.adversarial.trainer import AdversarialConfig, AdversarialTrainer
     from pngail_jax.confidence import ClassifierConfig
     from pngail_jax.demos import Demonstrations
     from pngail_jax.rl import RolloutConfig

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pngail_jax.integrity import (
+from pngail_jax.storage.integrity import (
     MANIFEST_NAME,
     IntegrityError,
     atomic_path,
@@ -128,9 +128,9 @@ def test_changed_inputs_name_the_file(tmp_path):
 
 
 def test_a_minari_dataset_is_recorded_by_its_content_not_only_its_id(tmp_path, monkeypatch):
-    from pngail_jax.integrity import changed_inputs
+    from pngail_jax.config.run_config import RunConfig
     from pngail_jax.jobs import demonstrations as demos_job
-    from pngail_jax.run_config import RunConfig
+    from pngail_jax.storage.integrity import changed_inputs
 
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path))
     dataset = tmp_path / "pendulum" / "mine-v0"

@@ -1,7 +1,9 @@
 """The house's shape, read from the code's own imports (every import, those inside functions
 too): no import circle inside pngail_jax, no module importing a higher layer, the jobs in
-their order, demos/ reading and writing data only, no private name imported across files,
-and no module too long. The layers are drawn in docs/architecture.md."""
+their order, demos/ reading and writing data only, analysis/ importing no JAX (in a fresh
+interpreter per module), no private name imported across files, no module too long, at most
+eight modules at the package's root and at most eleven floors. The layers are drawn in
+docs/architecture.md."""
 
 from __future__ import annotations
 
@@ -13,33 +15,36 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "pngail_jax"
 
-# Bottom to top: a module may import modules of its own layer or of the layers below.
+# Bottom to top: a module may import modules of its own layer or of the layers below. A room
+# (a folder) may span layers; config/ does until its run config moves to the bottom.
 LAYERS = [
     (
-        "foundation",
+        "plain data",  # no JAX: field checks, the method and released-file tables, files
         (
-            "validation", "integrity", "outputs", "compilation", "stats", "fitting",
-            "networks", "rl.gae", "envs", "envs.*", "demos.tables",
+            "config", "config.validation", "config.presets", "config.released_files",
+            "storage", "storage.integrity", "storage.outputs", "storage.compilation",
+            "analysis.stats",
         ),
     ),
-    ("data", ("demos", "demos.*")),
+    ("reading", ("analysis", "analysis.*")),  # run folders and records; no JAX
+    ("arrays", ("envs", "envs.*", "networks", "fitting", "rl.gae")),
+    ("demonstrations", ("demos", "demos.*")),
     (
         "learners",
         (
-            "rl", "rl.rollout", "rl.on_policy", "rl.trpo", "rl.train", "rl.ppo", "rl.learners",
-            "settings", "checkpoint", "phase", "bc", "firl", "ranking",
-            "confidence", "methods", "losses", "cail", "offline_losses", "offline_ilid",
-            "method_checks",
+            "rl", "rl.*", "confidence", "storage.checkpoint", "config.settings",
         ),
     ),
     (
-        "trainers",
+        "method parts",
         (
-            "adversarial", "grid", "train", "run_config", "run_config_checks", "config_record",
-            "report", "plots", "tracking", "compare",
-            "run_records", "record_tables", "offline", "runs",
+            "adversarial", "adversarial.methods", "adversarial.losses", "adversarial.phase",
+            "adversarial.bc", "adversarial.cail", "adversarial.firl", "adversarial.ranking",
+            "adversarial.method_checks", "offline", "offline.losses", "offline.ilid",
         ),
     ),
+    ("trainers", ("adversarial.trainer", "offline.trainer", "grid", "train")),
+    ("run config", ("config.run_config", "config.run_config_checks", "config.saved")),
     ("jobs", ("jobs", "jobs.*", "runner")),
     ("paper", ("paper", "paper.*")),
     ("programs", ("programs", "programs.*")),
@@ -172,14 +177,14 @@ def test_the_checks_find_a_circle_and_an_upward_import():
     graph = {"demos.make": [("jobs.sweep", [], 1)], "jobs.sweep": [("demos.make", [], 2)]}
     assert _circles(graph) == [["demos.make", "jobs.sweep"]]
     assert _upward(graph) == [
-        "pngail_jax.demos.make (data) imports pngail_jax.jobs.sweep (jobs), line 1"
+        "pngail_jax.demos.make (demonstrations) imports pngail_jax.jobs.sweep (jobs), line 1"
     ]
 
 
 def test_the_graph_holds_every_kind_of_import():
     """A function-body import (the package root's), ``from package import submodule``
     (runner's), a plain ``from module import name`` with the names it takes."""
-    assert any(target == "checkpoint" for target, _, _ in GRAPH[""])
+    assert any(target == "storage.checkpoint" for target, _, _ in GRAPH[""])
     assert any(target == "jobs.sweep" for target, _, _ in GRAPH["runner"])
     assert ("demos.files", ["load_numpy"]) in [(t, n) for t, n, _ in GRAPH["demos.released"]]
 
@@ -200,11 +205,90 @@ def test_demos_reads_and_writes_data_only():
     for name, imports in GRAPH.items():
         if name == "demos" or name.startswith("demos."):
             for target, _, line in imports:
-                assert target.split(".")[0] in ("demos", "envs"), (
+                assert target.split(".")[0] in ("demos", "envs") or target in PLAIN_TABLES, (
                     f"pngail_jax.{name} imports pngail_jax.{target} (line {line}): demos/ "
-                    "imports envs alone"
+                    "imports envs and the plain tables alone"
                 )
-    assert not GRAPH["demos.tables"], "the released-file tables import nothing"
+    for table in PLAIN_TABLES:
+        assert not GRAPH[table], f"pngail_jax.{table}, a plain table, imports nothing"
+
+
+# The modules that hold plain data only: they import nothing (demos/ reads the released
+# files' table; the trainers and the reading of runs read the methods' table).
+PLAIN_TABLES = ("config.released_files", "config.presets")
+# What the reading of run folders may import, those inside functions too: itself and modules
+# that import no JAX (checked by importing each in a fresh interpreter below).
+NO_JAX = (
+    "config.validation", "config.presets", "config.released_files", "storage",
+    "storage.integrity", "storage.outputs", "analysis", "analysis.*",
+)  # fmt: skip
+ANALYSIS = sorted(name for name in MODULES if name == "analysis" or name.startswith("analysis."))
+
+
+def test_the_analysis_imports_only_modules_without_jax():
+    """Every import of analysis/, those inside functions too, is of a module in NO_JAX: a
+    function that imported a trainer would bring JAX in at its first call."""
+    found = [
+        f"pngail_jax.{name} imports pngail_jax.{target} (line {line})"
+        for name in ANALYSIS
+        for target, _, line in GRAPH[name]
+        if not any(fnmatch(target, pattern) for pattern in NO_JAX)
+    ]
+    assert not found, "\n".join(found)
+
+
+@pytest.mark.parametrize("name", ["analysis", *ANALYSIS, "config.presets", "storage.outputs"])
+def test_importing_a_reading_module_imports_no_jax(name):
+    """In a fresh interpreter (this one has JAX already): importing the module leaves jax,
+    jaxlib, flax and optax out of sys.modules."""
+    import subprocess
+    import sys
+
+    code = (
+        f"import sys, pngail_jax.{name}\n"
+        "print(sorted({m.split('.')[0] for m in sys.modules} & {'jax', 'jaxlib', 'flax', 'optax'}))"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120
+    )
+    assert result.stdout.strip() == "[]", f"pngail_jax.{name} imports {result.stdout.strip()}"
+
+
+def _room(name: str) -> str:
+    """A module's room: its top folder, or the module itself at the package's root."""
+    return name.split(".")[0] if "." in name or MODULES[name].name == "__init__.py" else name
+
+
+def floors(graph) -> tuple[int, list[str]]:
+    """The house's height: the most rooms an import chain passes through (a step within a
+    room is no floor; the root's modules are rooms of their own), and that chain."""
+    height: dict[str, tuple[int, list[str]]] = {}
+
+    def climb(name):
+        if name not in height:
+            best = (1, [name])
+            for target, _, _ in graph[name]:
+                below, chain = climb(target)
+                up = below + (_room(target) != _room(name))
+                if up > best[0]:
+                    best = (up, [name, *chain])
+            height[name] = best
+        return height[name]
+
+    return max((climb(name) for name in graph), key=lambda found: found[0])
+
+
+MOST_FLOORS = 11
+
+
+def test_the_house_has_at_most_eleven_floors():
+    height, chain = floors(GRAPH)
+    assert height <= MOST_FLOORS, f"{height} floors: " + " -> ".join(chain)
+
+
+def test_the_package_root_holds_at_most_eight_modules():
+    root = sorted(path.name for path in PACKAGE.glob("*.py"))
+    assert len(root) <= 8, root
 
 
 def test_no_private_name_is_imported_across_files():

@@ -6,8 +6,8 @@ import numpy as np
 import optax
 import pytest
 
-from pngail_jax.losses import ConfidenceStats, discriminator_loss, policy_reward
-from pngail_jax.methods import METHOD_NAMES, PRESETS, method_spec, stack
+from pngail_jax.adversarial.losses import ConfidenceStats, discriminator_loss, policy_reward
+from pngail_jax.adversarial.methods import METHOD_NAMES, PRESETS, method_spec, stack
 from pngail_jax.networks import Discriminator
 
 
@@ -293,7 +293,7 @@ def test_logit_reward_against_numpy():
 
 
 def test_remedy_coefficients_are_checked():
-    from pngail_jax.methods import Preset, check_preset
+    from pngail_jax.adversarial.methods import Preset, check_preset
 
     base = dict(PRESETS["pngail"].coefficients)
     for field, bad in (

@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 
 import pngail_jax
-from pngail_jax import envs, outputs
+from pngail_jax import envs
 from pngail_jax.demos import load_demonstrations
 from pngail_jax.demos.generate import normalized_return, rollout_episodes
 from pngail_jax.programs import make_demos
+from pngail_jax.storage import outputs
 
 
 def test_make_demos_tiny_pendulum(tmp_path, capsys):

@@ -1,12 +1,12 @@
-"""What a trainer can serve (pngail_jax.method_checks), checked on the host with no trainer:
-label ratios against the split and the classifier's batch, methods against the data."""
+"""What a trainer can serve (pngail_jax.adversarial.method_checks), checked on the host with no
+trainer: label ratios against the split and the classifier's batch, methods against the data."""
 
 import pytest
 
+from pngail_jax.adversarial.method_checks import check_label_ratios, check_methods
+from pngail_jax.adversarial.ranking import RankingConfig
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import DemonstrationError
-from pngail_jax.method_checks import check_label_ratios, check_methods
-from pngail_jax.ranking import RankingConfig
 
 
 def test_a_ratio_must_leave_a_labelled_and_an_unlabelled_row():

@@ -10,18 +10,25 @@ import numpy as np
 import pytest
 from test_grid import assert_close_across_programs, small_setup
 
-from pngail_jax import methods
-from pngail_jax.adversarial import AdversarialTrainer
+from pngail_jax.adversarial import methods
+from pngail_jax.adversarial.methods import (
+    PRESETS,
+    Preset,
+    check_preset,
+    method_spec,
+    register,
+    resolve,
+)
+from pngail_jax.adversarial.trainer import AdversarialTrainer
+from pngail_jax.config.run_config import RunConfig
+from pngail_jax.config.validation import ConfigError
 from pngail_jax.grid import make_cells, stack_cells
-from pngail_jax.methods import PRESETS, Preset, check_preset, method_spec, register, resolve
 from pngail_jax.programs import sweep
-from pngail_jax.run_config import RunConfig
-from pngail_jax.validation import ConfigError
 
 # Halfway between 2IWIL's loss and PN-GAIL's (pn_coef from 0 to 1 is a continuum), with BSC
 # confidences: a method defined in a user's own module.
 OUTSIDE_MODULE = """
-from pngail_jax.methods import Preset
+from pngail_jax.adversarial.methods import Preset
 
 half_pn = Preset(
     "halfway between 2IWIL's and PN-GAIL's losses", "bsc",
@@ -61,7 +68,7 @@ def test_every_built_in_passes_its_own_checks():
         (Preset("x", "none", {"firl_coef": 1.0}), r"phase\(s\) \['firl'\]"),
         (Preset("x", "none", {"ranking_reward_coef": 1.0}), r"\['demo_rankings'\]"),
         (Preset("x", "none", {}, ("dagger",)), "phases must be among"),
-        ({"agent_coef": 1.0}, "a pngail_jax.methods.Preset"),
+        ({"agent_coef": 1.0}, "a pngail_jax.adversarial.methods.Preset"),
         (Preset("x", "none", {"gail_coef": 1.0, "bsc_eps": 0.0}), r"bsc_eps must lie in"),
         (Preset("x", "none", {"adversarial_reward_coef": 0.0}), "needs a phase whose reward"),
         (Preset("x", "none", {"policy_update_coef": 0.0}), "needs the 'bc' phase"),
@@ -95,7 +102,7 @@ def test_a_module_preset_is_imported_by_name_and_errors_name_it(outside_module):
     with pytest.raises(ConfigError, match="cannot import it") as error:
         RunConfig(methods=("outside_methods:missing",))
     assert error.value.field == "methods"
-    with pytest.raises(ConfigError, match="a pngail_jax.methods.Preset"):
+    with pytest.raises(ConfigError, match="a pngail_jax.adversarial.methods.Preset"):
         RunConfig(methods=("outside_methods:not_a_preset",))
     assert sweep.parse_args(["--methods", f"gail,{OUTSIDE}", "--out", "unused"]).config.methods
 

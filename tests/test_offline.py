@@ -1,5 +1,5 @@
-"""The offline trainer (pngail_jax.offline): the expert set it builds from the split, vmapped
-equals one at a time, the same key the same bits, a cell's numbers independent of the parts
+"""The offline trainer (pngail_jax.offline.trainer): the expert set it builds from the split,
+vmapped equals one at a time, the same key the same bits, a cell's numbers independent of the parts
 its grid compiles for other methods, the discriminator schedules, and bad configs refused."""
 
 import csv
@@ -12,11 +12,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from pngail_jax import envs, outputs
+from pngail_jax import envs
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import Demonstrations, make_split
 from pngail_jax.grid import make_cells
-from pngail_jax.offline import (
+from pngail_jax.offline.trainer import (
     OFFLINE_METHOD_NAMES,
     OfflineConfig,
     OfflineTrainer,
@@ -25,6 +25,7 @@ from pngail_jax.offline import (
     required_components,
     stack_offline_cells,
 )
+from pngail_jax.storage import outputs
 
 TINY = OfflineConfig(
     num_iterations=4,
@@ -308,7 +309,7 @@ def test_the_program_writes_the_sweeps_outputs_and_refuses_a_second_run(
 def assert_compare_and_the_record_read_it(out, rows, records):
     """An offline run's rows join the online methods' tables: compare reads its headline,
     and a record keeps it."""
-    from pngail_jax import compare, record_tables, run_records
+    from pngail_jax.analysis import compare, record_tables, run_records
 
     scores = compare.load_scores([out])
     evaluated = [

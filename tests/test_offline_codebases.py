@@ -20,18 +20,18 @@ import pytest
 from pngail_jax import envs
 from pngail_jax.demos import Demonstrations, successor_rows
 from pngail_jax.grid import make_cells
-from pngail_jax.offline import (
+from pngail_jax.offline.ilid import (
+    RELEASED_UNION_PADDING,
+    IlidSelection,
+    released_zero_share,
+    with_zero_rows,
+)
+from pngail_jax.offline.trainer import (
     OFFLINE_METHOD_NAMES,
     OfflineConfig,
     OfflineTrainer,
     offline_spec,
     stack_offline_cells,
-)
-from pngail_jax.offline_ilid import (
-    RELEASED_UNION_PADDING,
-    IlidSelection,
-    released_zero_share,
-    with_zero_rows,
 )
 
 RNG = np.random.default_rng(7)
@@ -307,10 +307,10 @@ def test_the_ilid_union_flag_reaches_config_metrics_record_and_resume(tmp_path, 
     """--ilid-union released is written in config.json (the run's settings and its trainer's)
     and read back by --resume; DWBC's evaluation columns are in metrics.csv and its record,
     filled at the evaluations of DWBC's rows only; a bad value is one line naming the flag."""
+    from pngail_jax.analysis.run_records import write_record
     from pngail_jax.demos import save_npz
     from pngail_jax.jobs.offline import OfflineRunConfig, load_offline_config
     from pngail_jax.programs import offline as program
-    from pngail_jax.run_records import write_record
 
     rng = np.random.default_rng(0)
     path = tmp_path / "demos.npz"

@@ -7,7 +7,7 @@ import numpy as np
 import optax
 import pytest
 
-from pngail_jax import offline_losses as losses
+from pngail_jax.offline import losses
 
 RNG = np.random.default_rng(0)
 

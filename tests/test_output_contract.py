@@ -17,9 +17,11 @@ from conftest import tiny_sweep_args
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from pngail_jax import outputs
 from pngail_jax.jobs import chunks
-from pngail_jax.outputs import (
+from pngail_jax.programs import cli, paper, sweep, train_rl
+from pngail_jax.programs.cli import claim_output
+from pngail_jax.storage import outputs
+from pngail_jax.storage.outputs import (
     MARKER,
     OUTPUT_LIST,
     OutputRefused,
@@ -28,8 +30,6 @@ from pngail_jax.outputs import (
     prepare_output,
     record_outputs,
 )
-from pngail_jax.programs import cli, paper, sweep, train_rl
-from pngail_jax.programs.cli import claim_output
 
 PROGRAMS = ["sweep", "paper", "train_rl", "make_demos", "compare_settings"]
 
@@ -307,7 +307,7 @@ def test_the_run_lock_refuses_a_live_holder_and_takes_over_a_dead_ones(tmp_path,
     import subprocess
     import sys
 
-    from pngail_jax.outputs import LOCK, RunLocked, run_lock
+    from pngail_jax.storage.outputs import LOCK, RunLocked, run_lock
 
     with run_lock(tmp_path, "sweep"):
         holder = json.loads((tmp_path / LOCK).read_text())
@@ -336,8 +336,8 @@ def test_a_signal_outside_a_chunk_stops_at_once_and_the_lock_goes_with_it(tmp_pa
     import signal
     import time
 
-    from pngail_jax.outputs import LOCK, run_lock
     from pngail_jax.programs.cli import signals_stop_at_a_checkpoint
+    from pngail_jax.storage.outputs import LOCK, run_lock
 
     number = signal.Signals[name]
     before = {n: signal.getsignal(n) for n in (signal.SIGINT, signal.SIGTERM)}
@@ -375,7 +375,7 @@ def test_a_failing_environment_factory_or_cache_path_is_one_line(tmp_path, monke
 
 
 def test_a_config_files_log_backend_is_checked_before_anything_runs(tmp_path, monkeypatch, capsys):
-    from pngail_jax.run_config import RunConfig
+    from pngail_jax.config.run_config import RunConfig
 
     def missing(backends):
         if "wandb" in backends:

@@ -21,9 +21,9 @@ def test_the_old_module_name_still_imports_with_a_warning():
     import sys
 
     sys.modules.pop("pngail_jax.train", None)
-    with pytest.warns(DeprecationWarning, match="pngail_jax.adversarial"):
+    with pytest.warns(DeprecationWarning, match="pngail_jax.adversarial.trainer"):
         old = importlib.import_module("pngail_jax.train")
-    from pngail_jax.adversarial import AdversarialHyperparams, AdversarialTrainer
+    from pngail_jax.adversarial.trainer import AdversarialHyperparams, AdversarialTrainer
 
     assert (
         old.Hyperparams is AdversarialHyperparams and old.AdversarialTrainer is AdversarialTrainer

@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 from conftest import sigterm_to_self
 
-from pngail_jax import outputs
+from pngail_jax.adversarial.methods import display_name
+from pngail_jax.analysis.runs import sealed_part
 from pngail_jax.demos import Demonstrations
-from pngail_jax.integrity import CONFIG_SEAL, seal
 from pngail_jax.jobs.errors import RunError
-from pngail_jax.methods import display_name
 from pngail_jax.programs import paper
-from pngail_jax.runs import sealed_part
+from pngail_jax.storage import outputs
+from pngail_jax.storage.integrity import CONFIG_SEAL, seal
 
 
 def test_fig2_and_fig3_share_one_grid_per_task_and_each_figure_has_its_grids():
@@ -33,8 +33,8 @@ def test_the_gpu_preset_takes_each_tasks_solver_caps_from_the_study_and_nothing_
     no solver and is untouched."""
     import dataclasses
 
+    from pngail_jax.config.settings import parse_solver
     from pngail_jax.paper.plan import BUDGETS, GPU_SOLVERS, MUJOCO_TASKS
-    from pngail_jax.settings import parse_solver
 
     gpu, paper_budget = BUDGETS["gpu"], BUDGETS["paper"]
     assert set(GPU_SOLVERS) <= set(MUJOCO_TASKS) and GPU_SOLVERS
@@ -230,8 +230,8 @@ def assert_a_page_of_a_partial_plan(out):
     begun: the page says what ran, what is in progress and what has not started."""
     import shutil
 
-    from pngail_jax.integrity import seal
     from pngail_jax.paper.run import PAPER_SEAL
+    from pngail_jax.storage.integrity import seal
 
     partial = out.parent / "partial"
     shutil.copytree(out, partial)
@@ -352,7 +352,7 @@ def test_an_interrupted_grid_keeps_its_wall_time_on_the_plan_record(tmp_path, mo
 
 
 def test_a_sigterm_ends_the_plan_as_ctrl_c_does(tmp_path, monkeypatch):
-    from pngail_jax.outputs import LOCK
+    from pngail_jax.storage.outputs import LOCK
 
     monkeypatch.setattr(paper, "run_paper", sigterm_to_self)
     out = tmp_path / "paper"
@@ -419,8 +419,8 @@ def test_a_grid_config_is_the_sweep_config_of_the_same_flags(tmp_path):
 
 
 def test_adoption_refuses_unfinished_and_different_sweeps(tmp_path):
+    from pngail_jax.config.run_config import RunConfig
     from pngail_jax.paper.adopt import finished_sweep, matching_grid
-    from pngail_jax.run_config import RunConfig
 
     with pytest.raises(RunError, match="not a sweep run"):
         finished_sweep(tmp_path)
@@ -443,8 +443,8 @@ def test_adoption_refuses_unfinished_and_different_sweeps(tmp_path):
 def test_an_unset_action_scale_compares_as_the_scale_the_loader_applies():
     """A sweep of the authors' Pendulum file given no --action-scale runs on its known scale
     (2), as the plan's grid, which names it: adoptable. Another scale is not."""
+    from pngail_jax.config.run_config import RunConfig
     from pngail_jax.paper.adopt import adoption_fields
-    from pngail_jax.run_config import RunConfig
 
     def config(scale, name="Pendulum-v1_mixture.npy"):
         return RunConfig(env="Pendulum-v1", demos=f"/data/{name}", action_scale=scale)

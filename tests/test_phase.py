@@ -1,12 +1,18 @@
-"""The phase interface (pngail_jax.phase): the order of a PhaseSet's hooks, what it merges,
-the keys it hands out, and the trajectories a seed may rank."""
+"""The phase interface (pngail_jax.adversarial.phase): the order of a PhaseSet's hooks, what it
+merges, the keys it hands out, and the trajectories a seed may rank."""
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from pngail_jax.phase import InitKeys, Phase, PhaseContext, PhaseSet, ranked_trajectories
+from pngail_jax.adversarial.phase import (
+    InitKeys,
+    Phase,
+    PhaseContext,
+    PhaseSet,
+    ranked_trajectories,
+)
 
 
 class Recording(Phase):

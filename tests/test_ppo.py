@@ -18,7 +18,7 @@ from test_gae import numpy_gae
 from test_grid import assert_close_across_programs, assert_resumes_bit_exactly, small_setup
 
 from pngail_jax import envs
-from pngail_jax.adversarial import AdversarialHyperparams, AdversarialTrainer
+from pngail_jax.adversarial.trainer import AdversarialHyperparams, AdversarialTrainer
 from pngail_jax.grid import make_cells, stack_cells
 from pngail_jax.rl import PPO, PPOConfig, PPOHyperparams, RolloutConfig, TRPOTrainer
 from pngail_jax.rl.learners import learner_hyperparams, make_learner
@@ -168,8 +168,8 @@ def test_bad_values_and_foreign_hyperparameters_are_named():
 
 
 def test_run_config_takes_the_learner_and_refuses_the_other_learners_axes():
-    from pngail_jax.run_config import RunConfig
-    from pngail_jax.validation import ConfigError
+    from pngail_jax.config.run_config import RunConfig
+    from pngail_jax.config.validation import ConfigError
 
     config = RunConfig(learner="ppo", grid_axes=(("clip_eps", (0.1, 0.2)),))
     assert config.adversarial_config().learner == "ppo"
@@ -228,7 +228,7 @@ def test_the_sweep_runs_with_ppo_and_keeps_a_cloned_policy_cloned(demos_path, tm
     PPO's step."""
     from conftest import tiny_sweep_args
 
-    from pngail_jax.methods import METHOD_NAMES
+    from pngail_jax.adversarial.methods import METHOD_NAMES
     from pngail_jax.programs.sweep import main
 
     out = tmp_path / "run"

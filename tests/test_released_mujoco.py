@@ -8,9 +8,9 @@ import pytest
 from conftest import authors_data
 
 from pngail_jax import envs
+from pngail_jax.config.run_config import RunConfig
 from pngail_jax.demos import DemonstrationError, load_released
 from pngail_jax.programs import sweep
-from pngail_jax.run_config import RunConfig
 
 # The released files' shapes, [s, a] columns, and the paper's Table 3 for each task.
 RELEASED = {

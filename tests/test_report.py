@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from conftest import as_sweep_run
 
-from pngail_jax import plots, report, stats
+from pngail_jax.analysis import plots, report, stats
 from pngail_jax.grid import make_cells, nonfinite_cells
 
 NORMALIZER = (-1200.0, -200.0)

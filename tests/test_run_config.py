@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from pngail_jax.confidence import ClassifierConfig
-from pngail_jax.config_record import upgrade_saved_config
-from pngail_jax.run_config import RunConfig
-from pngail_jax.settings import RunSettings, settings_for
+from pngail_jax.config.run_config import RunConfig
+from pngail_jax.config.saved import upgrade_saved_config
+from pngail_jax.config.settings import RunSettings, settings_for
 
 
 def test_json_round_trip_and_presets(tmp_path):
@@ -60,7 +60,10 @@ def test_json_round_trip_and_presets(tmp_path):
         ({"demos": 5}, "demos must be a non-empty string or None, got 5"),
         ({"env": 5}, "env must be an environment name, got 5"),
         ({"env": "CartPole", "settings": RunSettings()}, "unknown environment 'CartPole'"),
-        ({"settings": {"num_envs": 4}}, "settings must be a pngail_jax.settings.RunSettings"),
+        (
+            {"settings": {"num_envs": 4}},
+            "settings must be a pngail_jax.config.settings.RunSettings",
+        ),
         ({"classifier": {"num_steps": 5}}, "classifier must be a pngail_jax.confidence"),
         (
             {"classifier": ClassifierConfig(learning_rate=float("nan"))},
@@ -152,7 +155,7 @@ def _saved(**changes):
         ({"seeds": "3"}, "seeds must be a positive integer, got '3'"),
         ({"noise_stds": [0.0, "0.1"]}, "noise stds must be finite and >= 0"),
         ({"methods": {"gail": 1}}, r"unknown method\(s\) \[\{'gail': 1\}\]"),
-        ({"settings": [25, 200]}, "settings must be a pngail_jax.settings.RunSettings"),
+        ({"settings": [25, 200]}, "settings must be a pngail_jax.config.settings.RunSettings"),
         (
             {"settings": {**dataclasses.asdict(RunSettings()), "num_env": 4}},
             r"settings: unknown key\(s\) \['num_env'\]",

@@ -127,7 +127,7 @@ def test_a_grid_axis_keys_the_csv_the_summary_and_the_policies(finished, demos_p
 def test_a_registered_method_resumes_from_its_record(demos_path, tmp_path, capsys):
     """A method given to ``methods.register`` in the process that began a run is registered
     again from the run's config.json when another process resumes it."""
-    from pngail_jax.methods import PRESETS, Preset, preset_record, register
+    from pngail_jax.adversarial.methods import PRESETS, Preset, preset_record, register
 
     mine = Preset("GAIL at half the agent weight", "none", {"agent_coef": 0.5, "gail_coef": 1.0})
     out = tmp_path / "run"

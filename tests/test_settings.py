@@ -4,9 +4,10 @@ import dataclasses
 
 import pytest
 
-from pngail_jax import envs, settings
-from pngail_jax.run_config import RunConfig
-from pngail_jax.settings import (
+from pngail_jax import envs
+from pngail_jax.config import settings
+from pngail_jax.config.run_config import RunConfig
+from pngail_jax.config.settings import (
     ENV_SETTINGS,
     REFERENCE_SETTINGS,
     RunSettings,

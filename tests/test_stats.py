@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import scipy.stats
 
-from pngail_jax.stats import (
+from pngail_jax.analysis.stats import (
     bootstrap_ci,
     iqm,
     probability_of_improvement,

@@ -13,14 +13,14 @@ import numpy as np
 import pytest
 from conftest import metrics_numbers, sigterm_to_self, tiny_sweep_args
 
-from pngail_jax import outputs
+from pngail_jax.analysis.runs import sealed_part
 from pngail_jax.demos import save_npz
-from pngail_jax.integrity import sealed_differences
 from pngail_jax.jobs import chunks, record
 from pngail_jax.jobs import demonstrations as demos_job
-from pngail_jax.outputs import MARKER
 from pngail_jax.programs import sweep
-from pngail_jax.runs import sealed_part
+from pngail_jax.storage import outputs
+from pngail_jax.storage.integrity import sealed_differences
+from pngail_jax.storage.outputs import MARKER
 
 SUMMARY_KEYS = {  # the fields of every earlier summary.json, and the new interval ones
     "final_return_mean",
@@ -183,7 +183,7 @@ def test_checkpoint_damage_of_every_kind_falls_back(finished, tmp_path, capsys, 
 
 def test_resume_refuses_changed_inputs_and_damaged_configs(finished, tmp_path, capsys):
     from pngail_jax.demos import load_npz
-    from pngail_jax.integrity import file_record, seal
+    from pngail_jax.storage.integrity import file_record, seal
 
     out = copy_run(finished, tmp_path)
     config = json.loads((out / "config.json").read_text())
@@ -211,7 +211,7 @@ def test_resume_refuses_changed_inputs_and_damaged_configs(finished, tmp_path, c
 
 def test_a_damaged_policy_is_refused_naming_the_file(finished, tmp_path):
     from pngail_jax import load_policy
-    from pngail_jax.integrity import IntegrityError
+    from pngail_jax.storage.integrity import IntegrityError
 
     policies = copy_run(finished, tmp_path) / "policies" / "gail"
     damaged = largest_file(policies / "policy_params")
@@ -248,7 +248,7 @@ def check_exported_policies(out, gail_final_returns):
 
 
 def sweep_columns():
-    from pngail_jax.report import CSV_COLUMNS
+    from pngail_jax.analysis.report import CSV_COLUMNS
 
     return CSV_COLUMNS
 
@@ -296,8 +296,8 @@ def test_presets_and_chunking():
 
 
 def test_a_damaged_demonstration_cache_is_made_again(demos_path, tmp_path, monkeypatch, capsys):
+    from pngail_jax.config.run_config import RunConfig
     from pngail_jax.jobs.make_demos import MakeDemosConfig
-    from pngail_jax.run_config import RunConfig
 
     monkeypatch.setattr(demos_job, "DEMO_CACHE", tmp_path)
     cached = tmp_path / "Pendulum-v1" / "demos.npz"
@@ -332,7 +332,7 @@ def test_a_finished_run_resumes_to_already_complete_and_a_held_run_is_refused(
 ):
     import os
 
-    from pngail_jax.outputs import LOCK
+    from pngail_jax.storage.outputs import LOCK
 
     out = copy_run(finished, tmp_path)
     before = {p: p.stat().st_mtime_ns for p in out.rglob("*") if p.is_file()}
@@ -421,7 +421,7 @@ def test_a_full_disk_while_checkpointing_is_one_line_and_leaves_no_half_checkpoi
 HOLD_THE_CACHE = """
 import shutil, sys, time
 from pathlib import Path
-from pngail_jax.outputs import claimed
+from pngail_jax.storage.outputs import claimed
 
 cache, made = Path(sys.argv[1]), sys.argv[2]
 with claimed(cache, "make_demos", overwrite=True) as claim:
@@ -440,8 +440,8 @@ def test_a_second_sweep_waits_for_the_demonstrations_another_process_makes(
     import subprocess
     import sys
 
-    from pngail_jax import outputs
-    from pngail_jax.run_config import RunConfig
+    from pngail_jax.config.run_config import RunConfig
+    from pngail_jax.storage import outputs
 
     monkeypatch.setattr(demos_job, "DEMO_CACHE", tmp_path)
     monkeypatch.setattr(outputs, "WAIT_SECONDS", 0.1)
@@ -511,7 +511,7 @@ def test_a_signal_during_a_chunk_stops_the_sweep_once_that_chunk_is_saved(
     assert metrics_numbers(out / "metrics.csv") == metrics_numbers(finished / "metrics.csv")
 
 
-# -- run records (pngail_jax.run_records), on this module's finished run: no new compile ------
+# -- run records (pngail_jax.analysis.run_records), on this module's finished run: no new compile
 
 
 def test_a_record_keeps_the_run_small_and_checks_itself(finished, tmp_path, capsys):
@@ -566,7 +566,7 @@ def test_a_record_keeps_the_run_small_and_checks_itself(finished, tmp_path, caps
 def write_edited(folder, record, reseal=True):
     """A record.json edited by hand: with ``reseal``, its digest made again, as a careful
     forger would (so that the checks behind the digest are what refuses it)."""
-    from pngail_jax import run_records
+    from pngail_jax.analysis import run_records
 
     edited = run_records.sealed_record(record) if reseal else record
     (folder / "record.json").write_text(json.dumps(edited))
@@ -578,7 +578,7 @@ def test_record_check_finds_each_kind_of_damage(finished, tmp_path):
     a run is named."""
     import gzip
 
-    from pngail_jax import run_records
+    from pngail_jax.analysis import run_records
     from pngail_jax.programs import record as program
 
     [folder] = program.main([str(finished), "--name", "tiny", "--records", str(tmp_path)])
@@ -683,7 +683,7 @@ def test_rerun_spread_is_the_95th_percentile_of_the_iqm_shifts_of_draws():
     """run_records.rerun_spread against its definition, redone here with NumPy alone: the
     95th percentile of |IQM(k of the record's seeds, drawn without replacement) - IQM(all)|
     over 2,000 draws of np.random.default_rng(0); and cases whose answer is known exactly."""
-    from pngail_jax import run_records
+    from pngail_jax.analysis import run_records
 
     ten = [k / 10 for k in range(10)]
     assert iqm_by_hand(ten) == pytest.approx(0.45)  # 10 seeds: 2 cut each end, 0.2..0.7 kept
@@ -830,11 +830,13 @@ def test_compare_expected_says_where_a_run_lies_against_a_record(finished, tmp_p
     """compare --expected: a run against its own record lies within every interval; made-up
     scores below and above the record's interval are named so, with the distance; a record
     of another task is refused."""
-    from pngail_jax import run_records
-    from pngail_jax.compare import Scores
+    from pngail_jax.analysis import run_records
+    from pngail_jax.analysis.compare import Scores
+    from pngail_jax.config.run_config import RunConfig
     from pngail_jax.programs import compare as compare_program
     from pngail_jax.programs import record as record_program
 
+    defaults = RunConfig().to_dict()  # what compare passes for a sweep
     [folder] = record_program.main([str(finished), "--name", "r", "--records", str(tmp_path)])
     out = compare_program.main([str(finished), "--expected", str(folder),
                                 "--out", str(tmp_path / "cmp")])  # fmt: skip
@@ -856,13 +858,13 @@ def test_compare_expected_says_where_a_run_lies_against_a_record(finished, tmp_p
     with pytest.raises(run_records.RecordError, match="is of Pendulum-v1; your runs are of Hopper"):
         run_records.expected_rows(other, record)
     changed = {**record["config"], "iterations": 8, "log": ["x"]}
-    assert run_records.config_differences(changed, record) == ["iterations"]
+    assert run_records.config_differences(changed, record, defaults) == ["iterations"]
     # a field the record's run did not have yet is its default there
     older = {**record, "config": {k: v for k, v in record["config"].items() if k != "value_epochs"}}
-    assert run_records.config_differences(record["config"], older) == []
-    assert run_records.config_differences({**record["config"], "value_epochs": 3}, older) == [
-        "value_epochs"
-    ]
+    assert run_records.config_differences(record["config"], older, defaults) == []
+    assert run_records.config_differences(
+        {**record["config"], "value_epochs": 3}, older, defaults
+    ) == ["value_epochs"]
     # A record of seeds 0.0-0.9 (IQM 0.45): a 5-seed re-run's IQM lands within 13/60 of it
     # (test_rerun_spread_is_the_95th_percentile_of_the_iqm_shifts_of_draws).
     ten = [k / 10 for k in range(10)]

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from tensorboardX.proto.event_pb2 import Event
 
+from pngail_jax.analysis.tracking import chunk_scalars, open_logger
 from pngail_jax.grid import make_cells
-from pngail_jax.tracking import chunk_scalars, open_logger
 
 NAN = np.nan
 CELLS = make_cells(["gail", "pngail"], num_seeds=2)  # gail s0, gail s1, pngail s0, pngail s1

@@ -8,9 +8,9 @@ import pytest
 from conftest import sigterm_to_self
 
 import pngail_jax
-from pngail_jax import outputs
 from pngail_jax.networks import GaussianPolicy
 from pngail_jax.programs import train_rl
+from pngail_jax.storage import outputs
 
 
 @pytest.fixture(scope="module")
@@ -64,8 +64,8 @@ def test_load_policy_picks_best_seed_and_acts(run_dir, capsys):
 
 
 def test_load_policy_matches_saved_parameters(tmp_path):
-    from pngail_jax.checkpoint import save_policies
     from pngail_jax.rl.on_policy import ObservationNormalizer
+    from pngail_jax.storage.checkpoint import save_policies
 
     policy = GaussianPolicy(action_size=2, hidden_sizes=(8,))
     params = jax.vmap(lambda k: policy.init(k, np.zeros(3, np.float32)))(
@@ -132,7 +132,7 @@ def test_finished_work_is_not_overwritten_without_the_flag(run_dir, tmp_path, ca
 def test_load_policy_checks_cannot_be_switched_off_and_bad_inputs_are_named(run_dir, tmp_path):
     import shutil
 
-    from pngail_jax.integrity import IntegrityError
+    from pngail_jax.storage.integrity import IntegrityError
 
     copy = tmp_path / "policy"
     shutil.copytree(run_dir, copy)
@@ -214,8 +214,8 @@ def test_a_run_begun_before_the_rollout_section_resumes(run_dir, tmp_path, monke
     """A run whose sealed config.json has the layout from before the rollout's settings had
     their own section ("trpo" held them beside TRPO's) resumes to the uninterrupted run's
     numbers; in that layout a PPO run's "trpo" held TRPO's unused settings, which go."""
-    from pngail_jax.integrity import CONFIG_SEAL, write_sealed
     from pngail_jax.jobs.train_rl import upgrade_document
+    from pngail_jax.storage.integrity import CONFIG_SEAL, write_sealed
 
     out = tmp_path / "old-layout"
     _stopped_after_first_block(run_dir, out, monkeypatch)
@@ -245,7 +245,7 @@ def test_resume_checks_again_under_the_lock(run_dir, tmp_path, monkeypatch, caps
     shutil.copytree(run_dir, copy)
     policy = (copy / "policy.json").read_bytes()
     (copy / "policy.json").unlink()
-    from pngail_jax import outputs
+    from pngail_jax.storage import outputs
 
     lock = outputs.run_lock
 
@@ -262,7 +262,7 @@ def test_resume_checks_again_under_the_lock(run_dir, tmp_path, monkeypatch, caps
 
 
 def test_a_sigterm_releases_the_lock_and_says_how_to_resume(tmp_path, monkeypatch):
-    from pngail_jax.outputs import LOCK
+    from pngail_jax.storage.outputs import LOCK
 
     def terminated(*args):
         assert (tmp_path / "run" / LOCK).exists()
@@ -278,8 +278,8 @@ def test_a_sigterm_releases_the_lock_and_says_how_to_resume(tmp_path, monkeypatc
 
 
 def test_value_epochs_are_refused_for_ppo_in_one_line():
+    from pngail_jax.config.validation import ConfigError
     from pngail_jax.jobs.train_rl import TrainRLConfig
-    from pngail_jax.validation import ConfigError
 
     with pytest.raises(ConfigError, match="value_epochs is TRPO's value fit"):
         TrainRLConfig(learner="ppo", value_epochs=3)

@@ -104,7 +104,7 @@ PRIVATE = (MANIFEST, NORMALISED, LOGS)
 # --------------------------------------------------------------------------------------------
 
 PENDULUM = "{RELEASED}/Pendulum-v1_mixture.npy"
-# The paper's seven methods and the appendix baselines (pngail_jax/methods.py).
+# The paper's seven methods and the appendix baselines (pngail_jax/adversarial/methods.py).
 SEVEN = "gail,2iwil,icgail,wgail,pngail,pngail-no-bsc,pngail-no-pn"
 APPENDIX_ALL = "pngail,bc,bc-weighted,trex,drex,cail,firl-fkl,firl-rkl,firl-js"
 # A tiny adversarial run: 4 envs x 50 steps per iteration, 4 iterations, 50 classifier steps.
@@ -127,9 +127,10 @@ TINY_RL = "--iterations 4 --eval-every 2 --seeds 2 --num-envs 4 --unroll-length 
 # programs as they are.
 TINY_PHASES_DRIVER = """
 import dataclasses, runpy, sys
-from pngail_jax import run_config, ranking
-from pngail_jax.bc import BCConfig, DeterministicBCConfig
-from pngail_jax.firl import FirlConfig
+from pngail_jax.config import run_config
+from pngail_jax.adversarial import ranking
+from pngail_jax.adversarial.bc import BCConfig, DeterministicBCConfig
+from pngail_jax.adversarial.firl import FirlConfig
 _original = run_config.RunConfig.adversarial_config
 def _tiny_phases(self, *args, **kwargs):
     config = _original(self, *args, **kwargs)
@@ -733,7 +734,7 @@ def digest(args) -> int:
     return 0
 
 
-# Progress lines: a speed, an ETA or a carriage return, and pngail_jax.tracking.ticking's
+# Progress lines: a speed, an ETA or a carriage return, and pngail_jax.analysis.tracking.ticking's
 # heartbeat ("compiling ... 30 s", a line every 30 s of a slow step: how many depends on speed).
 PROGRESS = re.compile(r"(?i)(\bETA\b|it/s|steps/s|\r)|^.* \.\.\. \d+ s$")
 

@@ -7,7 +7,7 @@ Usage:  python config_walk.py ROOT [--json OUT.json] [--trace] [--objects]
 Definitions (applied identically to every checkout)
 ---------------------------------------------------
 Start.  The function ``run`` in ``pngail_jax/jobs/sweep.py``, its parameter ``config`` tracked,
-of class ``RunConfig`` (``pngail_jax.run_config``).
+of class ``RunConfig`` (``pngail_jax.config.run_config``).
 
 Carrying names (inside one function; flow-insensitive, iterated to a fixpoint).  A name
 carries the config if it is a tracked parameter, or is the target of an assignment
@@ -773,7 +773,10 @@ def run_walk(root: Path, objects: bool = False):
     index = Index(root)
     info = index.modules["jobs.sweep"]
     fn = info.defs["run"][1]
-    run_config = index.symbol("run_config", "RunConfig")[1]
+    # RunConfig's module: config/run_config.py since issue 74, run_config.py at the root before.
+    found = index.symbol("config.run_config", "RunConfig")
+    found = found or index.symbol("run_config", "RunConfig")
+    run_config = found[1]
     attrs: set = set()
     for passes in range(1, 20):  # noqa: B007 (the count is reported)
         w = Walk(index, attrs, objects)

@@ -17,9 +17,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from pngail_jax.analysis.run_records import RecordError  # noqa: E402
 from pngail_jax.jobs import comparison_record  # noqa: E402
 from pngail_jax.jobs.compare_settings import arm_description, draw_curve  # noqa: E402
-from pngail_jax.run_records import RecordError  # noqa: E402
 
 
 def parse_args(argv=None):

@@ -22,9 +22,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pngail_jax import run_records  # noqa: E402
-from pngail_jax.methods import display_name  # noqa: E402
-from pngail_jax.report import metrics_rows  # noqa: E402
+from pngail_jax.adversarial.methods import display_name  # noqa: E402
+from pngail_jax.analysis import run_records  # noqa: E402
+from pngail_jax.analysis.report import metrics_rows  # noqa: E402
 
 
 def evaluations(folder: Path) -> dict[str, dict[int, list[tuple[int, float]]]]:

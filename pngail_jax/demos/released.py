@@ -12,8 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pngail_jax.demos.files import load_numpy
-from pngail_jax.demos.tables import (  # noqa: F401  (the tables, importable from here too)
+from pngail_jax.config.released_files import (  # noqa: F401  (the tables, importable from here too)
     PAPER_NORMALIZERS,
     RELEASED_ACTION_SCALES,
     RELEASED_ACTION_SIZES,
@@ -21,6 +20,7 @@ from pngail_jax.demos.tables import (  # noqa: F401  (the tables, importable fro
     RELEASED_TASKS,
     RELEASED_TRAJECTORY_LENGTHS,
 )
+from pngail_jax.demos.files import load_numpy
 from pngail_jax.demos.types import DemonstrationError, Demonstrations, confidence_vector
 
 

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from pngail_jax.demos.tables import RELEASED_TASKS
+from pngail_jax.config.released_files import RELEASED_TASKS
 from pngail_jax.envs import ENV_NAMES, task_family
 
 # ``check_env`` refuses actions beyond this multiple of the bound's magnitude: a unit or file

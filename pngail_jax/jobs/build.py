@@ -9,15 +9,15 @@ import dataclasses
 import jax
 
 from pngail_jax import envs
-from pngail_jax import settings as run_settings
-from pngail_jax.adversarial import AdversarialTrainer
+from pngail_jax.adversarial.trainer import AdversarialTrainer
+from pngail_jax.analysis.tracking import ticking
+from pngail_jax.config import settings as run_settings
+from pngail_jax.config.run_config import RunConfig
 from pngail_jax.demos import DemonstrationError, action_scale_note
 from pngail_jax.grid import Cell, Grid, make_cells, stack_cells
 from pngail_jax.jobs.chunks import blocks_per_chunk
 from pngail_jax.jobs.demonstrations import RunDemonstrations, prepare
 from pngail_jax.jobs.errors import RunError
-from pngail_jax.run_config import RunConfig
-from pngail_jax.tracking import ticking
 
 
 @dataclasses.dataclass

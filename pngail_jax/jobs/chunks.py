@@ -22,8 +22,9 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from pngail_jax.checkpoint import restore_tree, save_tree
-from pngail_jax.integrity import (
+from pngail_jax.jobs.errors import RunError
+from pngail_jax.storage.checkpoint import restore_tree, save_tree
+from pngail_jax.storage.integrity import (
     IntegrityError,
     atomic_path,
     read_json,
@@ -31,8 +32,7 @@ from pngail_jax.integrity import (
     write_json,
     write_manifest,
 )
-from pngail_jax.jobs.errors import RunError
-from pngail_jax.outputs import record_held_outputs
+from pngail_jax.storage.outputs import record_held_outputs
 
 
 @dataclasses.dataclass

@@ -20,17 +20,18 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 
-from pngail_jax import envs, validation
+from pngail_jax import envs
+from pngail_jax.analysis.report import json_safe
 from pngail_jax.confidence import ClassifierConfig, ClassifierSpec, split_and_train
+from pngail_jax.config import validation
 from pngail_jax.demos import (
     DemonstrationError,
     Demonstrations,
     action_scale_note,
     load_demonstrations,
 )
-from pngail_jax.integrity import write_json
 from pngail_jax.jobs.errors import RunError
-from pngail_jax.report import json_safe
+from pngail_jax.storage.integrity import write_json
 
 METHODS = {"sc": ClassifierSpec.sc, "bsc": ClassifierSpec.bsc}
 

@@ -21,17 +21,18 @@ import jax
 import numpy as np
 import orbax.checkpoint as ocp
 
-from pngail_jax import envs, validation
-from pngail_jax.config_record import provenance
-from pngail_jax.integrity import atomic_path, atomic_write_text, write_json
+from pngail_jax import envs
+from pngail_jax.analysis.report import json_safe, read_evaluations
+from pngail_jax.config import validation
+from pngail_jax.config.saved import provenance
+from pngail_jax.config.settings import REFERENCE_SETTINGS, parse_solver, settings_for
 from pngail_jax.jobs.errors import refusals
 from pngail_jax.jobs.train_rl import TrainRLConfig, train_rl, upgrade_document
 from pngail_jax.networks import GaussianPolicy
-from pngail_jax.outputs import claimed, prepare_output
-from pngail_jax.report import json_safe, read_evaluations
 from pngail_jax.rl.on_policy import ObservationNormalizer
 from pngail_jax.rl.rollout import evaluate
-from pngail_jax.settings import REFERENCE_SETTINGS, parse_solver, settings_for
+from pngail_jax.storage.integrity import atomic_path, atomic_write_text, write_json
+from pngail_jax.storage.outputs import claimed, prepare_output
 
 PROGRAM = "compare_settings"
 COMPARISON_FILE = "comparison.json"  # written last: its presence marks a finished comparison

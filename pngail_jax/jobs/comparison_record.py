@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pngail_jax import stats
-from pngail_jax.integrity import IntegrityError, read_json, write_json
+from pngail_jax.analysis import stats
+from pngail_jax.analysis.run_records import MACHINE_KEYS, RECORD_FILE, RecordError, check_name
 from pngail_jax.jobs.compare_settings import (
     COMPARISON_FILE,
     PROGRAM,
@@ -30,8 +30,8 @@ from pngail_jax.jobs.compare_settings import (
     mean_and_standard_error,
     trained_on,
 )
-from pngail_jax.outputs import output_owner
-from pngail_jax.run_records import MACHINE_KEYS, RECORD_FILE, RecordError, check_name
+from pngail_jax.storage.integrity import IntegrityError, read_json, write_json
+from pngail_jax.storage.outputs import output_owner
 
 FORMAT = 2  # a comparison record's own (a run record's is run_records.FORMAT)
 

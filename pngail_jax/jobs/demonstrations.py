@@ -15,6 +15,7 @@ from pathlib import Path
 
 import jax
 
+from pngail_jax.config.run_config import RunConfig
 from pngail_jax.demos import (
     DemonstrationError,
     Demonstrations,
@@ -23,12 +24,11 @@ from pngail_jax.demos import (
 )
 from pngail_jax.demos.generate import random_policy_return
 from pngail_jax.demos.minari import MINARI_PREFIX
-from pngail_jax.integrity import file_record
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.jobs.make_demos import PROGRAM as MAKE_PROGRAM
 from pngail_jax.jobs.make_demos import MakeDemosConfig, make_claimed
-from pngail_jax.outputs import claimed
-from pngail_jax.run_config import RunConfig
+from pngail_jax.storage.integrity import file_record
+from pngail_jax.storage.outputs import claimed
 
 
 @dataclasses.dataclass(frozen=True)

@@ -27,15 +27,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from pngail_jax.adversarial import AdversarialTrainer
+from pngail_jax.adversarial.losses import policy_reward
+from pngail_jax.adversarial.trainer import AdversarialTrainer
 from pngail_jax.confidence import ClassifierConfig
+from pngail_jax.config.run_config import RunConfig
+from pngail_jax.config.settings import make_env
 from pngail_jax.demos import DemonstrationError, load_demonstrations
 from pngail_jax.grid import Cell, Grid, stack_cells
 from pngail_jax.jobs.chunks import run_chunks, start
 from pngail_jax.jobs.errors import RunError
-from pngail_jax.losses import policy_reward
-from pngail_jax.run_config import RunConfig
-from pngail_jax.settings import make_env
 
 VARIANTS = (  # (label, method, label ratio)
     ("gail", "gail", 0.2),

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import contextlib
 
-from pngail_jax.outputs import OutputRefused, RunLocked
+from pngail_jax.storage.outputs import OutputRefused, RunLocked
 
 
 class RunError(Exception):
@@ -14,7 +14,7 @@ class RunError(Exception):
 
 @contextlib.contextmanager
 def refusals():
-    """Raises a refused output claim (``pngail_jax.outputs.OutputRefused``) as a
+    """Raises a refused output claim (``pngail_jax.storage.outputs.OutputRefused``) as a
     ``RunError`` with the same line (a held lock: ``cannot run: ...``)."""
     try:
         yield

@@ -33,27 +33,27 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from pngail_jax import settings as run_settings
-from pngail_jax import validation
-from pngail_jax.checkpoint import save_trpo_policies
+from pngail_jax.config import settings as run_settings
+from pngail_jax.config import validation
 from pngail_jax.demos.generate import normalized_return, random_policy_return, rollout_episodes
 from pngail_jax.demos.npz import save_npz
 from pngail_jax.demos.types import Demonstrations
-from pngail_jax.integrity import atomic_path, atomic_write_text
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.jobs.train_seeds import train_seeds
-from pngail_jax.outputs import Claim, claimed
 from pngail_jax.rl import TRPOTrainer
 from pngail_jax.rl.learners import LEARNERS, check_batch, learner_hyperparams, make_learner
+from pngail_jax.storage.checkpoint import save_trpo_policies
+from pngail_jax.storage.integrity import atomic_path, atomic_write_text
+from pngail_jax.storage.outputs import Claim, claimed
 
 DEMOS_FILE = "demos.npz"  # written last: its presence marks a finished run
-PROGRAM = "make_demos"  # the owner its directories are marked with (pngail_jax.outputs)
+PROGRAM = "make_demos"  # the owner its directories are marked with (pngail_jax.storage.outputs)
 
 
 @dataclasses.dataclass(frozen=True)
 class MakeDemosConfig:
     """What to make: TRPO's budget, the mixture and its measurement. ``settings`` None: the
-    task's row of ``pngail_jax.settings`` with an evaluation every 10 iterations (the
+    task's row of ``pngail_jax.config.settings`` with an evaluation every 10 iterations (the
     intermediate policy is picked among the evaluated checkpoints: finer than the table's)."""
 
     env: str = "Pendulum-v1"
@@ -139,7 +139,7 @@ def make_demonstrations(
 ) -> Path:
     """Makes ``config``'s demonstrations into ``out`` (``demos.npz``, ``normalizer.json``,
     ``checkpoints/``) and returns the path of ``demos.npz``. ``out`` must be new, empty or,
-    with ``overwrite``, an earlier making's (``pngail_jax.outputs``); refusals raise
+    with ``overwrite``, an earlier making's (``pngail_jax.storage.outputs``); refusals raise
     ``RunError`` with one line; a second process on the same ``out`` is refused, or with
     ``wait`` waits for the first to end."""
     with refusals(), claimed(Path(out), PROGRAM, overwrite=overwrite, wait=wait) as claim:

@@ -20,12 +20,13 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from pngail_jax import plots, report
-from pngail_jax import settings as run_settings
-from pngail_jax.config_record import provenance
+from pngail_jax.analysis import plots, report
+from pngail_jax.analysis.runs import UntrustedRun, sealed_part, verify_run
+from pngail_jax.analysis.tracking import ticking
+from pngail_jax.config import settings as run_settings
+from pngail_jax.config.saved import provenance
 from pngail_jax.demos import DemonstrationError
 from pngail_jax.grid import Grid, make_cells, nonfinite_cells
-from pngail_jax.integrity import CONFIG_SEAL, read_json, write_json, write_sealed
 from pngail_jax.jobs.chunks import (
     Progress,
     blocks_per_chunk,
@@ -37,7 +38,7 @@ from pngail_jax.jobs.chunks import (
 from pngail_jax.jobs.demonstrations import input_files, load_or_make_demos, resolve_normalizer
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.jobs.offline_config import PROGRAM, OfflineRunConfig, load_offline_config
-from pngail_jax.offline import (
+from pngail_jax.offline.trainer import (
     METRICS_CSV_COLUMNS,
     OfflineConfig,
     OfflineTrainer,
@@ -45,9 +46,8 @@ from pngail_jax.offline import (
     required_components,
     stack_offline_cells,
 )
-from pngail_jax.outputs import claimed
-from pngail_jax.runs import UntrustedRun, sealed_part, verify_run
-from pngail_jax.tracking import ticking
+from pngail_jax.storage.integrity import CONFIG_SEAL, read_json, write_json, write_sealed
+from pngail_jax.storage.outputs import claimed
 
 __all__ = ["OfflineRunConfig", "load_offline_config", "run_offline"]
 

@@ -9,11 +9,11 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from pngail_jax.integrity import IntegrityError, read_json
+from pngail_jax.config.run_config import RunConfig
 from pngail_jax.jobs.errors import RunError
-from pngail_jax.offline import DEFAULT_OFFLINE_METHODS, OfflineConfig, required_components
-from pngail_jax.offline_ilid import check_union
-from pngail_jax.run_config import RunConfig
+from pngail_jax.offline.ilid import check_union
+from pngail_jax.offline.trainer import DEFAULT_OFFLINE_METHODS, OfflineConfig, required_components
+from pngail_jax.storage.integrity import IntegrityError, read_json
 
 PROGRAM = "offline"
 

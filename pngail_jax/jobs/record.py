@@ -12,23 +12,23 @@ import shutil
 from collections.abc import Sequence
 from pathlib import Path
 
-from pngail_jax import methods
-from pngail_jax.config_record import provenance, upgrade_saved_config
+from pngail_jax.adversarial import methods
+from pngail_jax.adversarial.methods import preset_record
+from pngail_jax.analysis.runs import changed_inputs_refusal, sealed_part
+from pngail_jax.config.run_config import RunConfig
+from pngail_jax.config.saved import provenance, upgrade_saved_config
+from pngail_jax.config.validation import ConfigError
 from pngail_jax.demos.minari import MINARI_PREFIX
-from pngail_jax.integrity import (
+from pngail_jax.jobs.build import BuiltRun
+from pngail_jax.jobs.demonstrations import input_files
+from pngail_jax.jobs.errors import RunError
+from pngail_jax.storage.integrity import (
     CONFIG_SEAL,
     IntegrityError,
     changed_inputs,
     read_json,
     write_sealed,
 )
-from pngail_jax.jobs.build import BuiltRun
-from pngail_jax.jobs.demonstrations import input_files
-from pngail_jax.jobs.errors import RunError
-from pngail_jax.methods import preset_record
-from pngail_jax.run_config import RunConfig
-from pngail_jax.runs import changed_inputs_refusal, sealed_part
-from pngail_jax.validation import ConfigError
 
 
 @dataclasses.dataclass
@@ -52,7 +52,7 @@ def load_saved(directory: Path, allow_unsealed: bool = False) -> SavedRun:
     unless ``allow_unsealed``; metrics.csv whole and agreeing with summary.json; its
     policies; its input files are checked after the claim, ``check_inputs``), with its
     methods as they were recorded. RunError with one line otherwise."""
-    from pngail_jax.runs import UntrustedRun, verify_run
+    from pngail_jax.analysis.runs import UntrustedRun, verify_run
 
     path = directory / "config.json"
     if not path.exists():
@@ -77,8 +77,9 @@ def load_saved(directory: Path, allow_unsealed: bool = False) -> SavedRun:
             if error.field != "methods":
                 raise
             raise RunError(
-                f"--resume {directory}: {error} (a name given to pngail_jax.methods.register "
-                "must be registered again before the run resumes)"
+                f"--resume {directory}: {error} (a name given to "
+                "pngail_jax.adversarial.methods.register must be registered again before the run "
+                "resumes)"
             ) from None
         check_methods_unchanged(directory, data["resolved"].get("methods"))
         # The engine that ran goes on running (a run begun on a CPU resumed on a GPU would

@@ -10,13 +10,13 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from pngail_jax import plots, report
-from pngail_jax.checkpoint import save_trpo_policies
+from pngail_jax.analysis import plots, report
+from pngail_jax.config.run_config import RunConfig
 from pngail_jax.grid import nonfinite_cells
-from pngail_jax.integrity import read_json
 from pngail_jax.jobs.build import BuiltRun
 from pngail_jax.jobs.chunks import Progress
-from pngail_jax.run_config import RunConfig
+from pngail_jax.storage.checkpoint import save_trpo_policies
+from pngail_jax.storage.integrity import read_json
 
 OUTPUT_FILES = {
     "config": "config.json",

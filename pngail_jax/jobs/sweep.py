@@ -10,7 +10,7 @@
 One call holds what ``python -m experiments.sweep`` does after reading its flags:
 
 1. ``claim``: the output directory (new, empty, or the sweep's own run with ``overwrite``;
-   ``pngail_jax.outputs.claimed``) and its lock; a resume's checks of its saved config and
+   ``pngail_jax.storage.outputs.claimed``) and its lock; a resume's checks of its saved config and
    input files (``record``) before the minutes of compiling.
 2. ``build``: environment, demonstrations, trainer and the compiled ``Grid`` (``build``).
 3. ``record``: config.json with its seal (``record.write_config``), for a new run.
@@ -35,6 +35,9 @@ from pathlib import Path
 import jax
 import numpy as np
 
+from pngail_jax.analysis.report import normalize
+from pngail_jax.analysis.tracking import open_logger
+from pngail_jax.config.run_config import RunConfig
 from pngail_jax.grid import nonfinite_cells
 from pngail_jax.jobs import record, results
 from pngail_jax.jobs.build import BuiltRun, build_run
@@ -47,12 +50,9 @@ from pngail_jax.jobs.chunks import (
 )
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.jobs.results import RunResult
-from pngail_jax.outputs import claimed
-from pngail_jax.report import normalize
-from pngail_jax.run_config import RunConfig
-from pngail_jax.tracking import open_logger
+from pngail_jax.storage.outputs import claimed
 
-PROGRAM = "sweep"  # the owner its directories are marked with (pngail_jax.outputs)
+PROGRAM = "sweep"  # the owner its directories are marked with (pngail_jax.storage.outputs)
 
 
 def configure_devices(requested: int | None) -> None:

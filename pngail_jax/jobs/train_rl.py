@@ -22,26 +22,26 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from pngail_jax import settings as run_settings
-from pngail_jax import validation
-from pngail_jax.checkpoint import save_trpo_policies
-from pngail_jax.integrity import (
+from pngail_jax.analysis.report import write_seed_metrics_csv
+from pngail_jax.analysis.runs import UntrustedRun, sealed_document
+from pngail_jax.config import settings as run_settings
+from pngail_jax.config import validation
+from pngail_jax.jobs.chunks import nanmean
+from pngail_jax.jobs.errors import RunError, refusals
+from pngail_jax.jobs.train_seeds import train_seeds
+from pngail_jax.rl import PPOConfig, RolloutConfig, TRPOConfig, TRPOHyperparams, TRPOTrainer
+from pngail_jax.rl.learners import LEARNERS, check_batch, learner_hyperparams, make_learner
+from pngail_jax.storage.checkpoint import save_trpo_policies
+from pngail_jax.storage.integrity import (
     CONFIG_SEAL,
     atomic_path,
     document_differences,
     write_manifest,
     write_sealed,
 )
-from pngail_jax.jobs.chunks import nanmean
-from pngail_jax.jobs.errors import RunError, refusals
-from pngail_jax.jobs.train_seeds import train_seeds
-from pngail_jax.outputs import claimed, output_owner
-from pngail_jax.report import write_seed_metrics_csv
-from pngail_jax.rl import PPOConfig, RolloutConfig, TRPOConfig, TRPOHyperparams, TRPOTrainer
-from pngail_jax.rl.learners import LEARNERS, check_batch, learner_hyperparams, make_learner
-from pngail_jax.runs import UntrustedRun, sealed_document
+from pngail_jax.storage.outputs import claimed, output_owner
 
-PROGRAM = "train_rl"  # the owner its directories are marked with (pngail_jax.outputs)
+PROGRAM = "train_rl"  # the owner its directories are marked with (pngail_jax.storage.outputs)
 # metrics.csv's columns after seed and iteration, by learner.
 METRIC_COLUMNS = {
     "trpo": (
@@ -58,7 +58,7 @@ METRIC_COLUMNS = {
 @dataclasses.dataclass(frozen=True)
 class TrainRLConfig:
     """A TRPO (or, ``learner="ppo"``, PPO) run on the true reward. ``settings`` None: the
-    task's row of ``pngail_jax.settings``. ``truncation_as_terminal``: the reference's GAE,
+    task's row of ``pngail_jax.config.settings``. ``truncation_as_terminal``: the reference's GAE,
     which does not bootstrap through time limits. ``ppo``: PPO's static settings."""
 
     env: str = "Pendulum-v1"

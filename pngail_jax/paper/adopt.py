@@ -15,10 +15,10 @@ import shutil
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
+from pngail_jax.config.run_config import RunConfig
 from pngail_jax.demos import RELEASED_ACTION_SCALES
-from pngail_jax.integrity import IntegrityError, read_json, write_json
 from pngail_jax.jobs.errors import RunError
-from pngail_jax.run_config import RunConfig
+from pngail_jax.storage.integrity import IntegrityError, read_json, write_json
 
 # Config fields that do not change a grid's numbers (beyond float rounding for the chunk).
 ADOPT_IGNORES = ("chunk_iterations", "log", "preset_name")
@@ -75,7 +75,7 @@ def finished_sweep(directory: Path, allow_unsealed: bool = False) -> dict:
     """``directory``'s config.json, if it is a complete sweep that ``runs.verify_run`` trusts
     (its seal, unless ``allow_unsealed``; its input files; metrics.csv whole and agreeing with
     summary.json; its policies' digests); else ``RunError``."""
-    from pngail_jax.runs import UntrustedRun, verify_run
+    from pngail_jax.analysis.runs import UntrustedRun, verify_run
 
     try:
         saved = read_json(directory / "config.json", "sweep config")

@@ -10,6 +10,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from pngail_jax import envs
+from pngail_jax.config.run_config import TASK_NUM_DEMOS
 from pngail_jax.demos import (
     RELEASED_ACTION_SCALES,
     cut_mixture,
@@ -17,13 +18,12 @@ from pngail_jax.demos import (
     load_npz,
     save_npz,
 )
-from pngail_jax.integrity import IntegrityError, atomic_path, read_json, write_json
 from pngail_jax.jobs import make_demos
 from pngail_jax.jobs.chunks import format_seconds
 from pngail_jax.jobs.make_demos import MakeDemosConfig
 from pngail_jax.jobs.sweep import run
 from pngail_jax.paper.plan import Budget, GridSpec, task_kind
-from pngail_jax.run_config import TASK_NUM_DEMOS
+from pngail_jax.storage.integrity import IntegrityError, atomic_path, read_json, write_json
 
 # -- demonstrations --------------------------------------------------------------------------
 
@@ -129,7 +129,7 @@ def grid_config(
 ):
     """The ``RunConfig`` of a grid; ``num_rows``, the demonstrations' row count, is read only
     by a grid with fewer unlabelled rows (Fig. 6)."""
-    from pngail_jax.run_config import RunConfig, task_classifier
+    from pngail_jax.config.run_config import RunConfig, task_classifier
 
     path, scale = demos
     label_ratios, num_demos = grid.label_ratios, None
@@ -162,7 +162,7 @@ def grid_config(
 def grid_complete(directory: Path) -> bool:
     """Whether a grid's summary.json says it is complete; a damaged one says no (the sweep's
     resume then writes it again from the checkpoints)."""
-    from pngail_jax.integrity import IntegrityError
+    from pngail_jax.storage.integrity import IntegrityError
 
     try:
         return bool(read_json(directory / "summary.json", "grid summary").get("complete"))

@@ -11,8 +11,9 @@ from pathlib import Path
 import numpy as np
 
 from pngail_jax import envs
-from pngail_jax.integrity import atomic_write_text, read_json, write_json
-from pngail_jax.methods import display_name
+from pngail_jax.adversarial.methods import display_name
+from pngail_jax.analysis.plots import line_style
+from pngail_jax.analysis.report import LATE_LABEL, group_label, late_evaluations
 from pngail_jax.paper.plan import (
     BUDGETS,
     PAPER_TABLE1,
@@ -21,8 +22,7 @@ from pngail_jax.paper.plan import (
     Figure,
     Series,
 )  # fmt: skip
-from pngail_jax.plots import line_style
-from pngail_jax.report import LATE_LABEL, group_label, late_evaluations
+from pngail_jax.storage.integrity import atomic_write_text, read_json, write_json
 
 # -- the results page ------------------------------------------------------------------------
 
@@ -30,7 +30,7 @@ from pngail_jax.report import LATE_LABEL, group_label, late_evaluations
 def read_grid_curves(directory: Path) -> dict[tuple[str, str], dict[str, np.ndarray]]:
     """(method, setting) -> {"steps": int[T], "normalized": float[seeds, T]} from a grid's
     metrics.csv, evaluated iterations only (``report.read_evaluations``)."""
-    from pngail_jax.report import read_evaluations
+    from pngail_jax.analysis.report import read_evaluations
 
     evaluations = read_evaluations(
         directory / "metrics.csv",
@@ -46,7 +46,7 @@ def read_grid_curves(directory: Path) -> dict[tuple[str, str], dict[str, np.ndar
 def series_statistics(series: Series, curves, summary) -> dict:
     """Final and training-averaged normalised return (mean, std, standard error, 95% bootstrap
     interval of the mean) of a series, and its classifier error."""
-    from pngail_jax import stats
+    from pngail_jax.analysis import stats
 
     matches = [key for key in curves if key[0] == series.method]
     if series.setting is not None:
@@ -246,7 +246,7 @@ def weak_expert_notes(out: Path, grids) -> list[str]:
 def made_expert_notes(out: Path, grids) -> list[str]:
     """One line per made demonstration set: its measured random and optimal returns (the
     normalisers of its task's figures) beside the paper's Table 3 returns of that task."""
-    from pngail_jax.demos.tables import PAPER_NORMALIZERS
+    from pngail_jax.config.released_files import PAPER_NORMALIZERS
 
     paper = {name.rsplit("-v", 1)[0]: returns for name, returns in PAPER_NORMALIZERS.items()}
     notes = []
@@ -322,7 +322,7 @@ def write_page(
     finished sweeps (``paper.adopt``), named as such; ``progress``: ``{grid: (iterations
     done, planned) or None}`` of the grids not finished (None: not started), whose panels a
     page so far leaves out (not started) or shows at the iteration reached, saying so."""
-    from pngail_jax.report import json_safe
+    from pngail_jax.analysis.report import json_safe
 
     adopted, progress = adopted or {}, progress or {}
     source = out if source is None else source

@@ -10,7 +10,7 @@ import math
 from collections.abc import Sequence
 
 from pngail_jax import envs
-from pngail_jax.methods import required_phases
+from pngail_jax.adversarial.methods import required_phases
 
 FIG2_METHODS = ("gail", "2iwil", "icgail", "wgail", "pngail")
 FIG3_METHODS = ("pngail", "pngail-no-bsc", "pngail-no-pn")
@@ -55,7 +55,7 @@ PAPER_TABLE1 = {  # task: (SC MAE, SC RMSE, BSC MAE, BSC RMSE), means over the p
 @dataclasses.dataclass(frozen=True)
 class Budget:
     """How long every grid and demonstration run is; ``settings`` and ``demo_settings`` are
-    ``RunSettings`` fields per task kind over the task's row of ``pngail_jax.settings``."""
+    ``RunSettings`` fields per task kind over the task's row of ``pngail_jax.config.settings``."""
 
     iterations: int
     seeds: int
@@ -74,7 +74,7 @@ class Budget:
         """The ``RunSettings`` of ``task``'s grids (``demos``: of its demonstration making,
         which evaluates every 10 iterations unless the budget says otherwise) on
         ``physics`` (gymnasium's MuJoCo tasks only; None: the platform's engine)."""
-        from pngail_jax.settings import parse_solver, settings_for
+        from pngail_jax.config.settings import parse_solver, settings_for
 
         kind = task_kind(task)
         fields = {"eval_every": 10, **self.demo_settings[kind]} if demos else self.settings[kind]

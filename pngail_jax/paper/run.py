@@ -12,16 +12,9 @@ from __future__ import annotations
 import shlex
 from pathlib import Path
 
+from pngail_jax.analysis.runs import UntrustedRun, changed_inputs_refusal, sealed_document
 from pngail_jax.demos import released_confidence_path
-from pngail_jax.integrity import (
-    IntegrityError,
-    changed_inputs,
-    file_record,
-    read_json,
-    write_sealed,
-)
 from pngail_jax.jobs.errors import RunError, refusals
-from pngail_jax.outputs import claimed
 from pngail_jax.paper.adopt import adopt_grids, finished_sweep
 from pngail_jax.paper.estimate import estimate_table, read_throughput
 from pngail_jax.paper.grids import (
@@ -34,7 +27,14 @@ from pngail_jax.paper.grids import (
 )
 from pngail_jax.paper.page import write_page
 from pngail_jax.paper.plan import BUDGETS, FIGURES, PAPER_TASKS, RENAMED_BUDGETS, plan
-from pngail_jax.runs import UntrustedRun, changed_inputs_refusal, sealed_document
+from pngail_jax.storage.integrity import (
+    IntegrityError,
+    changed_inputs,
+    file_record,
+    read_json,
+    write_sealed,
+)
+from pngail_jax.storage.outputs import claimed
 
 PROGRAM = "paper"
 
@@ -187,7 +187,7 @@ def page_so_far(plan_dir, out, *, overwrite: bool = False) -> Path:
     progress = {name: state for name, state in progress.items() if state != "complete"}
     if len(progress) == len(grids) and all(state is None for state in progress.values()):
         raise RunError(f"--page {plan_dir}: no grid of the plan has outputs yet")
-    from pngail_jax.runs import UntrustedRun, verify_run
+    from pngail_jax.analysis.runs import UntrustedRun, verify_run
 
     for name in grids:  # the page shows only numbers the plan's runs wrote
         if progress.get(name, "complete") is not None:

@@ -18,7 +18,8 @@ import math
 
 import numpy as np
 
-from pngail_jax.integrity import write_json
+from pngail_jax.analysis.report import LATE_LABEL, late_average, late_evaluations, read_evaluations
+from pngail_jax.analysis.stats import split_half_agreement
 from pngail_jax.programs.cli import (
     ArgumentParser,
     HelpFormatter,
@@ -27,8 +28,7 @@ from pngail_jax.programs.cli import (
     check_read_run,
     path_argument,
 )
-from pngail_jax.report import LATE_LABEL, late_average, late_evaluations, read_evaluations
-from pngail_jax.stats import split_half_agreement
+from pngail_jax.storage.integrity import write_json
 
 
 def parse_args(argv=None) -> argparse.Namespace:

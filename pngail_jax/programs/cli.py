@@ -14,7 +14,7 @@ import signal
 from collections.abc import Sequence
 from pathlib import Path
 
-from pngail_jax.outputs import output_refusal
+from pngail_jax.storage.outputs import output_refusal
 
 
 class HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
@@ -171,7 +171,7 @@ def check_finite(parser: argparse.ArgumentParser, args, names) -> None:
             parser.error(f"{_flag(name)} must be a finite number, got {value!r}")
 
 
-# -- the output contract (pngail_jax.outputs) ------------------------------------------------
+# -- the output contract (pngail_jax.storage.outputs) ----------------------------------------------
 
 
 def claim_output(
@@ -289,8 +289,8 @@ def check_read_run(parser, directory: Path, allow_unsealed: bool = False) -> Non
     ``run_records.check_record`` passes, a run once ``runs.verify_run`` does (its input files
     not looked at: results are read, not data); else ``parser.error`` in one line. The notes
     of what ``allow_unsealed`` let through are printed."""
-    from pngail_jax.run_records import METRICS_FILE, RECORD_FILE, RecordError, check_record
-    from pngail_jax.runs import UntrustedRun, verify_run
+    from pngail_jax.analysis.run_records import METRICS_FILE, RECORD_FILE, RecordError, check_record
+    from pngail_jax.analysis.runs import UntrustedRun, verify_run
 
     directory = Path(directory)
     try:
@@ -306,7 +306,7 @@ def check_read_run(parser, directory: Path, allow_unsealed: bool = False) -> Non
 
 def add_compile_cache_flags(parser) -> None:
     """``--compile-cache DIR`` and ``--no-compile-cache``; ``use_compile_cache`` applies them."""
-    from pngail_jax.compilation import CACHE_ENVIRONMENT_VARIABLE
+    from pngail_jax.storage.compilation import CACHE_ENVIRONMENT_VARIABLE
 
     parser.add_argument(
         "--compile-cache",
@@ -325,7 +325,7 @@ def add_compile_cache_flags(parser) -> None:
 
 def use_compile_cache(args) -> Path | None:
     """Applies the flags of ``add_compile_cache_flags``: the cache directory in use, or None."""
-    from pngail_jax.compilation import enable_compilation_cache
+    from pngail_jax.storage.compilation import enable_compilation_cache
 
     if args.no_compile_cache:
         return None

@@ -10,7 +10,7 @@ headline, which two re-runs agree on best), or with ``--statistic final`` its la
 evaluation. Writes to ``--out``: ``compare.json``, ``compare.md`` (the tables: the
 aggregates, then each task on its own) and ``aggregates.png``, ``profiles.png``,
 ``improvement.png``. The definitions:
-``pngail_jax.compare`` (rliable's, Agarwal et al. 2021).
+``pngail_jax.analysis.compare`` (rliable's, Agarwal et al. 2021).
 """
 
 from __future__ import annotations
@@ -19,10 +19,8 @@ import argparse
 import time
 from pathlib import Path
 
-from pngail_jax import compare, report, run_records
-from pngail_jax.integrity import atomic_write_text
+from pngail_jax.analysis import compare, report, run_records
 from pngail_jax.jobs.errors import RunError, refusals
-from pngail_jax.outputs import claimed
 from pngail_jax.programs.cli import (
     ArgumentParser,
     HelpFormatter,
@@ -30,6 +28,8 @@ from pngail_jax.programs.cli import (
     claim_output,
     path_argument,
 )
+from pngail_jax.storage.integrity import atomic_write_text
+from pngail_jax.storage.outputs import claimed
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -113,13 +113,14 @@ def _against_record(args, scores) -> tuple[dict, str]:
     nothing without the flag. The record is verified first."""
     if args.expected is None:
         return {}, ""
-    from pngail_jax.integrity import read_json
+    from pngail_jax.config.run_config import RunConfig  # JAX's import only with --expected
+    from pngail_jax.storage.integrity import read_json
 
     record = run_records.check_record(args.expected)
     notes = run_records.check_comparable(args.runs, record)
     rows = run_records.expected_rows(scores, record)
     config = read_json(args.runs[0] / "config.json", "run config")
-    differences = run_records.config_differences(config, record)
+    differences = run_records.config_differences(config, record, RunConfig().to_dict())
     text = "\n" + run_records.expected_markdown(rows, record, differences, scores.statistic, notes)
     info = {"record": str(args.expected), "config_differences": differences, "rows": rows,
             "unfinished": notes}  # fmt: skip

@@ -17,13 +17,13 @@ from pathlib import Path
 from typing import Any
 
 from pngail_jax import envs
+from pngail_jax.analysis.tracking import BACKENDS as LOG_BACKENDS
+from pngail_jax.config.run_config import TASK_CLASSIFIER_STEPS
+from pngail_jax.config.run_config_checks import FISHER_FORMS
+from pngail_jax.config.settings import REFERENCE_SETTINGS, RunSettings, parse_solver, settings_for
+from pngail_jax.config.validation import ConfigError
 from pngail_jax.programs.cli import comma_floats, known_names, text_argument
 from pngail_jax.rl.learners import LEARNERS
-from pngail_jax.run_config import TASK_CLASSIFIER_STEPS
-from pngail_jax.run_config_checks import FISHER_FORMS
-from pngail_jax.settings import REFERENCE_SETTINGS, RunSettings, parse_solver, settings_for
-from pngail_jax.tracking import BACKENDS as LOG_BACKENDS
-from pngail_jax.validation import ConfigError
 
 
 @dataclasses.dataclass(frozen=True)
@@ -121,7 +121,7 @@ def flag_message(error: ConfigError, tables: Sequence[Sequence[FieldFlag]]) -> s
 def _methods(parser, flag: str, text: str) -> tuple[str, ...]:
     """Built-in or registered names, and ``package.module:preset`` ones (RunConfig imports
     and checks those)."""
-    from pngail_jax.methods import PRESETS
+    from pngail_jax.adversarial.methods import PRESETS
 
     outside = [item.strip() for item in str(text).split(",") if ":" in item]
     return tuple(known_names(parser, text, (*PRESETS, *outside), "method", flag=flag))
@@ -160,7 +160,7 @@ def _absolute_file(parser, flag: str, text: str) -> str:
 
 TABLE = "(default: the table's)"
 
-# The run settings (pngail_jax.settings.RunSettings); --settings picks the starting row.
+# The run settings (pngail_jax.config.settings.RunSettings); --settings picks the starting row.
 SETTINGS_FLAGS = (
     FieldFlag("settings.num_envs", f"parallel envs per run {TABLE}", type=int),
     FieldFlag("settings.unroll_length", f"steps per env per iteration {TABLE}", type=int),
@@ -197,7 +197,7 @@ SETTINGS_FLAGS = (
 
 def add_settings_flags(parser) -> None:
     group = parser.add_argument_group(
-        "run settings (default: the environment's row of pngail_jax.settings.ENV_SETTINGS, "
+        "run settings (default: the environment's row of pngail_jax.config.settings.ENV_SETTINGS, "
         "see docs/performance.md)"
     )
     group.add_argument(

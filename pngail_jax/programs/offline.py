@@ -19,9 +19,12 @@ import sys
 from pngail_jax.demos import released_task
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.jobs.offline import OfflineRunConfig, load_offline_config, run_offline
-from pngail_jax.offline import CLASSIFIED_SUFFIX, DEFAULT_OFFLINE_METHODS, OFFLINE_METHOD_NAMES
-from pngail_jax.offline_ilid import ILID_UNIONS
-from pngail_jax.outputs import output_owner
+from pngail_jax.offline.ilid import ILID_UNIONS
+from pngail_jax.offline.trainer import (
+    CLASSIFIED_SUFFIX,
+    DEFAULT_OFFLINE_METHODS,
+    OFFLINE_METHOD_NAMES,
+)
 from pngail_jax.programs.cli import (
     ENV_HELP,
     ArgumentParser,
@@ -36,6 +39,7 @@ from pngail_jax.programs.cli import (
     signals_stop_at_a_checkpoint,
     use_compile_cache,
 )
+from pngail_jax.storage.outputs import output_owner
 
 DEFAULTS = OfflineRunConfig()
 

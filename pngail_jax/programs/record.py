@@ -4,7 +4,7 @@
     python -m experiments.record --check records/hopper-cpu records/pendulum-1000
     python -m experiments.record --docs          # rewrite the docs' tables from their records
 
-A record (``pngail_jax.run_records``) holds the run's config, command, commit, machine,
+A record (``pngail_jax.analysis.run_records``) holds the run's config, command, commit, machine,
 training seconds, each method's final normalised returns per seed, and its metrics.csv
 gzipped (every cell and iteration): what a results table in the docs rests on, without
 checkpoints, policies or plots. Writing one checks it; ``--check`` verifies kept ones (the
@@ -41,8 +41,7 @@ import re
 from collections.abc import Callable
 from pathlib import Path
 
-from pngail_jax import record_tables, run_records
-from pngail_jax.integrity import atomic_write_text
+from pngail_jax.analysis import record_tables, run_records
 from pngail_jax.jobs import comparison_record
 from pngail_jax.programs.cli import (
     ArgumentParser,
@@ -50,6 +49,7 @@ from pngail_jax.programs.cli import (
     add_allow_unsealed,
     path_argument,
 )
+from pngail_jax.storage.integrity import atomic_write_text
 
 
 def parse_args(argv=None) -> argparse.Namespace:

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pngail_jax.integrity import IntegrityError, read_json, write_json
+from pngail_jax.analysis.report import LATE_LABEL, LATE_SHARE, metrics_rows
 from pngail_jax.programs.cli import (
     ArgumentParser,
     HelpFormatter,
@@ -29,7 +29,7 @@ from pngail_jax.programs.cli import (
     check_read_run,
     path_argument,
 )
-from pngail_jax.report import LATE_LABEL, LATE_SHARE, metrics_rows
+from pngail_jax.storage.integrity import IntegrityError, read_json, write_json
 
 TRAINING_COLUMNS = ("disc_acc_agent", "disc_acc_demo", "mean_reward", "kl")
 

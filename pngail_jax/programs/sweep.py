@@ -8,7 +8,7 @@
     python -m experiments.sweep --config runs/A/config.json --seeds 10   # a new run like A
     python -m experiments.sweep --resume runs/20261122-210000
 
-The command line fills in a ``pngail_jax.run_config.RunConfig``. Without ``--demos`` the
+The command line fills in a ``pngail_jax.config.run_config.RunConfig``. Without ``--demos`` the
 demonstrations are made by ``pngail_jax.jobs.make_demos`` (1:4 optimal to intermediate
 trajectories) once and reused from ``runs/demos-cache/<env>/`` (or
 ``$PNGAIL_JAX_DEMOS_CACHE/<env>/``). Writes to ``--out`` (default
@@ -28,10 +28,12 @@ import sys
 import time
 from pathlib import Path
 
+from pngail_jax.analysis.tracking import check_backends
+from pngail_jax.config.run_config import PRESETS_BY_NAME, RunConfig, task_classifier
+from pngail_jax.config.validation import ConfigError
 from pngail_jax.jobs import record
 from pngail_jax.jobs import sweep as sweep_job
 from pngail_jax.jobs.errors import RunError
-from pngail_jax.outputs import output_owner
 from pngail_jax.programs import flags
 from pngail_jax.programs.cli import (
     ENV_HELP,
@@ -47,9 +49,7 @@ from pngail_jax.programs.cli import (
     signals_stop_at_a_checkpoint,
     use_compile_cache,
 )
-from pngail_jax.run_config import PRESETS_BY_NAME, RunConfig, task_classifier
-from pngail_jax.tracking import check_backends
-from pngail_jax.validation import ConfigError
+from pngail_jax.storage.outputs import output_owner
 
 SMOKE = RunConfig.preset("smoke")
 # Flags that --resume DIR accepts: the run's config.json has every other value.
@@ -79,7 +79,7 @@ class Invocation:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from pngail_jax.methods import PRESETS
+    from pngail_jax.adversarial.methods import PRESETS
 
     methods_help = "\n".join(
         f"  {name:14s} {preset.description} (r: {preset.confidence_source})"

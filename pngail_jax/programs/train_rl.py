@@ -17,10 +17,8 @@ import sys
 import time
 from pathlib import Path
 
-from pngail_jax.integrity import IntegrityError, read_json
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.jobs.train_rl import TrainRLConfig, train_rl
-from pngail_jax.outputs import output_owner
 from pngail_jax.programs import flags
 from pngail_jax.programs.cli import (
     ENV_HELP,
@@ -38,6 +36,8 @@ from pngail_jax.programs.cli import (
     use_compile_cache,
 )
 from pngail_jax.rl.learners import LEARNERS, check_batch
+from pngail_jax.storage.integrity import IntegrityError, read_json
+from pngail_jax.storage.outputs import output_owner
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -34,8 +34,8 @@ class TRPOTrainer:
     """TRPO (or another ``learner``, e.g. ``rl.PPO``) on a fixed reward (the environment's by
     default), in blocks.
 
-    The trainer interface shared with ``pngail_jax.adversarial.AdversarialTrainer`` (and used by
-    ``pngail_jax.grid.Grid``): ``init(*cell_inputs, key) -> (state, init_metrics)``,
+    The trainer interface shared with ``pngail_jax.adversarial.trainer.AdversarialTrainer``
+    (and used by ``pngail_jax.grid.Grid``): ``init(*cell_inputs, key) -> (state, init_metrics)``,
     ``run_blocks(*cell_inputs, state, num_blocks) -> (state, metrics)`` and
     ``train(*cell_inputs, key)``, their composition. Here the cell inputs are one
     ``TRPOHyperparams`` (the learner's: ``PPOHyperparams`` for PPO). All three are pure and

@@ -42,8 +42,8 @@ import numpy as np
 import optax
 from flax import struct
 
+from pngail_jax.adversarial.phase import Phase, PhaseContext
 from pngail_jax.networks import ClampedStateReward, ResidualDiscriminator
-from pngail_jax.phase import Phase, PhaseContext
 
 
 @dataclasses.dataclass(frozen=True)

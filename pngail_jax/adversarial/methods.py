@@ -1,7 +1,7 @@
 """Methods as data: ``MethodSpec`` coefficients and the presets of the paper's comparison.
 
 Every discriminator objective of ``docs/methods.md`` is one weighted sum of the same
-per-sample terms (``pngail_jax.losses.discriminator_loss``):
+per-sample terms (``pngail_jax.adversarial.losses.discriminator_loss``):
 
     L = A mean_agent sp(-z) + mean_demo [ u(x) sp(z) + v(x) sp(-z) ]
 
@@ -22,8 +22,21 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from pngail_jax import validation
 from pngail_jax.confidence import ClassifierSpec
+from pngail_jax.config import validation
+from pngail_jax.config.presets import (  # noqa: F401  (the table, importable from here too)
+    ALL_METHOD_NAMES,
+    APPENDIX_METHOD_NAMES,
+    APPENDIX_PRESETS,
+    CONFIDENCE_SOURCES,
+    DISPLAY_NAMES,
+    METHOD_NAMES,
+    PHASES,
+    PRESETS,
+    Preset,
+    display_name,
+    reads_confidences,
+)
 
 
 @struct.dataclass
@@ -42,7 +55,7 @@ class MethodSpec:
     classifier_coef: jax.Array  # 1: unlabelled r from a trained classifier; 0: no classifier
     bsc_coef: jax.Array  # which classifier: 1 BSC (eq. 13), 0 SC (2IWIL)
     bsc_eps: jax.Array  # BSC's clip (0.01; the paper uses 0.05 on Walker2d)
-    # The appendix baselines (pngail_jax.ranking, .firl, .bc). Each reads its training
+    # The appendix baselines (pngail_jax.adversarial.ranking, .firl, .bc). Each reads its training
     # phase's output, and a phase runs only in grids with a method that needs it (PHASES).
     adversarial_reward_coef: jax.Array  # policy reward += coef sp(-z) (1 for the seven)
     policy_update_coef: jax.Array  # 1: TRPO updates the policy; 0: it stays as initialised
@@ -53,7 +66,7 @@ class MethodSpec:
     firl_coef: jax.Array  # reward += coef r(s), f-IRL's reward ("firl" phase)
     firl_fkl_coef: jax.Array  # f-IRL's divergence: forward KL ...
     firl_rkl_coef: jax.Array  # ... reverse KL ...
-    firl_js_coef: jax.Array  # ... Jensen-Shannon (pngail_jax.firl.divergence_h)
+    firl_js_coef: jax.Array  # ... Jensen-Shannon (pngail_jax.adversarial.firl.divergence_h)
     cail_coef: jax.Array  # 1: r is CAIL's learned per-trajectory confidence ("cail" phase)
     cail_learning_rate: jax.Array  # CAIL's gradient step on beta (0: beta frozen at 1)
     # Non-negative positive-unlabelled risks (losses.non_negative_pu_risk), the two ways round:
@@ -85,121 +98,6 @@ class MethodSpec:
         return ClassifierSpec(bsc_coef=self.bsc_coef, eps=self.bsc_eps)
 
 
-# Training phases beyond the seven methods' (split, classifier, adversarial loop); a grid
-# compiles only those its methods name (``required_phases``).
-PHASES = ("bc", "demo_rankings", "noise_rankings", "firl", "cail")
-
-
-# Where a method's confidences r come from: "none", "given" (D_c only), "sc", "bsc" (a
-# classifier for D_u), or "rankings" (a label_ratio share of the trajectories, ranked by
-# confidence).
-CONFIDENCE_SOURCES = ("none", "given", "sc", "bsc", "rankings")
-
-
-@dataclasses.dataclass(frozen=True)
-class Preset:
-    """A named method: its ``MethodSpec`` coefficients (the others take their defaults), where
-    its confidences come from (``CONFIDENCE_SOURCES``) and the training phases it reads
-    (``PHASES``). ``register`` checks one against itself before a grid runs it."""
-
-    description: str
-    confidence_source: str
-    coefficients: dict
-    phases: tuple[str, ...] = ()
-
-
-_PN = {"agent_coef": 1.0, "pn_coef": 1.0}
-_IW = {"agent_coef": 1.0, "importance_weighted_coef": 1.0}
-_SC = {"classifier_coef": 1.0, "bsc_coef": 0.0}
-_BSC = {"classifier_coef": 1.0, "bsc_coef": 1.0}
-
-PRESETS: dict[str, Preset] = {
-    "gail": Preset("GAIL: every demonstration is treated as optimal", "none", {
-        "agent_coef": 1.0, "gail_coef": 1.0}),
-    "2iwil": Preset("2IWIL: demonstrations weighted by r / mean(r), SC confidences", "sc", {
-        **_IW, **_SC}),
-    "icgail": Preset("IC-GAIL: D_c's given confidences only, Z = max(mean r_c, 0.7)", "given", {
-        "icgail_coef": 1.0, "class_prior_floor": 0.7}),
-    "wgail": Preset("WGAIL: weights [exp(-z) pi(a|s)]^(1/2), no confidences", "none", {
-        "agent_coef": 1.0, "wgail_coef": 1.0}),
-    "pngail": Preset("PN-GAIL: positive-negative risk (eq. 11), BSC confidences", "bsc", {
-        **_PN, **_BSC}),
-    "pngail-no-bsc": Preset("PN-GAIL\\BSC: PN-GAIL's loss with SC confidences", "sc", {
-        **_PN, **_SC}),
-    "pngail-no-pn": Preset("PN-GAIL\\PN: 2IWIL's loss with BSC confidences", "bsc", {
-        **_IW, **_BSC}),
-}  # fmt: skip
-
-# The paper's seven: the default of every grid.
-METHOD_NAMES = tuple(PRESETS)
-
-_LEARNED_REWARD = {"adversarial_reward_coef": 0.0, "ranking_reward_coef": 1.0}
-_FIRL = {"adversarial_reward_coef": 0.0, "firl_coef": 1.0}
-APPENDIX_PRESETS: dict[str, Preset] = {
-    "bc": Preset("BC: behaviour cloning on every demonstration, no RL", "none", {
-        "policy_update_coef": 0.0, "bc_init_coef": 1.0}, ("bc",)),
-    "bc-weighted": Preset("BC weighted by confidence (BSC on D_u), no RL", "bsc", {
-        "policy_update_coef": 0.0, "bc_init_coef": 1.0, "bc_weighted_coef": 1.0, **_BSC},
-        ("bc",)),
-    "trex": Preset("T-REX: TRPO on a reward learned from trajectories ranked by confidence",
-        "rankings", _LEARNED_REWARD, ("demo_rankings",)),
-    "drex": Preset("D-REX: T-REX on rollouts of a cloned policy ranked by their noise",
-        "none", {**_LEARNED_REWARD, "noise_rankings_coef": 1.0}, ("noise_rankings",)),
-    "cail": Preset("CAIL: per-pair confidences learned by a bilevel ranking loss",
-        "rankings", {"agent_coef": 1.0, "importance_weighted_coef": 1.0, "cail_coef": 1.0,
-                     "cail_learning_rate": 0.1}, ("cail",)),
-    "firl-fkl": Preset("f-IRL, forward KL: state reward from the divergence's gradient",
-        "none", {**_FIRL, "firl_fkl_coef": 1.0}, ("firl",)),
-    "firl-rkl": Preset("f-IRL, reverse KL", "none", {**_FIRL, "firl_rkl_coef": 1.0},
-        ("firl",)),
-    "firl-js": Preset("f-IRL, Jensen-Shannon", "none", {**_FIRL, "firl_js_coef": 1.0},
-        ("firl",)),
-}  # fmt: skip
-APPENDIX_METHOD_NAMES = tuple(APPENDIX_PRESETS)
-PRESETS.update(APPENDIX_PRESETS)
-ALL_METHOD_NAMES = tuple(PRESETS)
-
-# The paper's names, for legends and tables.
-DISPLAY_NAMES = {
-    "gail": "GAIL",
-    "2iwil": "2IWIL",
-    "icgail": "IC-GAIL",
-    "wgail": "WGAIL",
-    "pngail": "PN-GAIL",
-    "pngail-no-bsc": "PN-GAIL\\BSC",
-    "pngail-no-pn": "PN-GAIL\\PN",
-    "bc": "BC",
-    "bc-weighted": "BC, weighted",
-    "trex": "T-REX",
-    "drex": "D-REX",
-    "cail": "CAIL",
-    "firl-fkl": "f-IRL (FKL)",
-    "firl-rkl": "f-IRL (RKL)",
-    "firl-js": "f-IRL (JS)",
-    # the offline family (pngail_jax.offline), which a report names the same way
-    "bc-expert": "BC (expert rows)",
-    "bc-all": "BC (all rows)",
-    "dwbc": "DWBC",
-    "iswbc": "ISW-BC",
-    "ilid": "ILID",
-}
-
-
-def display_name(name: str) -> str:
-    """The paper's name of a preset (``"pngail-no-bsc"``: ``"PN-GAIL\\BSC"``; an offline
-    method's BSC variant ``"dwbc+bsc"``: ``"DWBC + BSC rows"``), else ``name``."""
-    base, plus, rest = name.partition("+")
-    if plus and rest == "bsc" and base in DISPLAY_NAMES:
-        return f"{DISPLAY_NAMES[base]} + BSC rows"
-    return DISPLAY_NAMES.get(name, name)
-
-
-def reads_confidences(name: str) -> bool:
-    """Whether a method's loss reads confidences (GAIL, WGAIL, BC, D-REX and f-IRL do not);
-    True for a name that is not known."""
-    return name not in PRESETS or PRESETS[name].confidence_source != "none"
-
-
 _DEFAULTS = {field.name: 0.0 for field in dataclasses.fields(MethodSpec)} | {
     "bsc_eps": 0.01,
     "adversarial_reward_coef": 1.0,
@@ -221,7 +119,9 @@ def check_preset(name: str, preset: Preset) -> Preset:
     match its classifier coefficients or that a confidence-reading term lacks, a learned reward
     without the phase that learns it."""
     if not isinstance(preset, Preset):
-        raise ValueError(f"method {name!r}: a pngail_jax.methods.Preset, got {type(preset)}")
+        raise ValueError(
+            f"method {name!r}: a pngail_jax.adversarial.methods.Preset, got {type(preset)}"
+        )
     if not isinstance(preset.coefficients, dict):
         raise ValueError(f"method {name!r}: coefficients must be a dict of MethodSpec fields")
     unknown = sorted(set(preset.coefficients) - set(_DEFAULTS), key=str)
@@ -324,7 +224,7 @@ def resolve(name: str) -> Preset:
     if ":" not in name:
         raise ValueError(
             f"unknown method {name!r}; available: {', '.join(PRESETS)}, a name given to "
-            "pngail_jax.methods.register, or package.module:preset"
+            "pngail_jax.adversarial.methods.register, or package.module:preset"
         )
     module_name, _, attribute = name.partition(":")
     try:

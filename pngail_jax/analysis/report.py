@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from pngail_jax import stats
-from pngail_jax.integrity import atomic_path, atomic_write_text, write_json
-from pngail_jax.methods import display_name, reads_confidences
+from pngail_jax.analysis import stats
+from pngail_jax.config.presets import display_name, reads_confidences
+from pngail_jax.storage.integrity import atomic_path, atomic_write_text, write_json
 
 CSV_COLUMNS = (
     "method",
@@ -156,7 +156,7 @@ def _write_csv(path: Path, header: Sequence[str], rows) -> None:
 def metrics_rows(path: Path) -> Iterator[dict[str, str]]:
     """Every row of a metrics file as a dict of its columns: ``metrics.csv`` (the sweep's,
     the offline program's or ``train_rl``'s), or ``metrics.csv.gz`` (a run record's,
-    ``pngail_jax.run_records``). The library's one reader of metrics files."""
+    ``pngail_jax.analysis.run_records``). The library's one reader of metrics files."""
     path = Path(path)
     opened = gzip.open(path, "rt", newline="") if path.suffix == ".gz" else path.open(newline="")
     with opened as file:
@@ -286,7 +286,7 @@ def summarize(
     evaluation return over training, raw and normalised, as mean, sample std (ddof 1) and
     standard error over seeds (and the confidence classifier's MAE and RMSE on D_u, mean and
     std, when ``metrics`` has them), and as interquartile mean with a 95% percentile-bootstrap
-    interval (``pngail_jax.stats``, fixed seed: the same numbers on every
+    interval (``pngail_jax.analysis.stats``, fixed seed: the same numbers on every
     call), and a per-seed table (with the classifier's errors, which tell
     a seed's labels apart). Cells in ``excluded`` (diverged,
     ``pngail_jax.grid.nonfinite_cells``) and non-finite returns are left out of every

@@ -21,7 +21,7 @@ import contextlib
 import dataclasses
 from pathlib import Path
 
-from pngail_jax.integrity import LOCK, OUTPUT_LIST, atomic_write_text, write_json
+from pngail_jax.storage.integrity import LOCK, OUTPUT_LIST, atomic_write_text, write_json
 
 MARKER = ".pngail-run.json"
 # OUTPUT_LIST (".pngail-outputs.json", beside the lock in integrity): the files a run wrote, by

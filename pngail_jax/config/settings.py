@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import dataclasses
 
-from pngail_jax import envs, validation
+from pngail_jax import envs
+from pngail_jax.config import validation
 from pngail_jax.rl.on_policy import RolloutConfig
 
 

@@ -33,16 +33,16 @@ from pathlib import Path
 
 import numpy as np
 
-from pngail_jax import stats
-from pngail_jax.integrity import IntegrityError, read_json
-from pngail_jax.report import HEADLINE
-from pngail_jax.runs import (
+from pngail_jax.analysis import stats
+from pngail_jax.analysis.report import HEADLINE
+from pngail_jax.analysis.runs import (
     STATISTICS,
     RunReadError,
     run_progress,
     run_scores,
     verify_run,
 )
+from pngail_jax.storage.integrity import IntegrityError, atomic_path, read_json, write_json
 
 AGGREGATES = ("iqm", "mean", "median", "optimality_gap")
 NUM_RESAMPLES = 2000
@@ -413,7 +413,6 @@ def per_task_markdown(table: dict, baseline: str) -> list[str]:
 
 def write_result_json(path: Path, result: dict) -> None:
     """``result`` as JSON, an undefined number (NaN) as null."""
-    from pngail_jax.integrity import write_json as write
 
     def nulls(value):
         if isinstance(value, dict):
@@ -424,7 +423,7 @@ def write_result_json(path: Path, result: dict) -> None:
             return None
         return value
 
-    write(path, nulls(result))
+    write_json(path, nulls(result))
 
 
 def _interval_rows(axis, rows, colors) -> None:
@@ -445,8 +444,6 @@ def plot(result: dict, directory: Path) -> list[Path]:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from pngail_jax.integrity import atomic_path
 
     methods = list(result["aggregates"])
     colors = {m: plt.cm.tab10(i % 10) for i, m in enumerate(methods)}

@@ -8,7 +8,7 @@ round-trip it, so a saved ``config.json`` starts a new run (``--config FILE``) o
 where it ran.
 
 Every field is checked when a config is made, from Python or from a file: a wrong type, a NaN
-or infinite number or a count below 1 raises ``pngail_jax.validation.ConfigError`` naming the
+or infinite number or a count below 1 raises ``pngail_jax.config.validation.ConfigError`` naming the
 field (the sweep names its flag instead), and an unknown key a ValueError naming the key, so a
 valid config holds exactly its annotated types.
 """
@@ -23,22 +23,18 @@ from pathlib import Path
 from typing import Any
 
 from pngail_jax import envs
-from pngail_jax.adversarial import AdversarialConfig
-from pngail_jax.confidence import ClassifierConfig
-from pngail_jax.config_record import upgrade_saved_config
-from pngail_jax.firl import FirlConfig
-from pngail_jax.grid import GRID_AXES
-from pngail_jax.methods import (
+from pngail_jax.adversarial.firl import FirlConfig
+from pngail_jax.adversarial.methods import (
     METHOD_NAMES,
     required_phases,
     resolve,
 )
-from pngail_jax.rl.on_policy import RolloutConfig
-from pngail_jax.rl.ppo import PPOConfig
-from pngail_jax.rl.trpo import TRPOConfig
-from pngail_jax.run_config_checks import check_between_fields, check_names
-from pngail_jax.settings import RunSettings, settings_for
-from pngail_jax.validation import (
+from pngail_jax.adversarial.trainer import AdversarialConfig
+from pngail_jax.confidence import ClassifierConfig
+from pngail_jax.config.run_config_checks import check_between_fields, check_names
+from pngail_jax.config.saved import upgrade_saved_config
+from pngail_jax.config.settings import RunSettings, settings_for
+from pngail_jax.config.validation import (
     ConfigError,
     fail,
     float_axis,
@@ -46,6 +42,10 @@ from pngail_jax.validation import (
     layer_sizes,
     real,
 )
+from pngail_jax.grid import GRID_AXES
+from pngail_jax.rl.on_policy import RolloutConfig
+from pngail_jax.rl.ppo import PPOConfig
+from pngail_jax.rl.trpo import TRPOConfig
 
 # What a saved config.json holds besides the config's fields (pngail_jax.jobs.record writes them);
 # RunConfig.from_dict ignores these and refuses any other key that is not a field.
@@ -83,7 +83,7 @@ class RunConfig:
     """One sweep: a grid of methods x seeds x label ratios x noise levels on one environment.
 
     The defaults are the smoke scale (a few minutes on a 2-core CPU); ``settings`` defaults to
-    the environment's row of ``pngail_jax.settings.ENV_SETTINGS``.
+    the environment's row of ``pngail_jax.config.settings.ENV_SETTINGS``.
     """
 
     env: str = "Pendulum-v1"
@@ -160,7 +160,7 @@ class RunConfig:
         elif not isinstance(self.settings, RunSettings):
             fail(
                 "settings",
-                "must be a pngail_jax.settings.RunSettings (None: the environment's row), "
+                "must be a pngail_jax.config.settings.RunSettings (None: the environment's row), "
                 f"got {type(self.settings).__name__}",
             )
         else:
@@ -343,7 +343,7 @@ PRESETS_BY_NAME: dict[str, dict[str, Any]] = {
 }
 
 
-# -- field checks (pngail_jax.validation): each returns the value in its stored type -------
+# -- field checks (pngail_jax.config.validation): each returns the value in its stored type -------
 
 _TUPLE_FIELDS = ("methods", "label_ratios", "noise_stds", "log", "discriminator_hidden_sizes")
 # The fields a grid axis cannot vary, with a reason (they shape the compiled program).

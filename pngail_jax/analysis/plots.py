@@ -1,6 +1,6 @@
 """The run's figures: evaluation curves (``curves.png``, like the paper's Fig. 2) and the
 training diagnostics (``diagnostics.png``), from the grid's metrics; the tables and
-statistics are ``pngail_jax.report``'s."""
+statistics are ``pngail_jax.analysis.report``'s."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-from pngail_jax import stats
-from pngail_jax.integrity import atomic_path
-from pngail_jax.methods import METHOD_NAMES, display_name
-from pngail_jax.report import normalize
+from pngail_jax.analysis import stats
+from pngail_jax.analysis.report import normalize
+from pngail_jax.config.presets import METHOD_NAMES, display_name
+from pngail_jax.storage.integrity import atomic_path
 
 
 def plot_curves(

@@ -13,8 +13,24 @@ from pathlib import Path
 
 import numpy as np
 
-from pngail_jax.integrity import IntegrityError, read_json
-from pngail_jax.report import HEADLINE, LATE_LABEL, seed_figures
+from pngail_jax.analysis.report import (
+    HEADLINE,
+    LATE_LABEL,
+    iterations_per_cell,
+    late_evaluations,
+    metrics_rows,
+    read_evaluations,
+    seed_figures,
+)
+from pngail_jax.storage.integrity import (
+    CONFIG_SEAL,
+    IntegrityError,
+    changed_inputs,
+    read_json,
+    sealed_differences,
+    verify_manifest,
+)
+from pngail_jax.storage.outputs import output_owner
 
 
 class RunReadError(Exception):
@@ -39,7 +55,6 @@ def run_scores(run_dir: Path, statistic: str = HEADLINE) -> tuple[str, dict[str,
     (``statistic`` of the normalised evaluations; NaN for a seed that diverged), so the
     offline family's rows join the online methods' tables. RunReadError when the run has
     none to read."""
-    from pngail_jax.outputs import output_owner
 
     run_dir = Path(run_dir)
     if output_owner(run_dir) not in RUN_PROGRAMS:
@@ -68,7 +83,6 @@ def scores_of_metrics(
     file."""
     if statistic not in STATISTICS:
         raise RunReadError(f"statistic {statistic!r}: give one of {', '.join(STATISTICS)}")
-    from pngail_jax.report import iterations_per_cell, read_evaluations
 
     try:
         _check_whole(path, iterations_per_cell(path), progress, config)
@@ -232,8 +246,6 @@ def verify_run(
     - its policies (a finished sweep's) match their digests.
 
     Returns the notes of what was let through."""
-    from pngail_jax.integrity import changed_inputs, verify_manifest
-    from pngail_jax.outputs import output_owner
 
     directory = Path(directory)
     if output_owner(directory) not in RUN_PROGRAMS:
@@ -284,7 +296,6 @@ def sealed_document(
     ``seal_name`` (default ``integrity.CONFIG_SEAL``), or, with ``allow_unsealed``, has none
     (a note says so), and the notes; else ``UntrustedRun`` starting with ``who`` and naming
     what differs."""
-    from pngail_jax.integrity import CONFIG_SEAL, sealed_differences
 
     seal_name = seal_name or CONFIG_SEAL
     try:
@@ -351,7 +362,6 @@ def read_scored_rows(path: Path, normalizer: list[float] | None) -> dict:
     file's rounding. Returns, per (method, setting) and seed, {iteration: eval_return}.
     RunReadError naming the file, method, seed and iteration of the first row that
     disagrees (a score edited, or the normaliser)."""
-    from pngail_jax.report import metrics_rows
 
     rows: dict[tuple[str, str], dict[int, dict[int, float]]] = {}
     try:
@@ -400,7 +410,6 @@ def _seed_figures(evaluations: dict[int, float]) -> dict[str, tuple[float, list[
     late-average and training-average return), (value, the iterations it reads, the largest
     |return| among them),
     as ``report.summarize`` computes them (NaN evaluations left out of the averages)."""
-    from pngail_jax.report import late_evaluations
 
     iterations = sorted(evaluations)
     late = iterations[len(iterations) - late_evaluations(len(iterations)) :]
@@ -485,7 +494,6 @@ def _check_metrics_agree_with_summary(directory: Path, document: dict, who: str)
     metrics.csv gives (``_check_summary_figures``; 6 significant digits there; a diverged
     seed, null in the summary, is not compared). A summary behind metrics.csv (a stop
     between the two writes of a chunk) is not compared: the next chunk writes both again."""
-    from pngail_jax.report import iterations_per_cell
 
     metrics, summary_path = directory / "metrics.csv", directory / "summary.json"
     if not metrics.exists():

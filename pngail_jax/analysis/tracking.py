@@ -4,7 +4,7 @@
 Off by default: ``open_logger(directory, [], ...)`` is ``None``. After each chunk the sweep
 calls ``RunLogger.log_chunk(cells, metrics, first_iteration)`` with the chunk's host metrics
 (float[G, I]: G cells, I iterations). For every group (the method, plus its setting when the
-grid has several, as in ``pngail_jax.report``) and metric it logs the mean over the group's
+grid has several, as in ``pngail_jax.analysis.report``) and metric it logs the mean over the group's
 seeds of the finite values at each iteration, as ``"{metric}/{group}"`` at step = the 1-based
 iteration number; ``"eval/return"`` is also logged per seed as ``"eval/return/{group}/seed{k}"``.
 Points where every seed is NaN (``eval/return`` between evaluations) are not logged.
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pngail_jax.report import group_cells
+from pngail_jax.analysis.report import group_cells
 
 # Each backend and the module it needs.
 BACKEND_MODULES = {"tensorboard": "tensorboardX", "wandb": "wandb"}

@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from pngail_jax.adversarial.methods import required_phases, resolve
+from pngail_jax.adversarial.ranking import RankingConfig, Trajectories
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import DemonstrationError
-from pngail_jax.methods import required_phases, resolve
-from pngail_jax.ranking import RankingConfig, Trajectories
 
 
 def check_methods(

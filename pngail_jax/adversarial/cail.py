@@ -18,7 +18,7 @@ discriminator. Each iteration runs ``CAILConfig.num_rounds`` rounds of:
    ``pretrain_iterations``).
 
 Everything here is pure and jittable; ``CailPhase`` is its phase in the adversarial trainer's
-one-program grid (``pngail_jax.phase``).
+one-program grid (``pngail_jax.adversarial.phase``).
 """
 
 from __future__ import annotations
@@ -29,9 +29,9 @@ import chex
 import jax
 import jax.numpy as jnp
 
+from pngail_jax.adversarial.losses import policy_reward
+from pngail_jax.adversarial.phase import Phase, PhaseContext
 from pngail_jax.fitting import adam_step, gradients_agree, tree_where
-from pngail_jax.losses import policy_reward
-from pngail_jax.phase import Phase, PhaseContext
 
 # The codebase's smoothing of the hinge where two returns differ by less than this.
 SMOOTHING = 1e-5

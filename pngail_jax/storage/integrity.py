@@ -24,9 +24,10 @@ from pathlib import Path
 MANIFEST_NAME = "digests.json"
 _TEMPORARY_MARK = ".tmp-"
 # A run directory's lock file, there only while a process writes the run (held by
-# pngail_jax.outputs.run_lock); here, beside the atomic writes, because manifests leave it out.
+# pngail_jax.storage.outputs.run_lock); here, beside the atomic writes, because manifests leave
+# it out.
 LOCK = ".pngail-run.lock"
-# A run's list of the files it wrote, updated until its process ends (pngail_jax.outputs
+# A run's list of the files it wrote, updated until its process ends (pngail_jax.storage.outputs
 # .record_outputs): here for the same reason.
 OUTPUT_LIST = ".pngail-outputs.json"
 
@@ -112,7 +113,7 @@ def _tree_digest(directory: Path) -> str:
 
 def _files(directory: Path) -> list[Path]:
     """The files a manifest lists: not itself, temporaries, a run's lock (there only while a
-    process writes: pngail_jax.outputs.run_lock) or its list of files (updated after)."""
+    process writes: pngail_jax.storage.outputs.run_lock) or its list of files (updated after)."""
     return sorted(
         path
         for path in directory.rglob("*")

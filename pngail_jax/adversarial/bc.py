@@ -17,9 +17,9 @@ import chex
 import jax
 import jax.numpy as jnp
 
+from pngail_jax.adversarial.phase import Phase, PhaseContext
 from pngail_jax.fitting import fit_with_adam, squared_norm, tree_where
 from pngail_jax.networks import DeterministicPolicy, gaussian_log_prob
-from pngail_jax.phase import Phase, PhaseContext
 
 
 @dataclasses.dataclass(frozen=True)

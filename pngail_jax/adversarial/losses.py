@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from pngail_jax.methods import MethodSpec
+from pngail_jax.adversarial.methods import MethodSpec
 
 _TINY = 1e-8
 

@@ -9,12 +9,12 @@ from __future__ import annotations
 import dataclasses
 
 from pngail_jax import envs
-from pngail_jax.adversarial import AdversarialHyperparams
+from pngail_jax.adversarial.methods import ALL_METHOD_NAMES, PRESETS, check_preset, resolve
+from pngail_jax.adversarial.trainer import AdversarialHyperparams
+from pngail_jax.analysis.tracking import BACKENDS as LOG_BACKENDS
+from pngail_jax.config.validation import fail, is_among
 from pngail_jax.grid import METHOD_AXES
-from pngail_jax.methods import ALL_METHOD_NAMES, PRESETS, check_preset, resolve
 from pngail_jax.rl.learners import LEARNERS
-from pngail_jax.tracking import BACKENDS as LOG_BACKENDS
-from pngail_jax.validation import fail, is_among
 
 FISHER_FORMS = ("gauss_newton", "hessian")
 

@@ -26,7 +26,21 @@ from pathlib import Path
 
 import numpy as np
 
-from pngail_jax.integrity import (
+from pngail_jax.analysis import stats
+from pngail_jax.analysis.report import LATE_SHARE, iterations_per_cell, metrics_rows
+from pngail_jax.analysis.runs import (
+    STATISTICS,
+    RunReadError,
+    read_scored_rows,
+    run_normalizer,
+    run_progress_numbers,
+    run_scores,
+    run_settings,
+    scores_of_metrics,
+    verify_run,
+)
+from pngail_jax.config.released_files import PAPER_NORMALIZERS
+from pngail_jax.storage.integrity import (
     IntegrityError,
     atomic_path,
     file_digest,
@@ -34,16 +48,7 @@ from pngail_jax.integrity import (
     read_json,
     write_json,
 )
-from pngail_jax.report import LATE_SHARE
-from pngail_jax.runs import (
-    STATISTICS,
-    RunReadError,
-    read_scored_rows,
-    run_normalizer,
-    run_progress_numbers,
-    run_settings,
-    scores_of_metrics,
-)
+from pngail_jax.storage.outputs import output_owner
 
 # 3: its digest and whether its run's seal was checked; 2: both statistics per seed (1 held
 # the final evaluation only). ``upgrade_record`` brings a format-2 record to 3.
@@ -84,7 +89,6 @@ def _confidence_errors(summary: dict) -> dict[str, list[float | None]]:
 
 def _training_seconds(metrics_path: Path) -> float | None:
     """The run's training seconds so far: the largest ``wall_seconds`` of its metrics file."""
-    from pngail_jax.report import metrics_rows
 
     rows = metrics_rows(metrics_path)
     seconds = [float(row["wall_seconds"]) for row in rows if row.get("wall_seconds")]
@@ -99,9 +103,6 @@ def write_record(
     whole and agreeing with summary.json; its input files are not looked at). A record of
     that name already there is replaced only if it records the same run (same config and
     commit); anything else in the way is refused. Returns the record's folder."""
-    from pngail_jax.outputs import output_owner
-    from pngail_jax.report import iterations_per_cell
-    from pngail_jax.runs import run_scores, verify_run
 
     run_dir = Path(run_dir)
     check_name(name)
@@ -330,7 +331,6 @@ def _check_config_facts(folder: Path, record: dict) -> None:
 def _metrics_facts(metrics: Path):
     """What a record's metrics file says of its run: the seeds of each (method, setting),
     the label ratios and noises, the last iteration, and the environment steps at each."""
-    from pngail_jax.report import metrics_rows
 
     cells: dict[tuple[str, str], set[int]] = {}
     ratios, noises, reached, steps = set(), set(), 0, {}
@@ -348,7 +348,6 @@ def _check_task(where: Path, config: dict, normalizer: list[float] | None) -> No
     """RecordError unless a record of an authors' file whose normaliser is the paper's Table
     3 row has that row's normaliser and that file's task (on a made set the metrics carry no
     witness of the task: the record's digest alone keeps it)."""
-    from pngail_jax.demos.tables import PAPER_NORMALIZERS
 
     offline = config.get("program") == "offline"
     settings = run_settings(config)
@@ -380,7 +379,6 @@ def upgrade_record(folder: Path) -> dict:
     ``unsealed`` None (format 2 did not keep whether the run's seal was checked), and its
     digest; then checks it whole, and puts the old file back when the check fails. Returns
     the checked record."""
-    from pngail_jax.report import iterations_per_cell
 
     folder = Path(folder)
     path = folder / RECORD_FILE
@@ -466,11 +464,13 @@ _NOT_NUMBERS = ("demos", "conf", "resolved", "log", "chunk_iterations", "cpu_dev
                 "train_seconds", "demonstrations", "input_files")  # fmt: skip
 
 
-def config_differences(config: dict, record: dict) -> list[str]:
+def config_differences(config: dict, record: dict, sweep_defaults: dict) -> list[str]:
     """The config fields in which a run (its ``config.json``) differs from the record's run,
     leaving out those that do not change the numbers: the top-level fields of a sweep's, the
-    settings (``config``) of an offline run's with its normaliser and trainer fields."""
-    from pngail_jax.run_config import RunConfig
+    settings (``config``) of an offline run's with its normaliser and trainer fields. A field
+    one side of a sweep lacks (a record from before the field existed) reads as its value in
+    ``sweep_defaults``, a default ``RunConfig``'s ``to_dict()`` (which the caller, above the
+    trainers, makes: this module imports no JAX)."""
 
     def fields(document: dict) -> dict:
         if document.get("program") != "offline":
@@ -484,8 +484,7 @@ def config_differences(config: dict, record: dict) -> list[str]:
     mine, reference = fields(config), fields(record["config"])
     not_numbers = set(_NOT_NUMBERS) | {f"config.{key}" for key in _NOT_NUMBERS}
     keys = sorted((set(mine) | set(reference)) - not_numbers)
-    # A field one side lacks (a record from before the field existed) has its default.
-    defaults = {} if config.get("program") == "offline" else RunConfig().to_dict()
+    defaults = {} if config.get("program") == "offline" else sweep_defaults
 
     def value(document: dict, key: str):
         return document[key] if key in document else defaults.get(key)
@@ -499,7 +498,6 @@ def check_comparable(run_dirs, record: dict) -> list[str]:
     runs), of the record's task, at the iterations the record reached (a late average or a
     final evaluation of a shorter or longer training is another figure). Returns the lines
     that say what is unfinished on either side (compared all the same, like with like)."""
-    from pngail_jax.outputs import output_owner
 
     program = str(record.get("program", "")).removeprefix("experiments.")
     task = run_settings(record["config"]).get("env")
@@ -538,7 +536,6 @@ def expected_rows(scores, record: dict) -> list[dict]:
     ``compare.Scores``, under its statistic) inside the record's 95% bootstrap interval of its
     IQM over seeds under the same statistic, and by how much is it outside. RecordError when
     your runs hold no run of the record's task."""
-    from pngail_jax import stats
 
     task = run_settings(record["config"]).get("env")
     if task not in scores.tasks:
@@ -582,7 +579,6 @@ def rerun_spread(seeds, num_seeds: int, num_draws: int = 2000) -> float:
     re-run shows it: the 95th percentile of |IQM(a draw of ``num_seeds`` of the record's seeds,
     without replacement) - IQM(all of them)| over ``num_draws`` draws (a fixed seed). NaN when
     the record has no more seeds than the re-run (then no draw differs from it)."""
-    from pngail_jax import stats
 
     values = np.asarray([v for v in seeds if v is not None and math.isfinite(v)], float)
     if num_seeds < 1 or values.size <= num_seeds:

@@ -32,17 +32,18 @@ import numpy as np
 import optax
 from flax import struct
 
-from pngail_jax import cail, envs, firl, ranking
-from pngail_jax.bc import BCConfig, CloningPhase
+from pngail_jax import envs
+from pngail_jax.adversarial import cail, firl, ranking
+from pngail_jax.adversarial.bc import BCConfig, CloningPhase
+from pngail_jax.adversarial.firl import FirlState
+from pngail_jax.adversarial.losses import ConfidenceStats, discriminator_loss, policy_reward
+from pngail_jax.adversarial.method_checks import check_label_ratios, check_methods
+from pngail_jax.adversarial.methods import PHASES, MethodSpec
+from pngail_jax.adversarial.phase import PhaseContext, PhaseSet
 from pngail_jax.confidence import ClassifierConfig, confidence_errors, split_confidences
 from pngail_jax.demos import DemonstrationError, Demonstrations, make_split
-from pngail_jax.firl import FirlState
 from pngail_jax.fitting import adam_step
-from pngail_jax.losses import ConfidenceStats, discriminator_loss, policy_reward
-from pngail_jax.method_checks import check_label_ratios, check_methods
-from pngail_jax.methods import PHASES, MethodSpec
 from pngail_jax.networks import Discriminator
-from pngail_jax.phase import PhaseContext, PhaseSet
 from pngail_jax.rl.learners import check_batch, learner_hyperparams, make_learner
 from pngail_jax.rl.on_policy import RolloutConfig, run_evaluated_blocks
 from pngail_jax.rl.ppo import PPOConfig, PPOHyperparams, PPOState

@@ -19,7 +19,9 @@ import jax.numpy as jnp
 import numpy as np
 import orbax.checkpoint as ocp
 
-from pngail_jax.integrity import (
+from pngail_jax.networks import GaussianPolicy
+from pngail_jax.rl.on_policy import ObservationNormalizer
+from pngail_jax.storage.integrity import (
     MANIFEST_NAME,
     IntegrityError,
     read_json,
@@ -27,8 +29,6 @@ from pngail_jax.integrity import (
     write_json,
     write_manifest,
 )
-from pngail_jax.networks import GaussianPolicy
-from pngail_jax.rl.on_policy import ObservationNormalizer
 
 # 2 added digests.json; version 1 directories (no digests) still load, unverified.
 POLICY_FORMAT_VERSION = 2

@@ -7,7 +7,7 @@ better-ranked one has the larger summed reward, with the Bradley-Terry likelihoo
 
 and then runs RL on r. D-REX (Brown et al., 2020) makes its own rankings: rollouts of a
 behaviour-cloned policy with epsilon-greedy noise, less noise ranked better (CAIL's ranking
-loss is in ``pngail_jax.cail``). Here the rankings of the demonstrations are their
+loss is in ``pngail_jax.adversarial.cail``). Here the rankings of the demonstrations are their
 confidences; a learner sees those of an ``eligible`` subset of the trajectories only
 (``sample_pairs``).
 
@@ -29,10 +29,10 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from pngail_jax.bc import DeterministicBCConfig, cloned_actions, train_deterministic_bc
+from pngail_jax.adversarial.bc import DeterministicBCConfig, cloned_actions, train_deterministic_bc
+from pngail_jax.adversarial.phase import Phase, PhaseContext
 from pngail_jax.fitting import fit_with_adam, squared_norm
 from pngail_jax.networks import ReluMLP
-from pngail_jax.phase import Phase, PhaseContext
 
 
 @dataclasses.dataclass(frozen=True)

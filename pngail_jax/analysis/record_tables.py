@@ -12,13 +12,16 @@ from pathlib import Path
 
 import numpy as np
 
-from pngail_jax.run_records import (
+from pngail_jax.analysis import stats
+from pngail_jax.analysis.report import LATE_LABEL, display_label, metrics_rows, read_evaluations
+from pngail_jax.analysis.run_records import (
     METRICS_FILE,
     RecordError,
     run_settings,
     seed_values,
     statistic_key,
 )
+from pngail_jax.config.presets import display_name, reads_confidences
 
 
 def record_table(record: dict, baseline: str | None = None) -> str:
@@ -29,8 +32,6 @@ def record_table(record: dict, baseline: str | None = None) -> str:
     over each method when the record has PN-GAIL, or with ``baseline`` each method's over it.
     The docs' tables between ``<!-- record-table NAME [baseline=METHOD] -->`` markers are
     this text, and a test keeps them so (``experiments.record --docs`` rewrites them)."""
-    from pngail_jax import stats
-    from pngail_jax.methods import display_name
 
     late, final = record[statistic_key("late_average")], record[statistic_key("final")]
     share = f"last {record['late_share']:.0%} of training"
@@ -79,8 +80,6 @@ def glance_table(records: list[dict], statistic: str = "late_average") -> str:
     cell the mean ± s.e. over seeds of ``statistic``'s normalised return ("-": not run).
     The docs' tables between ``<!-- record-glance NAME NAME ... -->`` markers are this text
     (``experiments.record --docs``)."""
-    from pngail_jax import stats
-    from pngail_jax.methods import display_name
 
     rows: dict[str, dict[str, np.ndarray]] = {}
     for record in records:
@@ -141,8 +140,6 @@ def block_table(record: dict, folder: Path, block_steps: int) -> str:
     evaluation. A seed without a final evaluation (diverged) is left out of every column, as
     from the record's headline. ``folder`` holds the checked ``record``. The docs' tables
     between ``<!-- record-blocks NAME block=STEPS -->`` markers are this text."""
-    from pngail_jax.methods import display_name
-    from pngail_jax.report import read_evaluations
 
     groups = read_evaluations(
         Path(folder) / METRICS_FILE, "normalized_return", evaluated_by="eval_return",
@@ -198,8 +195,6 @@ def diagnostics_table(
     per setting where the run has several) and column of ``DIAGNOSTICS``, each cell the mean
     over every (iteration, seed) row of the block, all seeds pooled. The docs' tables between
     ``<!-- record-diagnostics NAME block=STEPS [methods=A,B] -->`` markers are this text."""
-    from pngail_jax.methods import display_name
-    from pngail_jax.report import metrics_rows
 
     rows = list(metrics_rows(Path(folder) / METRICS_FILE))
     _check_methods(record, [row["method"] for row in rows], methods)
@@ -242,8 +237,6 @@ def seed_table(record: dict, folder: Path, turn: float, methods: list[str] | Non
     confidence classifier's MAE on D_u (the record's ``confidence_mae``, for methods whose
     loss reads confidences). ``folder`` holds the checked ``record``. The docs' tables between
     ``<!-- record-seeds NAME turn=LEVEL [methods=A,B] -->`` markers are this text."""
-    from pngail_jax.methods import reads_confidences
-    from pngail_jax.report import LATE_LABEL, display_label, read_evaluations
 
     groups = read_evaluations(
         Path(folder) / METRICS_FILE, "normalized_return", evaluated_by="eval_return",

@@ -36,6 +36,7 @@ import optax
 from flax import struct
 
 from pngail_jax import envs
+from pngail_jax.adversarial.methods import stack
 from pngail_jax.confidence import (
     ClassifierConfig,
     ClassifierSpec,
@@ -44,15 +45,14 @@ from pngail_jax.confidence import (
 )
 from pngail_jax.demos import Demonstrations, make_split, successor_rows
 from pngail_jax.fitting import adam_step, squared_norm, tree_where
-from pngail_jax.methods import stack
 from pngail_jax.networks import (
     GaussianPolicy,
     LogDensityDiscriminator,
     LogitDiscriminator,
     gaussian_log_density,
 )
-from pngail_jax.offline_ilid import IlidSelection, check_union, uniform_over, with_zero_rows
-from pngail_jax.offline_losses import (
+from pngail_jax.offline.ilid import IlidSelection, check_union, uniform_over, with_zero_rows
+from pngail_jax.offline.losses import (
     dwbc_discriminator_loss,
     dwbc_evaluation_metrics,
     dwbc_policy_loss,

@@ -19,7 +19,7 @@ def upgrade_saved_config(data: dict[str, Any]) -> dict[str, Any]:
     unchanged."""
     if "classifier_steps" not in data:  # the old layout's mark
         return data
-    from pngail_jax.settings import REFERENCE_SETTINGS
+    from pngail_jax.config.settings import REFERENCE_SETTINGS
 
     needed = ["demos", "platform", "device_count", "local_device_count"]
     if not data.get("settings"):

@@ -27,7 +27,7 @@ import optax
 
 from pngail_jax.fitting import adam_step, squared_norm
 from pngail_jax.networks import LogitDiscriminator
-from pngail_jax.offline_losses import clipped_probability, ilid_discriminator_loss, ilid_selection
+from pngail_jax.offline.losses import clipped_probability, ilid_discriminator_loss, ilid_selection
 
 ILID_UNIONS = ("intended", "released")
 # The released code's union buffer: ReplayBuffer's max_size zero rows (main.py:231), before E
