@@ -58,7 +58,10 @@ never touched):
 * Digests that a program states of its own outputs: in digests.json and the .*sealed*.json
   seals the per-file sha256/bytes go (the files are compared themselves; random OCDBT names
   become "<random>: present"); record.json's digest of metrics.csv.gz goes (that file holds
-  the wall_seconds column; it is compared decompressed, without it).
+  the wall_seconds column; it is compared decompressed, without it), and so does its own
+  top-level "digest" (its seal over the whole record, that digest and the commit included).
+* A run's list of the files it wrote (.pngail-outputs.json): orbax's random names become
+  <random>, each pattern listed once.
 * .png: skipped (matplotlib embeds metadata) but listed.
 * Anything else: raw bytes.
 
@@ -257,6 +260,12 @@ DIGEST_FILES = re.compile(r"(^|/)(digests\.json|\.[^/]*seal[^/]*\.json)$")
 DIGESTED_OUTPUT = re.compile(r"(^|/)metrics\.csv(\.gz)?$")
 # Orbax/OCDBT files that name random files or hold nothing but pointers.
 RANDOM_NAME = re.compile(r"^[0-9a-f]{32}$")
+# A run's list of the files it wrote ({"program": ..., "files": [...]}): orbax's random names
+# in it become <random>, listed once (how many there are differs between two writes).
+OUTPUT_LIST = re.compile(r"(^|/)\.pngail-outputs\.json$")
+# experiments.record's record.json: its top-level "digest" seals the record, whose metrics
+# digest covers the wall_seconds column and whose commit and machine fields differ by design.
+RECORD = re.compile(r"(^|/)record\.json$")
 
 
 def _tokens(key: str) -> list[str]:
@@ -383,6 +392,17 @@ def _markdown_tables(text: str) -> str:
     return "\n".join(lines)
 
 
+def _random_names_out(paths: list) -> list:
+    """A list of relative paths with each random OCDBT name as <random>, each path once."""
+    found = []
+    for path in paths:
+        parts = str(path).split("/")
+        pattern = "/".join("<random>" if RANDOM_NAME.match(part) else part for part in parts)
+        if pattern not in found:
+            found.append(pattern)
+    return found
+
+
 def _collapse_random_names(mapping: dict) -> dict:
     kept, random = {}, {}
     for key, value in mapping.items():
@@ -414,6 +434,10 @@ def normalise_json(raw: bytes, ctx: Context, relpath: str) -> str:
     document = json.loads(raw)
     digest_file = bool(DIGEST_FILES.search(relpath))
     value = ctx.json_value(document, digest_file)
+    if OUTPUT_LIST.search(relpath) and isinstance(value, dict):
+        value = {**value, "files": _random_names_out(value.get("files", []))}
+    if RECORD.search(relpath) and isinstance(value, dict):
+        value.pop("digest", None)  # the record's seal: over metrics' bytes, commit, machine
     if drop_key(Path(relpath).name.split(".")[0]):  # a file of timings (paper's timings.json)
         value = _numbers_out(value)
     return json.dumps(value, indent=1, sort_keys=False) + "\n"

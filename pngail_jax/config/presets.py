@@ -1,8 +1,9 @@
-"""The methods' presets as plain data: each method's name, description, confidence source,
-loss coefficients and training phases (``Preset``), the name tuples, and the paper's display
-names. Imports nothing: the trainers (``pngail_jax.adversarial.methods`` turns a preset into
-a ``MethodSpec`` and registers new ones into ``PRESETS``) and the reading of run folders
-(``pngail_jax.analysis``, which imports no JAX) read the same table."""
+"""The methods' presets as plain data: each method's name, description, confidence source, loss
+coefficients and training phases (``Preset``), the name tuples, and the paper's display
+names. Imports nothing of the package and no JAX: the trainers
+(``pngail_jax.adversarial.methods`` turns a preset into a ``MethodSpec`` and registers new
+ones into ``PRESETS``) and the reading of run folders (``pngail_jax.analysis``, which imports
+no JAX) read the same table."""
 
 from __future__ import annotations
 
