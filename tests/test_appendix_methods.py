@@ -221,7 +221,7 @@ def test_firl_learns_from_a_controllers_trajectory_under_each_divergence():
     trainer = AdversarialTrainer(config, envs.make("Pendulum-v1"), optimal)
     cells = make_cells(methods, num_seeds=3)
     _, metrics = jax.jit(jax.vmap(trainer.train))(*stack_cells(cells, key(0)))
-    final = dict(zip(methods, np.asarray(metrics["eval/return"])[:, -1].reshape(3, 3)))
+    final = dict(zip(methods, np.asarray(metrics["eval/return"])[:, -1].reshape(3, 3), strict=True))
     assert np.median(final["firl-fkl"]) > -900, final
     assert np.median(final["firl-rkl"]) > -800, final
     assert np.median(final["firl-js"]) > -800, final
