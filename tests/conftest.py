@@ -223,6 +223,22 @@ def swing_up_episodes_and_random(num_controller: int, num_random: int):
     return _pendulum_demonstrations(episodes, [1.0] * num_controller + [0.0] * num_random)
 
 
+def noisy_swing_up_episodes(shares):
+    """One episode of ``swing_up_action`` per share eps in ``shares`` (seeds 100, 101, ...),
+    each torque replaced by a uniform random one with probability eps, confidence 1 - eps, one
+    trajectory each, and their returns: trajectories of graded quality."""
+    rng = np.random.default_rng(0)
+
+    def noisy(share):
+        def torque_of(observation):
+            return rng.uniform(-2, 2) if rng.uniform() < share else swing_up_action(observation)
+
+        return torque_of
+
+    episodes = [(noisy(share), 100 + index) for index, share in enumerate(shares)]
+    return _pendulum_demonstrations(episodes, [1 - share for share in shares])
+
+
 def swing_up_demonstrations(num_episodes: int = 1, seed: int = 0):
     """``num_episodes`` episodes of ``swing_up_action`` on gymnasium's Pendulum-v1 (seeds
     ``seed``, ``seed + 1``, ...) as ``Demonstrations`` of confidence 1, one trajectory each,

@@ -26,6 +26,7 @@ SHARED_PENDULUM = authors_data()
     not (SHARED_PENDULUM / "Pendulum-v1_mixture.npy").exists(),
     reason=f"the authors' Pendulum set is not in {SHARED_PENDULUM}",
 )
+@pytest.mark.heavy
 @pytest.mark.slow
 def test_gail_learns_pendulum_from_the_optimal_trajectory():
     """Rows 0-199 of the released set come from the optimal policy (r = 1). From random

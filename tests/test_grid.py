@@ -159,6 +159,7 @@ def grid_metrics_bytes() -> dict:
 
 
 @pytest.mark.slow
+@pytest.mark.heavy
 @pytest.mark.skipif(
     not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2,
     reason="needs a second CPU to run on",

@@ -244,7 +244,7 @@ def test_the_sweep_runs_with_ppo_and_keeps_a_cloned_policy_cloned(demos_path, tm
     learnt = [row for row in rows if row["method"] in METHOD_NAMES]
     assert len(learnt) == 2 * 4 and all(float(row["kl"]) > 0 for row in learnt)
     returns = {row["method"]: row["eval_return"] for row in rows if row["iteration"] == "4"}
-    assert all(np.isfinite(float(value)) for value in returns.values()), returns
+    assert all(-16.2736044 * 200 <= float(value) <= 0 for value in returns.values()), returns
     cloned = {row["eval_return"] for row in rows if row["method"] == "bc"}
     assert len(cloned) == 1, cloned  # evaluated every iteration, never moved by PPO
 
@@ -265,8 +265,10 @@ def test_train_rl_with_ppo_writes_its_columns_and_a_loadable_policy(tmp_path):
     header = (out / "metrics.csv").read_text().splitlines()[0].split(",")
     assert {"ppo/kl", "ppo/clip_fraction"} <= set(header)
     policy = load_policy(out)
-    action = policy(np.zeros(3, np.float32))
-    assert np.shape(action) == (1,) and np.all(np.isfinite(action))
+    observations = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 4]], np.float32)
+    actions = np.stack([policy(observation) for observation in observations])
+    assert actions.shape == (3, 1) and np.all(np.abs(actions) <= 2)  # Pendulum's bounds
+    assert np.array_equal(policy(observations[2]), actions[2])  # deterministic
 
 
 # -- learning --------------------------------------------------------------------------------
