@@ -20,12 +20,13 @@ import numpy as np
 import pytest
 from conftest import _pendulum_demonstrations, noisy_swing_up_episodes, swing_up_action
 
-from pngail_jax import envs, ranking
-from pngail_jax.adversarial import AdversarialConfig, AdversarialTrainer
+from pngail_jax import envs
+from pngail_jax.adversarial import ranking
+from pngail_jax.adversarial.methods import required_phases
+from pngail_jax.adversarial.ranking import DrexConfig, RankingConfig, RankingReward
+from pngail_jax.adversarial.trainer import AdversarialConfig, AdversarialTrainer
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.grid import make_cells, stack_cells
-from pngail_jax.methods import required_phases
-from pngail_jax.ranking import DrexConfig, RankingConfig, RankingReward
 from pngail_jax.rl import RolloutConfig
 
 pytestmark = [pytest.mark.heavy, pytest.mark.slow]
