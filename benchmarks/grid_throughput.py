@@ -122,10 +122,10 @@ from pngail_jax.adversarial.methods import METHOD_NAMES
 from pngail_jax.adversarial.trainer import AdversarialConfig, AdversarialTrainer, TrainState
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.config import settings as run_settings
+from pngail_jax.config.learner import DEFAULT_FISHER, FISHER_FORMS, LEARNERS
 from pngail_jax.demos import Demonstrations, load_demonstrations
 from pngail_jax.grid import Grid, make_cells, nonfinite_cells, stack_cells
 from pngail_jax.programs import flags
-from pngail_jax.rl.learners import LEARNERS
 from pngail_jax.rl.trpo import TRPO, TRPOConfig
 from pngail_jax.storage.compilation import enable_compilation_cache
 
@@ -463,8 +463,8 @@ def _add_grid_flags(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--fisher",
-        choices=("hessian", "gauss_newton"),
-        default="gauss_newton",
+        choices=FISHER_FORMS,
+        default=DEFAULT_FISHER,
         help="Fisher-vector product form (default gauss_newton, as experiments.sweep)",
     )
     parser.add_argument(

@@ -79,6 +79,7 @@ from pngail_jax.adversarial.trainer import (
     AdversarialTrainer,
 )
 from pngail_jax.confidence import ClassifierConfig
+from pngail_jax.config.learner import DEFAULT_FISHER, FISHER_FORMS
 from pngail_jax.config.settings import describe, make_env, settings_for
 from pngail_jax.demos import Demonstrations
 from pngail_jax.fitting import adam_step
@@ -478,7 +479,7 @@ def parse_arguments(argv=None) -> argparse.Namespace:
     parser.add_argument("--cells", type=int, default=7, help="grid cells, vmapped (default 7)")
     parser.add_argument("--num-envs", type=int, help="parallel envs per cell (default: settings)")
     parser.add_argument("--unroll-length", type=int, help="steps per env (default: settings)")
-    parser.add_argument("--fisher", choices=("gauss_newton", "hessian"), default="gauss_newton")
+    parser.add_argument("--fisher", choices=FISHER_FORMS, default=DEFAULT_FISHER)
     parser.add_argument(
         "--gae-form",
         choices=("sequential", "associative"),

@@ -21,8 +21,8 @@ from pngail_jax import envs
 from pngail_jax.adversarial.methods import METHOD_NAMES
 from pngail_jax.analysis.tracking import BACKENDS as LOG_BACKENDS
 from pngail_jax.confidence import ClassifierConfig
+from pngail_jax.config.learner import FISHER_FORMS
 from pngail_jax.config.run_config import RunConfig
-from pngail_jax.config.run_config_checks import FISHER_FORMS
 from pngail_jax.config.settings import RunSettings
 from pngail_jax.config.validation import ConfigError
 from pngail_jax.programs import cli, compare_settings, sweep

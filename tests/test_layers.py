@@ -22,6 +22,7 @@ LAYERS = [
         "plain data",  # no JAX: field checks, the method and released-file tables, files
         (
             "config", "config.validation", "config.presets", "config.released_files",
+            "config.learner", "config.budget",
             "storage", "storage.integrity", "storage.outputs", "storage.compilation",
             "analysis.stats",
         ),

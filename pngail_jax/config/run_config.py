@@ -31,6 +31,8 @@ from pngail_jax.adversarial.methods import (
 )
 from pngail_jax.adversarial.trainer import AdversarialConfig
 from pngail_jax.confidence import ClassifierConfig
+from pngail_jax.config.budget import check_seeds
+from pngail_jax.config.learner import DEFAULT_FISHER, DEFAULT_LEARNER
 from pngail_jax.config.run_config_checks import check_between_fields, check_names
 from pngail_jax.config.saved import upgrade_saved_config
 from pngail_jax.config.settings import RunSettings, settings_for
@@ -50,8 +52,6 @@ from pngail_jax.rl.trpo import TRPOConfig
 # What a saved config.json holds besides the config's fields (pngail_jax.jobs.record writes them);
 # RunConfig.from_dict ignores these and refuses any other key that is not a field.
 RECORD_KEYS = ("resolved", "provenance")
-# jax.random.key takes a seed below 2**63.
-SEED_LIMIT = 2**63
 # BSC's clip per task where the paper departs from 0.01 (appendix C.2: 0.05 on Walker2d).
 TASK_BSC_EPS = {"Walker2d": 0.05}
 # Classifier steps per task where the paper departs from 25,000 (appendix C.2).
@@ -120,13 +120,13 @@ class RunConfig:
     settings: RunSettings | None = None
     classifier: ClassifierConfig | None = None  # None: the task's (task_classifier)
     bsc_eps: float | None = None  # None: the task's (TASK_BSC_EPS, else 0.01)
-    fisher: str = "gauss_newton"
+    fisher: str = DEFAULT_FISHER
     fisher_subsample: int = 1
     # TRPO's value fit: passes over each batch (1: the reference's; rl.TRPOConfig)
     value_epochs: int = 1
     # The policy learner: "trpo" (the paper's) or "ppo" (pngail_jax.rl.learners); the rollout's
     # shape and the networks are the settings' either way.
-    learner: str = "trpo"
+    learner: str = DEFAULT_LEARNER
     discriminator_hidden_sizes: tuple[int, ...] = (100, 100)
     cpu_devices: int | None = None  # split a CPU into this many XLA devices
     log: tuple[str, ...] = ()  # "tensorboard" and/or "wandb"
@@ -177,9 +177,11 @@ class RunConfig:
 
     def _check_numbers(self) -> None:
         """Counts, grid axes and the optional numbers, each in its stored type."""
-        for name in ("seeds", "iterations", "chunk_iterations", "fisher_subsample", "value_epochs"):
+        seeds, seed = check_seeds(self.seeds, self.seed)
+        self._set("seeds", seeds)
+        for name in ("iterations", "chunk_iterations", "fisher_subsample", "value_epochs"):
             self._set(name, integer(name, getattr(self, name), minimum=1))
-        self._set("seed", integer("seed", self.seed, minimum=0, below=SEED_LIMIT))
+        self._set("seed", seed)
         for name, minimum, below in (("num_demos", 2, 2**31), ("cpu_devices", 1, None)):
             if getattr(self, name) is not None:  # num_demos: a row index is an int32
                 self._set(name, integer(name, getattr(self, name), minimum, below=below))

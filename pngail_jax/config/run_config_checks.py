@@ -12,15 +12,15 @@ from pngail_jax import envs
 from pngail_jax.adversarial.methods import ALL_METHOD_NAMES, PRESETS, check_preset, resolve
 from pngail_jax.adversarial.trainer import AdversarialHyperparams
 from pngail_jax.analysis.tracking import BACKENDS as LOG_BACKENDS
+from pngail_jax.config.budget import check_eval_interval
+from pngail_jax.config.learner import check_learner
 from pngail_jax.config.validation import fail, is_among
 from pngail_jax.grid import METHOD_AXES
-from pngail_jax.rl.learners import LEARNERS
-
-FISHER_FORMS = ("gauss_newton", "hessian")
 
 
 def check_names(config) -> None:
-    """The names each field must be among: methods, the Fisher form, log backends."""
+    """The names each field must be among: methods, the learner and its Fisher form
+    (``config.learner``), log backends."""
     if not config.methods:
         fail(
             "methods",
@@ -43,10 +43,7 @@ def check_names(config) -> None:
             fail("methods", f": {error}")
     if len(set(config.methods)) != len(config.methods):
         fail("methods", f"must not repeat, got {list(config.methods)}")
-    if not is_among(config.learner, LEARNERS):
-        fail("learner", f"must be one of {LEARNERS}, got {config.learner!r}")
-    if not is_among(config.fisher, FISHER_FORMS):
-        fail("fisher", f"must be one of {FISHER_FORMS}, got {config.fisher!r}")
+    check_learner(config.learner, fisher=config.fisher, value_epochs=config.value_epochs)
     bad_backends = [name for name in config.log if not is_among(name, LOG_BACKENDS)]
     if bad_backends:
         fail(
@@ -82,14 +79,7 @@ def check_names(config) -> None:
 def check_between_fields(config) -> None:
     """The checks between fields: the run's length and its task's settings, the
     normalised return's ends, the demonstrations and their companion fields."""
-    if config.learner == "ppo" and config.value_epochs != 1:
-        fail("value_epochs", "is TRPO's value fit; PPO fits its value in its own epochs")
-    if config.iterations % config.settings.eval_every:
-        fail(
-            "iterations",
-            f"({config.iterations}) must be a multiple of the evaluation interval "
-            f"({config.settings.eval_every}, settings.eval_every)",
-        )
+    check_eval_interval(config.iterations, config.settings.eval_every)
     if config.settings.physics is not None and config.env not in envs.GYM_TASKS:
         fail(
             "settings.physics",

@@ -35,13 +35,15 @@ import numpy as np
 
 from pngail_jax.config import settings as run_settings
 from pngail_jax.config import validation
+from pngail_jax.config.budget import check_eval_interval, check_seeds
+from pngail_jax.config.learner import DEFAULT_LEARNER, check_learner
 from pngail_jax.demos.generate import normalized_return, random_policy_return, rollout_episodes
 from pngail_jax.demos.npz import save_npz
 from pngail_jax.demos.types import Demonstrations
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.jobs.train_seeds import train_seeds
 from pngail_jax.rl import TRPOTrainer
-from pngail_jax.rl.learners import LEARNERS, check_batch, learner_hyperparams, make_learner
+from pngail_jax.rl.learners import check_batch, learner_hyperparams, make_learner
 from pngail_jax.storage.checkpoint import save_trpo_policies
 from pngail_jax.storage.integrity import atomic_path, atomic_write_text
 from pngail_jax.storage.outputs import Claim, claimed
@@ -65,22 +67,18 @@ class MakeDemosConfig:
     intermediate_target: float = 0.45  # normalised return the intermediate policy is picked near
     measure_episodes: int = 64  # episodes for the random and optimal returns
     settings: run_settings.RunSettings | None = None
-    learner: str = "trpo"  # the policy learner that trains the candidates (rl.learners)
+    learner: str = DEFAULT_LEARNER  # the policy learner that trains the candidates (rl.learners)
 
     def __post_init__(self):
         if self.settings is None:
             object.__setattr__(self, "settings", run_settings.settings_for(self.env, eval_every=10))
-        if self.learner not in LEARNERS:
-            validation.fail("learner", f"must be one of {LEARNERS}, got {self.learner!r}")
-        for name in ("iterations", "seeds", "num_trajectories", "measure_episodes"):
+        check_learner(self.learner)
+        for name in ("iterations", "num_trajectories", "measure_episodes"):
             value = getattr(self, name)
             validation.integer(name, value, 1)
+        check_seeds(self.seeds, self.seed)
         self.ratio_parts  # noqa: B018  (checks the ratio)
-        if self.iterations % self.settings.eval_every:
-            validation.fail(
-                "iterations",
-                f"must be a multiple of eval_every ({self.settings.eval_every})",
-            )
+        check_eval_interval(self.iterations, self.settings.eval_every)
         if not 0 < self.intermediate_target < 1:
             validation.fail(
                 "intermediate_target", f"must be in (0, 1), got {self.intermediate_target}"

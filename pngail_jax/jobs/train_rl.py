@@ -26,11 +26,13 @@ from pngail_jax.analysis.report import write_seed_metrics_csv
 from pngail_jax.analysis.runs import UntrustedRun, sealed_document
 from pngail_jax.config import settings as run_settings
 from pngail_jax.config import validation
+from pngail_jax.config.budget import check_eval_interval, check_seeds
+from pngail_jax.config.learner import DEFAULT_FISHER, DEFAULT_LEARNER, check_learner
 from pngail_jax.jobs.chunks import nanmean
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.jobs.train_seeds import train_seeds
 from pngail_jax.rl import PPOConfig, RolloutConfig, TRPOConfig, TRPOHyperparams, TRPOTrainer
-from pngail_jax.rl.learners import LEARNERS, check_batch, learner_hyperparams, make_learner
+from pngail_jax.rl.learners import check_batch, learner_hyperparams, make_learner
 from pngail_jax.storage.checkpoint import save_trpo_policies
 from pngail_jax.storage.integrity import (
     CONFIG_SEAL,
@@ -65,32 +67,22 @@ class TrainRLConfig:
     iterations: int = 100
     seeds: int = 3
     seed: int = 0
-    fisher: str = "gauss_newton"
+    fisher: str = DEFAULT_FISHER
     fisher_subsample: int = 1
     value_epochs: int = 1
     truncation_as_terminal: bool = False
     settings: run_settings.RunSettings | None = None
-    learner: str = "trpo"
+    learner: str = DEFAULT_LEARNER
     ppo: PPOConfig = PPOConfig()
 
     def __post_init__(self):
         if self.settings is None:
             object.__setattr__(self, "settings", run_settings.settings_for(self.env))
-        for name in ("iterations", "seeds", "fisher_subsample", "value_epochs"):
+        for name in ("iterations", "fisher_subsample", "value_epochs"):
             validation.integer(name, getattr(self, name), 1)
-        validation.integer("seed", self.seed, 0)
-        if self.learner not in LEARNERS:
-            validation.fail("learner", f"must be one of {LEARNERS}, got {self.learner!r}")
-        if self.learner == "ppo" and self.value_epochs != 1:
-            validation.fail(
-                "value_epochs", "is TRPO's value fit; PPO fits its value in its own epochs"
-            )
-        if self.iterations % self.settings.eval_every:
-            validation.fail(
-                "iterations",
-                f"({self.iterations}) must be a multiple of the evaluation interval "
-                f"({self.settings.eval_every}, settings.eval_every)",
-            )
+        check_seeds(self.seeds, self.seed)
+        check_learner(self.learner, fisher=self.fisher, value_epochs=self.value_epochs)
+        check_eval_interval(self.iterations, self.settings.eval_every)
         rollout, trpo = self.rollout_config, self.trpo_config  # each config's own checks
         try:
             check_batch(self.learner, rollout, self.ppo, trpo)

@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from pngail_jax.config.learner import LEARNERS
 from pngail_jax.config.validation import ConfigError
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.jobs.make_demos import MakeDemosConfig, make_demonstrations
@@ -38,7 +39,6 @@ from pngail_jax.programs.cli import (
     path_argument,
     use_compile_cache,
 )
-from pngail_jax.rl.learners import LEARNERS
 
 
 def parse_args(argv=None) -> argparse.Namespace:

@@ -30,6 +30,7 @@ import time
 from pathlib import Path
 
 from pngail_jax import envs
+from pngail_jax.config.learner import LEARNERS
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.paper.estimate import read_throughput
 from pngail_jax.paper.grids import grid_config, plan_eta
@@ -66,7 +67,6 @@ from pngail_jax.programs.cli import (
     signals_stop_at_a_checkpoint,
     use_compile_cache,
 )
-from pngail_jax.rl.learners import LEARNERS
 
 # Names of the library's paper modules that this program's users (and tests) read from it.
 __all__ = [

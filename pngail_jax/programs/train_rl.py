@@ -17,6 +17,9 @@ import sys
 import time
 from pathlib import Path
 
+from pngail_jax.config.budget import check_eval_interval
+from pngail_jax.config.learner import DEFAULT_FISHER, FISHER_FORMS, LEARNERS
+from pngail_jax.config.validation import ConfigError
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.jobs.train_rl import TrainRLConfig, train_rl
 from pngail_jax.programs import flags
@@ -35,7 +38,7 @@ from pngail_jax.programs.cli import (
     signals_stop_at_a_checkpoint,
     use_compile_cache,
 )
-from pngail_jax.rl.learners import LEARNERS, check_batch
+from pngail_jax.rl.learners import check_batch
 from pngail_jax.storage.integrity import IntegrityError, read_json
 from pngail_jax.storage.outputs import output_owner
 
@@ -75,8 +78,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add(
         "--fisher",
-        choices=("hessian", "gauss_newton"),
-        default="gauss_newton",
+        choices=FISHER_FORMS,
+        default=DEFAULT_FISHER,
         help="Fisher-vector product form (the same matrix; hessian is the reference's form)",
     )
     add("--fisher-subsample", type=int, default=1, help="Fisher products on every k-th step")
@@ -126,11 +129,10 @@ def _check(parser, args) -> None:
         args.solver = "fast"
     check_positive(parser, args, ("iterations", "seeds", "fisher_subsample", "value_epochs"))
     args.settings = flags.settings_from_flags(parser, args, args.env)
-    if args.iterations % args.settings.eval_every:
-        parser.error(
-            f"--iterations ({args.iterations}) must be a multiple of the evaluation interval "
-            f"({args.settings.eval_every}, --eval-every)"
-        )
+    try:
+        check_eval_interval(args.iterations, args.settings.eval_every, "--eval-every")
+    except ConfigError as error:
+        parser.error(error.named("--iterations"))
     try:
         check_batch(args.learner, args.settings.rollout_config(args.iterations))
     except ValueError as error:

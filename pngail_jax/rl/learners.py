@@ -10,11 +10,11 @@ from __future__ import annotations
 import dataclasses
 
 from pngail_jax import envs
+from pngail_jax.config.learner import LEARNERS
 from pngail_jax.rl.on_policy import OnPolicyLearner, RolloutConfig
 from pngail_jax.rl.ppo import PPO, PPOConfig, PPOHyperparams
 from pngail_jax.rl.trpo import TRPO, TRPOConfig, TRPOHyperparams
 
-LEARNERS = ("trpo", "ppo")
 HYPERPARAMS = {"trpo": TRPOHyperparams, "ppo": PPOHyperparams}
 
 

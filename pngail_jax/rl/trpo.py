@@ -26,6 +26,7 @@ from flax import struct
 from jax.flatten_util import ravel_pytree
 
 from pngail_jax import envs
+from pngail_jax.config.learner import DEFAULT_FISHER, FISHER_FORMS
 from pngail_jax.networks import gaussian_entropy, gaussian_kl, gaussian_log_prob
 from pngail_jax.rl.gae import generalized_advantages
 from pngail_jax.rl.on_policy import (
@@ -173,7 +174,7 @@ class TRPOConfig:
     # "gauss_newton": J^T M J v for the Gaussian policy, the same matrix at the current
     # parameters, from one jvp and one vjp, and faster: the default everywhere (library,
     # sweep, train_rl), so that Python and the command line run the same program.
-    fisher: Literal["hessian", "gauss_newton"] = "gauss_newton"
+    fisher: Literal["hessian", "gauss_newton"] = DEFAULT_FISHER
     # Fisher products on every k-th time step of every env (OpenAI baselines uses every 5th
     # sample); 1 = all.
     fisher_subsample: int = 1
@@ -193,9 +194,9 @@ class TRPOConfig:
                 "TRPOConfig.fisher_subsample must be a positive integer, "
                 f"got {self.fisher_subsample!r}"
             )
-        if self.fisher not in ("hessian", "gauss_newton"):
+        if self.fisher not in FISHER_FORMS:
             raise ValueError(
-                f"TRPOConfig.fisher must be 'hessian' or 'gauss_newton', got {self.fisher!r}"
+                f"TRPOConfig.fisher must be one of {FISHER_FORMS}, got {self.fisher!r}"
             )
 
     def check_batch(self, rollout: RolloutConfig) -> None:
