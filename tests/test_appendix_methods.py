@@ -27,6 +27,7 @@ from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.config.run_config import RunConfig
 from pngail_jax.demos import DemonstrationError, Demonstrations
 from pngail_jax.grid import make_cells, stack_cells
+from pngail_jax.jobs.trainer_configs import adversarial_config
 from pngail_jax.networks import orthogonal_init
 from pngail_jax.rl import RolloutConfig, TRPOConfig
 from pngail_jax.rl.ppo import PPOConfig
@@ -75,9 +76,9 @@ def trainer_for(methods, data=None, num_iterations=2, learner="trpo"):
 
 
 def test_the_seven_compile_no_appendix_phase():
-    assert RunConfig().adversarial_config().phases == ()
+    assert adversarial_config(RunConfig()).phases == ()
     assert required_phases(METHOD_NAMES) == ()
-    assert RunConfig(methods=("gail", "drex")).adversarial_config().phases == ("noise_rankings",)
+    assert adversarial_config(RunConfig(methods=("gail", "drex"))).phases == ("noise_rankings",)
     state, _ = trainer_for(("gail",)).init(
         AdversarialHyperparams.create(), method_spec("gail"), key(0)
     )

@@ -8,6 +8,7 @@ from conftest import authors_data
 
 from pngail_jax.confidence import ClassifierConfig, bsc_loss, logistic_loss, sc_loss
 from pngail_jax.config.run_config import RunConfig
+from pngail_jax.jobs.trainer_configs import adversarial_config
 
 AUTHORS_PENDULUM = authors_data()
 
@@ -129,8 +130,8 @@ def test_the_classifier_batch_holds_int_nu_over_nc_unlabelled_rows():
     assert counts == [4, 9, 19, 32]
     assert ClassifierConfig(unlabelled_batch_size=4).unlabelled_rows_per_step(1000, 50) == 4
     run = RunConfig(label_ratios=(0.2, 0.05))
-    assert run.adversarial_config(1000).classifier.unlabelled_batch_width == 19
-    assert RunConfig().adversarial_config(1000).classifier.unlabelled_batch_width == 4
+    assert adversarial_config(run, 1000).classifier.unlabelled_batch_width == 19
+    assert adversarial_config(RunConfig(), 1000).classifier.unlabelled_batch_width == 4
 
 
 RATIOS = (0.2, 0.1, 0.05, 0.03)

@@ -16,6 +16,7 @@ from pngail_jax.adversarial.methods import method_spec, stack
 from pngail_jax.adversarial.trainer import AdversarialConfig, AdversarialTrainer
 from pngail_jax.config.run_config import RunConfig
 from pngail_jax.demos import Demonstrations
+from pngail_jax.jobs.trainer_configs import adversarial_config
 from pngail_jax.networks import ClampedStateReward, ResidualDiscriminator
 from pngail_jax.rl import RolloutConfig
 
@@ -234,8 +235,8 @@ def test_config_is_the_codebases_and_checked():
     assert config.reward_hidden_sizes == (64, 64) and config.discriminator_residual_blocks == 2
     ant = firl.FirlConfig.for_env("Ant")
     assert ant.discriminator_residual_blocks == 5 and ant.reward_hidden_sizes == (128, 128)
-    assert RunConfig(env="Ant").adversarial_config().firl == ant
-    assert RunConfig(env="Hopper").adversarial_config().firl == config
+    assert adversarial_config(RunConfig(env="Ant")).firl == ant
+    assert adversarial_config(RunConfig(env="Hopper")).firl == config
     with pytest.raises(ValueError, match="discriminator_iterations"):
         firl.FirlConfig(discriminator_iterations=0)
     with pytest.raises(ValueError, match="reward_weight_decay"):

@@ -11,6 +11,7 @@ import pytest
 from pngail_jax import envs
 from pngail_jax.config.run_config import RunConfig
 from pngail_jax.config.settings import REFERENCE_SETTINGS, settings_for
+from pngail_jax.jobs.trainer_configs import adversarial_config
 from pngail_jax.programs import flags, sweep
 
 # RunConfig fields the sweep sets through its own flags or not at all.
@@ -129,4 +130,4 @@ def test_a_resume_refuses_a_method_whose_preset_changed(tmp_path):
 def test_value_epochs_reach_the_learners_config(tmp_path):
     config = sweep.parse_args(["--value-epochs", "3", "--out", str(tmp_path / "out")]).config
     assert config.value_epochs == 3
-    assert config.adversarial_config().trpo.num_value_epochs == 3
+    assert adversarial_config(config).trpo.num_value_epochs == 3

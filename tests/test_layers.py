@@ -54,7 +54,7 @@ LAYERS = [
 
 # The jobs in their dependency order: each imports only those before it.
 JOB_ORDER = [
-    "errors", "classify", "chunks", "early_rewards", "train_seeds", "make_demos",
+    "errors", "trainer_configs", "classify", "chunks", "early_rewards", "train_seeds", "make_demos",
     "demonstrations", "train_rl", "compare_settings", "comparison_record", "build", "record",
     "results", "sweep", "offline_config", "offline",
 ]  # fmt: skip

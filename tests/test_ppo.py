@@ -20,6 +20,7 @@ from test_grid import assert_close_across_programs, assert_resumes_bit_exactly, 
 from pngail_jax import envs
 from pngail_jax.adversarial.trainer import AdversarialHyperparams, AdversarialTrainer
 from pngail_jax.grid import make_cells, stack_cells
+from pngail_jax.jobs.trainer_configs import adversarial_config
 from pngail_jax.rl import PPO, PPOConfig, PPOHyperparams, RolloutConfig, TRPOTrainer
 from pngail_jax.rl.learners import learner_hyperparams, make_learner
 from pngail_jax.rl.ppo import clipped_surrogate_loss, value_loss
@@ -172,7 +173,7 @@ def test_run_config_takes_the_learner_and_refuses_the_other_learners_axes():
     from pngail_jax.config.validation import ConfigError
 
     config = RunConfig(learner="ppo", grid_axes=(("clip_eps", (0.1, 0.2)),))
-    assert config.adversarial_config().learner == "ppo"
+    assert adversarial_config(config).learner == "ppo"
     with pytest.raises(ConfigError, match="max_kl=0.01: the ppo learner has no hyperparameter"):
         RunConfig(learner="ppo", grid_axes=(("max_kl", (0.01,)),))
     with pytest.raises(ConfigError, match="learner must be one of"):

@@ -10,6 +10,7 @@ from conftest import authors_data
 from pngail_jax import envs
 from pngail_jax.config.run_config import RunConfig
 from pngail_jax.demos import DemonstrationError, load_released
+from pngail_jax.jobs.trainer_configs import adversarial_config
 from pngail_jax.programs import sweep
 
 # The released files' shapes, [s, a] columns, and the paper's Table 3 for each task.
@@ -50,7 +51,7 @@ def test_each_released_mujoco_file_fits_its_task_with_the_papers_settings(tmp_pa
     assert config.env == task
     assert config.task_num_demos(demos.num_rows) == min(num_demos, 3000)
     assert config.task_num_demos(40) == min(num_demos, 40)
-    assert config.adversarial_config(demos.num_rows).num_demos == num_demos
+    assert adversarial_config(config, demos.num_rows).num_demos == num_demos
 
 
 def test_walker2d_takes_the_papers_classifier_and_clip():

@@ -11,6 +11,7 @@ from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.config.run_config import RunConfig
 from pngail_jax.config.saved import upgrade_saved_config
 from pngail_jax.config.settings import RunSettings, settings_for
+from pngail_jax.jobs.trainer_configs import adversarial_config
 
 
 def test_json_round_trip_and_presets(tmp_path):
@@ -203,7 +204,7 @@ def test_an_old_config_json_missing_keys_is_named():
 
 
 def test_the_gradient_penalty_is_compiled_when_a_cell_uses_it():
-    assert not RunConfig().adversarial_config().gradient_penalty
+    assert not adversarial_config(RunConfig()).gradient_penalty
     assert not RunConfig(grid_axes=(("gradient_penalty_coef", (0.0,)),)).uses_gradient_penalty
     by_axis = RunConfig(methods=("pngail",), grid_axes=(("gradient_penalty_coef", (0.0, 1.0)),))
-    assert by_axis.adversarial_config().gradient_penalty
+    assert adversarial_config(by_axis).gradient_penalty

@@ -34,7 +34,7 @@ def test_the_objects_walk_is_the_part_of_the_walk_that_receives_config_objects()
     tool = _tool("config_walk")
     full, objects = tool.report(ROOT), tool.report(ROOT, objects=True)
     assert set(objects["stays_list"]) < set(full["stays_list"])
-    assert "config.run_config:RunConfig.adversarial_config" in objects["stays_list"]
+    assert "jobs.trainer_configs:adversarial_config" in objects["stays_list"]
     assert "adversarial.trainer:AdversarialTrainer.__init__" in objects["stays_list"]
     assert "envs.base:Env.step" in full["stays_list"]  # a value read from the config, not one
     assert "envs.base:Env.step" not in objects["stays_list"]

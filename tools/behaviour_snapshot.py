@@ -123,20 +123,21 @@ TINY_RL = "--iterations 4 --eval-every 2 --seeds 2 --num-envs 4 --unroll-length 
 # one D-REX cell ~910 s before any RL on a 2-core CPU (pngail_jax/paper/plan.py's own
 # measurements). So one sweep of every appendix method runs through this driver, which shrinks
 # them (to the sizes of tests/test_appendix_methods.py) and then runs the sweep's own main().
-# It patches RunConfig.adversarial_config: if the refactor removes that, the driver fails
+# It patches jobs.trainer_configs.adversarial_config (RunConfig.adversarial_config before
+# issue 74's item 1): if the refactor removes that, the driver fails
 # (exit status != 0); if the sweep stops calling it, the sizes in config.json's
 # resolved.adversarial (ranking, drex, bc, firl) show the difference. Every other invocation,
 # and a second appendix sweep of the cheap phases (bc, cail) at their real sizes, runs the
 # programs as they are.
 TINY_PHASES_DRIVER = """
 import dataclasses, runpy, sys
-from pngail_jax.config import run_config
+from pngail_jax.jobs import trainer_configs
 from pngail_jax.adversarial import ranking
 from pngail_jax.adversarial.bc import BCConfig, DeterministicBCConfig
 from pngail_jax.adversarial.firl import FirlConfig
-_original = run_config.RunConfig.adversarial_config
-def _tiny_phases(self, *args, **kwargs):
-    config = _original(self, *args, **kwargs)
+_original = trainer_configs.adversarial_config
+def _tiny_phases(*args, **kwargs):
+    config = _original(*args, **kwargs)
     return dataclasses.replace(
         config,
         ranking=ranking.RankingConfig(num_steps=20, snippet_length=10, hidden_sizes=(16,)),
@@ -149,7 +150,7 @@ def _tiny_phases(self, *args, **kwargs):
         firl=dataclasses.replace(config.firl, discriminator_iterations=5,
                                  discriminator_batch_size=16),
     )
-run_config.RunConfig.adversarial_config = _tiny_phases
+trainer_configs.adversarial_config = _tiny_phases
 module = sys.argv[1]
 sys.argv = [module, *sys.argv[2:]]
 runpy.run_module(module, run_name="__main__", alter_sys=True)

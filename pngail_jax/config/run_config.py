@@ -23,13 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from pngail_jax import envs
-from pngail_jax.adversarial.firl import FirlConfig
-from pngail_jax.adversarial.methods import (
-    METHOD_NAMES,
-    required_phases,
-    resolve,
-)
-from pngail_jax.adversarial.trainer import AdversarialConfig
+from pngail_jax.adversarial.methods import METHOD_NAMES, resolve
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.config.budget import check_seeds
 from pngail_jax.config.learner import DEFAULT_FISHER, DEFAULT_LEARNER
@@ -248,32 +242,13 @@ class RunConfig:
             return self.num_demos
         return min(num_rows, TASK_NUM_DEMOS.get(envs.task_family(self.env), num_rows))
 
-    def adversarial_config(self, num_rows: int | None = None) -> AdversarialConfig:
-        """The static configuration of the trainer this run builds on demonstrations of
-        ``num_rows`` rows (None: ``num_demos`` as given, every row when None)."""
-        num_demos = self.num_demos if num_rows is None else self.task_num_demos(num_rows)
-        classifier = self.classifier
-        if classifier.unlabelled_batch_size is None and num_demos is not None:
-            # The unlabelled batch as wide as the grid's smallest label ratio needs, no wider.
-            width = max(
-                classifier.unlabelled_rows_per_step(num_demos, max(round(r * num_demos), 1))
-                for r in self.label_ratios
-            )
-            classifier = dataclasses.replace(classifier, max_unlabelled_batch_size=width)
-        return AdversarialConfig(
-            rollout=self.settings.rollout_config(self.iterations),
-            learner=self.learner,
-            trpo=TRPOConfig(
-                num_value_epochs=self.value_epochs,
-                fisher=self.fisher,
-                fisher_subsample=self.fisher_subsample,
-            ),
-            classifier=classifier,
-            num_demos=num_demos,
-            discriminator_hidden_sizes=self.discriminator_hidden_sizes,
-            phases=required_phases(self.methods),
-            firl=FirlConfig.for_env(self.env),
-            gradient_penalty=self.uses_gradient_penalty,
+    @property
+    def trpo_config(self) -> TRPOConfig:
+        """TRPO's static settings of this run (its value fit and Fisher product)."""
+        return TRPOConfig(
+            num_value_epochs=self.value_epochs,
+            fisher=self.fisher,
+            fisher_subsample=self.fisher_subsample,
         )
 
     @property

@@ -16,6 +16,7 @@ from pngail_jax.config.budget import check_eval_interval
 from pngail_jax.config.learner import check_learner
 from pngail_jax.config.validation import fail, is_among
 from pngail_jax.grid import METHOD_AXES
+from pngail_jax.rl.learners import check_batch
 
 
 def check_names(config) -> None:
@@ -94,7 +95,12 @@ def check_between_fields(config) -> None:
             ": Pendulum-v1 has no MJX solver (its solver caps stay None)",
             name=f"RunSettings.{cap}",
         )
-    config.adversarial_config()  # the trainer's own checks (e.g. samples per iteration)
+    # The learner's batch (samples per iteration against its minibatches): the one check of
+    # the trainer's config that reads the run's fields together; the trainer's config itself
+    # is built once, with the run (jobs.trainer_configs).
+    check_batch(
+        config.learner, config.settings.rollout_config(config.iterations), trpo=config.trpo_config
+    )
     if config.random_return is not None and config.optimal_return is None:
         fail("random_return", "needs optimal_return (the normalised return's other end)")
     if None not in (config.random_return, config.optimal_return) and not (

@@ -4,6 +4,8 @@ before it):
 
 - ``errors``: ``RunError``, the one-line refusal every job raises; ``refusals``, which turns
   an output claim's refusal into one.
+- ``trainer_configs``: ``adversarial_config``, the one place a ``RunConfig`` becomes the
+  trainer's static config (``sized_classifier``: the classifier's batch width).
 - ``classify``: ``classify``, Table 1 and 5's classifiers on a demonstrations file.
 - ``chunks``: the one chunk step (run a compiled chunk, fetch, join its metrics, time it,
   print its line, checkpoint), the loop over chunks, stopping at a checkpoint, resuming.

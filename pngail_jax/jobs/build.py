@@ -15,6 +15,7 @@ from pngail_jax.config import settings as run_settings
 from pngail_jax.config.run_config import RunConfig
 from pngail_jax.demos import DemonstrationError, action_scale_note
 from pngail_jax.grid import Cell, Grid, make_cells, stack_cells
+from pngail_jax.jobs import trainer_configs
 from pngail_jax.jobs.chunks import blocks_per_chunk
 from pngail_jax.jobs.demonstrations import RunDemonstrations, prepare
 from pngail_jax.jobs.errors import RunError
@@ -83,7 +84,9 @@ def build(
     against it) and the compiled grid of ``cells``."""
     demos, demos_path = demonstrations.demos, demonstrations.path
     try:
-        trainer = AdversarialTrainer(config.adversarial_config(demos.num_rows), env, demos)
+        trainer = AdversarialTrainer(
+            trainer_configs.adversarial_config(config, demos.num_rows), env, demos
+        )
         trainer.check_methods(config.methods)
         try:
             trainer.check_label_ratios(config.label_ratios)

@@ -34,6 +34,7 @@ from pngail_jax.config.run_config import RunConfig
 from pngail_jax.config.settings import make_env
 from pngail_jax.demos import DemonstrationError, load_demonstrations
 from pngail_jax.grid import Cell, Grid, stack_cells
+from pngail_jax.jobs import trainer_configs
 from pngail_jax.jobs.chunks import run_chunks, start
 from pngail_jax.jobs.errors import RunError
 
@@ -106,7 +107,9 @@ def _build(config: EarlyRewardsConfig, demos) -> tuple[AdversarialTrainer, Grid]
     )
     env = make_env(run.env, run.settings)
     try:
-        trainer = AdversarialTrainer(run.adversarial_config(demos.num_rows), env, demos)
+        trainer = AdversarialTrainer(
+            trainer_configs.adversarial_config(run, demos.num_rows), env, demos
+        )
     except (DemonstrationError, ValueError) as error:
         raise RunError(f"{config.demos}: {error}") from None
     cells = [

@@ -11,6 +11,7 @@ from pathlib import Path
 
 from pngail_jax.config.run_config import RunConfig
 from pngail_jax.jobs.errors import RunError
+from pngail_jax.jobs.trainer_configs import sized_classifier
 from pngail_jax.offline.ilid import check_union
 from pngail_jax.offline.trainer import DEFAULT_OFFLINE_METHODS, OfflineConfig, required_components
 from pngail_jax.storage.integrity import IntegrityError, read_json
@@ -78,6 +79,7 @@ class OfflineRunConfig:
 
     def trainer_config(self, num_rows: int) -> OfflineConfig:
         run_config = self.run_config
+        num_demos = run_config.task_num_demos(num_rows)
         return OfflineConfig(
             num_iterations=self.gradient_steps // self.steps_per_iteration,
             steps_per_iteration=self.steps_per_iteration,
@@ -85,8 +87,8 @@ class OfflineRunConfig:
             num_eval_episodes=self.num_eval_episodes or run_config.settings.num_eval_episodes,
             batch_size=self.batch_size,
             hidden_sizes=self.hidden_sizes,
-            num_demos=run_config.task_num_demos(num_rows),
-            classifier=run_config.adversarial_config(num_rows).classifier,
+            num_demos=num_demos,
+            classifier=sized_classifier(run_config.classifier, run_config.label_ratios, num_demos),
             ilid_discriminator_steps=self.ilid_discriminator_steps,
             ilid_union=self.ilid_union,
             components=required_components(self.methods),
