@@ -28,6 +28,7 @@ from jax.sharding import NamedSharding, PartitionSpec
 
 from pngail_jax.adversarial.methods import MethodSpec, method_spec, stack
 from pngail_jax.adversarial.trainer import AdversarialHyperparams
+from pngail_jax.config.grid_axes import GRID_AXES, HYPERPARAM_AXES, METHOD_AXES
 from pngail_jax.storage.checkpoint import is_key
 
 GRID_AXIS = "grid"
@@ -47,17 +48,8 @@ class Trainer(Protocol):
     def eval_every(self) -> int: ...
 
 
-# Per-cell values a grid axis may vary besides label ratio and noise (their own axes): the
-# pytree leaves of AdversarialHyperparams (the learner's included: TRPO's or PPO's, each only
-# on a run of its learner) and of MethodSpec. Everything else (network widths, rollout shape,
-# step counts, the learner itself) fixes the compiled program's shapes or loops, which every
-# cell shares.
-HYPERPARAM_AXES = (
-    "discriminator_learning_rate", "gamma", "lam", "max_kl", "damping", "value_learning_rate",
-    "clip_eps", "learning_rate", "entropy_coef", "value_coef", "max_grad_norm",
-)  # fmt: skip
-METHOD_AXES = tuple(field.name for field in dataclasses.fields(MethodSpec))
-GRID_AXES = HYPERPARAM_AXES + METHOD_AXES
+# The per-cell axes (HYPERPARAM_AXES, METHOD_AXES, GRID_AXES) are the config's grid part's,
+# plain data: pngail_jax.config.grid_axes.
 
 
 @dataclasses.dataclass(frozen=True)

@@ -22,7 +22,8 @@ LAYERS = [
         "plain data",  # no JAX: field checks, the method and released-file tables, files
         (
             "config", "config.validation", "config.presets", "config.released_files",
-            "config.learner", "config.budget",
+            "config.learner", "config.budget", "config.grid_axes", "config.output",
+            "config.classifier",
             "storage", "storage.integrity", "storage.outputs", "storage.compilation",
             "analysis.stats",
         ),
@@ -220,7 +221,7 @@ PLAIN_TABLES = ("config.released_files", "config.presets")
 # What the reading of run folders may import, those inside functions too: itself and modules
 # that import no JAX (checked by importing each in a fresh interpreter below).
 NO_JAX = (
-    "config.validation", "config.presets", "config.released_files", "storage",
+    "config.validation", "config.presets", "config.released_files", "config.output", "storage",
     "storage.integrity", "storage.outputs", "analysis", "analysis.*",
 )  # fmt: skip
 ANALYSIS = sorted(name for name in MODULES if name == "analysis" or name.startswith("analysis."))
@@ -238,7 +239,15 @@ def test_the_analysis_imports_only_modules_without_jax():
     assert not found, "\n".join(found)
 
 
-@pytest.mark.parametrize("name", ["analysis", *ANALYSIS, "config.presets", "storage.outputs"])
+# The config's parts at the bottom (issue 74, item 1), each importing no JAX.
+CONFIG_PARTS = (
+    "config.learner", "config.budget", "config.grid_axes", "config.output", "config.classifier",
+)  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    "name", ["analysis", *ANALYSIS, "config.presets", "storage.outputs", *CONFIG_PARTS]
+)
 def test_importing_a_reading_module_imports_no_jax(name):
     """In a fresh interpreter (this one has JAX already): importing the module leaves jax,
     jaxlib, flax and optax out of sys.modules."""

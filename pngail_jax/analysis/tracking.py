@@ -27,10 +27,10 @@ from pathlib import Path
 import numpy as np
 
 from pngail_jax.analysis.report import group_cells
+from pngail_jax.config.output import BACKEND_MODULES, LOG_BACKENDS
 
-# Each backend and the module it needs.
-BACKEND_MODULES = {"tensorboard": "tensorboardX", "wandb": "wandb"}
-BACKENDS = tuple(BACKEND_MODULES)
+# Each backend and the module it needs: the config's output part (plain data).
+BACKENDS = LOG_BACKENDS
 PER_SEED_METRICS = ("eval/return",)
 WANDB_PROJECT = "pngail-jax"
 

@@ -24,8 +24,9 @@ from typing import Any
 
 from pngail_jax import envs
 from pngail_jax.adversarial.methods import METHOD_NAMES, resolve
-from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.config.budget import check_seeds
+from pngail_jax.config.classifier import ClassifierConfig
+from pngail_jax.config.grid_axes import check_grid_axes
 from pngail_jax.config.learner import DEFAULT_FISHER, DEFAULT_LEARNER
 from pngail_jax.config.run_config_checks import check_between_fields, check_names
 from pngail_jax.config.saved import upgrade_saved_config
@@ -38,9 +39,6 @@ from pngail_jax.config.validation import (
     layer_sizes,
     real,
 )
-from pngail_jax.grid import GRID_AXES
-from pngail_jax.rl.on_policy import RolloutConfig
-from pngail_jax.rl.ppo import PPOConfig
 from pngail_jax.rl.trpo import TRPOConfig
 
 # What a saved config.json holds besides the config's fields (pngail_jax.jobs.record writes them);
@@ -87,7 +85,7 @@ class RunConfig:
     label_ratios: tuple[float, ...] = (0.2,)
     noise_stds: tuple[float, ...] = (0.0,)
     # More grid axes: ((field, (value, ...)), ...), each field a per-cell value
-    # (pngail_jax.grid.GRID_AXES: discriminator and TRPO hyperparameters, MethodSpec
+    # (pngail_jax.config.grid_axes.GRID_AXES: discriminator and TRPO hyperparameters, MethodSpec
     # coefficients); the grid is the product of every axis.
     grid_axes: tuple[tuple[str, tuple[float, ...]], ...] = ()
     # The summary's probability of improvement: of each method over this one (None: of
@@ -202,7 +200,7 @@ class RunConfig:
             self._set("bsc_eps", real("bsc_eps", self.bsc_eps, "lie in (0, 0.5)"))
             if not 0 < self.bsc_eps < 0.5:
                 fail("bsc_eps", f"must lie in (0, 0.5), got {self.bsc_eps!r}")
-        self._set("grid_axes", _grid_axes(self.grid_axes))
+        self._set("grid_axes", check_grid_axes(self.grid_axes))
 
     @classmethod
     def preset(cls, name: str, **overrides) -> RunConfig:
@@ -323,51 +321,6 @@ PRESETS_BY_NAME: dict[str, dict[str, Any]] = {
 # -- field checks (pngail_jax.config.validation): each returns the value in its stored type -------
 
 _TUPLE_FIELDS = ("methods", "label_ratios", "noise_stds", "log", "discriminator_hidden_sizes")
-# The fields a grid axis cannot vary, with a reason (they shape the compiled program).
-_STATIC_FIELDS = {
-    *(field.name for field in dataclasses.fields(RunSettings)),
-    *(field.name for field in dataclasses.fields(RolloutConfig)),
-    *(field.name for field in dataclasses.fields(TRPOConfig)),
-    *(field.name for field in dataclasses.fields(ClassifierConfig)),
-    *(field.name for field in dataclasses.fields(PPOConfig)),
-    "learner", "iterations", "seeds", "num_demos", "discriminator_hidden_sizes", "chunk_iterations",
-}  # fmt: skip
-
-
-def _grid_axes(axes) -> tuple[tuple[str, tuple[float, ...]], ...]:
-    """``((field, (value, ...)), ...)`` checked: per-cell fields (``GRID_AXES``; a static one
-    is refused saying why), each once, with distinct finite values."""
-    if not isinstance(axes, list | tuple) or not all(
-        isinstance(axis, list | tuple) and len(axis) == 2 for axis in axes
-    ):
-        fail("grid_axes", f"must be (field, values) pairs, got {axes!r}")
-    fields = [axis[0] for axis in axes]
-    for field in fields:
-        if field in ("label_ratio", "noise_std"):
-            fail("grid_axes", f": {field} has its own axis ({field}s)")
-        if not isinstance(field, str) or field not in GRID_AXES:
-            static = isinstance(field, str) and field in _STATIC_FIELDS
-            why = (
-                "is static: it fixes the shapes or loop counts of the one compiled program that "
-                "every cell shares; set it with its own option"
-                if static
-                else "is not a per-cell field"
-            )
-            fail("grid_axes", f": {field!r} {why}; axes: {', '.join(GRID_AXES)}")
-    if len(set(fields)) != len(fields):
-        fail("grid_axes", f": an axis is given twice, got {fields}")
-    checked = []
-    for field, values in axes:
-        values = tuple(values) if isinstance(values, list | tuple) else (values,)
-        try:
-            values = float_axis(field, values, "be finite numbers", math.isfinite)
-        except ConfigError as error:
-            fail("grid_axes", f": {field} values {error.reason}")
-        labels = [f"{value:g}" for value in values]  # a setting's label names its value
-        if len(set(labels)) != len(labels):
-            fail("grid_axes", f": {field} values {list(values)} are not distinct to 6 digits")
-        checked.append((field, values))
-    return tuple(checked)
 
 
 def _env_settings(env: str) -> RunSettings:
