@@ -1,12 +1,17 @@
 """The learner part of a run's config, as plain data: the policy learners' names, TRPO's
-Fisher forms and their default, and the checks of a config's learner fields, written once for
-every job's config (the sweep's ``RunConfig``, ``TrainRLConfig``, ``MakeDemosConfig``).
-Imports no JAX: ``pngail_jax.rl`` builds the learners these name (``rl.learners``) and
-``rl.trpo.TRPOConfig`` takes its Fisher default from here."""
+Fisher forms and their default, the checks of a config's learner fields, written once for
+every job's config (the sweep's ``RunConfig``, ``TrainRLConfig``, ``MakeDemosConfig``), and
+the learners' static settings: ``RolloutConfig`` (what both share), ``TRPOConfig``,
+``PPOConfig`` and ``check_batch``. Imports no JAX: ``pngail_jax.rl`` builds the learners
+these describe and re-exports the names (``rl.on_policy``, ``rl.trpo``, ``rl.ppo``,
+``rl.learners``)."""
 
 from __future__ import annotations
 
-from pngail_jax.config.validation import fail, is_among
+import dataclasses
+from typing import Literal
+
+from pngail_jax.config.validation import ConfigError, fail, is_among
 
 # "trpo" (the paper's, the default) and "ppo" (pngail_jax.rl.learners builds them).
 LEARNERS = ("trpo", "ppo")
@@ -15,15 +20,167 @@ DEFAULT_LEARNER = "trpo"
 # everywhere: library, sweep, train_rl) or "hessian" (the reference's second-order form).
 FISHER_FORMS = ("gauss_newton", "hessian")
 DEFAULT_FISHER = "gauss_newton"
+# GAE as a T-step scan or a log-depth tree (pngail_jax.rl.gae).
+GAEForm = Literal["sequential", "associative"]
+
+
+def learner_name(name) -> str:
+    """``name`` when it is a learner's, else ConfigError (a ValueError) naming the choices."""
+    if not is_among(name, LEARNERS):
+        raise ConfigError("learner", f"must be one of {', '.join(LEARNERS)}, got {name!r}")
+    return name
 
 
 def check_learner(learner, *, fisher=DEFAULT_FISHER, value_epochs=1) -> None:
     """A config's learner fields: the learner's name, TRPO's Fisher form, and TRPO's value
     epochs left at 1 under PPO (which fits its value in its own epochs). ConfigError naming
     the field."""
-    if not is_among(learner, LEARNERS):
-        fail("learner", f"must be one of {LEARNERS}, got {learner!r}")
+    learner_name(learner)
     if not is_among(fisher, FISHER_FORMS):
         fail("fisher", f"must be one of {FISHER_FORMS}, got {fisher!r}")
     if learner == "ppo" and value_epochs != 1:
         fail("value_epochs", "is TRPO's value fit; PPO fits its value in its own epochs")
+
+
+@dataclasses.dataclass(frozen=True)
+class RolloutConfig:
+    """What both learners share, static: the rollout's shape (``num_envs * unroll_length``
+    steps per iteration), the run's length, the evaluation, the networks and the observation
+    normaliser. Each learner's own settings are its config beside it (``rl.trpo.TRPOConfig``,
+    ``rl.ppo.PPOConfig``)."""
+
+    num_envs: int = 25
+    unroll_length: int = 200
+    num_iterations: int = 100
+    eval_every: int = 10
+    num_eval_episodes: int = 32
+    hidden_sizes: tuple[int, ...] = (100, 100)
+    normalize_observations: bool = False
+    # GAE as a T-step scan ("sequential") or a log-depth tree ("associative"): the same
+    # numbers up to float rounding (tests/test_gae.py); which is faster depends on the device.
+    gae_form: GAEForm = "sequential"
+    # Each env's first episode truncated at a random length (envs.AutoReset.staggered_reset),
+    # so that the envs of a task that never terminates do not stay in step.
+    stagger_starts: bool = False
+
+    def __post_init__(self):
+        for name in (
+            "num_envs", "unroll_length", "num_iterations", "eval_every", "num_eval_episodes",
+        ):  # fmt: skip
+            value = getattr(self, name)
+            if not isinstance(value, int) or value < 1:
+                raise ValueError(f"RolloutConfig.{name} must be a positive integer, got {value!r}")
+        if self.num_iterations % self.eval_every:
+            raise ValueError(
+                f"RolloutConfig.num_iterations ({self.num_iterations}) must be a "
+                f"multiple of eval_every ({self.eval_every})"
+            )
+        if not isinstance(self.stagger_starts, bool):
+            raise ValueError(
+                f"RolloutConfig.stagger_starts must be True or False, got {self.stagger_starts!r}"
+            )
+        if self.gae_form not in ("sequential", "associative"):
+            raise ValueError(
+                "RolloutConfig.gae_form must be 'sequential' or 'associative', "
+                f"got {self.gae_form!r}"
+            )
+
+    @property
+    def batch_size(self) -> int:
+        return self.num_envs * self.unroll_length
+
+    @property
+    def num_evaluations(self) -> int:
+        return self.num_iterations // self.eval_every
+
+
+@dataclasses.dataclass(frozen=True)
+class TRPOConfig:
+    """TRPO's own static settings (loop counts and which Fisher product is compiled); the
+    rollout's shape and the networks are ``RolloutConfig``'s, which both learners share."""
+
+    num_value_minibatches: int = 30
+    # Passes of the value fit over the batch, each a fresh permutation (the reference: 1);
+    # the logged value/loss is the mean over every pass's minibatches.
+    num_value_epochs: int = 1
+    num_cg_iterations: int = 10
+    num_backtracks: int = 10
+    # "hessian": Hessian of the mean KL times v, the reference's form (second-order autodiff).
+    # "gauss_newton": J^T M J v for the Gaussian policy, the same matrix at the current
+    # parameters, from one jvp and one vjp, and faster: the default everywhere (library,
+    # sweep, train_rl), so that Python and the command line run the same program.
+    fisher: Literal["hessian", "gauss_newton"] = DEFAULT_FISHER
+    # Fisher products on every k-th time step of every env (OpenAI baselines uses every 5th
+    # sample); 1 = all.
+    fisher_subsample: int = 1
+
+    def __post_init__(self):
+        for name in (
+            "num_value_minibatches",
+            "num_value_epochs",
+            "num_cg_iterations",
+            "num_backtracks",
+        ):
+            value = getattr(self, name)
+            if not isinstance(value, int) or value < 1:
+                raise ValueError(f"TRPOConfig.{name} must be a positive integer, got {value!r}")
+        if not isinstance(self.fisher_subsample, int) or self.fisher_subsample < 1:
+            raise ValueError(
+                "TRPOConfig.fisher_subsample must be a positive integer, "
+                f"got {self.fisher_subsample!r}"
+            )
+        if self.fisher not in FISHER_FORMS:
+            raise ValueError(
+                f"TRPOConfig.fisher must be one of {FISHER_FORMS}, got {self.fisher!r}"
+            )
+
+    def check_batch(self, rollout: RolloutConfig) -> None:
+        """Raises ValueError when the rollout has fewer samples than value minibatches."""
+        if rollout.batch_size < self.num_value_minibatches:
+            raise ValueError(
+                f"samples per iteration (num_envs x unroll_length = {rollout.num_envs} x "
+                f"{rollout.unroll_length} = {rollout.batch_size}) must be at least the "
+                f"{self.num_value_minibatches} value minibatches"
+            )
+
+
+@dataclasses.dataclass(frozen=True)
+class PPOConfig:
+    """PPO's static settings (loop counts and which losses are compiled); the rollout's shape
+    and the networks are ``RolloutConfig``'s, which both learners share."""
+
+    num_epochs: int = 10
+    num_minibatches: int = 32
+    clip_value_loss: bool = True
+    anneal_learning_rate: bool = True
+    # Rewards divided by the running standard deviation of each env's discounted return and
+    # clipped to [-10, 10] (CleanRL's NormalizeReward wrapper), before GAE.
+    normalize_rewards: bool = True
+
+    def __post_init__(self):
+        for name in ("num_epochs", "num_minibatches"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise ValueError(f"PPOConfig.{name} must be a positive integer, got {value!r}")
+        for name in ("clip_value_loss", "anneal_learning_rate", "normalize_rewards"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"PPOConfig.{name} must be True or False")
+
+    def check_batch(self, config: RolloutConfig) -> None:
+        """Raises ValueError when the rollout has fewer samples than minibatches."""
+        if config.batch_size < self.num_minibatches:
+            raise ValueError(
+                f"samples per iteration (num_envs x unroll_length = {config.batch_size}) must "
+                f"be at least PPO's {self.num_minibatches} minibatches"
+            )
+
+
+def check_batch(
+    name: str, config: RolloutConfig, ppo: PPOConfig | None = None, trpo: TRPOConfig | None = None
+) -> None:
+    """ValueError when ``config``'s rollout has fewer samples than learner ``name`` splits
+    each iteration's batch into (TRPO's value minibatches, PPO's minibatches)."""
+    if learner_name(name) == "ppo":
+        (PPOConfig() if ppo is None else ppo).check_batch(config)
+    else:
+        (TRPOConfig() if trpo is None else trpo).check_batch(config)

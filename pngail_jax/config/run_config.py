@@ -27,7 +27,7 @@ from pngail_jax.adversarial.methods import METHOD_NAMES, resolve
 from pngail_jax.config.budget import check_seeds
 from pngail_jax.config.classifier import ClassifierConfig
 from pngail_jax.config.grid_axes import check_grid_axes
-from pngail_jax.config.learner import DEFAULT_FISHER, DEFAULT_LEARNER
+from pngail_jax.config.learner import DEFAULT_FISHER, DEFAULT_LEARNER, TRPOConfig
 from pngail_jax.config.run_config_checks import check_between_fields, check_names
 from pngail_jax.config.saved import upgrade_saved_config
 from pngail_jax.config.settings import RunSettings, settings_for
@@ -39,7 +39,6 @@ from pngail_jax.config.validation import (
     layer_sizes,
     real,
 )
-from pngail_jax.rl.trpo import TRPOConfig
 
 # What a saved config.json holds besides the config's fields (pngail_jax.jobs.record writes them);
 # RunConfig.from_dict ignores these and refuses any other key that is not a field.

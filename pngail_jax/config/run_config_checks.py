@@ -13,10 +13,9 @@ from pngail_jax.adversarial.methods import ALL_METHOD_NAMES, PRESETS, check_pres
 from pngail_jax.adversarial.trainer import AdversarialHyperparams
 from pngail_jax.config.budget import check_eval_interval
 from pngail_jax.config.grid_axes import METHOD_AXES
-from pngail_jax.config.learner import check_learner
+from pngail_jax.config.learner import check_batch, check_learner
 from pngail_jax.config.output import LOG_BACKENDS
 from pngail_jax.config.validation import fail, is_among
-from pngail_jax.rl.learners import check_batch
 
 
 def check_names(config) -> None:

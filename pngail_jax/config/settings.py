@@ -20,7 +20,7 @@ import dataclasses
 
 from pngail_jax import envs
 from pngail_jax.config import validation
-from pngail_jax.rl.on_policy import RolloutConfig
+from pngail_jax.config.learner import RolloutConfig
 
 
 def _positive_int(name: str, value) -> int:

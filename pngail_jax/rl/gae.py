@@ -9,12 +9,10 @@ shorter chain of dependent steps (``benchmarks/iteration_phases.py`` times both)
 
 from __future__ import annotations
 
-from typing import Literal
-
 import jax
 import jax.numpy as jnp
 
-GAEForm = Literal["sequential", "associative"]
+from pngail_jax.config.learner import GAEForm
 
 
 def generalized_advantages(

@@ -11,18 +11,13 @@ import dataclasses
 
 from pngail_jax import envs
 from pngail_jax.config.learner import LEARNERS
+from pngail_jax.config.learner import check_batch as check_batch
+from pngail_jax.config.learner import learner_name as check_learner
 from pngail_jax.rl.on_policy import OnPolicyLearner, RolloutConfig
 from pngail_jax.rl.ppo import PPO, PPOConfig, PPOHyperparams
 from pngail_jax.rl.trpo import TRPO, TRPOConfig, TRPOHyperparams
 
 HYPERPARAMS = {"trpo": TRPOHyperparams, "ppo": PPOHyperparams}
-
-
-def check_learner(name) -> str:
-    """``name`` when it is a learner's, else ValueError naming the choices."""
-    if not isinstance(name, str) or name not in LEARNERS:
-        raise ValueError(f"learner must be one of {', '.join(LEARNERS)}, got {name!r}")
-    return name
 
 
 def make_learner(
@@ -37,17 +32,6 @@ def make_learner(
     if check_learner(name) == "ppo":
         return PPO(config, env, ppo)
     return TRPO(config, env, trpo)
-
-
-def check_batch(
-    name: str, config: RolloutConfig, ppo: PPOConfig | None = None, trpo: TRPOConfig | None = None
-) -> None:
-    """ValueError when ``config``'s rollout has fewer samples than learner ``name`` splits
-    each iteration's batch into (TRPO's value minibatches, PPO's minibatches)."""
-    if check_learner(name) == "ppo":
-        (PPOConfig() if ppo is None else ppo).check_batch(config)
-    else:
-        (TRPOConfig() if trpo is None else trpo).check_batch(config)
 
 
 def hyperparam_names(name: str) -> tuple[str, ...]:

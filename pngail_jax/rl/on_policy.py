@@ -1,73 +1,20 @@
 """What every policy learner shares (TRPO, ``rl.trpo``; PPO, ``rl.ppo``): the static settings
-of the rollout, the networks and the evaluation (``RolloutConfig``), the observation
+of the rollout, the networks and the evaluation (``RolloutConfig``, plain data in the
+config's learner part, ``pngail_jax.config.learner``, re-exported here), the observation
 normaliser, the ``OnPolicyLearner`` base class (networks, auto-resetting envs, rollout,
 log-probabilities, evaluation), the episode metrics of a rollout, and
 ``run_evaluated_blocks``, the scan of iterations and evaluations every trainer runs."""
 
 from __future__ import annotations
 
-import dataclasses
-
 import jax
 import jax.numpy as jnp
 from flax import struct
 
 from pngail_jax import envs
+from pngail_jax.config.learner import RolloutConfig
 from pngail_jax.networks import GaussianPolicy, ValueNetwork, gaussian_log_prob
-from pngail_jax.rl.gae import GAEForm
 from pngail_jax.rl.rollout import Transitions, collect, evaluate
-
-
-@dataclasses.dataclass(frozen=True)
-class RolloutConfig:
-    """What both learners share, static: the rollout's shape (``num_envs * unroll_length``
-    steps per iteration), the run's length, the evaluation, the networks and the observation
-    normaliser. Each learner's own settings are its config beside it (``rl.trpo.TRPOConfig``,
-    ``rl.ppo.PPOConfig``)."""
-
-    num_envs: int = 25
-    unroll_length: int = 200
-    num_iterations: int = 100
-    eval_every: int = 10
-    num_eval_episodes: int = 32
-    hidden_sizes: tuple[int, ...] = (100, 100)
-    normalize_observations: bool = False
-    # GAE as a T-step scan ("sequential") or a log-depth tree ("associative"): the same
-    # numbers up to float rounding (tests/test_gae.py); which is faster depends on the device.
-    gae_form: GAEForm = "sequential"
-    # Each env's first episode truncated at a random length (envs.AutoReset.staggered_reset),
-    # so that the envs of a task that never terminates do not stay in step.
-    stagger_starts: bool = False
-
-    def __post_init__(self):
-        for name in (
-            "num_envs", "unroll_length", "num_iterations", "eval_every", "num_eval_episodes",
-        ):  # fmt: skip
-            value = getattr(self, name)
-            if not isinstance(value, int) or value < 1:
-                raise ValueError(f"RolloutConfig.{name} must be a positive integer, got {value!r}")
-        if self.num_iterations % self.eval_every:
-            raise ValueError(
-                f"RolloutConfig.num_iterations ({self.num_iterations}) must be a "
-                f"multiple of eval_every ({self.eval_every})"
-            )
-        if not isinstance(self.stagger_starts, bool):
-            raise ValueError(
-                f"RolloutConfig.stagger_starts must be True or False, got {self.stagger_starts!r}"
-            )
-        if self.gae_form not in ("sequential", "associative"):
-            raise ValueError(
-                "RolloutConfig.gae_form must be 'sequential' or 'associative', "
-                f"got {self.gae_form!r}"
-            )
-
-    @property
-    def batch_size(self) -> int:
-        return self.num_envs * self.unroll_length
-
-    @property
-    def num_evaluations(self) -> int:
-        return self.num_iterations // self.eval_every
 
 
 @struct.dataclass

@@ -27,8 +27,6 @@ statistics are updated once per rollout (CleanRL's wrapper updates them every st
 
 from __future__ import annotations
 
-import dataclasses
-
 import chex
 import jax
 import jax.numpy as jnp
@@ -36,6 +34,7 @@ import optax
 from flax import struct
 
 from pngail_jax import envs
+from pngail_jax.config.learner import PPOConfig
 from pngail_jax.networks import gaussian_entropy, gaussian_kl, gaussian_log_prob
 from pngail_jax.rl.gae import generalized_advantages
 from pngail_jax.rl.on_policy import (
@@ -45,37 +44,6 @@ from pngail_jax.rl.on_policy import (
     episode_metrics,
 )
 from pngail_jax.rl.rollout import Transitions, rollout_metrics
-
-
-@dataclasses.dataclass(frozen=True)
-class PPOConfig:
-    """PPO's static settings (loop counts and which losses are compiled); the rollout's shape
-    and the networks are ``RolloutConfig``'s, which both learners share."""
-
-    num_epochs: int = 10
-    num_minibatches: int = 32
-    clip_value_loss: bool = True
-    anneal_learning_rate: bool = True
-    # Rewards divided by the running standard deviation of each env's discounted return and
-    # clipped to [-10, 10] (CleanRL's NormalizeReward wrapper), before GAE.
-    normalize_rewards: bool = True
-
-    def __post_init__(self):
-        for name in ("num_epochs", "num_minibatches"):
-            value = getattr(self, name)
-            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
-                raise ValueError(f"PPOConfig.{name} must be a positive integer, got {value!r}")
-        for name in ("clip_value_loss", "anneal_learning_rate", "normalize_rewards"):
-            if not isinstance(getattr(self, name), bool):
-                raise ValueError(f"PPOConfig.{name} must be True or False")
-
-    def check_batch(self, config: RolloutConfig) -> None:
-        """Raises ValueError when the rollout has fewer samples than minibatches."""
-        if config.batch_size < self.num_minibatches:
-            raise ValueError(
-                f"samples per iteration (num_envs x unroll_length = {config.batch_size}) must "
-                f"be at least PPO's {self.num_minibatches} minibatches"
-            )
 
 
 @struct.dataclass

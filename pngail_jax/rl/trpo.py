@@ -14,9 +14,8 @@ of trying them all (docs/architecture.md).
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable
-from typing import Literal, NamedTuple
+from typing import NamedTuple
 
 import chex
 import jax
@@ -26,7 +25,7 @@ from flax import struct
 from jax.flatten_util import ravel_pytree
 
 from pngail_jax import envs
-from pngail_jax.config.learner import DEFAULT_FISHER, FISHER_FORMS
+from pngail_jax.config.learner import TRPOConfig
 from pngail_jax.networks import gaussian_entropy, gaussian_kl, gaussian_log_prob
 from pngail_jax.rl.gae import generalized_advantages
 from pngail_jax.rl.on_policy import (
@@ -157,56 +156,6 @@ def hessian_vector_product(
         return jax.jvp(gradient, (at,), (v,))[1] + damping * v
 
     return product
-
-
-@dataclasses.dataclass(frozen=True)
-class TRPOConfig:
-    """TRPO's own static settings (loop counts and which Fisher product is compiled); the
-    rollout's shape and the networks are ``RolloutConfig``'s, which both learners share."""
-
-    num_value_minibatches: int = 30
-    # Passes of the value fit over the batch, each a fresh permutation (the reference: 1);
-    # the logged value/loss is the mean over every pass's minibatches.
-    num_value_epochs: int = 1
-    num_cg_iterations: int = 10
-    num_backtracks: int = 10
-    # "hessian": Hessian of the mean KL times v, the reference's form (second-order autodiff).
-    # "gauss_newton": J^T M J v for the Gaussian policy, the same matrix at the current
-    # parameters, from one jvp and one vjp, and faster: the default everywhere (library,
-    # sweep, train_rl), so that Python and the command line run the same program.
-    fisher: Literal["hessian", "gauss_newton"] = DEFAULT_FISHER
-    # Fisher products on every k-th time step of every env (OpenAI baselines uses every 5th
-    # sample); 1 = all.
-    fisher_subsample: int = 1
-
-    def __post_init__(self):
-        for name in (
-            "num_value_minibatches",
-            "num_value_epochs",
-            "num_cg_iterations",
-            "num_backtracks",
-        ):
-            value = getattr(self, name)
-            if not isinstance(value, int) or value < 1:
-                raise ValueError(f"TRPOConfig.{name} must be a positive integer, got {value!r}")
-        if not isinstance(self.fisher_subsample, int) or self.fisher_subsample < 1:
-            raise ValueError(
-                "TRPOConfig.fisher_subsample must be a positive integer, "
-                f"got {self.fisher_subsample!r}"
-            )
-        if self.fisher not in FISHER_FORMS:
-            raise ValueError(
-                f"TRPOConfig.fisher must be one of {FISHER_FORMS}, got {self.fisher!r}"
-            )
-
-    def check_batch(self, rollout: RolloutConfig) -> None:
-        """Raises ValueError when the rollout has fewer samples than value minibatches."""
-        if rollout.batch_size < self.num_value_minibatches:
-            raise ValueError(
-                f"samples per iteration (num_envs x unroll_length = {rollout.num_envs} x "
-                f"{rollout.unroll_length} = {rollout.batch_size}) must be at least the "
-                f"{self.num_value_minibatches} value minibatches"
-            )
 
 
 @struct.dataclass
