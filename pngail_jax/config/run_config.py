@@ -23,11 +23,12 @@ from pathlib import Path
 from typing import Any
 
 from pngail_jax import envs
-from pngail_jax.adversarial.methods import METHOD_NAMES, resolve
 from pngail_jax.config.budget import check_seeds
 from pngail_jax.config.classifier import ClassifierConfig
 from pngail_jax.config.grid_axes import check_grid_axes
 from pngail_jax.config.learner import DEFAULT_FISHER, DEFAULT_LEARNER, TRPOConfig
+from pngail_jax.config.methods import resolve
+from pngail_jax.config.presets import METHOD_NAMES
 from pngail_jax.config.run_config_checks import check_between_fields, check_names
 from pngail_jax.config.saved import upgrade_saved_config
 from pngail_jax.config.settings import RunSettings, settings_for

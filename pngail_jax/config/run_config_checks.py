@@ -9,12 +9,13 @@ from __future__ import annotations
 import dataclasses
 
 from pngail_jax import envs
-from pngail_jax.adversarial.methods import ALL_METHOD_NAMES, PRESETS, check_preset, resolve
 from pngail_jax.adversarial.trainer import AdversarialHyperparams
 from pngail_jax.config.budget import check_eval_interval
 from pngail_jax.config.grid_axes import METHOD_AXES
 from pngail_jax.config.learner import check_batch, check_learner
+from pngail_jax.config.methods import check_preset, resolve
 from pngail_jax.config.output import LOG_BACKENDS
+from pngail_jax.config.presets import ALL_METHOD_NAMES, PRESETS
 from pngail_jax.config.validation import fail, is_among
 
 
