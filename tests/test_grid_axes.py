@@ -54,3 +54,12 @@ def test_the_check_refuses_with_the_reason(axes, message):
 
 def test_the_check_returns_floats_in_tuples():
     assert check_grid_axes([["max_kl", [1, 0.02]]]) == (("max_kl", (1.0, 0.02)),)
+
+
+def test_each_learners_hyperparameter_names_are_its_classes_fields():
+    from pngail_jax.config.learner import HYPERPARAM_NAMES
+
+    assert HYPERPARAM_NAMES == {
+        "trpo": tuple(field.name for field in dataclasses.fields(TRPOHyperparams)),
+        "ppo": tuple(field.name for field in dataclasses.fields(PPOHyperparams)),
+    }

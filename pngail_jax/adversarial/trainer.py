@@ -41,6 +41,7 @@ from pngail_jax.adversarial.method_checks import check_label_ratios, check_metho
 from pngail_jax.adversarial.methods import PHASES, MethodSpec
 from pngail_jax.adversarial.phase import PhaseContext, PhaseSet
 from pngail_jax.confidence import ClassifierConfig, confidence_errors, split_confidences
+from pngail_jax.config.learner import check_discriminator_learning_rate
 from pngail_jax.demos import DemonstrationError, Demonstrations, make_split
 from pngail_jax.fitting import adam_step
 from pngail_jax.networks import Discriminator
@@ -126,10 +127,7 @@ class AdversarialHyperparams:
             raise ValueError(f"label_ratio must be in (0, 1), got {label_ratio!r}")
         if not noise_std >= 0:
             raise ValueError(f"noise_std must be >= 0, got {noise_std!r}")
-        if not discriminator_learning_rate > 0:
-            raise ValueError(
-                f"discriminator_learning_rate must be positive, got {discriminator_learning_rate!r}"
-            )
+        check_discriminator_learning_rate(discriminator_learning_rate)
         return cls(
             learner=learner_hyperparams(learner, **learner_values),
             discriminator_learning_rate=jnp.asarray(discriminator_learning_rate, jnp.float32),

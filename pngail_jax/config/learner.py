@@ -24,6 +24,18 @@ DEFAULT_FISHER = "gauss_newton"
 GAEForm = Literal["sequential", "associative"]
 
 
+# The per-cell values each learner reads: the fields of rl.trpo.TRPOHyperparams and
+# rl.ppo.PPOHyperparams, in order (tests/test_grid_axes.py holds them to the classes).
+HYPERPARAM_NAMES = {
+    "trpo": ("gamma", "lam", "max_kl", "damping", "value_learning_rate", "bootstrap_truncation"),
+    "ppo": (
+        "gamma", "lam", "clip_eps", "learning_rate", "entropy_coef", "value_coef",
+        "max_grad_norm", "bootstrap_truncation",
+    ),
+}  # fmt: skip
+HYPERPARAM_CLASSES = {"trpo": "TRPOHyperparams", "ppo": "PPOHyperparams"}
+
+
 def learner_name(name) -> str:
     """``name`` when it is a learner's, else ConfigError (a ValueError) naming the choices."""
     if not is_among(name, LEARNERS):
@@ -40,6 +52,57 @@ def check_learner(learner, *, fisher=DEFAULT_FISHER, value_epochs=1) -> None:
         fail("fisher", f"must be one of {FISHER_FORMS}, got {fisher!r}")
     if learner == "ppo" and value_epochs != 1:
         fail("value_epochs", "is TRPO's value fit; PPO fits its value in its own epochs")
+
+
+def hyperparam_names(name: str) -> tuple[str, ...]:
+    """The per-cell values learner ``name`` reads (its hyperparameters' fields)."""
+    return HYPERPARAM_NAMES[learner_name(name)]
+
+
+def check_hyperparam_names(name: str, values) -> None:
+    """ValueError naming each of ``values`` that learner ``name`` does not read, and which
+    learner does."""
+    known = hyperparam_names(name)
+    foreign = [field for field in values if field not in known]
+    if foreign:
+        others = {
+            field: [other for other in LEARNERS if field in hyperparam_names(other)]
+            for field in foreign
+        }
+        described = ", ".join(
+            f"{field} ({'/'.join(owners)}'s)" if owners else field
+            for field, owners in others.items()
+        )
+        raise ValueError(
+            f"the {name} learner has no hyperparameter {described}; its own: {', '.join(known)}"
+        )
+
+
+def check_hyperparam(name: str, field: str, value) -> None:
+    """One of learner ``name``'s float hyperparameters in its range: positive (gamma and lam
+    at most 1), PPO's entropy coefficient >= 0. ValueError naming it."""
+    where = f"{HYPERPARAM_CLASSES[name]}.{field}"
+    if field == "entropy_coef":
+        if not value >= 0:
+            raise ValueError(f"{where} must be >= 0, got {value!r}")
+    elif not (value > 0) or (field in ("gamma", "lam") and value > 1):
+        raise ValueError(f"{where} out of range: {value!r}")
+
+
+def check_discriminator_learning_rate(value) -> None:
+    """The discriminator's per-cell step size: positive (ValueError otherwise)."""
+    if not value > 0:
+        raise ValueError(f"discriminator_learning_rate must be positive, got {value!r}")
+
+
+def check_cell_value(learner: str, field: str, value) -> None:
+    """A grid axis's value of a per-cell hyperparameter (not a MethodSpec coefficient) under
+    ``learner``: the discriminator's step size or one the learner reads, in its range."""
+    if field == "discriminator_learning_rate":
+        check_discriminator_learning_rate(value)
+    else:
+        check_hyperparam_names(learner, [field])
+        check_hyperparam(learner, field, value)
 
 
 @dataclasses.dataclass(frozen=True)

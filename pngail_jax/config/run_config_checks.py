@@ -9,10 +9,9 @@ from __future__ import annotations
 import dataclasses
 
 from pngail_jax import envs
-from pngail_jax.adversarial.trainer import AdversarialHyperparams
 from pngail_jax.config.budget import check_eval_interval
 from pngail_jax.config.grid_axes import METHOD_AXES
-from pngail_jax.config.learner import check_batch, check_learner
+from pngail_jax.config.learner import check_batch, check_cell_value, check_learner
 from pngail_jax.config.methods import check_preset, resolve
 from pngail_jax.config.output import LOG_BACKENDS
 from pngail_jax.config.presets import ALL_METHOD_NAMES, PRESETS
@@ -61,7 +60,7 @@ def check_names(config) -> None:
             continue
         for value in values:
             try:
-                AdversarialHyperparams.create(learner=config.learner, **{field: value})
+                check_cell_value(config.learner, field, value)
             except ValueError as error:
                 fail("grid_axes", f": {field}={value:g}: {error}")
     for name in config.methods:  # every value of a coefficient axis, on every method

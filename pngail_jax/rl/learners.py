@@ -7,11 +7,11 @@ its own (``TRPOHyperparams`` or ``PPOHyperparams``).
 
 from __future__ import annotations
 
-import dataclasses
-
 from pngail_jax import envs
-from pngail_jax.config.learner import LEARNERS
+from pngail_jax.config.learner import LEARNERS as LEARNERS
 from pngail_jax.config.learner import check_batch as check_batch
+from pngail_jax.config.learner import check_hyperparam_names
+from pngail_jax.config.learner import hyperparam_names as hyperparam_names
 from pngail_jax.config.learner import learner_name as check_learner
 from pngail_jax.rl.on_policy import OnPolicyLearner, RolloutConfig
 from pngail_jax.rl.ppo import PPO, PPOConfig, PPOHyperparams
@@ -34,26 +34,8 @@ def make_learner(
     return TRPO(config, env, trpo)
 
 
-def hyperparam_names(name: str) -> tuple[str, ...]:
-    """The per-cell values learner ``name`` reads (its hyperparameters' fields)."""
-    return tuple(field.name for field in dataclasses.fields(HYPERPARAMS[check_learner(name)]))
-
-
 def learner_hyperparams(name: str, **values) -> TRPOHyperparams | PPOHyperparams:
     """Learner ``name``'s hyperparameters with ``values`` (ValueError naming a value the
     learner does not read, and which learner does)."""
-    known = hyperparam_names(name)
-    foreign = [field for field in values if field not in known]
-    if foreign:
-        others = {
-            field: [other for other in LEARNERS if field in hyperparam_names(other)]
-            for field in foreign
-        }
-        described = ", ".join(
-            f"{field} ({'/'.join(owners)}'s)" if owners else field
-            for field, owners in others.items()
-        )
-        raise ValueError(
-            f"the {name} learner has no hyperparameter {described}; its own: {', '.join(known)}"
-        )
+    check_hyperparam_names(name, values)
     return HYPERPARAMS[name].create(**values)

@@ -34,7 +34,7 @@ import optax
 from flax import struct
 
 from pngail_jax import envs
-from pngail_jax.config.learner import PPOConfig
+from pngail_jax.config.learner import PPOConfig, check_hyperparam
 from pngail_jax.networks import gaussian_entropy, gaussian_kl, gaussian_log_prob
 from pngail_jax.rl.gae import generalized_advantages
 from pngail_jax.rl.on_policy import (
@@ -75,12 +75,9 @@ class PPOHyperparams:
             gamma=gamma, lam=lam, clip_eps=clip_eps, learning_rate=learning_rate,
             value_coef=value_coef, max_grad_norm=max_grad_norm,
         )  # fmt: skip
-        for name, value in positive.items():
-            if not (value > 0) or (name in ("gamma", "lam") and value > 1):
-                raise ValueError(f"PPOHyperparams.{name} out of range: {value!r}")
-        if not entropy_coef >= 0:
-            raise ValueError(f"PPOHyperparams.entropy_coef must be >= 0, got {entropy_coef!r}")
         floats = {**positive, "entropy_coef": entropy_coef}
+        for name, value in floats.items():
+            check_hyperparam("ppo", name, value)
         return cls(
             **{k: jnp.asarray(v, jnp.float32) for k, v in floats.items()},
             bootstrap_truncation=jnp.asarray(bootstrap_truncation, bool),

@@ -25,7 +25,7 @@ from flax import struct
 from jax.flatten_util import ravel_pytree
 
 from pngail_jax import envs
-from pngail_jax.config.learner import TRPOConfig
+from pngail_jax.config.learner import TRPOConfig, check_hyperparam
 from pngail_jax.networks import gaussian_entropy, gaussian_kl, gaussian_log_prob
 from pngail_jax.rl.gae import generalized_advantages
 from pngail_jax.rl.on_policy import (
@@ -187,8 +187,7 @@ class TRPOHyperparams:
             value_learning_rate=value_learning_rate,
         )
         for name, value in floats.items():
-            if not (value > 0) or (name in ("gamma", "lam") and value > 1):
-                raise ValueError(f"TRPOHyperparams.{name} out of range: {value!r}")
+            check_hyperparam("trpo", name, value)
         return cls(
             **{k: jnp.asarray(v, jnp.float32) for k, v in floats.items()},
             bootstrap_truncation=jnp.asarray(bootstrap_truncation, bool),
