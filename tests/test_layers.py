@@ -16,7 +16,8 @@ import pytest
 PACKAGE = Path(__file__).resolve().parents[1] / "pngail_jax"
 
 # Bottom to top: a module may import modules of its own layer or of the layers below. A room
-# (a folder) may span layers; config/ does until its run config moves to the bottom.
+# (a folder) may span layers: config/'s parts are plain data, its run config (the sweep's
+# RunConfig, the per-environment settings) reads the environments' names just above them.
 LAYERS = [
     (
         "plain data",  # no JAX: field checks, the method and released-file tables, files
@@ -30,11 +31,15 @@ LAYERS = [
     ),
     ("reading", ("analysis", "analysis.*")),  # run folders and records; no JAX
     ("arrays", ("envs", "envs.*", "networks", "fitting", "rl.gae")),
+    (
+        "run config",
+        ("config.settings", "config.run_config", "config.run_config_checks", "config.saved"),
+    ),
     ("demonstrations", ("demos", "demos.*")),
     (
         "learners",
         (
-            "rl", "rl.*", "confidence", "storage.checkpoint", "config.settings",
+            "rl", "rl.*", "confidence", "storage.checkpoint",
         ),
     ),
     (
@@ -46,7 +51,6 @@ LAYERS = [
         ),
     ),
     ("trainers", ("adversarial.trainer", "offline.trainer", "grid", "train")),
-    ("run config", ("config.run_config", "config.run_config_checks", "config.saved")),
     ("jobs", ("jobs", "jobs.*", "runner")),
     ("paper", ("paper", "paper.*")),
     ("programs", ("programs", "programs.*")),
@@ -297,17 +301,30 @@ def test_the_house_has_at_most_eleven_floors():
     assert height <= MOST_FLOORS, f"{height} floors: " + " -> ".join(chain)
 
 
-def test_rooms_circle_only_through_config():
-    """Between rooms (folders, and the root's modules) the one circle passes through config/:
-    its run config (run_config, run_config_checks, saved) still sits above the trainers while
-    its plain tables sit below them (issue 74, item 1, moves the run config down). Any other
-    circle between rooms is a new one."""
+def test_no_circle_between_rooms():
+    """Between rooms (folders, and the root's modules) there is no circle either: config/
+    imports no room above it (issue 74, item 1: its run config, which imported the trainers,
+    now reads plain parts and the environments' names only)."""
     rooms: dict[str, list] = {}
     for name, imports in GRAPH.items():
         targets = rooms.setdefault(_room(name), [])
         targets += [(_room(t), [], line) for t, _, line in imports if _room(t) != _room(name)]
-    circles = _circles(rooms)
-    assert all("config" in circle for circle in circles), circles
+    assert not _circles(rooms), _circles(rooms)
+
+
+def test_config_imports_only_config_and_the_environments_names():
+    """config/ sits at the bottom: besides itself it reads envs/ alone (task names, physics
+    engines, the settings' make_env), and envs/ imports nothing of config/."""
+    found = [
+        f"pngail_jax.{name} imports pngail_jax.{target} (line {line})"
+        for name, imports in GRAPH.items()
+        if name.split(".")[0] == "config"
+        for target, _, line in imports
+        if target.split(".")[0] not in ("config", "envs")
+    ]
+    assert not found, "\n".join(found)
+    assert not [t for name in MODULES if name.split(".")[0] == "envs" for t, _, _ in GRAPH[name]
+                if t.split(".")[0] == "config"]  # fmt: skip
 
 
 def test_the_package_root_holds_at_most_eight_modules():
