@@ -33,7 +33,10 @@ LAYERS = [
     ("arrays", ("envs", "envs.*", "networks", "fitting", "rl.gae")),
     (
         "run config",
-        ("config.settings", "config.run_config", "config.run_config_checks", "config.saved"),
+        (
+            "config.task", "config.settings", "config.run_config", "config.run_config_checks",
+            "config.saved",
+        ),
     ),
     ("demonstrations", ("demos", "demos.*")),
     (

@@ -22,7 +22,6 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from pngail_jax import envs
 from pngail_jax.config.budget import check_seeds
 from pngail_jax.config.classifier import ClassifierConfig
 from pngail_jax.config.grid_axes import check_grid_axes
@@ -32,6 +31,14 @@ from pngail_jax.config.presets import METHOD_NAMES
 from pngail_jax.config.run_config_checks import check_between_fields, check_names
 from pngail_jax.config.saved import upgrade_saved_config
 from pngail_jax.config.settings import RunSettings, settings_for
+from pngail_jax.config.task import (  # noqa: F401  (the tables, importable from here too)
+    TASK_BSC_EPS,
+    TASK_CLASSIFIER_STEPS,
+    TASK_NUM_DEMOS,
+    task_bsc_eps,
+    task_classifier,
+    task_num_demos,
+)
 from pngail_jax.config.validation import (
     ConfigError,
     fail,
@@ -44,30 +51,6 @@ from pngail_jax.config.validation import (
 # What a saved config.json holds besides the config's fields (pngail_jax.jobs.record writes them);
 # RunConfig.from_dict ignores these and refuses any other key that is not a field.
 RECORD_KEYS = ("resolved", "provenance")
-# BSC's clip per task where the paper departs from 0.01 (appendix C.2: 0.05 on Walker2d).
-TASK_BSC_EPS = {"Walker2d": 0.05}
-# Classifier steps per task where the paper departs from 25,000 (appendix C.2).
-TASK_CLASSIFIER_STEPS = {"Walker2d": 50_000}
-# Rows per split, n_c + n_u, per task (the paper's Table 3): ``num_demos=None`` takes these,
-# capped at the demonstrations' row count. Per-task tables are keyed by ``envs.task_family``
-# (Hopper-v4 and Brax's Hopper share a row).
-TASK_NUM_DEMOS = {
-    "Pendulum-v1": 1000,
-    "Ant": 600,
-    "HalfCheetah": 2500,
-    "Hopper": 100,
-    "Swimmer": 25,
-    "Walker2d": 2000,
-}
-
-
-def task_classifier(env: str) -> ClassifierConfig:
-    """The paper's classifier settings for ``env`` (``TASK_CLASSIFIER_STEPS``, else the
-    reference code's 25,000 steps)."""
-    default = ClassifierConfig()
-    return ClassifierConfig(
-        num_steps=TASK_CLASSIFIER_STEPS.get(envs.task_family(env), default.num_steps)
-    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -219,11 +202,7 @@ class RunConfig:
 
     @property
     def task_bsc_eps(self) -> float:
-        return (
-            self.bsc_eps
-            if self.bsc_eps is not None
-            else TASK_BSC_EPS.get(envs.task_family(self.env), 0.01)
-        )
+        return task_bsc_eps(self.env, self.bsc_eps)
 
     @property
     def num_settings(self) -> int:
@@ -236,9 +215,7 @@ class RunConfig:
     def task_num_demos(self, num_rows: int) -> int:
         """Rows per split for demonstrations of ``num_rows`` rows: ``num_demos``, or the
         task's paper size (``TASK_NUM_DEMOS``) capped at ``num_rows``, or every row."""
-        if self.num_demos is not None:
-            return self.num_demos
-        return min(num_rows, TASK_NUM_DEMOS.get(envs.task_family(self.env), num_rows))
+        return task_num_demos(self.env, num_rows, self.num_demos)
 
     @property
     def trpo_config(self) -> TRPOConfig:

@@ -25,6 +25,7 @@ from pngail_jax.analysis.runs import UntrustedRun, sealed_part, verify_run
 from pngail_jax.analysis.tracking import ticking
 from pngail_jax.config import settings as run_settings
 from pngail_jax.config.saved import provenance
+from pngail_jax.config.task import task_bsc_eps
 from pngail_jax.demos import DemonstrationError
 from pngail_jax.grid import Grid, make_cells, nonfinite_cells
 from pngail_jax.jobs.chunks import (
@@ -191,7 +192,7 @@ def _run_group(
     target = max(1, config.chunk_iterations // trainer_config.eval_every)
     chunk_blocks = blocks_per_chunk(trainer_config.num_evaluations, target)
     inputs = stack_offline_cells(
-        cells, jax.random.key(config.seed), bsc_eps=config.run_config.task_bsc_eps,
+        cells, jax.random.key(config.seed), bsc_eps=task_bsc_eps(config.env),
         ilid_discriminator_learning_rate=config.ilid_discriminator_learning_rate,
     )  # fmt: skip
     methods = ", ".join(dict.fromkeys(cell.method for cell in cells))

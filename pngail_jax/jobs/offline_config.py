@@ -10,6 +10,8 @@ import dataclasses
 from pathlib import Path
 
 from pngail_jax.config.run_config import RunConfig
+from pngail_jax.config.settings import settings_for
+from pngail_jax.config.task import task_classifier, task_num_demos
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.jobs.trainer_configs import sized_classifier
 from pngail_jax.offline.ilid import check_union
@@ -78,17 +80,20 @@ class OfflineRunConfig:
         )  # fmt: skip
 
     def trainer_config(self, num_rows: int) -> OfflineConfig:
-        run_config = self.run_config
-        num_demos = run_config.task_num_demos(num_rows)
+        """The offline trainer's static config on demonstrations of ``num_rows`` rows: the
+        task's rows per split, classifier and evaluation episodes (``config.task``,
+        ``config.settings``), as the sweep's on the same task."""
+        num_demos = task_num_demos(self.env, num_rows)
+        classifier = task_classifier(self.env)
         return OfflineConfig(
             num_iterations=self.gradient_steps // self.steps_per_iteration,
             steps_per_iteration=self.steps_per_iteration,
             eval_every=self.eval_every,
-            num_eval_episodes=self.num_eval_episodes or run_config.settings.num_eval_episodes,
+            num_eval_episodes=self.num_eval_episodes or settings_for(self.env).num_eval_episodes,
             batch_size=self.batch_size,
             hidden_sizes=self.hidden_sizes,
             num_demos=num_demos,
-            classifier=sized_classifier(run_config.classifier, run_config.label_ratios, num_demos),
+            classifier=sized_classifier(classifier, (self.label_ratio,), num_demos),
             ilid_discriminator_steps=self.ilid_discriminator_steps,
             ilid_union=self.ilid_union,
             components=required_components(self.methods),

@@ -10,7 +10,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from pngail_jax import envs
-from pngail_jax.config.run_config import TASK_NUM_DEMOS
+from pngail_jax.config.task import TASK_NUM_DEMOS
 from pngail_jax.demos import (
     RELEASED_ACTION_SCALES,
     cut_mixture,
@@ -129,12 +129,13 @@ def grid_config(
 ):
     """The ``RunConfig`` of a grid; ``num_rows``, the demonstrations' row count, is read only
     by a grid with fewer unlabelled rows (Fig. 6)."""
-    from pngail_jax.config.run_config import RunConfig, task_classifier
+    from pngail_jax.config.run_config import RunConfig
+    from pngail_jax.config.task import task_classifier, task_num_demos
 
     path, scale = demos
     label_ratios, num_demos = grid.label_ratios, None
     if grid.unlabelled_fraction != 1:  # the same n_c labelled rows, fewer unlabelled ones
-        num_demos = RunConfig(env=grid.task).task_num_demos(num_rows)
+        num_demos = task_num_demos(grid.task, num_rows)
         num_labelled = round(grid.label_ratios[0] * num_demos)
         num_demos = num_labelled + round(grid.unlabelled_fraction * (num_demos - num_labelled))
         label_ratios = (float(f"{num_labelled / num_demos:.6g}"),)

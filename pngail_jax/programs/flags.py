@@ -19,8 +19,8 @@ from typing import Any
 from pngail_jax import envs
 from pngail_jax.config.learner import FISHER_FORMS, LEARNERS
 from pngail_jax.config.output import LOG_BACKENDS
-from pngail_jax.config.run_config import TASK_CLASSIFIER_STEPS
 from pngail_jax.config.settings import REFERENCE_SETTINGS, RunSettings, parse_solver, settings_for
+from pngail_jax.config.task import TASK_CLASSIFIER_STEPS
 from pngail_jax.config.validation import ConfigError
 from pngail_jax.programs.cli import comma_floats, known_names, text_argument
 

@@ -29,7 +29,8 @@ import time
 from pathlib import Path
 
 from pngail_jax.analysis.tracking import check_backends
-from pngail_jax.config.run_config import PRESETS_BY_NAME, RunConfig, task_classifier
+from pngail_jax.config.run_config import PRESETS_BY_NAME, RunConfig
+from pngail_jax.config.task import task_classifier
 from pngail_jax.config.validation import ConfigError
 from pngail_jax.jobs import record
 from pngail_jax.jobs import sweep as sweep_job
