@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import optax
 from flax import struct
 
-from pngail_jax.config.classifier import ClassifierConfig
+from pngail_jax.config.classifier import DEFAULT_BSC_EPS, ClassifierConfig
 from pngail_jax.networks import OUTPUT_SCALE, torch_like_init
 
 
@@ -115,10 +115,10 @@ class ClassifierSpec:
 
     @classmethod
     def sc(cls) -> ClassifierSpec:
-        return cls(bsc_coef=jnp.asarray(0.0), eps=jnp.asarray(0.01))
+        return cls(bsc_coef=jnp.asarray(0.0), eps=jnp.asarray(DEFAULT_BSC_EPS))
 
     @classmethod
-    def bsc(cls, eps: float = 0.01) -> ClassifierSpec:
+    def bsc(cls, eps: float = DEFAULT_BSC_EPS) -> ClassifierSpec:
         if not eps > 0:
             raise ValueError(f"BSC eps must be positive, got {eps!r}")
         return cls(bsc_coef=jnp.asarray(1.0), eps=jnp.asarray(eps, jnp.float32))

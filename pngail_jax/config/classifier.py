@@ -8,6 +8,9 @@ import dataclasses
 
 from pngail_jax.config import validation
 
+# BSC's clip eps (eq. 13) where a task does not set its own (config.task.TASK_BSC_EPS).
+DEFAULT_BSC_EPS = 0.01
+
 
 @dataclasses.dataclass(frozen=True)
 class ClassifierConfig:

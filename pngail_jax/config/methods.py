@@ -12,12 +12,13 @@ import dataclasses
 import importlib
 
 from pngail_jax.config import validation
+from pngail_jax.config.classifier import DEFAULT_BSC_EPS
 from pngail_jax.config.grid_axes import METHOD_AXES
 from pngail_jax.config.presets import CONFIDENCE_SOURCES, PHASES, PRESETS, Preset
 
 # MethodSpec's values where a preset leaves a coefficient out.
 METHOD_DEFAULTS = {name: 0.0 for name in METHOD_AXES} | {
-    "bsc_eps": 0.01,
+    "bsc_eps": DEFAULT_BSC_EPS,
     "adversarial_reward_coef": 1.0,
     "policy_update_coef": 1.0,
     "pn_negative_coef": 1.0,
