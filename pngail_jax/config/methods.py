@@ -78,6 +78,19 @@ def check_preset(name: str, preset: Preset) -> Preset:
     for coef, prior in (("pu_coef", "pu_prior"), ("pu_agent_coef", "pu_agent_prior")):
         if values[coef] and not 0 <= values[prior] < 1:
             refuse(f"{prior} must lie in [0, 1) with {coef}, got {values[prior]}")
+    _check_confidence_source(values, source, refuse)
+    needed = {phase for field, need in _NEEDS_PHASE.items() if values[field] for phase in need}
+    if values["ranking_reward_coef"]:
+        needed.add("noise_rankings" if values["noise_rankings_coef"] else "demo_rankings")
+    if not needed <= set(phases):
+        refuse(f"its coefficients need the phase(s) {sorted(needed - set(phases))}: "
+               "add them to phases")  # fmt: skip
+    return dataclasses.replace(preset, coefficients=coefficients, phases=phases)
+
+
+def _check_confidence_source(values: dict, source: str, refuse) -> None:
+    """The confidence source against the coefficients: the classifier they train, and a
+    source for every term that reads confidences."""
     classifier = "bsc" if values["bsc_coef"] == 1.0 else "sc"
     if values["classifier_coef"] == 1.0 and source != classifier:
         refuse(f"classifier_coef 1 with bsc_coef {values['bsc_coef']} trains {classifier}: "
@@ -87,13 +100,6 @@ def check_preset(name: str, preset: Preset) -> Preset:
     readers = [field for field in _READS_CONFIDENCE if values[field] != 0.0]
     if readers and source == "none":
         refuse(f"{', '.join(readers)} read confidences: confidence_source cannot be 'none'")
-    needed = {phase for field, need in _NEEDS_PHASE.items() if values[field] for phase in need}
-    if values["ranking_reward_coef"]:
-        needed.add("noise_rankings" if values["noise_rankings_coef"] else "demo_rankings")
-    if not needed <= set(phases):
-        refuse(f"its coefficients need the phase(s) {sorted(needed - set(phases))}: "
-               "add them to phases")  # fmt: skip
-    return dataclasses.replace(preset, coefficients=coefficients, phases=phases)
 
 
 def _check_remedies(values: dict, refuse) -> None:
