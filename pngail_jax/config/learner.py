@@ -43,7 +43,7 @@ def learner_name(name) -> str:
     return name
 
 
-def check_learner(learner, *, fisher=DEFAULT_FISHER, value_epochs=1) -> None:
+def check_learner_fields(learner, *, fisher=DEFAULT_FISHER, value_epochs=1) -> None:
     """A config's learner fields: the learner's name, TRPO's Fisher form, and TRPO's value
     epochs left at 1 under PPO (which fits its value in its own epochs). ConfigError naming
     the field."""

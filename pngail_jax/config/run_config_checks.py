@@ -11,7 +11,7 @@ import dataclasses
 from pngail_jax import envs
 from pngail_jax.config.budget import check_eval_interval
 from pngail_jax.config.grid_axes import METHOD_AXES
-from pngail_jax.config.learner import check_batch, check_cell_value, check_learner
+from pngail_jax.config.learner import check_batch, check_cell_value, check_learner_fields
 from pngail_jax.config.methods import check_preset, resolve
 from pngail_jax.config.output import LOG_BACKENDS
 from pngail_jax.config.presets import ALL_METHOD_NAMES, PRESETS
@@ -43,7 +43,7 @@ def check_names(config) -> None:
             fail("methods", f": {error}")
     if len(set(config.methods)) != len(config.methods):
         fail("methods", f"must not repeat, got {list(config.methods)}")
-    check_learner(config.learner, fisher=config.fisher, value_epochs=config.value_epochs)
+    check_learner_fields(config.learner, fisher=config.fisher, value_epochs=config.value_epochs)
     bad_backends = [name for name in config.log if not is_among(name, LOG_BACKENDS)]
     if bad_backends:
         fail(

@@ -36,7 +36,7 @@ import numpy as np
 from pngail_jax.config import settings as run_settings
 from pngail_jax.config import validation
 from pngail_jax.config.budget import check_eval_interval, check_seeds
-from pngail_jax.config.learner import DEFAULT_LEARNER, check_learner
+from pngail_jax.config.learner import DEFAULT_LEARNER, check_learner_fields
 from pngail_jax.demos.generate import normalized_return, random_policy_return, rollout_episodes
 from pngail_jax.demos.npz import save_npz
 from pngail_jax.demos.types import Demonstrations
@@ -72,7 +72,7 @@ class MakeDemosConfig:
     def __post_init__(self):
         if self.settings is None:
             object.__setattr__(self, "settings", run_settings.settings_for(self.env, eval_every=10))
-        check_learner(self.learner)
+        check_learner_fields(self.learner)
         for name in ("iterations", "num_trajectories", "measure_episodes"):
             value = getattr(self, name)
             validation.integer(name, value, 1)

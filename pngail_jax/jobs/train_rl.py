@@ -27,7 +27,7 @@ from pngail_jax.analysis.runs import UntrustedRun, sealed_document
 from pngail_jax.config import settings as run_settings
 from pngail_jax.config import validation
 from pngail_jax.config.budget import check_eval_interval, check_seeds
-from pngail_jax.config.learner import DEFAULT_FISHER, DEFAULT_LEARNER, check_learner
+from pngail_jax.config.learner import DEFAULT_FISHER, DEFAULT_LEARNER, check_learner_fields
 from pngail_jax.jobs.chunks import nanmean
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.jobs.train_seeds import train_seeds
@@ -81,7 +81,7 @@ class TrainRLConfig:
         for name in ("iterations", "fisher_subsample", "value_epochs"):
             validation.integer(name, getattr(self, name), 1)
         check_seeds(self.seeds, self.seed)
-        check_learner(self.learner, fisher=self.fisher, value_epochs=self.value_epochs)
+        check_learner_fields(self.learner, fisher=self.fisher, value_epochs=self.value_epochs)
         check_eval_interval(self.iterations, self.settings.eval_every)
         rollout, trpo = self.rollout_config, self.trpo_config  # each config's own checks
         try:
