@@ -113,11 +113,10 @@ _READS_CONFIDENCE = (
 _NEEDS_PHASE = {"bc_init_coef": ("bc",), "firl_coef": ("firl",), "cail_coef": ("cail",)}
 
 
-def check_preset(name: str, preset: Preset) -> Preset:
-    """``preset`` with its coefficients as floats, if it is consistent; else ValueError naming
-    ``name`` and the field: an unknown coefficient or phase, a confidence source that does not
-    match its classifier coefficients or that a confidence-reading term lacks, a learned reward
-    without the phase that learns it."""
+def _float_coefficients(name: str, preset: Preset) -> dict[str, float]:
+    """``preset``'s coefficients as floats; ValueError naming ``name`` for a preset that is
+    not a ``Preset``, coefficients that are not a dict of known MethodSpec fields, or a value
+    that is not a finite number."""
     if not isinstance(preset, Preset):
         raise ValueError(
             f"method {name!r}: a pngail_jax.adversarial.methods.Preset, got {type(preset)}"
@@ -133,6 +132,15 @@ def check_preset(name: str, preset: Preset) -> Preset:
             coefficients[field] = validation.real(field, value, "be a finite number")
         except validation.ConfigError as error:
             raise ValueError(f"method {name!r}: {error}") from None
+    return coefficients
+
+
+def check_preset(name: str, preset: Preset) -> Preset:
+    """``preset`` with its coefficients as floats, if it is consistent; else ValueError naming
+    ``name`` and the field: an unknown coefficient or phase, a confidence source that does not
+    match its classifier coefficients or that a confidence-reading term lacks, a learned reward
+    without the phase that learns it."""
+    coefficients = _float_coefficients(name, preset)
     values = _DEFAULTS | coefficients
     source, phases = preset.confidence_source, tuple(preset.phases)
 
