@@ -139,6 +139,21 @@ def tiny_sweep_args(demos_path, out):
     ]  # fmt: skip
 
 
+def tiny_offline_demos():
+    """The offline tests' tiny set: 200 random Pendulum-v1 rows in 10 trajectories of 20, with
+    confidences 1, 0.2, 0.7 and 0 by blocks of 50."""
+    from pngail_jax.demos import Demonstrations
+
+    rng = np.random.default_rng(0)
+    return Demonstrations(
+        observations=rng.normal(size=(200, 3)).astype(np.float32),
+        actions=rng.uniform(-2, 2, size=(200, 1)).astype(np.float32),
+        confidence=np.repeat([1.0, 0.2, 0.7, 0.0], 50).astype(np.float32),
+        trajectory_ids=np.repeat(np.arange(10), 20),
+        metadata={"env": "Pendulum-v1"},
+    )
+
+
 # -- demonstrations of a classical controller (no file needed) ------------------------------
 
 

@@ -14,7 +14,7 @@ import pytest
 
 from pngail_jax import envs
 from pngail_jax.confidence import ClassifierConfig
-from pngail_jax.demos import Demonstrations, make_split
+from pngail_jax.demos import make_split
 from pngail_jax.grid import make_cells
 from pngail_jax.offline.trainer import (
     OFFLINE_METHOD_NAMES,
@@ -49,14 +49,9 @@ METHODS = (*OFFLINE_METHOD_NAMES, "dwbc+bsc")
 
 @pytest.fixture(scope="module")
 def demos():
-    rng = np.random.default_rng(0)
-    return Demonstrations(
-        observations=rng.normal(size=(200, 3)).astype(np.float32),
-        actions=rng.uniform(-2, 2, size=(200, 1)).astype(np.float32),
-        confidence=np.repeat([1.0, 0.2, 0.7, 0.0], 50).astype(np.float32),
-        trajectory_ids=np.repeat(np.arange(10), 20),
-        metadata={"env": "Pendulum-v1"},
-    )
+    from conftest import tiny_offline_demos
+
+    return tiny_offline_demos()
 
 
 @pytest.fixture(scope="module")

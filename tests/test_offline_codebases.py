@@ -44,14 +44,9 @@ TINY = OfflineConfig(
 
 @pytest.fixture(scope="module")
 def demos():
-    rng = np.random.default_rng(0)
-    return Demonstrations(
-        observations=rng.normal(size=(200, 3)).astype(np.float32),
-        actions=rng.uniform(-2, 2, size=(200, 1)).astype(np.float32),
-        confidence=np.repeat([1.0, 0.2, 0.7, 0.0], 50).astype(np.float32),
-        trajectory_ids=np.repeat(np.arange(10), 20),
-        metadata={"env": "Pendulum-v1"},
-    )
+    from conftest import tiny_offline_demos
+
+    return tiny_offline_demos()
 
 
 def _trainer(demos, **changes) -> OfflineTrainer:

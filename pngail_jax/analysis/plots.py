@@ -51,19 +51,9 @@ def plot_curves(
                 for i, c in enumerate(cells)
                 if c.method == method and c.setting == setting and i not in excluded
             ]
-            if not rows:
-                continue
-            steps = np.asarray(metrics["env_steps"])[rows[0], evaluated] / 1e6
-            curve = values[rows][:, evaluated]
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)
-                mean = np.nanmean(curve, axis=0)
-            low, high = np.array([stats.bootstrap_ci(column, np.mean) for column in curve.T]).T
-            style = line_style(method)
-            axis.plot(
-                steps, mean, color=colors[method], lw=1.8, ls=style, label=display_name(method)
-            )
-            axis.fill_between(steps, low, high, color=colors[method], alpha=0.12, lw=0)
+            if rows:
+                steps = np.asarray(metrics["env_steps"])[rows[0], evaluated] / 1e6
+                _plot_mean(axis, method, steps, values[rows][:, evaluated], colors[method])
         if normalizer is not None:
             axis.axhline(1.0, color="grey", ls="--", lw=0.8)
             axis.axhline(0.0, color="grey", ls=":", lw=0.8)
@@ -79,6 +69,17 @@ def plot_curves(
     with atomic_path(path) as temporary:
         figure.savefig(temporary, dpi=120, bbox_inches="tight")  # the legend is outside
     plt.close(figure)
+
+
+def _plot_mean(axis, method: str, steps, curve, color) -> None:
+    """``method``'s mean over seeds of ``curve`` float[seeds, T] against ``steps`` float[T],
+    its 95% bootstrap interval shaded."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        mean = np.nanmean(curve, axis=0)
+    low, high = np.array([stats.bootstrap_ci(column, np.mean) for column in curve.T]).T
+    axis.plot(steps, mean, color=color, lw=1.8, ls=line_style(method), label=display_name(method))
+    axis.fill_between(steps, low, high, color=color, alpha=0.12, lw=0)
 
 
 # diagnostics.png's panels: (metric, title), read from the metrics every trainer records.

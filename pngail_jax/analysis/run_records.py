@@ -315,17 +315,25 @@ def _check_config_facts(folder: Path, record: dict) -> None:
             f"iterations (complete: {record.get('complete')!r}), its config plans {planned!r} and "
             f"its {METRICS_FILE} ends at {reached}: the record or its metrics were edited"
         )
-    rollout = settings.get("settings") or {}
-    if not offline and isinstance(rollout.get("num_envs"), int):
-        per_iteration = rollout["num_envs"] * rollout.get("unroll_length", 0)
-        wrong = [i for i, found in steps.items() if found != {i * per_iteration}]
-        if wrong:
-            refuse(
-                f"{per_iteration} environment steps an iteration; at iteration {wrong[0]}",
-                wrong[0] * per_iteration,
-                sorted(steps[wrong[0]]),
-            )
+    if not offline:
+        _check_steps(settings.get("settings") or {}, steps, refuse)
     _check_task(where, config, normalizer)
+
+
+def _check_steps(rollout: dict, steps: dict, refuse) -> None:
+    """A sweep's environment steps at each iteration (``steps``: iteration -> the set of
+    values its metrics give) against its rollout's ``num_envs * unroll_length`` an
+    iteration; ``refuse(fact, stated, found)`` at the first that differs."""
+    if not isinstance(rollout.get("num_envs"), int):
+        return
+    per_iteration = rollout["num_envs"] * rollout.get("unroll_length", 0)
+    wrong = [i for i, found in steps.items() if found != {i * per_iteration}]
+    if wrong:
+        refuse(
+            f"{per_iteration} environment steps an iteration; at iteration {wrong[0]}",
+            wrong[0] * per_iteration,
+            sorted(steps[wrong[0]]),
+        )
 
 
 def _metrics_facts(metrics: Path):

@@ -98,13 +98,7 @@ def run_offline(
         cells = make_cells(config.methods, config.seeds, (config.label_ratio,),
                            (config.noise_std,))  # fmt: skip
         trainer_config = config.trainer_config(demos.num_rows)
-        print(
-            f"{len(cells)} offline runs ({', '.join(config.methods)} x {config.seeds} seeds) on "
-            f"{config.env}, {config.gradient_steps:,} gradient steps of {config.batch_size} "
-            f"rows per batch, {trainer_config.num_demos or demos.num_rows} demonstration rows "
-            f"(label ratio {config.label_ratio:g})",
-            flush=True,
-        )
+        _announce(config, len(cells), trainer_config.num_demos or demos.num_rows)
         start_time = time.perf_counter()
         runs = [
             _run_group(config, OfflineTrainer(trainer, env, demos), group, normalizer,
@@ -117,6 +111,16 @@ def run_offline(
         _complete(out, document, trainer_config, progress, start_time, resume, command)
     print(f"-> {out}/{{config.json,metrics.csv,summary.md,summary.json,curves.png}}")
     return summary
+
+
+def _announce(config: OfflineRunConfig, num_cells: int, num_rows: int) -> None:
+    """The run's first line: its cells, task, budget and demonstration rows."""
+    print(
+        f"{num_cells} offline runs ({', '.join(config.methods)} x {config.seeds} seeds) on "
+        f"{config.env}, {config.gradient_steps:,} gradient steps of {config.batch_size} "
+        f"rows per batch, {num_rows} demonstration rows (label ratio {config.label_ratio:g})",
+        flush=True,
+    )
 
 
 def _complete(
