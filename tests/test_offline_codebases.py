@@ -372,3 +372,29 @@ def test_a_run_resumed_from_before_a_metric_existed_gets_nan_for_its_earlier_chu
     np.testing.assert_array_equal(
         progress.metrics["dwbc/eval_d_expert"], [[np.nan] * 3 + [0.5] * 3] * 2
     )
+
+
+def test_dwbc_discriminator_updates_set_its_cadence_and_bad_values_are_one_line(
+    tmp_path, capsys
+):
+    """--dwbc-discriminator-updates N spaces N Adam steps of DWBC's discriminator over the
+    run (every gradient_steps / N-th step: its codebase's 5,000 of 500,000 are every 100th,
+    5,000 of 50,000 every 10th); without it, every 100th step as before (a config.json from
+    before the field loads that way); a count that does not divide the steps is one line."""
+    from pngail_jax.jobs.offline import OfflineRunConfig
+    from pngail_jax.programs import offline as program
+
+    assert OfflineRunConfig().dwbc_discriminator_every == 100  # 500 updates at 50,000 steps
+    assert OfflineRunConfig().trainer_config(1000).dwbc_discriminator_every == 100
+    codebase = OfflineRunConfig(dwbc_discriminator_updates=5000)
+    assert codebase.trainer_config(1000).dwbc_discriminator_every == 10
+    argv = ["--demos", "data/released/Pendulum-v1_mixture.npy", "--gradient-steps", "40000"]
+    args = program.parse_args([*argv, "--dwbc-discriminator-updates", "4000",
+                               "--out", str(tmp_path / "a")])  # fmt: skip
+    assert args.config.dwbc_discriminator_every == 10
+    with pytest.raises(SystemExit, match="^2$"):
+        program.parse_args([*argv, "--dwbc-discriminator-updates", "3000",
+                            "--out", str(tmp_path / "b")])  # fmt: skip
+    error = capsys.readouterr().err
+    assert "dwbc_discriminator_updates must be a positive integer that divides" in error
+    assert error.count("\n") == 1

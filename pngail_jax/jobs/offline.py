@@ -300,6 +300,9 @@ def _write_outputs(out, config, cells, progress, normalizer, compile_seconds) ->
     if "ilid/num_selected" in progress.init_metrics:
         summary["ilid"], note = _ilid_summary(progress.init_metrics, config.ilid_union)
         notes.append(note)
+    if "dwbc/eval_d_expert" in progress.metrics:
+        summary["dwbc"], note = _dwbc_summary(progress.metrics, config)
+        notes.append(note)
     markdown = report.summary_markdown(summary, cells, metrics, title, notes)
     report.write_summary(out, summary, markdown)
     gradient = {**metrics, "env_steps": progress.metrics["gradient_steps"]}
@@ -329,6 +332,22 @@ def _ilid_summary(init_metrics: dict, union: str) -> tuple[dict, str]:
             f"{ilid.get('union_zero_share', float('nan')):.6g} of its draws are zero rows."
         )
     return ilid, note
+
+
+def _dwbc_summary(metrics: dict, config) -> tuple[dict, str]:
+    """DWBC's discriminator at the last evaluation in the summary (means over the cells that
+    ran it: its mean d on E and on O, the mean weights), and the note that says it."""
+    names = ["d_expert", "d_other", "weight_expert", "weight_other"]
+    last = {name: metrics[f"dwbc/eval_{name}"][:, -1] for name in names}
+    dwbc = {name: float(np.nanmean(values)) for name, values in last.items()}
+    dwbc["updates"] = config.gradient_steps // config.dwbc_discriminator_every
+    note = (
+        f"DWBC's discriminator ({dwbc['updates']:,} Adam steps) at the last evaluation: mean "
+        f"d {dwbc['d_expert']:.2f} on E and {dwbc['d_other']:.2f} on O; mean weight of an "
+        f"expert row's nll {dwbc['weight_expert']:.2f}, of an other row's "
+        f"{dwbc['weight_other']:.2f}."
+    )
+    return dwbc, note
 
 
 def _write_metrics(path, cells, metrics, normalizer, timing) -> None:

@@ -44,6 +44,9 @@ class OfflineRunConfig:
     ilid_discriminator_steps: int = 100_000  # each of ILID's two, before its policy (codebase's)
     ilid_discriminator_learning_rate: float = 1e-5  # its codebase's Adam step size
     ilid_union: str = "intended"  # E+S; "released": padded with zero rows (offline_ilid)
+    # Adam steps of DWBC's discriminator over the run; None: one every 100th policy step (its
+    # codebase's cadence: 500 at 50,000 steps), its codebase's number: 5,000 (of 500,000).
+    dwbc_discriminator_updates: int | None = None
 
     def __post_init__(self):
         if not self.methods or len(set(self.methods)) != len(self.methods):
@@ -68,6 +71,22 @@ class OfflineRunConfig:
                 f"{self.ilid_discriminator_learning_rate!r}"
             )
         check_union(self.ilid_union)
+        updates = self.dwbc_discriminator_updates
+        if updates is not None and (
+            isinstance(updates, bool) or not isinstance(updates, int) or updates < 1
+            or self.gradient_steps % updates
+        ):  # fmt: skip
+            raise ValueError(
+                f"dwbc_discriminator_updates must be a positive integer that divides "
+                f"gradient_steps ({self.gradient_steps}), got {updates!r}"
+            )
+
+    @property
+    def dwbc_discriminator_every(self) -> int:
+        """DWBC's discriminator steps on every this-many-th policy step."""
+        if self.dwbc_discriminator_updates is None:
+            return OfflineConfig.dwbc_discriminator_every
+        return self.gradient_steps // self.dwbc_discriminator_updates
 
     @property
     def run_config(self) -> RunConfig:
@@ -96,6 +115,7 @@ class OfflineRunConfig:
             classifier=sized_classifier(classifier, (self.label_ratio,), num_demos),
             ilid_discriminator_steps=self.ilid_discriminator_steps,
             ilid_union=self.ilid_union,
+            dwbc_discriminator_every=self.dwbc_discriminator_every,
             components=required_components(self.methods),
         )
 

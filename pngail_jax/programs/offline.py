@@ -97,7 +97,14 @@ def build_parser() -> ArgumentParser:
 
 
 def _add_ilid_flags(parser: ArgumentParser) -> None:
-    """ILID's flags: its discriminators' budget and the union it draws from."""
+    """ILID's flags (its discriminators' budget and the union it draws from) and DWBC's
+    discriminator budget."""
+    parser.add_argument(
+        "--dwbc-discriminator-updates", type=int, default=DEFAULTS.dwbc_discriminator_updates,
+        help="Adam steps of DWBC's discriminator over the run, evenly spaced (must divide "
+        "--gradient-steps; its codebase's: 5,000 over 500,000 steps; default: one every 100th "
+        "step, 500 at 50,000)",
+    )  # fmt: skip
     parser.add_argument(
         "--ilid-discriminator-steps", type=int, default=DEFAULTS.ilid_discriminator_steps,
         help="Adam steps of each of ILID's two discriminators, before its policy learns "
@@ -152,6 +159,7 @@ def parse_args(argv=None) -> argparse.Namespace:
             ilid_discriminator_steps=args.ilid_discriminator_steps,
             ilid_discriminator_learning_rate=args.ilid_discriminator_learning_rate,
             ilid_union=args.ilid_union,
+            dwbc_discriminator_updates=args.dwbc_discriminator_updates,
         )  # fmt: skip
     except ValueError as error:
         parser.error(str(error))
