@@ -374,9 +374,7 @@ def test_a_run_resumed_from_before_a_metric_existed_gets_nan_for_its_earlier_chu
     )
 
 
-def test_dwbc_discriminator_updates_set_its_cadence_and_bad_values_are_one_line(
-    tmp_path, capsys
-):
+def test_dwbc_discriminator_updates_set_its_cadence_and_bad_values_are_one_line(tmp_path, capsys):
     """--dwbc-discriminator-updates N spaces N Adam steps of DWBC's discriminator over the
     run (every gradient_steps / N-th step: its codebase's 5,000 of 500,000 are every 100th,
     5,000 of 50,000 every 10th); without it, every 100th step as before (a config.json from
