@@ -2,6 +2,7 @@
 is in the README's index, and every flag of a documented command is one its program knows."""
 
 import importlib
+import itertools
 import re
 from pathlib import Path
 
@@ -115,3 +116,16 @@ def test_every_local_image_and_link_of_the_docs_is_in_git():
                 if not any(name.startswith(f"{path.relative_to(ROOT)}/") for name in tracked):
                     missing.append(f"{page.name}: {target}")
     assert not missing, f"linked but not in git: {missing}"
+
+
+def test_the_readmes_status_cells_are_short():
+    """The README's status table says what each piece is and where to read more, in at most
+    25 words a cell; the measured detail lives in docs/."""
+    lines = (ROOT / "README.md").read_text().split("\n")
+    start = lines.index("| piece | state |") + 2
+    rows = list(itertools.takewhile(lambda line: line.startswith("|"), lines[start:]))
+    assert len(rows) >= 5
+    for row in rows:
+        for cell in row.strip().strip("|").split("|"):
+            words = len(re.sub(r"\]\([^)]*\)", "]", cell).split())  # a link's target is no word
+            assert words <= 25, f"{words} words in the status cell {cell.strip()[:60]!r}..."
