@@ -94,8 +94,8 @@ def make_cells(
 @dataclasses.dataclass(frozen=True)
 class MethodFamily:
     """What a grid and a job need of a method family (adversarial, offline, the next one), as
-    plain functions, so ``stack_cells``, ``Grid`` and the jobs never name a family's modules:
-    the family is passed in (``pngail_jax.adversarial.family.ADVERSARIAL``,
+    plain functions, so ``stack_cells`` and ``Grid`` never name a family's modules: a job
+    passes its family in (``pngail_jax.adversarial.family.ADVERSARIAL``,
     ``pngail_jax.offline.family.OFFLINE``).
 
     - ``name``: the family's name ("adversarial", "offline");
@@ -107,9 +107,9 @@ class MethodFamily:
       trainer's spec; ``overrides`` set its fields; an unknown field is a ValueError);
     - ``spec_axes`` and ``hyperparam_axes``: the grid axes (``Cell.axes`` fields) that set a
       spec field or a hyperparameter; a cell with any other axis is refused;
-    - ``hyperparams(cell, **values)``: the cell's hyperparameters, a pytree of float[]
-      leaves, from its label ratio and noise and ``values`` (shared keywords and its
-      ``hyperparam_axes``);
+    - ``hyperparams(cell, **values)``: the cell's hyperparameters, a pytree of scalar
+      leaves (float[], a learner's flag bool[]), from its label ratio and noise and
+      ``values`` (shared keywords and its ``hyperparam_axes``);
     - ``parts(methods)``: the parts of the trainer that ``methods`` need compiled (the
       adversarial phases, the offline components), in the family's order;
     - ``program_groups(methods)``: ``methods`` grouped into the programs a grid compiles, in
