@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+from pngail_jax.analysis.runs import read_run_config
 from pngail_jax.config.run_config import RunConfig
 from pngail_jax.config.settings import settings_for
 from pngail_jax.config.task import task_classifier, task_num_demos
@@ -105,13 +106,14 @@ def load_offline_config(out: str | Path) -> OfflineRunConfig:
     path = Path(out) / "config.json"
     try:
         document = read_json(path, "offline run config")
-        values = dict(document["config"])
-        if document.get("program") != PROGRAM:
+        view = read_run_config(document)
+        if view.program != PROGRAM:
             raise ValueError(f"written by {document.get('program')!r}")
+        values = dict(view.settings)
         for name in ("methods", "hidden_sizes"):
             values[name] = tuple(values[name])
         return OfflineRunConfig(**values)
-    except (IntegrityError, KeyError, TypeError, ValueError) as error:
+    except (AttributeError, IntegrityError, KeyError, TypeError, ValueError) as error:
         raise RunError(
             f"cannot resume {out}: no offline run's config.json there ({error})"
         ) from None
