@@ -26,7 +26,6 @@ from pngail_jax.offline.trainer import (
     OFFLINE_METHOD_NAMES,
     OfflineConfig,
     OfflineTrainer,
-    required_components,
 )
 
 DEFAULT_DEMOS = Path(__file__).resolve().parents[1] / "data/released/Pendulum-v1_mixture.npy"
@@ -38,7 +37,7 @@ def measure(env, demos, methods, args) -> dict:
         steps_per_iteration=args.steps,
         eval_every=args.iterations,
         batch_size=args.batch_size,
-        components=required_components(methods),
+        components=OFFLINE.parts(methods),
     )
     trainer = OfflineTrainer(config, env, demos)
     cells = make_cells(methods, args.seeds)

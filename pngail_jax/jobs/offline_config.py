@@ -15,8 +15,9 @@ from pngail_jax.config.settings import settings_for
 from pngail_jax.config.task import task_classifier, task_num_demos
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.jobs.trainer_configs import sized_classifier
+from pngail_jax.offline.family import OFFLINE
 from pngail_jax.offline.ilid import check_union
-from pngail_jax.offline.trainer import DEFAULT_OFFLINE_METHODS, OfflineConfig, required_components
+from pngail_jax.offline.trainer import DEFAULT_OFFLINE_METHODS, OfflineConfig
 from pngail_jax.storage.integrity import IntegrityError, read_json
 
 PROGRAM = "offline"
@@ -49,7 +50,8 @@ class OfflineRunConfig:
     def __post_init__(self):
         if not self.methods or len(set(self.methods)) != len(self.methods):
             raise ValueError(f"methods must be distinct and not empty, got {self.methods!r}")
-        required_components(self.methods)  # unknown names: one line naming them
+        for method in self.methods:  # an unknown name: one line naming the known ones
+            OFFLINE.check_method(method)
         for name in ("seeds", "gradient_steps", "steps_per_iteration", "eval_every",
                      "chunk_iterations", "batch_size", "ilid_discriminator_steps"):  # fmt: skip
             value = getattr(self, name)
@@ -97,7 +99,7 @@ class OfflineRunConfig:
             classifier=sized_classifier(classifier, (self.label_ratio,), num_demos),
             ilid_discriminator_steps=self.ilid_discriminator_steps,
             ilid_union=self.ilid_union,
-            components=required_components(self.methods),
+            components=OFFLINE.parts(self.methods),
         )
 
 
