@@ -118,6 +118,7 @@ from common import (
 from jax import monitoring
 
 from pngail_jax import envs
+from pngail_jax.adversarial.family import ADVERSARIAL
 from pngail_jax.adversarial.methods import METHOD_NAMES
 from pngail_jax.adversarial.trainer import AdversarialConfig, AdversarialTrainer, TrainState
 from pngail_jax.confidence import ClassifierConfig
@@ -261,7 +262,10 @@ def compile_worker(args, devices) -> None:
     train = make_grid_train(args, env, demos)
     methods, seeds = grid_layout(args.compile_worker)
     inputs = stack_cells(
-        make_cells(methods, seeds), jax.random.key(args.seed), learner=args.learner
+        make_cells(methods, seeds),
+        jax.random.key(args.seed),
+        learner=args.learner,
+        family=ADVERSARIAL,
     )
     with counting_cache_hits() as hits:
         grid = Grid(train, inputs, blocks_per_chunk=1, devices=devices)
@@ -301,7 +305,7 @@ def measure_grid(args, train, full_trpo, size: int, devices, key) -> dict:
     evaluation timings in this process."""
     compiling = compile_times(args, size)
     methods, seeds = grid_layout(size)
-    inputs = stack_cells(make_cells(methods, seeds), key, learner=args.learner)
+    inputs = stack_cells(make_cells(methods, seeds), key, learner=args.learner, family=ADVERSARIAL)
     grid = Grid(train, inputs, blocks_per_chunk=1, devices=devices)
     if compiling["compile_seconds"] is None:
         compiling["compile_seconds"] = grid.compile_seconds

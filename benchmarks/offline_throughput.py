@@ -20,13 +20,12 @@ from common import context, markdown_table, time_grid_chunks, write_rows
 
 from pngail_jax import envs
 from pngail_jax.demos import load_released
-from pngail_jax.grid import Grid, make_cells
+from pngail_jax.grid import Grid, make_cells, stack_cells
+from pngail_jax.offline.family import OFFLINE
 from pngail_jax.offline.trainer import (
     OFFLINE_METHOD_NAMES,
     OfflineConfig,
     OfflineTrainer,
-    required_components,
-    stack_offline_cells,
 )
 
 DEFAULT_DEMOS = Path(__file__).resolve().parents[1] / "data/released/Pendulum-v1_mixture.npy"
@@ -38,11 +37,11 @@ def measure(env, demos, methods, args) -> dict:
         steps_per_iteration=args.steps,
         eval_every=args.iterations,
         batch_size=args.batch_size,
-        components=required_components(methods),
+        components=OFFLINE.parts(methods),
     )
     trainer = OfflineTrainer(config, env, demos)
     cells = make_cells(methods, args.seeds)
-    grid = Grid(trainer, stack_offline_cells(cells, jax.random.key(0)), blocks_per_chunk=1)
+    grid = Grid(trainer, stack_cells(cells, jax.random.key(0), family=OFFLINE), blocks_per_chunk=1)
     _, _, _, chunk_seconds = time_grid_chunks(grid, repeats=1)
     steps = args.iterations * args.steps
     return {

@@ -3,7 +3,8 @@
 The user's path, importable from here (each loaded on first use, so ``import pngail_jax``
 stays fast): ``run`` / ``RunConfig`` / ``RunResult`` / ``RunError`` (a whole run with its
 outputs, ``pngail_jax.jobs``), ``load_demonstrations``, the trainers (``AdversarialTrainer``,
-``AdversarialConfig``), grids (``make_cells``, ``stack_cells``, ``Grid``) and ``load_policy``.
+``AdversarialConfig``), grids (``make_cells``, ``stack_cells``, ``Grid``), the method families
+a grid stacks (``MethodFamily``; ``ADVERSARIAL``, ``OFFLINE``) and ``load_policy``.
 """
 
 import importlib
@@ -22,6 +23,9 @@ _EXPORTS = {
     "make_cells": "pngail_jax.grid",
     "stack_cells": "pngail_jax.grid",
     "Grid": "pngail_jax.grid",
+    "MethodFamily": "pngail_jax.grid",
+    "ADVERSARIAL": "pngail_jax.adversarial.family",
+    "OFFLINE": "pngail_jax.offline.family",
 }
 __all__ = ["load_policy", *_EXPORTS]
 

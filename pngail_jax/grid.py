@@ -1,7 +1,8 @@
 """Grids of runs (methods x seeds x settings) as one compiled, optionally sharded, program.
 
 A grid is a list of ``Cell``s. ``stack_cells`` turns it into stacked hyperparameters, method
-specs and keys with one leading grid axis; ``Grid`` compiles ``jit(vmap(trainer.init))`` and
+specs and keys with one leading grid axis, for any ``MethodFamily`` (the family is passed in:
+this module imports none); ``Grid`` compiles ``jit(vmap(trainer.init))`` and
 ``jit(vmap(trainer.run_blocks))`` over that axis and, when more than one device is given,
 shards it over a one-axis ``Mesh`` (padding the grid to a multiple of the device count with
 copies of its last cell, which are dropped from every result).
@@ -26,9 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import NamedSharding, PartitionSpec
 
-from pngail_jax.adversarial.methods import MethodSpec, method_spec, stack
-from pngail_jax.adversarial.trainer import AdversarialHyperparams
-from pngail_jax.config.grid_axes import GRID_AXES, HYPERPARAM_AXES, METHOD_AXES
+from pngail_jax.config.grid_axes import GRID_AXES
 from pngail_jax.storage.checkpoint import is_key
 
 GRID_AXIS = "grid"
@@ -92,17 +91,60 @@ def make_cells(
     ]
 
 
+@dataclasses.dataclass(frozen=True)
+class MethodFamily:
+    """What a grid and a job need of a method family (adversarial, offline, the next one), as
+    plain functions, so ``stack_cells`` and ``Grid`` never name a family's modules: a job
+    passes its family in (``pngail_jax.adversarial.family.ADVERSARIAL``,
+    ``pngail_jax.offline.family.OFFLINE``).
+
+    - ``name``: the family's name ("adversarial", "offline");
+    - ``method_names``: its built-in method names (``check_method`` may accept more: a
+      registered name, ``package.module:preset``);
+    - ``check_method(name) -> name``: the name, resolved and checked; a one-line ValueError
+      naming the known ones for an unknown name;
+    - ``spec(name, **overrides)``: the method as data, a pytree of float[] leaves (the
+      trainer's spec; ``overrides`` set its fields; an unknown field is a ValueError);
+    - ``spec_axes`` and ``hyperparam_axes``: the grid axes (``Cell.axes`` fields) that set a
+      spec field or a hyperparameter; a cell with any other axis is refused;
+    - ``hyperparams(cell, **values)``: the cell's hyperparameters, a pytree of scalar
+      leaves (float[], a learner's flag bool[]), from its label ratio and noise and
+      ``values`` (shared keywords and its ``hyperparam_axes``);
+    - ``parts(methods)``: the parts of the trainer that ``methods`` need compiled (the
+      adversarial phases, the offline components), in the family's order;
+    - ``program_groups(methods)``: ``methods`` grouped into the programs a grid compiles, in
+      order of first appearance (one program for the adversarial family);
+    - ``trainer``: the trainer class (``Trainer`` interface), whose cell inputs are
+      ``(hyperparams, spec)`` and the key.
+    """
+
+    name: str
+    method_names: tuple[str, ...]
+    check_method: Callable[[str], str]
+    spec: Callable[..., Any]
+    spec_axes: tuple[str, ...]
+    hyperparam_axes: tuple[str, ...]
+    hyperparams: Callable[..., Any]
+    parts: Callable[[Sequence[str]], tuple[str, ...]]
+    program_groups: Callable[[Sequence[str]], list[tuple[str, ...]]]
+    trainer: type
+
+
 def stack_cells(
     cells: Sequence[Cell],
     key: jax.Array,
     method_overrides: dict[str, float] | None = None,
+    *,
+    family: MethodFamily,
     **hyperparams,
-) -> tuple[AdversarialHyperparams, MethodSpec, jax.Array]:
-    """Stacked ``(hyperparams, specs, keys)`` with a leading axis of ``len(cells)``.
+) -> tuple[Any, Any, jax.Array]:
+    """Stacked ``(hyperparams, specs, keys)`` of ``family``'s cells with a leading axis of
+    ``len(cells)``: the inputs of ``Grid(trainer)`` for a trainer of that family.
 
-    ``hyperparams`` are ``AdversarialHyperparams.create`` keywords shared by every cell, and
-    ``method_overrides`` ``MethodSpec`` fields; a cell's ``axes`` override either. Each cell's
-    key is ``fold_in(key, cell.seed)``.
+    ``hyperparams`` are keywords of ``family.hyperparams`` shared by every cell, and
+    ``method_overrides`` spec fields; a cell's ``axes`` override either (those of
+    ``family.spec_axes`` the spec, of ``family.hyperparam_axes`` the hyperparameters). Each
+    cell's key is ``fold_in(key, cell.seed)``.
     """
     if not cells:
         raise ValueError("a grid needs at least one cell")
@@ -110,16 +152,20 @@ def stack_cells(
     specs, cell_hyperparams = [], []
     for cell in cells:
         axes = dict(cell.axes)
-        method_values = {f: v for f, v in axes.items() if f in METHOD_AXES}
-        specs.append(method_spec(cell.method, **{**overrides, **method_values}))
-        values = {**hyperparams, **{f: v for f, v in axes.items() if f in HYPERPARAM_AXES}}
-        cell_hyperparams.append(
-            AdversarialHyperparams.create(
-                label_ratio=cell.label_ratio, noise_std=cell.noise_std, **values
-            )
-        )
+        unknown = sorted(set(axes) - set(family.spec_axes) - set(family.hyperparam_axes))
+        if unknown:
+            raise ValueError(f"the {family.name} family's cells take no grid axis {unknown}")
+        method_values = {f: v for f, v in axes.items() if f in family.spec_axes}
+        specs.append(family.spec(cell.method, **{**overrides, **method_values}))
+        values = {**hyperparams, **{f: v for f, v in axes.items() if f in family.hyperparam_axes}}
+        cell_hyperparams.append(family.hyperparams(cell, **values))
     keys = jnp.stack([jax.random.fold_in(key, cell.seed) for cell in cells])
     return stack(cell_hyperparams), stack(specs), keys
+
+
+def stack(trees):
+    """Stacks equal-structure pytrees (specs, hyperparameters) along a new leading axis."""
+    return jax.tree.map(lambda *leaves: jnp.stack(leaves), *trees)
 
 
 def _pad(tree, size: int):

@@ -11,6 +11,7 @@ from conftest import authors_data, swing_up_demonstrations, swing_up_mixture
 
 from pngail_jax import envs
 from pngail_jax.adversarial.bc import BCConfig
+from pngail_jax.adversarial.family import ADVERSARIAL
 from pngail_jax.adversarial.methods import PRESETS, required_phases
 from pngail_jax.adversarial.ranking import RankingConfig
 from pngail_jax.adversarial.trainer import AdversarialConfig, AdversarialTrainer
@@ -48,7 +49,9 @@ def test_gail_learns_pendulum_from_the_optimal_trajectory():
     )
     trainer = AdversarialTrainer(config, env, optimal)
     cells = make_cells(["gail"], num_seeds=4)
-    _, metrics = jax.jit(jax.vmap(trainer.train))(*stack_cells(cells, jax.random.key(0)))
+    _, metrics = jax.jit(jax.vmap(trainer.train))(
+        *stack_cells(cells, jax.random.key(0), family=ADVERSARIAL)
+    )
     final = np.asarray(metrics["eval/return"])[:, -1]
     assert np.median(final) > -600, final
     assert np.isfinite(np.asarray(metrics["disc/loss"])).all()
@@ -72,7 +75,9 @@ def final_returns(methods, demos, classifier_steps=2000, key=0) -> dict[str, np.
     )
     trainer = AdversarialTrainer(config, envs.make("Pendulum-v1"), demos)
     cells = make_cells(methods, num_seeds=3)
-    _, metrics = jax.jit(jax.vmap(trainer.train))(*stack_cells(cells, jax.random.key(key)))
+    _, metrics = jax.jit(jax.vmap(trainer.train))(
+        *stack_cells(cells, jax.random.key(key), family=ADVERSARIAL)
+    )
     final = np.asarray(metrics["eval/return"])[:, -1].reshape(len(methods), 3)
     return dict(zip(methods, final, strict=True))
 
@@ -146,7 +151,7 @@ def test_demonstration_actions_reach_every_learned_comparison_clipped_as_the_age
     )  # fmt: skip
     env = envs.make("Pendulum-v1")
     assert AdversarialTrainer(config, env, beyond).num_clipped_rows == (np.abs(actions) > 2).sum()
-    inputs = stack_cells(make_cells(methods, 1), jax.random.key(0))
+    inputs = stack_cells(make_cells(methods, 1), jax.random.key(0), family=ADVERSARIAL)
     results = [
         jax.jit(jax.vmap(AdversarialTrainer(config, env, data).train))(*inputs)
         for data in (beyond, inside)
@@ -218,9 +223,9 @@ def test_gradient_penalty_is_compiled_only_when_asked_and_refused_otherwise():
 
     demos = _random_demos()
     cells = make_cells(["pngail"], 1, axes=[("gradient_penalty_coef", (0.0, 10.0))])
-    inputs = stack_cells(cells, jax.random.key(0))
+    inputs = stack_cells(cells, jax.random.key(0), family=ADVERSARIAL)
     _, with_penalty = jax.jit(jax.vmap(_small_trainer(demos, gradient_penalty=True).train))(*inputs)
-    plain_inputs = stack_cells(make_cells(["pngail"], 1), jax.random.key(0))
+    plain_inputs = stack_cells(make_cells(["pngail"], 1), jax.random.key(0), family=ADVERSARIAL)
     _, plain = jax.jit(jax.vmap(_small_trainer(demos).train))(*plain_inputs)
     np.testing.assert_allclose(with_penalty["disc/loss"][0], plain["disc/loss"][0], rtol=1e-5)
     np.testing.assert_allclose(with_penalty["eval/return"][0], plain["eval/return"][0], 1e-4)

@@ -15,6 +15,7 @@ import pytest
 from pngail_jax import envs
 from pngail_jax.adversarial.bc import BCConfig, DeterministicBCConfig
 from pngail_jax.adversarial.cail import CAILConfig, CailPhase
+from pngail_jax.adversarial.family import ADVERSARIAL
 from pngail_jax.adversarial.firl import FirlConfig
 from pngail_jax.adversarial.methods import METHOD_NAMES, method_spec, required_phases, stack
 from pngail_jax.adversarial.ranking import DrexConfig, RankingConfig
@@ -94,7 +95,7 @@ def key(seed):
 def test_a_grid_of_the_appendix_methods_equals_its_cells_run_alone():
     trainer = trainer_for(METHODS)
     cells = make_cells(METHODS, 1)
-    hyperparams, specs, keys = stack_cells(cells, key(0))
+    hyperparams, specs, keys = stack_cells(cells, key(0), family=ADVERSARIAL)
     state, grid_metrics = jax.jit(jax.vmap(trainer.train))(hyperparams, specs, keys)
     single = jax.jit(trainer.train)  # one program for every method: the spec is data
     for index, cell in enumerate(cells):
@@ -125,7 +126,7 @@ def test_the_appendix_methods_train_under_ppo():
     (the tolerances of the TRPO grid above), each cell's rewards its own."""
     methods = METHODS[:6]  # BC has no policy learner to swap
     trainer = trainer_for(methods, learner="ppo")
-    inputs = stack_cells(make_cells(methods, 1), key(0), learner="ppo")
+    inputs = stack_cells(make_cells(methods, 1), key(0), learner="ppo", family=ADVERSARIAL)
     state, metrics = jax.jit(jax.vmap(trainer.train))(*inputs)
     single = jax.jit(trainer.train)
     for index, method in enumerate(methods):
@@ -165,7 +166,7 @@ def test_behaviour_cloning_learns_from_a_controllers_trajectory():
     )
     trainer = AdversarialTrainer(config, envs.make("Pendulum-v1"), optimal)
     cells = make_cells(["bc"], num_seeds=3)
-    _, metrics = jax.jit(jax.vmap(trainer.train))(*stack_cells(cells, key(0)))
+    _, metrics = jax.jit(jax.vmap(trainer.train))(*stack_cells(cells, key(0), family=ADVERSARIAL))
     final = np.asarray(metrics["eval/return"])[:, -1]
     assert np.median(final) > -800, final
 
@@ -192,7 +193,7 @@ def test_confidence_weighted_bc_learns_from_a_mixture_plain_bc_cannot():
     )
     trainer = AdversarialTrainer(config, envs.make("Pendulum-v1"), demos)
     cells = make_cells(["bc-weighted", "bc"], num_seeds=3, label_ratios=(0.8,))
-    _, metrics = jax.jit(jax.vmap(trainer.train))(*stack_cells(cells, key(0)))
+    _, metrics = jax.jit(jax.vmap(trainer.train))(*stack_cells(cells, key(0), family=ADVERSARIAL))
     weighted, plain = np.asarray(metrics["eval/return"])[:, -1].reshape(2, 3)
     assert np.median(weighted) > -600, (weighted, plain)
     assert np.median(weighted) > np.median(plain) + 300, (weighted, plain)
@@ -225,7 +226,7 @@ def test_firl_learns_from_a_controllers_trajectory_under_each_divergence():
     )
     trainer = AdversarialTrainer(config, envs.make("Pendulum-v1"), optimal)
     cells = make_cells(methods, num_seeds=3)
-    _, metrics = jax.jit(jax.vmap(trainer.train))(*stack_cells(cells, key(0)))
+    _, metrics = jax.jit(jax.vmap(trainer.train))(*stack_cells(cells, key(0), family=ADVERSARIAL))
     final = dict(zip(methods, np.asarray(metrics["eval/return"])[:, -1].reshape(3, 3), strict=True))
     assert np.median(final["firl-fkl"]) > -900, final
     assert np.median(final["firl-rkl"]) > -800, final
@@ -253,7 +254,7 @@ def test_cail_learns_from_a_mixture_of_graded_episodes():
     )
     trainer = AdversarialTrainer(config, envs.make("Pendulum-v1"), demos)
     cells = make_cells(["cail"], num_seeds=3, label_ratios=(0.6,))
-    _, metrics = jax.jit(jax.vmap(trainer.train))(*stack_cells(cells, key(0)))
+    _, metrics = jax.jit(jax.vmap(trainer.train))(*stack_cells(cells, key(0), family=ADVERSARIAL))
     final = np.asarray(metrics["eval/return"])[:, -1]
     assert np.median(final) > -800, final
 
@@ -381,7 +382,7 @@ drex = t.DrexConfig(
 )
 trainer = t.AdversarialTrainer(
     dataclasses.replace(trainer.config, drex=drex), trainer.env, t.demos())
-inputs = t.stack_cells(t.make_cells(["drex"], 2), t.key(0))
+inputs = t.stack_cells(t.make_cells(["drex"], 2), t.key(0), family=t.ADVERSARIAL)
 jax.block_until_ready(jax.jit(jax.vmap(trainer.init))(*inputs))
 print("initialised")
 """

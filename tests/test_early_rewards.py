@@ -55,6 +55,7 @@ def test_rewards_on_rows_are_each_sides_mean_policy_reward_against_numpy():
     import jax
     import numpy as np
 
+    from pngail_jax.adversarial.family import ADVERSARIAL
     from pngail_jax.demos import load_demonstrations
     from pngail_jax.grid import Cell, stack_cells
     from pngail_jax.jobs.early_rewards import _build, rewards_on_rows
@@ -63,7 +64,9 @@ def test_rewards_on_rows_are_each_sides_mean_policy_reward_against_numpy():
     demos = load_demonstrations(str(PENDULUM))
     trainer, _ = _build(config, demos)
     cells = [Cell("gail", 0), Cell("gail", 1)]
-    state, _ = jax.jit(jax.vmap(trainer.init))(*stack_cells(cells, jax.random.key(0)))
+    state, _ = jax.jit(jax.vmap(trainer.init))(
+        *stack_cells(cells, jax.random.key(0), family=ADVERSARIAL)
+    )
     optimal = demos.confidence >= 1.0
     assert 0 < optimal.sum() < demos.num_rows
     on_optimal, on_other = rewards_on_rows(trainer, state, jax.numpy.asarray(optimal))

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from pngail_jax import envs
+from pngail_jax.adversarial.family import ADVERSARIAL
 from pngail_jax.adversarial.methods import method_spec
 from pngail_jax.adversarial.trainer import (
     AdversarialConfig,
@@ -80,7 +81,7 @@ def small_setup(num_iterations=2, eval_every=1, **config_overrides):
 
 def small_grid_inputs(methods=("gail", "pngail", "wgail"), num_seeds=2):
     cells = make_cells(methods, num_seeds)
-    return cells, stack_cells(cells, jax.random.key(0))
+    return cells, stack_cells(cells, jax.random.key(0), family=ADVERSARIAL)
 
 
 def run_single_and_grid() -> dict:
@@ -435,7 +436,7 @@ def test_a_grid_over_further_axes_equals_its_cells_run_alone():
         for w in (0.0, 1.0)
     ]
     assert cells[1].setting == "label_ratio=0.2,noise=0,max_kl=0.005,importance_weighted_coef=1"
-    inputs = stack_cells(cells, jax.random.key(0))
+    inputs = stack_cells(cells, jax.random.key(0), family=ADVERSARIAL)
     _, grid_metrics = jax.jit(jax.vmap(trainer.train))(*inputs)
     single = jax.jit(trainer.train)
     for index, cell in enumerate(cells):

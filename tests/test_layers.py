@@ -53,7 +53,13 @@ LAYERS = [
             "adversarial.method_checks", "offline", "offline.losses", "offline.ilid",
         ),
     ),
-    ("trainers", ("adversarial.trainer", "offline.trainer", "grid", "train")),
+    (
+        "trainers",
+        (
+            "adversarial.trainer", "offline.trainer", "grid", "train", "adversarial.family",
+            "offline.family",
+        ),
+    ),
     ("jobs", ("jobs", "jobs.*", "runner")),
     ("paper", ("paper", "paper.*")),
     ("programs", ("programs", "programs.*")),

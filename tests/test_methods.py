@@ -11,6 +11,7 @@ import pytest
 from test_grid import assert_close_across_programs, small_setup
 
 from pngail_jax.adversarial import methods
+from pngail_jax.adversarial.family import ADVERSARIAL
 from pngail_jax.adversarial.methods import (
     PRESETS,
     Preset,
@@ -113,7 +114,7 @@ def test_an_outside_method_in_a_grid_with_built_ins_equals_its_cells_alone(outsi
     trainer = AdversarialTrainer(config, env, demos)
     trainer.check_methods(names)
     cells = make_cells(names, 1)
-    hyperparams, specs, keys = stack_cells(cells, jax.random.key(0))
+    hyperparams, specs, keys = stack_cells(cells, jax.random.key(0), family=ADVERSARIAL)
     _, grid_metrics = jax.jit(jax.vmap(trainer.train))(hyperparams, specs, keys)
     single = jax.jit(trainer.train)
     for index in range(len(cells)):

@@ -15,7 +15,8 @@ import pytest
 from pngail_jax import envs
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import make_split
-from pngail_jax.grid import make_cells
+from pngail_jax.grid import make_cells, stack_cells
+from pngail_jax.offline.family import OFFLINE
 from pngail_jax.offline.trainer import (
     OFFLINE_METHOD_NAMES,
     OfflineConfig,
@@ -23,7 +24,6 @@ from pngail_jax.offline.trainer import (
     offline_spec,
     program_groups,
     required_components,
-    stack_offline_cells,
 )
 from pngail_jax.storage import outputs
 
@@ -65,7 +65,7 @@ def grid_run(trainer):
     gradient steps, in one vmapped program: (cells, inputs, start state, final state,
     metrics, the compiled init and blocks)."""
     cells = make_cells(METHODS, 2)
-    hyperparams, specs, keys = stack_offline_cells([*cells, cells[2]], jax.random.key(3))
+    hyperparams, specs, keys = stack_cells([*cells, cells[2]], jax.random.key(3), family=OFFLINE)
     short = offline_spec(cells[2].method, num_gradient_steps=20.0)
     specs = jax.tree.map(lambda stacked, one: stacked.at[-1].set(one), specs, short)
     inputs = (hyperparams, specs, keys)
@@ -348,9 +348,10 @@ def test_each_method_beats_bc_on_every_row_on_a_mostly_poor_mixture():
         trainer = OfflineTrainer(
             dataclasses.replace(config, components=components), envs.make("Pendulum-v1"), demos
         )
-        inputs = stack_offline_cells(  # ILID's discriminators: 2,000 steps at 3e-4 here
-            make_cells(methods, 3), jax.random.key(0), ilid_discriminator_learning_rate=3e-4
-        )
+        inputs = stack_cells(  # ILID's discriminators: 2,000 steps at 3e-4 here
+            make_cells(methods, 3), jax.random.key(0), {"ilid_discriminator_learning_rate": 3e-4},
+            family=OFFLINE,
+        )  # fmt: skip
         _, group = jax.jit(jax.vmap(trainer.train))(*inputs)
         returns = np.asarray(group["eval/return"])[:, -1].reshape(len(methods), 3)
         final |= dict(zip(methods, returns, strict=True))

@@ -19,7 +19,8 @@ import pytest
 
 from pngail_jax import envs
 from pngail_jax.demos import Demonstrations, successor_rows
-from pngail_jax.grid import make_cells
+from pngail_jax.grid import make_cells, stack_cells
+from pngail_jax.offline.family import OFFLINE
 from pngail_jax.offline.ilid import (
     RELEASED_UNION_PADDING,
     IlidSelection,
@@ -31,7 +32,6 @@ from pngail_jax.offline.trainer import (
     OfflineConfig,
     OfflineTrainer,
     offline_spec,
-    stack_offline_cells,
 )
 
 RNG = np.random.default_rng(7)
@@ -226,7 +226,7 @@ def test_the_released_union_changes_only_ilids_union(demos):
     E[X] = 640 q (below 0.1), and by the Chernoff bound P(X >= k) <= (e E[X] / k)^k the
     test allows X below the smallest k at which that bound is under 1e-6."""
     cells = make_cells(["ilid"], 1)
-    inputs = jax.tree.map(lambda x: x[0], stack_offline_cells(cells, jax.random.key(2)))
+    inputs = jax.tree.map(lambda x: x[0], stack_cells(cells, jax.random.key(2), family=OFFLINE))
     trainers = {union: _trainer(demos, components=("ilid",), ilid_union=union)
                 for union in ("intended", "released")}  # fmt: skip
     results = {union: jax.jit(trainer.train)(*inputs) for union, trainer in trainers.items()}
@@ -267,7 +267,7 @@ def test_dwbcs_evaluation_metrics_against_numpy(demos):
     computation from the final state's networks."""
     trainer = _trainer(demos, components=("dwbc",))
     cells = make_cells(["dwbc"], 1)
-    inputs = jax.tree.map(lambda x: x[0], stack_offline_cells(cells, jax.random.key(4)))
+    inputs = jax.tree.map(lambda x: x[0], stack_cells(cells, jax.random.key(4), family=OFFLINE))
     state, metrics = jax.jit(trainer.train)(*inputs)
     metrics = {name: np.asarray(value) for name, value in metrics.items()}
     names = ["dwbc/eval_d_expert", "dwbc/eval_d_other", "dwbc/eval_weight_expert",

@@ -18,6 +18,7 @@ from test_gae import numpy_gae
 from test_grid import assert_close_across_programs, assert_resumes_bit_exactly, small_setup
 
 from pngail_jax import envs
+from pngail_jax.adversarial.family import ADVERSARIAL
 from pngail_jax.adversarial.trainer import AdversarialHyperparams, AdversarialTrainer
 from pngail_jax.grid import make_cells, stack_cells
 from pngail_jax.jobs.trainer_configs import adversarial_config
@@ -197,7 +198,7 @@ def test_a_grid_of_ppo_cells_equals_its_cells_run_alone():
     hyperparameters set by hand)."""
     trainer = ppo_trainer()
     cells = make_cells(["gail"], 2, axes=(("clip_eps", (0.1, 0.3)),))
-    inputs = stack_cells(cells, jax.random.key(0), learner="ppo")
+    inputs = stack_cells(cells, jax.random.key(0), learner="ppo", family=ADVERSARIAL)
     _, grid_metrics = jax.jit(jax.vmap(trainer.train))(*inputs)
     single = jax.jit(trainer.train)
     for index, cell in enumerate(cells):
@@ -215,7 +216,9 @@ def test_a_grid_of_ppo_cells_equals_its_cells_run_alone():
 @pytest.mark.slow
 def test_a_ppo_grid_resumes_from_a_checkpoint_bit_exactly(tmp_path):
     trainer = ppo_trainer()
-    inputs = stack_cells(make_cells(["pngail"], 2), jax.random.key(0), learner="ppo")
+    inputs = stack_cells(
+        make_cells(["pngail"], 2), jax.random.key(0), learner="ppo", family=ADVERSARIAL
+    )
     assert_resumes_bit_exactly(trainer, inputs, tmp_path)
 
 

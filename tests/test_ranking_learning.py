@@ -22,6 +22,7 @@ from conftest import _pendulum_demonstrations, noisy_swing_up_episodes, swing_up
 
 from pngail_jax import envs
 from pngail_jax.adversarial import ranking
+from pngail_jax.adversarial.family import ADVERSARIAL
 from pngail_jax.adversarial.methods import required_phases
 from pngail_jax.adversarial.ranking import DrexConfig, RankingConfig, RankingReward
 from pngail_jax.adversarial.trainer import AdversarialConfig, AdversarialTrainer
@@ -157,7 +158,9 @@ def test_trpo_raises_the_learned_reward_of_trex_and_drex():
     )  # fmt: skip
     trainer = AdversarialTrainer(config, envs.make("Pendulum-v1"), demos)
     cells = make_cells(methods, num_seeds=2, label_ratios=(0.95,))
-    _, metrics = jax.jit(jax.vmap(trainer.train))(*stack_cells(cells, jax.random.key(0)))
+    _, metrics = jax.jit(jax.vmap(trainer.train))(
+        *stack_cells(cells, jax.random.key(0), family=ADVERSARIAL)
+    )
     reward = np.asarray(metrics["train/reward"])  # float[cells, iterations]
     first, last = reward[:, :10].mean(1), reward[:, -10:].mean(1)
     assert np.all(last > first), (first, last)

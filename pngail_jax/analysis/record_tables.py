@@ -17,7 +17,7 @@ from pngail_jax.analysis.report import LATE_LABEL, display_label, metrics_rows, 
 from pngail_jax.analysis.run_records import (
     METRICS_FILE,
     RecordError,
-    run_settings,
+    read_run_config,
     seed_values,
     statistic_key,
 )
@@ -83,7 +83,7 @@ def glance_table(records: list[dict], statistic: str = "late_average") -> str:
 
     rows: dict[str, dict[str, np.ndarray]] = {}
     for record in records:
-        env = str(run_settings(record["config"]).get("env"))
+        env = str(read_run_config(record["config"]).settings.get("env"))
         task = rows.setdefault(env, {})
         for method, seeds in record[statistic_key(statistic)].items():
             if method in task:

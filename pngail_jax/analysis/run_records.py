@@ -31,11 +31,11 @@ from pngail_jax.analysis.report import LATE_SHARE, iterations_per_cell, metrics_
 from pngail_jax.analysis.runs import (
     STATISTICS,
     RunReadError,
+    read_run_config,
     read_scored_rows,
     run_normalizer,
     run_progress_numbers,
     run_scores,
-    run_settings,
     scores_of_metrics,
     verify_run,
 )
@@ -168,14 +168,7 @@ def sealed_record(record: dict) -> dict:
 def planned_iterations(config: dict) -> int | None:
     """The iterations a run's ``config.json`` (or a record's config) plans: the sweep's
     ``iterations``, the offline program's gradient steps over its steps per iteration."""
-    if config.get("program") == "offline":
-        settings = config.get("config") or {}
-        steps, per_iteration = settings.get("gradient_steps"), settings.get("steps_per_iteration")
-        if isinstance(steps, int) and isinstance(per_iteration, int) and per_iteration > 0:
-            return steps // per_iteration
-        return None
-    planned = config.get("iterations")
-    return planned if isinstance(planned, int) else None
+    return read_run_config(config).planned_iterations
 
 
 def check_name(name: str) -> None:
@@ -249,9 +242,10 @@ def check_record(folder: Path) -> dict:
             "record the run again"
         )
     _check_config_facts(folder, record)
+    settings = read_run_config(record["config"]).settings
     for name in STATISTICS:
         try:
-            scores = scores_of_metrics(metrics, run_settings(record["config"]), progress, name)
+            scores = scores_of_metrics(metrics, settings, progress, name)
         except RunReadError as error:
             raise RecordError(str(error)) from None
         if _per_seed(scores) != record.get(statistic_key(name)):
@@ -275,7 +269,8 @@ def _check_config_facts(folder: Path, record: dict) -> None:
     config = record.get("config")
     if not isinstance(config, dict):
         raise RecordError(f"{where}: no config")
-    settings = run_settings(config)
+    view = read_run_config(config)
+    settings = view.settings
     metrics = folder / METRICS_FILE
     try:
         normalizer = run_normalizer(config)
@@ -299,23 +294,21 @@ def _check_config_facts(folder: Path, record: dict) -> None:
     for (method, _), found in cells.items():
         if found != set(range(seeds if isinstance(seeds, int) else -1)):
             refuse(f"{method} has seeds", seeds, len(found))
-    offline = config.get("program") == "offline"
-    stated_ratios = [settings.get("label_ratio")] if offline else settings.get("label_ratios")
-    stated_noises = [settings.get("noise_std")] if offline else settings.get("noise_stds")
+    stated_ratios, stated_noises = view.label_ratios, view.noise_stds
     if sorted(map(float, stated_ratios or [])) != sorted(ratios):
         refuse("label ratios", stated_ratios, sorted(ratios))
     if sorted(map(float, stated_noises or [])) != sorted(noises):
         refuse("confidence noises", stated_noises, sorted(noises))
     if record.get("iterations_done") != reached:
         refuse("iterations done", record.get("iterations_done"), reached)
-    planned = planned_iterations(config)
+    planned = view.planned_iterations
     if record.get("iterations") != planned or record.get("complete") is not (reached == planned):
         raise RecordError(
             f"{where}: it says {record.get('iterations_done')!r} of {record.get('iterations')!r} "
             f"iterations (complete: {record.get('complete')!r}), its config plans {planned!r} and "
             f"its {METRICS_FILE} ends at {reached}: the record or its metrics were edited"
         )
-    if not offline:
+    if view.program != "offline":
         _check_steps(settings.get("settings") or {}, steps, refuse)
     _check_task(where, config, normalizer)
 
@@ -357,13 +350,8 @@ def _check_task(where: Path, config: dict, normalizer: list[float] | None) -> No
     3 row has that row's normaliser and that file's task (on a made set the metrics carry no
     witness of the task: the record's digest alone keeps it)."""
 
-    offline = config.get("program") == "offline"
-    settings = run_settings(config)
-    source = (
-        config.get("normalizer_source")
-        if offline
-        else ((config.get("resolved") or {}).get("normalizer_source"))
-    )
+    view = read_run_config(config)
+    settings, source = view.settings, view.normalizer_source
     demos = Path(str(settings.get("demos") or "")).name.removesuffix("_mixture.npy")
     if source == "paper Table 3" and demos in PAPER_NORMALIZERS:
         task = str(settings.get("env"))
@@ -402,7 +390,8 @@ def upgrade_record(folder: Path) -> dict:
     command = record.get("command")
     if isinstance(command, list) and command[:3] == ["python", "-m", "offline"]:
         record["command"] = ["python", "-m", "experiments.offline", *command[3:]]  # format 2's slip
-    if record.get("config", {}).get("program") == "offline" and record.get("iterations") is None:
+    offline = read_run_config(record.get("config") or {}).program == "offline"
+    if offline and record.get("iterations") is None:
         try:
             reached = max(iterations_per_cell(folder / METRICS_FILE).values())
         except (ValueError, KeyError, TypeError, EOFError, OSError) as error:
@@ -457,8 +446,9 @@ def describe(record: dict) -> str:
         if record.get("unsealed")
         else ""
     )
+    env = read_run_config(record["config"]).settings.get("env")
     return (
-        f"{record['name']}: {run_settings(record['config']).get('env')}, {len(finals)} methods, "
+        f"{record['name']}: {env}, {len(finals)} methods, "
         f"{cells} runs, {how_far}; commit {str(record['commit'])[:10]}, "
         f"{record['machine'].get('cpu_model') or 'CPU not recorded'}; "
         f"metrics {record['metrics']['bytes']:,} bytes{unsealed}"
@@ -481,18 +471,19 @@ def config_differences(config: dict, record: dict, sweep_defaults: dict) -> list
     trainers, makes: this module imports no JAX)."""
 
     def fields(document: dict) -> dict:
-        if document.get("program") != "offline":
+        view = read_run_config(document)
+        if view.program != "offline":
             return document
         return {
-            **{f"{part}.{key}": value for part in ("config", "trainer")
-               for key, value in (document.get(part) or {}).items()},
-            "normalizer": document.get("normalizer"),
+            **{f"{part}.{key}": value for part, values in (("config", view.settings),
+               ("trainer", view.trainer)) for key, value in values.items()},
+            "normalizer": view.normalizer,
         }  # fmt: skip
 
     mine, reference = fields(config), fields(record["config"])
     not_numbers = set(_NOT_NUMBERS) | {f"config.{key}" for key in _NOT_NUMBERS}
     keys = sorted((set(mine) | set(reference)) - not_numbers)
-    defaults = {} if config.get("program") == "offline" else sweep_defaults
+    defaults = {} if read_run_config(config).program == "offline" else sweep_defaults
 
     def value(document: dict, key: str):
         return document[key] if key in document else defaults.get(key)
@@ -508,7 +499,7 @@ def check_comparable(run_dirs, record: dict) -> list[str]:
     that say what is unfinished on either side (compared all the same, like with like)."""
 
     program = str(record.get("program", "")).removeprefix("experiments.")
-    task = run_settings(record["config"]).get("env")
+    task = read_run_config(record["config"]).settings.get("env")
     done, planned = record.get("iterations_done"), record.get("iterations")
     notes = []
     if not record.get("complete"):
@@ -523,7 +514,7 @@ def check_comparable(run_dirs, record: dict) -> list[str]:
                 f"experiments.{program}: compare a run of the record's program"
             )
         config = read_json(run_dir / "config.json", "run config")
-        if run_settings(config).get("env") != task:
+        if read_run_config(config).settings.get("env") != task:
             continue  # another task: expected_rows reads only the record's
         progress = run_progress_numbers(run_dir, config)
         if progress is None:
@@ -545,7 +536,7 @@ def expected_rows(scores, record: dict) -> list[dict]:
     IQM over seeds under the same statistic, and by how much is it outside. RecordError when
     your runs hold no run of the record's task."""
 
-    task = run_settings(record["config"]).get("env")
+    task = read_run_config(record["config"]).settings.get("env")
     if task not in scores.tasks:
         raise RecordError(
             f"the record {record['name']} is of {task}; your runs are of {', '.join(scores.tasks)}"
@@ -611,9 +602,9 @@ def expected_markdown(
     under ``statistic`` (a key of ``compare.STATISTICS``); ``notes`` (``check_comparable``'s:
     what is unfinished) above it."""
 
+    env = read_run_config(record["config"]).settings.get("env")
     lines = [
-        f"## Against the record {record['name']} "
-        f"({run_settings(record['config']).get('env')}, commit {str(record['commit'])[:10]})",
+        f"## Against the record {record['name']} ({env}, commit {str(record['commit'])[:10]})",
         "",
         f"Score: {STATISTICS[statistic]}. The IQM of your seeds against the record's IQM and "
         "its 95% bootstrap interval over its seeds. Outside it is a difference to look at, not "

@@ -8,6 +8,7 @@ files' digests, metrics.csv whole and agreeing with summary.json, the policies' 
 from __future__ import annotations
 
 import csv
+import dataclasses
 import math
 from pathlib import Path
 
@@ -44,10 +45,81 @@ STATISTICS = {  # what a score is, as the tables and plots say it
 RUN_PROGRAMS = ("sweep", "offline")  # the programs whose runs compare (and records) read
 
 
-def run_settings(config: dict) -> dict:
-    """A run's settings from its ``config.json``: the file itself for a sweep, its
-    ``config`` part for the offline program (env, methods, seeds, ...)."""
-    return config["config"] if config.get("program") == "offline" else config
+# What an offline run's seal covers: config.json's parts fixed when the run began (it adds
+# the trainer's fields, its seconds and "complete" when it ends).
+OFFLINE_SEALED = ("program", "config", "demonstrations", "input_files", "normalizer",
+                  "normalizer_source")  # fmt: skip
+
+
+@dataclasses.dataclass(frozen=True)
+class RunConfigView:
+    """A run's ``config.json`` (or a record's ``config``), whichever program wrote it, read
+    the same way (``read_run_config``)."""
+
+    program: str  # "sweep" or "offline"
+    settings: dict  # env, methods, seeds, demos, ...: what the run was asked to do
+    sealed: dict  # what the run's config seal covers
+    inputs: dict  # the input files' records (integrity.file_record), by name
+    normalizer: object  # the (random, optimal) returns as written (run_normalizer checks them)
+    normalizer_source: str | None  # where they came from ("paper Table 3", ...)
+    label_ratios: list  # the grid's label ratios (the offline program runs one)
+    noise_stds: list  # the grid's confidence noises (the offline program runs one)
+    planned_iterations: int | None  # the iterations it plans, where the config says
+    complete: bool | None  # the offline program's "complete" (a sweep's is in summary.json)
+    trainer: dict  # the offline trainer's fields, written when it ends ({} for a sweep)
+
+
+def read_run_config(document: dict) -> RunConfigView:
+    """The one reader of a run's ``config.json`` (or of a run record's ``config``, the same
+    document without its provenance): every reader of run folders and records goes through
+    it, so the two layouts on disk are told apart here alone.
+
+    The two layouts (left as the programs write them; a change needs an upgrade step):
+
+    - ``experiments.sweep`` (``jobs.record.write_config``), flat: the ``RunConfig``'s fields
+      at the top (``env``, ``methods``, ``seeds``, ``label_ratios``, ``noise_stds``,
+      ``iterations``, ...), ``resolved`` (``inputs``, ``normalizer``, ``normalizer_source``,
+      the methods' presets, ...) and ``provenance`` (where it ran; not sealed);
+    - ``experiments.offline`` (``jobs.offline.run_offline``), nested: ``{"program": "offline",
+      "config": {the OfflineRunConfig's fields: env, methods, seeds, label_ratio, noise_std,
+      gradient_steps, steps_per_iteration, ...}, "demonstrations", "input_files",
+      "normalizer", "normalizer_source", "provenance", "trainer", "complete", ...}``, of
+      which ``OFFLINE_SEALED`` is sealed when it begins.
+    """
+    if document.get("program") == "offline":
+        settings = document.get("config") or {}
+        steps, per_iteration = settings.get("gradient_steps"), settings.get("steps_per_iteration")
+        planned = None
+        if isinstance(steps, int) and isinstance(per_iteration, int) and per_iteration > 0:
+            planned = steps // per_iteration
+        return RunConfigView(
+            program="offline",
+            settings=settings,
+            sealed={key: document[key] for key in OFFLINE_SEALED if key in document},
+            inputs=document.get("input_files") or {},
+            normalizer=document.get("normalizer"),
+            normalizer_source=document.get("normalizer_source"),
+            label_ratios=[settings.get("label_ratio")],
+            noise_stds=[settings.get("noise_std")],
+            planned_iterations=planned,
+            complete=document.get("complete"),
+            trainer=document.get("trainer") or {},
+        )
+    resolved = document.get("resolved") or {}
+    planned = document.get("iterations")
+    return RunConfigView(
+        program="sweep",
+        settings=document,
+        sealed={key: value for key, value in document.items() if key != "provenance"},
+        inputs=resolved.get("inputs") or {},
+        normalizer=resolved.get("normalizer"),
+        normalizer_source=resolved.get("normalizer_source"),
+        label_ratios=document.get("label_ratios"),
+        noise_stds=document.get("noise_stds"),
+        planned_iterations=planned if isinstance(planned, int) else None,
+        complete=None,
+        trainer={},
+    )
 
 
 def run_scores(run_dir: Path, statistic: str = HEADLINE) -> tuple[str, dict[str, np.ndarray]]:
@@ -63,7 +135,7 @@ def run_scores(run_dir: Path, statistic: str = HEADLINE) -> tuple[str, dict[str,
             "writes one)"
         )
     try:
-        config = run_settings(read_json(run_dir / "config.json", "run config"))
+        config = read_run_config(read_json(run_dir / "config.json", "run config")).settings
         env = config["env"]
     except (OSError, IntegrityError, KeyError, TypeError) as error:
         raise RunReadError(f"{run_dir}: no readable config.json ({error})") from None
@@ -156,8 +228,9 @@ def run_progress_numbers(run_dir: Path, document: dict | None = None) -> tuple[i
             document = read_json(Path(run_dir) / "config.json", "run config")
         except (OSError, IntegrityError):
             document = None
-    if isinstance(document, dict) and document.get("program") == "offline":
-        return _offline_progress(document)
+    view = read_run_config(document) if isinstance(document, dict) else None
+    if view is not None and view.program == "offline":
+        return _offline_progress(view)
     try:
         summary = read_json(Path(run_dir) / "summary.json", "run summary")
     except (OSError, IntegrityError):
@@ -171,15 +244,11 @@ def run_progress_numbers(run_dir: Path, document: dict | None = None) -> tuple[i
     return None
 
 
-def _offline_progress(document: dict) -> tuple[int, int] | None:
+def _offline_progress(view: RunConfigView) -> tuple[int, int] | None:
     """An offline run's (iterations done, planned), known once its config.json says it is
     complete (its summary keeps no progress; a run cut short has no summary to compare)."""
-    config = document.get("config") or {}
-    steps, per_iteration = config.get("gradient_steps"), config.get("steps_per_iteration")
-    if not (isinstance(steps, int) and isinstance(per_iteration, int) and per_iteration > 0):
-        return None
-    planned = steps // per_iteration
-    return (planned, planned) if document.get("complete") is True else None
+    planned = view.planned_iterations
+    return (planned, planned) if planned is not None and view.complete is True else None
 
 
 def run_progress(run_dir: Path) -> str | None:
@@ -199,12 +268,6 @@ def run_progress(run_dir: Path) -> str | None:
     return "unfinished"
 
 
-# What an offline run's seal covers: config.json's parts fixed when the run began (it adds
-# the trainer's fields, its seconds and "complete" when it ends).
-OFFLINE_SEALED = ("program", "config", "demonstrations", "input_files", "normalizer",
-                  "normalizer_source")  # fmt: skip
-
-
 class UntrustedRun(RunReadError):
     """A run folder that fails a check a program makes before it trusts it (the message
     names the file and the problem)."""
@@ -212,17 +275,13 @@ class UntrustedRun(RunReadError):
 
 def sealed_part(document: dict) -> dict:
     """What a run's config seal covers: a sweep's config.json but its provenance (where it
-    ran); an offline run's ``OFFLINE_SEALED`` parts."""
-    if document.get("program") == "offline":
-        return {key: document[key] for key in OFFLINE_SEALED if key in document}
-    return {key: value for key, value in document.items() if key != "provenance"}
+    ran); an offline run's ``OFFLINE_SEALED`` parts (``read_run_config``)."""
+    return read_run_config(document).sealed
 
 
 def recorded_inputs(document: dict) -> dict:
     """The input files' records (``integrity.file_record``) a run's config.json holds."""
-    if document.get("program") == "offline":
-        return document.get("input_files") or {}
-    return (document.get("resolved") or {}).get("inputs") or {}
+    return read_run_config(document).inputs
 
 
 def verify_run(
@@ -327,11 +386,7 @@ def run_normalizer(document: dict) -> list[float] | None:
     """The (random, optimal) returns a run's config.json (or a record's config) sealed: the
     sweep's ``resolved.normalizer``, the offline program's ``normalizer``; None when the run
     knew none (its normalised column is then empty)."""
-    value = (
-        document.get("normalizer")
-        if document.get("program") == "offline"
-        else (document.get("resolved") or {}).get("normalizer")
-    )
+    value = read_run_config(document).normalizer
     if value is None:
         return None
     if (
@@ -506,7 +561,7 @@ def _check_metrics_agree_with_summary(directory: Path, document: dict, who: str)
         raise UntrustedRun(f"{who}: {error}") from None
     try:
         reached = iterations_per_cell(metrics)
-        _check_whole(metrics, reached, progress, run_settings(document))
+        _check_whole(metrics, reached, progress, read_run_config(document).settings)
         rows = read_scored_rows(metrics, normalizer)
     except UNREADABLE as error:
         raise damaged(metrics, error, UntrustedRun) from None

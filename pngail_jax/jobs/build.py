@@ -9,6 +9,7 @@ import dataclasses
 import jax
 
 from pngail_jax import envs
+from pngail_jax.adversarial.family import ADVERSARIAL
 from pngail_jax.adversarial.trainer import AdversarialTrainer
 from pngail_jax.analysis.tracking import ticking
 from pngail_jax.config import settings as run_settings
@@ -98,7 +99,7 @@ def build(
         raise RunError(f"{demos_path}: {error}") from None
     inputs = stack_cells(
         cells, jax.random.key(config.seed), {"bsc_eps": config.task_bsc_eps},
-        learner=config.learner,
+        family=ADVERSARIAL, learner=config.learner,
     )  # fmt: skip
     eval_every = config.settings.eval_every
     num_evaluations = config.iterations // eval_every

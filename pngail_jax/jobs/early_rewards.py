@@ -27,6 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from pngail_jax.adversarial.family import ADVERSARIAL
 from pngail_jax.adversarial.losses import policy_reward
 from pngail_jax.adversarial.trainer import AdversarialTrainer
 from pngail_jax.confidence import ClassifierConfig
@@ -115,7 +116,9 @@ def _build(config: EarlyRewardsConfig, demos) -> tuple[AdversarialTrainer, Grid]
     cells = [
         Cell(method, seed, ratio) for _, method, ratio in VARIANTS for seed in range(config.seeds)
     ]
-    return trainer, Grid(trainer, stack_cells(cells, jax.random.key(0)), blocks_per_chunk=1)
+    return trainer, Grid(
+        trainer, stack_cells(cells, jax.random.key(0), family=ADVERSARIAL), blocks_per_chunk=1
+    )
 
 
 def _read_every_chunk(config: EarlyRewardsConfig, trainer, grid: Grid, optimal) -> list[dict]:

@@ -27,7 +27,7 @@ from pngail_jax.config import settings as run_settings
 from pngail_jax.config.saved import provenance
 from pngail_jax.config.task import task_bsc_eps
 from pngail_jax.demos import DemonstrationError
-from pngail_jax.grid import Grid, make_cells, nonfinite_cells
+from pngail_jax.grid import Grid, make_cells, nonfinite_cells, stack_cells
 from pngail_jax.jobs.chunks import (
     Progress,
     blocks_per_chunk,
@@ -39,14 +39,8 @@ from pngail_jax.jobs.chunks import (
 from pngail_jax.jobs.demonstrations import input_files, load_or_make_demos, resolve_normalizer
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.jobs.offline_config import PROGRAM, OfflineRunConfig, load_offline_config
-from pngail_jax.offline.trainer import (
-    METRICS_CSV_COLUMNS,
-    OfflineConfig,
-    OfflineTrainer,
-    program_groups,
-    required_components,
-    stack_offline_cells,
-)
+from pngail_jax.offline.family import OFFLINE
+from pngail_jax.offline.trainer import METRICS_CSV_COLUMNS, OfflineConfig, OfflineTrainer
 from pngail_jax.storage.integrity import CONFIG_SEAL, read_json, write_json, write_sealed
 from pngail_jax.storage.outputs import claimed
 
@@ -73,7 +67,7 @@ def run_offline(
     continues from them to the numbers of an uninterrupted run.
 
     The methods run in one compiled program per set of parts they need
-    (``offline.program_groups``: both BCs together, DWBC, ISW-BC): a vmapped program computes
+    (``OFFLINE.program_groups``: both BCs together, DWBC, ISW-BC): a vmapped program computes
     every compiled part in every cell, and one mixed program ran 3.2 times as long as the
     separate ones together (benchmarks/offline_throughput.py, docs/methods.md)."""
     out = Path(out)
@@ -140,8 +134,8 @@ def _complete(
 def _programs(config: OfflineRunConfig, trainer_config: OfflineConfig, cells):
     """(methods, trainer config, cells) of each program the grid runs as (``program_groups``:
     one per set of compiled parts)."""
-    for methods in program_groups(config.methods):
-        components = required_components(methods)
+    for methods in OFFLINE.program_groups(config.methods):
+        components = OFFLINE.parts(methods)
         group = [cell for cell in cells if cell.method in methods]
         yield methods, dataclasses.replace(trainer_config, components=components), group
 
@@ -177,7 +171,7 @@ def _environment_and_demos(config: OfflineRunConfig):
         raise RunError(f"demonstrations: {error}") from None
     if demos.confidence is None:
         raise RunError(f"{demos_path}: no confidences, which every offline method reads")
-    if "ilid" in required_components(config.methods) and demos.trajectory_ids is None:
+    if "ilid" in OFFLINE.parts(config.methods) and demos.trajectory_ids is None:
         raise RunError(
             f"{demos_path}: no trajectories (its rows carry no trajectory ids), and ILID selects "
             "rows by the states they lead to: drop ilid from --methods, or use a made set or "
@@ -195,10 +189,11 @@ def _run_group(
     trainer_config = trainer.config
     target = max(1, config.chunk_iterations // trainer_config.eval_every)
     chunk_blocks = blocks_per_chunk(trainer_config.num_evaluations, target)
-    inputs = stack_offline_cells(
-        cells, jax.random.key(config.seed), bsc_eps=task_bsc_eps(config.env),
-        ilid_discriminator_learning_rate=config.ilid_discriminator_learning_rate,
-    )  # fmt: skip
+    overrides = {
+        "bsc_eps": task_bsc_eps(config.env),
+        "ilid_discriminator_learning_rate": config.ilid_discriminator_learning_rate,
+    }
+    inputs = stack_cells(cells, jax.random.key(config.seed), overrides, family=OFFLINE)
     methods = ", ".join(dict.fromkeys(cell.method for cell in cells))
     with ticking(f"compiling {methods}"):
         grid = Grid(trainer, inputs, chunk_blocks)

@@ -9,13 +9,15 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+from pngail_jax.analysis.runs import read_run_config
 from pngail_jax.config.run_config import RunConfig
 from pngail_jax.config.settings import settings_for
 from pngail_jax.config.task import task_classifier, task_num_demos
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.jobs.trainer_configs import sized_classifier
+from pngail_jax.offline.family import OFFLINE
 from pngail_jax.offline.ilid import check_union
-from pngail_jax.offline.trainer import DEFAULT_OFFLINE_METHODS, OfflineConfig, required_components
+from pngail_jax.offline.trainer import DEFAULT_OFFLINE_METHODS, OfflineConfig
 from pngail_jax.storage.integrity import IntegrityError, read_json
 
 PROGRAM = "offline"
@@ -51,7 +53,8 @@ class OfflineRunConfig:
     def __post_init__(self):
         if not self.methods or len(set(self.methods)) != len(self.methods):
             raise ValueError(f"methods must be distinct and not empty, got {self.methods!r}")
-        required_components(self.methods)  # unknown names: one line naming them
+        for method in self.methods:  # an unknown name: one line naming the known ones
+            OFFLINE.check_method(method)
         for name in ("seeds", "gradient_steps", "steps_per_iteration", "eval_every",
                      "chunk_iterations", "batch_size", "ilid_discriminator_steps"):  # fmt: skip
             value = getattr(self, name)
@@ -116,7 +119,7 @@ class OfflineRunConfig:
             ilid_discriminator_steps=self.ilid_discriminator_steps,
             ilid_union=self.ilid_union,
             dwbc_discriminator_every=self.dwbc_discriminator_every,
-            components=required_components(self.methods),
+            components=OFFLINE.parts(self.methods),
         )
 
 
@@ -125,13 +128,14 @@ def load_offline_config(out: str | Path) -> OfflineRunConfig:
     path = Path(out) / "config.json"
     try:
         document = read_json(path, "offline run config")
-        values = dict(document["config"])
-        if document.get("program") != PROGRAM:
+        view = read_run_config(document)
+        if view.program != PROGRAM:
             raise ValueError(f"written by {document.get('program')!r}")
+        values = dict(view.settings)
         for name in ("methods", "hidden_sizes"):
             values[name] = tuple(values[name])
         return OfflineRunConfig(**values)
-    except (IntegrityError, KeyError, TypeError, ValueError) as error:
+    except (AttributeError, IntegrityError, KeyError, TypeError, ValueError) as error:
         raise RunError(
             f"cannot resume {out}: no offline run's config.json there ({error})"
         ) from None

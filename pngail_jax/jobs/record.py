@@ -14,7 +14,7 @@ from pathlib import Path
 
 from pngail_jax.adversarial import methods
 from pngail_jax.adversarial.methods import preset_record
-from pngail_jax.analysis.runs import changed_inputs_refusal, sealed_part
+from pngail_jax.analysis.runs import changed_inputs_refusal, read_run_config, sealed_part
 from pngail_jax.config.run_config import RunConfig
 from pngail_jax.config.saved import provenance, upgrade_saved_config
 from pngail_jax.config.validation import ConfigError
@@ -94,8 +94,8 @@ def load_saved(directory: Path, allow_unsealed: bool = False) -> SavedRun:
             devices["device_count"],
             devices["platform"],
             devices["local_device_count"],
-            data["resolved"].get("inputs", {}),
-            data["resolved"].get("normalizer"),
+            read_run_config(data).inputs,
+            read_run_config(data).normalizer,
         )
     except IntegrityError as error:
         raise RunError(f"--resume {directory}: {error}") from None

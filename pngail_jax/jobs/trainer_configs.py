@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import dataclasses
 
+from pngail_jax.adversarial.family import ADVERSARIAL
 from pngail_jax.adversarial.firl import FirlConfig
-from pngail_jax.adversarial.methods import required_phases
 from pngail_jax.adversarial.trainer import AdversarialConfig
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.config.run_config import RunConfig
@@ -43,7 +43,7 @@ def adversarial_config(config: RunConfig, num_rows: int | None = None) -> Advers
         classifier=sized_classifier(config.classifier, config.label_ratios, num_demos),
         num_demos=num_demos,
         discriminator_hidden_sizes=config.discriminator_hidden_sizes,
-        phases=required_phases(config.methods),
+        phases=ADVERSARIAL.parts(config.methods),
         firl=FirlConfig.for_env(config.env),
         gradient_penalty=config.uses_gradient_penalty,
     )

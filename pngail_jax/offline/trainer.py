@@ -36,7 +36,6 @@ import optax
 from flax import struct
 
 from pngail_jax import envs
-from pngail_jax.adversarial.methods import stack
 from pngail_jax.confidence import (
     ClassifierConfig,
     ClassifierSpec,
@@ -661,14 +660,3 @@ def program_groups(methods) -> list[tuple[str, ...]]:
     for name in methods:
         groups.setdefault(required_components([name]), []).append(name)
     return [tuple(group) for group in groups.values()]
-
-
-def stack_offline_cells(cells, key: jax.Array, **overrides):
-    """``(hyperparams, specs, keys)`` stacked over ``grid.Cell``s (method, seed, label ratio,
-    noise), each cell's key ``fold_in(key, seed)``: the inputs of ``Grid(OfflineTrainer)``."""
-    if not cells:
-        raise ValueError("a grid needs at least one cell")
-    hyperparams = [OfflineHyperparams.create(c.label_ratio, c.noise_std) for c in cells]
-    specs = [offline_spec(c.method, **overrides) for c in cells]
-    keys = jnp.stack([jax.random.fold_in(key, c.seed) for c in cells])
-    return stack(hyperparams), stack(specs), keys

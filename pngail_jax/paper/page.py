@@ -14,6 +14,7 @@ from pngail_jax import envs
 from pngail_jax.adversarial.methods import display_name
 from pngail_jax.analysis.plots import line_style
 from pngail_jax.analysis.report import LATE_LABEL, group_label, late_evaluations
+from pngail_jax.analysis.runs import read_run_config
 from pngail_jax.paper.plan import (
     BUDGETS,
     PAPER_TABLE1,
@@ -290,7 +291,7 @@ def figure_results(out: Path, figures: list[Figure], grids) -> dict:
         }
         for task, series_list in figure.panels.items():  # the grid's random / optimal returns
             config = read_json(out / "grids" / series_list[0].grid / "config.json")
-            results[figure.name][task]["normalizer"] = config["resolved"].get("normalizer")
+            results[figure.name][task]["normalizer"] = read_run_config(config).normalizer
     return results
 
 

@@ -1,0 +1,111 @@
+"""``analysis.runs.read_run_config``, the one reader of a run's config.json: the sweep's flat
+layout and the offline program's nested one read into the same view, and no other module
+tells the two layouts apart. Small dicts in each layout, as the programs write them."""
+
+from pathlib import Path
+
+import pytest
+
+from pngail_jax.analysis.run_records import planned_iterations
+from pngail_jax.analysis.runs import (
+    read_run_config,
+    recorded_inputs,
+    run_normalizer,
+    run_progress_numbers,
+    sealed_part,
+)
+
+PACKAGE = Path(__file__).resolve().parents[1] / "pngail_jax"
+INPUTS = {"demos": {"path": "d.npy", "sha256": "ab", "bytes": 3}}
+
+SWEEP = {  # experiments.sweep's config.json: the RunConfig flat, then what it resolved
+    "env": "Pendulum-v1",
+    "methods": ["gail", "pngail"],
+    "seeds": 2,
+    "label_ratios": [0.2, 0.5],
+    "noise_stds": [0.0],
+    "iterations": 40,
+    "resolved": {
+        "inputs": INPUTS,
+        "normalizer": [-1500.0, -150.0],
+        "normalizer_source": "paper Table 3",
+    },
+    "provenance": {"git_commit": "abc"},
+}
+OFFLINE = {  # experiments.offline's: its config nested under "config"
+    "program": "offline",
+    "config": {
+        "env": "Pendulum-v1",
+        "methods": ["bc-expert", "dwbc"],
+        "seeds": 3,
+        "label_ratio": 0.3,
+        "noise_std": 0.1,
+        "gradient_steps": 2_000,
+        "steps_per_iteration": 100,
+    },
+    "demonstrations": {"rows": 10},
+    "input_files": INPUTS,
+    "normalizer": [-1500.0, -150.0],
+    "normalizer_source": "given",
+    "provenance": {"git_commit": "abc"},
+    "trainer": {"batch_size": 16},
+    "complete": True,
+}
+
+
+def test_a_sweeps_config_reads_as_its_settings_and_what_it_resolved():
+    view = read_run_config(SWEEP)
+    assert view.program == "sweep" and view.settings is SWEEP
+    assert view.settings["env"] == "Pendulum-v1" and view.settings["methods"] == ["gail", "pngail"]
+    assert view.sealed == {k: v for k, v in SWEEP.items() if k != "provenance"}
+    assert view.inputs == INPUTS and view.normalizer == [-1500.0, -150.0]
+    assert view.normalizer_source == "paper Table 3"
+    assert (view.label_ratios, view.noise_stds) == ([0.2, 0.5], [0.0])
+    assert view.planned_iterations == 40 and view.complete is None and view.trainer == {}
+
+
+def test_an_offline_runs_config_reads_as_its_nested_settings():
+    view = read_run_config(OFFLINE)
+    assert view.program == "offline" and view.settings is OFFLINE["config"]
+    assert view.settings["env"] == "Pendulum-v1" and view.settings["seeds"] == 3
+    assert set(view.sealed) == {"program", "config", "demonstrations", "input_files",
+                                "normalizer", "normalizer_source"}  # fmt: skip
+    assert view.inputs == INPUTS and view.normalizer == [-1500.0, -150.0]
+    assert view.normalizer_source == "given"
+    assert (view.label_ratios, view.noise_stds) == ([0.3], [0.1])
+    assert view.planned_iterations == 20  # 2,000 gradient steps of 100 per iteration
+    assert view.complete is True and view.trainer == {"batch_size": 16}
+
+
+@pytest.mark.parametrize("document", [SWEEP, OFFLINE], ids=["sweep", "offline"])
+def test_the_readers_of_one_part_agree_with_the_view(document, tmp_path):
+    view = read_run_config(document)
+    assert sealed_part(document) == view.sealed
+    assert recorded_inputs(document) == view.inputs
+    assert run_normalizer(document) == view.normalizer
+    assert planned_iterations(document) == view.planned_iterations
+    progress = run_progress_numbers(tmp_path, document)  # no summary.json beside it
+    assert progress == ((20, 20) if view.program == "offline" else None)
+
+
+def test_a_config_missing_parts_reads_as_empty():
+    bare = read_run_config({"program": "offline"})
+    assert bare.settings == {} and bare.inputs == {} and bare.planned_iterations is None
+    assert (bare.normalizer, bare.complete) == (None, None)
+    unfinished = read_run_config({**OFFLINE, "complete": False})
+    assert run_progress_numbers(Path("."), {**OFFLINE, "complete": False}) is None
+    assert unfinished.planned_iterations == 20
+    sweep = read_run_config({"env": "Pendulum-v1", "iterations": "40"})
+    assert sweep.inputs == {} and sweep.normalizer is None and sweep.planned_iterations is None
+
+
+def test_no_other_module_tells_the_two_layouts_apart():
+    """The offline layout is recognised in ``read_run_config`` alone (and in
+    ``storage.outputs.output_owner``, below the reading layer, which names the program that
+    owns a folder copied without its marker)."""
+    found = {
+        str(path.relative_to(PACKAGE)): path.read_text().count('get("program") == "offline"')
+        for path in PACKAGE.rglob("*.py")
+        if 'get("program") == "offline"' in path.read_text()
+    }
+    assert found == {"analysis/runs.py": 1, "storage/outputs.py": 1}
