@@ -122,7 +122,7 @@ from pngail_jax.adversarial.family import ADVERSARIAL
 from pngail_jax.adversarial.methods import METHOD_NAMES
 from pngail_jax.adversarial.trainer import AdversarialConfig, AdversarialTrainer, TrainState
 from pngail_jax.confidence import ClassifierConfig
-from pngail_jax.config import settings as run_settings
+from pngail_jax.config import settings as env_settings
 from pngail_jax.config.learner import DEFAULT_FISHER, FISHER_FORMS, LEARNERS
 from pngail_jax.demos import Demonstrations, load_demonstrations
 from pngail_jax.grid import Grid, make_cells, nonfinite_cells, stack_cells
@@ -257,7 +257,7 @@ def compile_worker(args, devices) -> None:
     """Builds the grid of ``args.compile_worker`` cells as ``measure_grid`` does, with the
     compilation cache in ``args.cache_dir``, and prints its compile seconds and cache hits."""
     enable_compilation_cache(args.cache_dir)
-    env = run_settings.make_env(args.env, args.run_settings, cells=args.compile_worker)
+    env = env_settings.make_env(args.env, args.env_settings, cells=args.compile_worker)
     demos, _ = load_demos(args.demos, args.env, env)
     train = make_grid_train(args, env, demos)
     methods, seeds = grid_layout(args.compile_worker)
@@ -317,7 +317,7 @@ def measure_grid(args, train, full_trpo, size: int, devices, key) -> dict:
         eval_seconds,
         eval_seconds_full,
         grid.iterations_per_chunk,
-        args.run_settings.eval_every,
+        args.env_settings.eval_every,
         grid.num_cells * train.config.rollout.batch_size,
     )
     return {
@@ -336,7 +336,7 @@ def measure_grid(args, train, full_trpo, size: int, devices, key) -> dict:
 
 def make_grid_train(args, env, demos):
     """The adversarial trainer of one chunk: ``--iterations`` iterations, one evaluation."""
-    chunk_settings = args.run_settings.replace(eval_every=args.iterations)
+    chunk_settings = args.env_settings.replace(eval_every=args.iterations)
     config = AdversarialConfig(
         rollout=chunk_settings.rollout_config(args.iterations),
         trpo=TRPOConfig(fisher=args.fisher),
@@ -348,7 +348,7 @@ def make_grid_train(args, env, demos):
 
 
 def measure_rows(args, env, demos, devices, common: dict) -> list[dict]:
-    settings = args.run_settings
+    settings = args.env_settings
     train = make_grid_train(args, env, demos)
     full_trpo = full_episode_trpo(args.env, settings, train, max(args.sizes))
     key, rows = jax.random.key(args.seed), []
@@ -538,18 +538,18 @@ def _checked(parser: argparse.ArgumentParser, args: argparse.Namespace) -> argpa
         parser.error("--devices must be a positive integer")
     if args.demos is None and args.env == "Pendulum-v1" and PENDULUM_DEMOS.exists():
         args.demos = PENDULUM_DEMOS
-    args.run_settings = flags.settings_from_flags(parser, args, args.env)
+    args.env_settings = flags.settings_from_flags(parser, args, args.env)
     return args
 
 
 def measure_environment(args, devices) -> list[dict]:
     """Builds the task and its demonstrations and measures every grid size."""
-    settings = args.run_settings
-    env = run_settings.make_env(args.env, settings, cells=max(args.sizes))
+    settings = args.env_settings
+    env = env_settings.make_env(args.env, settings, cells=max(args.sizes))
     demos, demos_note = load_demos(args.demos, args.env, env)
     print(
         f"device {context()['device']} x{len(devices)} used, jax {jax.__version__}; "
-        f"{args.env}: {run_settings.describe(settings, env)}; {args.iterations} iterations per "
+        f"{args.env}: {env_settings.describe(settings, env)}; {args.iterations} iterations per "
         f"timed chunk, {args.classifier_steps:,} classifier steps (untimed)\n"
         f"demonstrations: {demos_note}",
         flush=True,
@@ -563,7 +563,7 @@ def measure_environment(args, devices) -> list[dict]:
     rows = measure_rows(args, env, demos, devices, common)
     per_device = "; peak memory per device" if len(devices) > 1 else ""
     print(
-        f"\n{args.env}: {run_settings.describe(settings, env)}; demonstrations: {demos_note}\n"
+        f"\n{args.env}: {env_settings.describe(settings, env)}; demonstrations: {demos_note}\n"
         f"Timed: median of {NUM_REPEATS} warm calls of a chunk ({args.iterations} iterations + "
         "one evaluation) and of an evaluation alone; training steps/s leaves the evaluation "
         f"out, 'incl. eval' adds one every {settings.eval_every} iterations; {len(devices)} "

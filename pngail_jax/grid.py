@@ -34,7 +34,7 @@ GRID_AXIS = "grid"
 
 
 class Trainer(Protocol):
-    """What ``Grid`` needs of a trainer (``AdversarialTrainer`` and ``rl.TRPOTrainer`` have
+    """What ``Grid`` needs of a trainer (``AdversarialTrainer`` and ``rl.PolicyTrainer`` have
     it): pure ``init(*cell_inputs, key) -> (state, metrics)`` and ``run_blocks(*cell_inputs,
     state, num_blocks=...) -> (state, metrics)``, where a block is ``eval_every`` iterations
     ending in an evaluation, and ``policy_state(state)``, the learner state of its policy."""
@@ -196,7 +196,7 @@ class Grid:
     """Compiled init and chunk programs for stacked cells, sharded over ``devices``.
 
     ``trainer`` is any object with the trainer interface (``AdversarialTrainer``,
-    ``pngail_jax.rl.TRPOTrainer``); ``inputs`` are the arguments of its ``init``, each stacked
+    ``pngail_jax.rl.PolicyTrainer``); ``inputs`` are the arguments of its ``init``, each stacked
     with a leading grid axis, the keys last: ``(hyperparams, specs, keys)`` from
     ``stack_cells`` for adversarial training, ``(hyperparams, keys)`` for TRPO.
 

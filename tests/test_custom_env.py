@@ -153,11 +153,11 @@ def test_brax_environments_are_wrapped():
 def test_a_user_environment_trains_through_the_public_api():
     """TRPO learns the point mass from its ``module:factory`` name: from a policy that lets
     the mass sit (return about -30 over 100 steps) to one that brings it home."""
-    from pngail_jax.rl import RolloutConfig, TRPOHyperparams, TRPOTrainer
+    from pngail_jax.rl import PolicyTrainer, RolloutConfig, TRPOHyperparams
 
     env = envs.make(f"{MODULE}:PointMass")
     config = RolloutConfig(num_envs=10, unroll_length=100, num_iterations=30, eval_every=10)
-    _, metrics = jax.jit(TRPOTrainer(config, env).train)(
+    _, metrics = jax.jit(PolicyTrainer(config, env).train)(
         TRPOHyperparams.create(), jax.random.key(0)
     )
     evaluations = np.asarray(metrics["eval/return"])[9::10]

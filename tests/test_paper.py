@@ -41,15 +41,15 @@ def test_the_gpu_preset_takes_each_tasks_solver_caps_from_the_study_and_nothing_
     for task in MUJOCO_TASKS:
         for demos in (False, True):
             row, base = (
-                gpu.run_settings(task, "mjx", demos),
-                paper_budget.run_settings(task, "mjx", demos),
+                gpu.settings_for(task, "mjx", demos),
+                paper_budget.settings_for(task, "mjx", demos),
             )
             caps = parse_solver(GPU_SOLVERS.get(task, "own"))
             assert (row.solver_iterations, row.ls_iterations) == (
                 caps["solver_iterations"], caps["ls_iterations"]
             )  # fmt: skip
             assert dataclasses.replace(row, **parse_solver("own")) == base
-    assert gpu.run_settings("Pendulum-v1", None) == paper_budget.run_settings("Pendulum-v1", None)
+    assert gpu.settings_for("Pendulum-v1", None) == paper_budget.settings_for("Pendulum-v1", None)
     assert BUDGETS["cpu"].solvers == {} and paper_budget.solvers == {}
 
 

@@ -22,7 +22,7 @@ from pngail_jax.adversarial.family import ADVERSARIAL
 from pngail_jax.adversarial.trainer import AdversarialHyperparams, AdversarialTrainer
 from pngail_jax.grid import make_cells, stack_cells
 from pngail_jax.jobs.trainer_configs import adversarial_config
-from pngail_jax.rl import PPO, PPOConfig, PPOHyperparams, RolloutConfig, TRPOTrainer
+from pngail_jax.rl import PPO, PolicyTrainer, PPOConfig, PPOHyperparams, RolloutConfig
 from pngail_jax.rl.learners import learner_hyperparams, make_learner
 from pngail_jax.rl.ppo import clipped_surrogate_loss, value_loss
 
@@ -162,7 +162,7 @@ def test_bad_values_and_foreign_hyperparameters_are_named():
     with pytest.raises(ValueError, match="learner must be one of trpo, ppo"):
         make_learner("sac", RolloutConfig(), envs.make("Pendulum-v1"))
     pendulum, config = envs.make("Pendulum-v1"), RolloutConfig(num_iterations=1, eval_every=1)
-    trainer = TRPOTrainer(config, pendulum, learner=PPO(config, pendulum))
+    trainer = PolicyTrainer(config, pendulum, learner=PPO(config, pendulum))
     with pytest.raises(ValueError, match="learner is PPO, which reads PPOHyperparams, but the"):
         trainer.init(learner_hyperparams("trpo"), jax.random.key(0))
     with pytest.raises(ValueError, match="at least PPO's 32 minibatches"):
@@ -289,7 +289,7 @@ def test_ppo_learns_pendulum_on_the_true_reward(pendulum):
     config = RolloutConfig(num_envs=10, unroll_length=200, num_iterations=50, eval_every=10,
                            num_eval_episodes=10)  # fmt: skip
     learner = PPO(config, pendulum, PPOConfig(num_minibatches=8))
-    train = jax.jit(jax.vmap(TRPOTrainer(config, pendulum, learner=learner).train))
+    train = jax.jit(jax.vmap(PolicyTrainer(config, pendulum, learner=learner).train))
     hyperparams = _stack(PPOHyperparams.create(learning_rate=1e-3), 3)
     _, metrics = train(hyperparams, jax.random.split(jax.random.key(0), 3))
     final = np.asarray(metrics["eval/return"][:, -1])

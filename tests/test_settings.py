@@ -112,12 +112,12 @@ def test_hopper_learns_with_the_table_settings():
     minute on 2 cores, mostly compiling."""
     import jax
 
-    from pngail_jax.rl import TRPOHyperparams, TRPOTrainer
+    from pngail_jax.rl import PolicyTrainer, TRPOHyperparams
 
     row = settings_for("Hopper", eval_every=10)
     env = settings.make_env("Hopper", row)
     assert env.model_options["iterations"] == 1 and env.model_options["ls_iterations"] == 4
-    train = jax.jit(TRPOTrainer(row.rollout_config(10), env).train)  # Gauss-Newton, the default
+    train = jax.jit(PolicyTrainer(row.rollout_config(10), env).train)  # Gauss-Newton, the default
     key = jax.random.split(jax.random.key(0), 3)[0]  # train_rl --seed 0's first seed
     _, metrics = train(TRPOHyperparams.create(), key)
     final = float(metrics["eval/return"][-1])

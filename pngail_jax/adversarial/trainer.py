@@ -171,7 +171,7 @@ class DiscriminatorBatch(NamedTuple):
 class AdversarialTrainer:
     """Adversarial imitation of ``demos`` in ``env``, one method (a ``MethodSpec``) per call.
 
-    The trainer interface shared with ``pngail_jax.rl.TRPOTrainer`` (and used by
+    The trainer interface shared with ``pngail_jax.rl.PolicyTrainer`` (and used by
     ``pngail_jax.grid.Grid``); the cell inputs here are ``(hyperparams, spec)``:
 
     - ``init(hyperparams, spec, key) -> (state, init_metrics)``: the split, the classifier

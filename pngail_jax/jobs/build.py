@@ -12,7 +12,7 @@ from pngail_jax import envs
 from pngail_jax.adversarial.family import ADVERSARIAL
 from pngail_jax.adversarial.trainer import AdversarialTrainer
 from pngail_jax.analysis.tracking import ticking
-from pngail_jax.config import settings as run_settings
+from pngail_jax.config import settings as env_settings
 from pngail_jax.config.run_config import RunConfig
 from pngail_jax.demos import DemonstrationError, action_scale_note
 from pngail_jax.grid import Cell, Grid, make_cells, stack_cells
@@ -69,7 +69,7 @@ def run_cells(config: RunConfig) -> list[Cell]:
 def make_run_env(config: RunConfig, cells: list[Cell]) -> envs.Env:
     """The task's environment, sized for the grid (a batched engine's width)."""
     try:
-        return run_settings.make_env(config.env, config.settings, cells=len(cells))
+        return env_settings.make_env(config.env, config.settings, cells=len(cells))
     except ValueError as error:  # e.g. a custom factory that raised or returned no Env
         raise RunError(f"environment: {error}") from None
 
@@ -110,7 +110,7 @@ def build(
         f"{config.num_settings} setting(s)) on {config.env}, {config.iterations} iterations x "
         f"{config.settings.samples_per_iteration} steps, {trainer.num_demos} demonstration "
         f"rows; {len(devices)} {devices[0].platform} device(s)\n"
-        f"  {run_settings.describe(config.settings, env)}",
+        f"  {env_settings.describe(config.settings, env)}",
         flush=True,
     )
     announce_inputs(demonstrations, trainer, config, resumed)

@@ -33,7 +33,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from pngail_jax.config import settings as run_settings
+from pngail_jax.config import settings as env_settings
 from pngail_jax.config import validation
 from pngail_jax.config.budget import check_eval_interval, check_seeds
 from pngail_jax.config.learner import DEFAULT_LEARNER, check_learner_fields
@@ -42,7 +42,7 @@ from pngail_jax.demos.npz import save_npz
 from pngail_jax.demos.types import Demonstrations
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.jobs.train_seeds import train_seeds
-from pngail_jax.rl import TRPOTrainer
+from pngail_jax.rl import PolicyTrainer
 from pngail_jax.rl.learners import check_batch, learner_hyperparams, make_learner
 from pngail_jax.storage.checkpoint import save_trpo_policies
 from pngail_jax.storage.integrity import atomic_path, atomic_write_text
@@ -66,12 +66,12 @@ class MakeDemosConfig:
     num_trajectories: int = 5  # trajectories in the mixture
     intermediate_target: float = 0.45  # normalised return the intermediate policy is picked near
     measure_episodes: int = 64  # episodes for the random and optimal returns
-    settings: run_settings.RunSettings | None = None
+    settings: env_settings.RunSettings | None = None
     learner: str = DEFAULT_LEARNER  # the policy learner that trains the candidates (rl.learners)
 
     def __post_init__(self):
         if self.settings is None:
-            object.__setattr__(self, "settings", run_settings.settings_for(self.env, eval_every=10))
+            object.__setattr__(self, "settings", env_settings.settings_for(self.env, eval_every=10))
         check_learner_fields(self.learner)
         for name in ("iterations", "num_trajectories", "measure_episodes"):
             value = getattr(self, name)
@@ -150,7 +150,7 @@ def make_claimed(config: MakeDemosConfig, claim: Claim) -> Path:
     try:
         # Sized for Warp's widest batch: the seeds' training, or the episodes rolled at once.
         widest = max(config.seeds, config.measure_episodes, config.num_trajectories)
-        env = run_settings.make_env(config.env, config.settings, cells=widest)
+        env = env_settings.make_env(config.env, config.settings, cells=widest)
     except ValueError as error:  # e.g. a custom factory that raised or returned no Env
         raise RunError(f"environment: {error}") from None
     claim.prepare()  # an old run kept until here
@@ -177,7 +177,7 @@ def train_candidates(config: MakeDemosConfig, env, out: Path) -> list[Checkpoint
     under ``out/checkpoints/iter_XXXX/``)."""
     rollout = config.rollout_config
     learner = make_learner(config.learner, rollout, env)
-    trainer = TRPOTrainer(rollout, env, learner=learner)
+    trainer = PolicyTrainer(rollout, env, learner=learner)
     hyperparams = jax.tree.map(
         lambda x: jnp.broadcast_to(x, (config.seeds, *x.shape)),
         learner_hyperparams(config.learner),
@@ -195,7 +195,7 @@ def train_candidates(config: MakeDemosConfig, env, out: Path) -> list[Checkpoint
 
     print(
         f"1/3 training {config.learner.upper()} on {config.env} ({config.seeds} seeds x "
-        f"{config.iterations} iterations; {run_settings.describe(config.settings)})",
+        f"{config.iterations} iterations; {env_settings.describe(config.settings)})",
         flush=True,
     )
     train_key = _keys(config)[0]
@@ -213,7 +213,7 @@ class CheckpointEpisodes:
     parameters are arguments, not constants)."""
 
     def __init__(self, env, rollout):
-        policy = TRPOTrainer(rollout, env).learner.policy
+        policy = PolicyTrainer(rollout, env).learner.policy
 
         @jax.jit
         def episodes(params, normalizer, keys):

@@ -23,7 +23,7 @@ import numpy as np
 from pngail_jax.analysis import plots, report
 from pngail_jax.analysis.runs import UntrustedRun, sealed_part, verify_run
 from pngail_jax.analysis.tracking import ticking
-from pngail_jax.config import settings as run_settings
+from pngail_jax.config import settings as env_settings
 from pngail_jax.config.saved import provenance
 from pngail_jax.config.task import task_bsc_eps
 from pngail_jax.demos import DemonstrationError
@@ -164,7 +164,7 @@ def _environment_and_demos(config: OfflineRunConfig):
     """(env, demonstrations, their path), or RunError naming what is wrong with them."""
     run_config, cells = config.run_config, len(config.methods) * config.seeds
     try:
-        env = run_settings.make_env(config.env, run_config.settings, cells)
+        env = env_settings.make_env(config.env, run_config.settings, cells)
         demos, demos_path = load_or_make_demos(run_config, None, env)
         demos.check_env(env)  # before config.json is written, not in the first program
     except (DemonstrationError, FileNotFoundError, ImportError, ValueError) as error:

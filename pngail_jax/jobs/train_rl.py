@@ -24,14 +24,14 @@ import numpy as np
 
 from pngail_jax.analysis.report import write_seed_metrics_csv
 from pngail_jax.analysis.runs import UntrustedRun, sealed_document
-from pngail_jax.config import settings as run_settings
+from pngail_jax.config import settings as env_settings
 from pngail_jax.config import validation
 from pngail_jax.config.budget import check_eval_interval, check_seeds
 from pngail_jax.config.learner import DEFAULT_FISHER, DEFAULT_LEARNER, check_learner_fields
 from pngail_jax.jobs.chunks import nanmean
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.jobs.train_seeds import train_seeds
-from pngail_jax.rl import PPOConfig, RolloutConfig, TRPOConfig, TRPOHyperparams, TRPOTrainer
+from pngail_jax.rl import PolicyTrainer, PPOConfig, RolloutConfig, TRPOConfig, TRPOHyperparams
 from pngail_jax.rl.learners import check_batch, learner_hyperparams, make_learner
 from pngail_jax.storage.checkpoint import save_trpo_policies
 from pngail_jax.storage.integrity import (
@@ -71,13 +71,13 @@ class TrainRLConfig:
     fisher_subsample: int = 1
     value_epochs: int = 1
     truncation_as_terminal: bool = False
-    settings: run_settings.RunSettings | None = None
+    settings: env_settings.RunSettings | None = None
     learner: str = DEFAULT_LEARNER
     ppo: PPOConfig = PPOConfig()
 
     def __post_init__(self):
         if self.settings is None:
-            object.__setattr__(self, "settings", run_settings.settings_for(self.env))
+            object.__setattr__(self, "settings", env_settings.settings_for(self.env))
         for name in ("iterations", "fisher_subsample", "value_epochs"):
             validation.integer(name, getattr(self, name), 1)
         check_seeds(self.seeds, self.seed)
@@ -107,11 +107,11 @@ class TrainRLConfig:
             self.learner, bootstrap_truncation=not self.truncation_as_terminal
         )
 
-    def trainer(self, env) -> TRPOTrainer:
+    def trainer(self, env) -> PolicyTrainer:
         """The trainer of this run in ``env`` (its learner on the true reward)."""
         config = self.rollout_config
         learner = make_learner(self.learner, config, env, self.ppo, self.trpo_config)
-        return TRPOTrainer(config, env, learner=learner)
+        return PolicyTrainer(config, env, learner=learner)
 
     @property
     def learner_config(self) -> TRPOConfig | PPOConfig:
@@ -154,7 +154,7 @@ def train_rl(
     out = Path(out)
     with refusals(), claimed(out, PROGRAM, overwrite=overwrite, resume=resume) as claim:
         try:
-            env = run_settings.make_env(config.env, config.settings, cells=config.seeds)
+            env = env_settings.make_env(config.env, config.settings, cells=config.seeds)
         except ValueError as error:  # e.g. a custom factory that raised or returned no Env
             raise RunError(f"environment: {error}") from None
         document = config.document(command)
@@ -217,7 +217,7 @@ def _train(config: TrainRLConfig, env, out: Path) -> None:
     keys = jax.random.split(jax.random.key(config.seed), config.seeds)
     print(
         f"{learner} on {config.env}: {config.seeds} seeds x {config.iterations} iterations x "
-        f"{rollout.batch_size} steps ({run_settings.describe(config.settings)}) -> {out}",
+        f"{rollout.batch_size} steps ({env_settings.describe(config.settings)}) -> {out}",
         flush=True,
     )
     start = time.perf_counter()

@@ -13,7 +13,7 @@ from pngail_jax.jobs.chunks import intact_checkpoint, nanmean, run_chunks, start
 
 
 def train_seeds(trainer, hyperparams, keys, on_block=None, checkpoints: Path | None = None):
-    """Runs ``trainer`` (a ``pngail_jax.rl.TRPOTrainer``) for stacked seeds, one compiled
+    """Runs ``trainer`` (a ``pngail_jax.rl.PolicyTrainer``) for stacked seeds, one compiled
     block of ``eval_every`` iterations at a time (``pngail_jax.grid.Grid``), printing
     progress after each.
 

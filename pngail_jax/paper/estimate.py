@@ -141,7 +141,7 @@ def nearest_row(rows: list[dict], task: str, physics: str | None, cells: int) ->
 
 def grid_size(grid: GridSpec, budget: Budget, physics: str | None) -> tuple[int, int]:
     """(cells, environment steps) of ``grid`` at ``budget``."""
-    settings = budget.run_settings(grid.task, physics)
+    settings = budget.settings_for(grid.task, physics)
     cells = len(grid.methods) * budget.seeds * len(grid.label_ratios) * len(grid.noise_stds)
     return cells, cells * budget.iterations * settings.num_envs * settings.unroll_length
 
@@ -161,7 +161,7 @@ def estimate_table(grids: dict, budget: Budget, physics, rows: list[dict], made_
     total, missing = 0.0, []
     parts = [(name, grid.task, *grid_size(grid, budget, physics)) for name, grid in grids.items()]
     for task in made_tasks:
-        settings = budget.run_settings(task, physics, demos=True)
+        settings = budget.settings_for(task, physics, demos=True)
         iterations = budget.demo_iterations[task_kind(task)]
         steps = budget.demo_seeds * iterations * settings.num_envs * settings.unroll_length
         parts.append((f"demonstrations of {task}", task, budget.demo_seeds, steps))

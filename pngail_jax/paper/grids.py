@@ -55,7 +55,7 @@ def demo_paths(
     grids, out: Path, budget: Budget, released: dict[str, Path], physics=None, learner="trpo"
 ):
     """The demonstrations file of every grid's set (made, mixed and saved when missing);
-    made ones on ``physics`` (``Budget.run_settings``) by ``learner``'s policies."""
+    made ones on ``physics`` (``Budget.settings_for``) by ``learner``'s policies."""
     sets = list(dict.fromkeys(grid.demos for grid in grids.values()))
     paths = {}
     for demo_set in sets:
@@ -105,7 +105,7 @@ def demo_config(
         num_trajectories=num_optimal + num_intermediate,
         ratio=f"{num_optimal}:{num_intermediate}",
         measure_episodes=budget.measure_episodes,
-        settings=budget.run_settings(task, physics, demos=True),
+        settings=budget.settings_for(task, physics, demos=True),
         learner=learner,
     )
 
@@ -145,7 +145,7 @@ def grid_config(
     return RunConfig.preset(
         "smoke",
         env=grid.task,
-        settings=budget.run_settings(grid.task, physics),
+        settings=budget.settings_for(grid.task, physics),
         classifier=classifier,
         methods=tuple(grid.methods),
         seeds=budget.seeds,

@@ -70,7 +70,7 @@ class Budget:
     # takes them); a task not named keeps its row's (gymnasium's own on the -v4 tasks).
     solvers: dict[str, str] = dataclasses.field(default_factory=dict)
 
-    def run_settings(self, task: str, physics: str | None, demos: bool = False):
+    def settings_for(self, task: str, physics: str | None, demos: bool = False):
         """The ``RunSettings`` of ``task``'s grids (``demos``: of its demonstration making,
         which evaluates every 10 iterations unless the budget says otherwise) on
         ``physics`` (gymnasium's MuJoCo tasks only; None: the platform's engine)."""

@@ -8,16 +8,16 @@ import numpy as np
 import pytest
 
 from pngail_jax import envs
-from pngail_jax.rl import TRPO, RolloutConfig, TRPOConfig, TRPOHyperparams, TRPOTrainer
+from pngail_jax.rl import TRPO, PolicyTrainer, RolloutConfig, TRPOConfig, TRPOHyperparams
 
 SMALL = RolloutConfig(num_envs=4, unroll_length=50, num_iterations=2, eval_every=2,
                       num_eval_episodes=4)  # fmt: skip
 SMALL_TRPO = TRPOConfig(num_value_minibatches=5)
 
 
-def small_trainer(env, config: RolloutConfig = SMALL) -> TRPOTrainer:
+def small_trainer(env, config: RolloutConfig = SMALL) -> PolicyTrainer:
     """TRPO on ``env``'s reward with the small rollout and 5 value minibatches."""
-    return TRPOTrainer(config, env, learner=TRPO(config, env, SMALL_TRPO))
+    return PolicyTrainer(config, env, learner=TRPO(config, env, SMALL_TRPO))
 
 
 def _stack(tree, n):
@@ -116,7 +116,7 @@ def test_learns_pendulum_with_reference_defaults(pendulum):
     on 2 CPU cores.
     """
     config = RolloutConfig(num_iterations=100, eval_every=20)
-    train = jax.jit(jax.vmap(TRPOTrainer(config, pendulum).train))
+    train = jax.jit(jax.vmap(PolicyTrainer(config, pendulum).train))
     keys = jax.random.split(jax.random.key(0), 3)
     _, metrics = train(_stack(TRPOHyperparams.create(), 3), keys)
     final = np.asarray(metrics["eval/return"][:, -1])

@@ -1,5 +1,5 @@
-"""``TRPOTrainer``: TRPO (or another learner) on a fixed reward as one pure program, so
-``jax.jit(jax.vmap(TRPOTrainer(config, env).train))(stacked_hyperparams, keys)`` trains many
+"""``PolicyTrainer``: TRPO (or another learner) on a fixed reward as one pure program, so
+``jax.jit(jax.vmap(PolicyTrainer(config, env).train))(stacked_hyperparams, keys)`` trains many
 runs in one program."""
 
 from __future__ import annotations
@@ -23,14 +23,14 @@ def true_reward(transitions: Transitions) -> jax.Array:
 
 
 @struct.dataclass
-class TRPOTrainState:
+class PolicyTrainState:
     """A TRPO-only run's state: the learner plus its fixed evaluation episode keys."""
 
     learner: TRPOState  # or another learner's state (PPOState)
     eval_keys: jax.Array  # key[num_eval_episodes], the same every evaluation
 
 
-class TRPOTrainer:
+class PolicyTrainer:
     """TRPO (or another ``learner``, e.g. ``rl.PPO``) on a fixed reward (the environment's by
     default), in blocks.
 
@@ -58,7 +58,7 @@ class TRPOTrainer:
         self.env = env
         self.learner = TRPO(config, env) if learner is None else learner
         if self.learner.config != config:
-            raise ValueError("TRPOTrainer: the learner was built with another RolloutConfig")
+            raise ValueError("PolicyTrainer: the learner was built with another RolloutConfig")
         self.reward_fn = reward_fn
 
     @property
@@ -69,7 +69,7 @@ class TRPOTrainer:
     def init(self, hyperparams: TRPOHyperparams, key: jax.Array):
         self.learner.check_hyperparams(hyperparams)  # init reads none, but the blocks will
         init_key, eval_key = jax.random.split(key)
-        state = TRPOTrainState(
+        state = PolicyTrainState(
             learner=self.learner.init(init_key),
             eval_keys=jax.random.split(eval_key, self.config.num_eval_episodes),
         )
@@ -82,8 +82,8 @@ class TRPOTrainer:
         return state, {**metrics, "env_steps": state.env_steps}
 
     def run_blocks(
-        self, hyperparams: TRPOHyperparams, state: TRPOTrainState, num_blocks: int
-    ) -> tuple[TRPOTrainState, dict]:
+        self, hyperparams: TRPOHyperparams, state: PolicyTrainState, num_blocks: int
+    ) -> tuple[PolicyTrainState, dict]:
         learner_state, metrics = run_evaluated_blocks(
             self.learner,
             functools.partial(self._iteration, hyperparams),
@@ -100,6 +100,6 @@ class TRPOTrainer:
         return state, {**metrics, **init_metrics}
 
     @staticmethod
-    def policy_state(state: TRPOTrainState) -> TRPOState:
+    def policy_state(state: PolicyTrainState) -> TRPOState:
         """The learner's state inside a trainer state (for exporting its policy)."""
         return state.learner
