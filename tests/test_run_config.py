@@ -208,3 +208,19 @@ def test_the_gradient_penalty_is_compiled_when_a_cell_uses_it():
     assert not RunConfig(grid_axes=(("gradient_penalty_coef", (0.0,)),)).uses_gradient_penalty
     by_axis = RunConfig(methods=("pngail",), grid_axes=(("gradient_penalty_coef", (0.0, 1.0)),))
     assert adversarial_config(by_axis).gradient_penalty
+
+
+def test_a_runs_provenance_names_the_checkouts_commit():
+    """provenance's git_commit is this checkout's HEAD (None was written after saved.py moved
+    one folder down, so records kept no commit)."""
+    import subprocess
+    from pathlib import Path
+
+    from pngail_jax.config.saved import provenance
+
+    root = Path(__file__).resolve().parents[1]
+    head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True)
+    if head.returncode != 0:
+        pytest.skip("not a git checkout")
+    commit = provenance(command=["x"])["git_commit"]
+    assert commit is not None and commit.removesuffix("+dirty") == head.stdout.strip()

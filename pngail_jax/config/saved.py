@@ -108,7 +108,7 @@ def _cpu_model() -> str:
 
 def _git_commit() -> str | None:
     """The checkout's commit (with ``+dirty`` when files differ), or None outside git."""
-    root = Path(__file__).resolve().parent.parent
+    root = Path(__file__).resolve().parents[2]  # the checkout: pngail_jax/config/saved.py
     try:
         toplevel = subprocess.run(
             ["git", "rev-parse", "--show-toplevel"],
