@@ -125,6 +125,12 @@ def test_a_cut_rerun_is_continued_and_a_foreign_folder_refused(tiny, tmp_path, c
         shutil.copytree(finished, cut, dirs_exist_ok=True)
         return 0
 
+    stopped = (
+        r"^the re-run stopped \(exit status 3; its reason above\): the same command continues "
+        rf"it in {cut}$"
+    )
+    with pytest.raises(run_records.RecordError, match=stopped):
+        reproduce.reproduce("tiny", records, cut, run=lambda program, argv: 3)
     assert reproduce.reproduce("tiny", records, cut, run=finishes)
     assert calls == [("sweep", ["--resume", str(cut)])]
     assert "continuing the record tiny's command" in capsys.readouterr().out

@@ -144,8 +144,13 @@ def plan(record: dict, program: str, argv: list[str], out: Path) -> tuple[str, l
 
 def run_program(program: str, argv: list[str]) -> int:
     """``python -m experiments.<program> ARGV`` in this checkout, as the record's command runs
-    (its relative paths are the checkout's); its exit status."""
-    return subprocess.call([sys.executable, "-m", f"experiments.{program}", *argv])
+    (its relative paths are the checkout's); its exit status. On Ctrl-C the program, which
+    had the signal too, is waited for while it stops at its checkpoint, never killed."""
+    with subprocess.Popen([sys.executable, "-m", f"experiments.{program}", *argv]) as child:
+        try:
+            return child.wait()
+        except KeyboardInterrupt:
+            return child.wait()
 
 
 def reproduce(name: str, records: Path = Path("records"), out: Path | None = None,
@@ -183,8 +188,8 @@ def reproduce(name: str, records: Path = Path("records"), out: Path | None = Non
         status = run(program, arguments)
         if status != 0:
             raise run_records.RecordError(
-                f"the re-run stopped (exit status {status}); run the same command again to "
-                f"continue it in {out}"
+                f"the re-run stopped (exit status {status}; its reason above): the same "
+                f"command continues it in {out}"
             )
     lines, agreed = agreement(record, out)
     if action != "check":
