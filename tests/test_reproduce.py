@@ -188,7 +188,9 @@ def test_bad_requests_are_one_line(tiny, capsys):
     from pngail_jax.programs import record
 
     records, _ = tiny
-    with pytest.raises(SystemExit, match=r"^no record 'nope' in .* \(records there: tiny\)$"):
+    with pytest.raises(
+        SystemExit, match=r"^no record 'nope' in .* \(the records of runs there: tiny\)$"
+    ):
         record.main(["--reproduce", "nope", "--records", str(records)])
     with pytest.raises(SystemExit, match="the record settings-ant-v4 is a comparison of "
                        "experiments.compare_settings; --reproduce checks the records of "

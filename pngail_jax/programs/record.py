@@ -83,8 +83,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument(
         "--reproduce", metavar="NAME",
         help="run the record NAME's command into --out and check the result against the "
-        "record as compare --expected does (exit 1 when a method disagrees); a cut re-run "
-        "continues when run again (programs/reproduce.py)",
+        "record: every seed to the last bit with the record's code and machine, else compare "
+        "--expected's interval (exit 1 when a method disagrees); a cut re-run continues when "
+        "run again (programs/reproduce.py)",
     )  # fmt: skip
     parser.add_argument(
         "--out", type=path_argument,

@@ -52,9 +52,11 @@ def record_folder(name: str, records: Path) -> Path:
     folder = Path(records) / name
     if _NAME.fullmatch(name) and (folder / run_records.RECORD_FILE).is_file():
         return folder
-    known = sorted(path.parent.name for path in Path(records).glob(f"*/{run_records.RECORD_FILE}"))
+    known = sorted(path.parent.name for path in Path(records).glob(f"*/{run_records.METRICS_FILE}"))
     listing = ", ".join(known) if known else "none"
-    raise run_records.RecordError(f"no record {name!r} in {records}/ (records there: {listing})")
+    raise run_records.RecordError(
+        f"no record {name!r} in {records}/ (the records of runs there: {listing})"
+    )
 
 
 def stored_command(record: dict) -> tuple[str, list[str]]:
