@@ -3,6 +3,7 @@
     python -m experiments.record runs/hopper-cpu --name hopper-cpu   # -> records/hopper-cpu/
     python -m experiments.record --check records/hopper-cpu records/pendulum-1000
     python -m experiments.record --docs          # rewrite the docs' tables from their records
+    python -m experiments.record --reproduce check-pendulum   # re-run a record here, check it
 
 A record (``pngail_jax.analysis.run_records``) holds the run's config, command, commit, machine,
 training seconds, each method's final normalised returns per seed, and its metrics.csv
@@ -79,7 +80,24 @@ def parse_args(argv=None) -> argparse.Namespace:
         "record-blocks, record-diagnostics and record-seeds table of README.md and docs/*.md "
         "from its records (checked first)",
     )  # fmt: skip
+    parser.add_argument(
+        "--reproduce", metavar="NAME",
+        help="run the record NAME's command into --out and check the result against the "
+        "record: every seed to the last bit with the record's code and machine, else compare "
+        "--expected's interval (exit 1 when a method disagrees); a cut re-run continues when "
+        "run again (programs/reproduce.py)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--out", type=path_argument,
+        help="with --reproduce: the re-run's folder (default runs/reproduce-NAME)",
+    )  # fmt: skip
     args = parser.parse_args(argv)
+    if args.reproduce is not None:
+        if args.paths or args.name or args.check or args.upgrade or args.docs:
+            parser.error("--reproduce NAME takes --out and --records alone")
+        return args
+    if args.out is not None:
+        parser.error("--out is for --reproduce NAME")
     if args.docs:
         if args.paths or args.name or args.check or args.upgrade:
             parser.error("--docs takes no run, --name, --check or --upgrade")
@@ -414,6 +432,13 @@ def rewrite_docs(root: Path = Path("."), records: Path = Path("records")) -> lis
 def main(argv=None) -> list[Path]:
     args = parse_args(argv)
     try:
+        if args.reproduce is not None:
+            from pngail_jax.programs import reproduce  # its checks import JAX: only here
+
+            out = args.out or reproduce.default_out(args.reproduce)
+            if not reproduce.reproduce(args.reproduce, args.records, out):
+                raise SystemExit(1)
+            return [out]
         if args.docs:
             changed = rewrite_docs(records=args.records)
             print(

@@ -1,0 +1,249 @@
+"""experiments.record --reproduce (pngail_jax.programs.reproduce): a record's command run again
+into a folder of its own, continued when cut, and checked against the record; and every
+committed record's command parses as its program reads it today."""
+
+from __future__ import annotations
+
+import csv
+import gzip
+import importlib
+import io
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+from conftest import tiny_sweep_args
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def tiny(demos_path, tmp_path_factory):
+    """(records folder, the finished tiny sweep) with the sweep recorded as ``tiny``."""
+    from pngail_jax.programs import record, sweep
+
+    base = tmp_path_factory.mktemp("reproduce")
+    run = base / "run"
+    sweep.main(tiny_sweep_args(demos_path, run))
+    record.main([str(run), "--name", "tiny", "--records", str(base / "records")])
+    return base / "records", run
+
+
+def shifted_copy(
+    records: Path, folder: Path, method: str, shift: float, seed: int | None = None, source="tiny"
+) -> None:
+    """``records/<source>`` copied into ``folder`` with every evaluation of ``method`` (of its
+    seed ``seed`` alone, if given) raised by ``shift`` normalised (its raw return with it),
+    its scores, metrics digest and seal made again: a record that checks, of numbers no run
+    gave."""
+    from pngail_jax.analysis import run_records
+    from pngail_jax.analysis.runs import STATISTICS, read_run_config, scores_of_metrics
+    from pngail_jax.storage.integrity import file_digest
+
+    name = folder.name
+    shutil.copytree(records / source, folder)
+    record = json.loads((folder / "record.json").read_text())
+    low, high = record["config"]["resolved"]["normalizer"]
+    metrics = folder / "metrics.csv.gz"
+    rows = list(csv.DictReader(io.StringIO(gzip.decompress(metrics.read_bytes()).decode())))
+    for row in rows:
+        chosen = seed is None or row["seed"] == str(seed)
+        if row["method"] == method and chosen and row["normalized_return"]:
+            value = float(row["eval_return"]) + shift * (high - low)
+            row["eval_return"] = f"{value:.6g}"
+            row["normalized_return"] = f"{(value - low) / (high - low):.6g}"
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=list(rows[0]), lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    metrics.write_bytes(gzip.compress(text.getvalue().encode(), mtime=0))
+    record |= {"name": name, "metrics": {"file": metrics.name, "bytes": metrics.stat().st_size,
+                                         "sha256": file_digest(metrics)}}  # fmt: skip
+    progress = (record["iterations_done"], record["iterations"])
+    for statistic in STATISTICS:
+        scores = scores_of_metrics(
+            metrics, read_run_config(record["config"]).settings, progress, statistic
+        )
+        record[run_records.statistic_key(statistic)] = {
+            label: [float(v) for v in values] for label, values in scores.items()
+        }
+    (folder / "record.json").write_text(json.dumps(run_records.sealed_record(record)))
+    run_records.check_record(folder)
+
+
+def test_a_rerun_agrees_with_its_record_and_a_changed_record_fails(
+    tiny, tmp_path, monkeypatch, capsys
+):
+    """The record's command, run again in a fresh interpreter on this machine, gives every
+    seed of the record to the last bit, so every method agrees (exit 0); run again, the
+    finished re-run is checked, not trained again; against a record whose GAIL seeds are
+    raised by 5 (normalised) the same re-run fails that method, below the record's interval,
+    and the program exits 1."""
+    from pngail_jax.programs import record
+
+    records, _ = tiny
+    monkeypatch.chdir(ROOT)  # the command is python -m experiments.sweep, from the checkout
+    out = tmp_path / "rerun"
+    assert record.main(["--reproduce", "tiny", "--records", str(records), "--out", str(out)]) == [
+        out
+    ]
+    text = capsys.readouterr().out
+    assert "running the record tiny's command: python -m experiments.sweep" in text
+    assert "  agrees when: " in text and "this run: commit " in text
+    assert "2 of 2 methods agree with the record tiny" in text, text
+    assert text.count("every seed identical to the record's") == 2, text
+    record.main(["--reproduce", "tiny", "--records", str(records), "--out", str(out)])
+    assert f"{out} holds the finished re-run of tiny: checking it" in capsys.readouterr().out
+
+    shifted_copy(records, tmp_path / "records" / "shifted", "gail", 5.0)
+    with pytest.raises(SystemExit) as failed:
+        record.main(["--reproduce", "shifted", "--records", str(tmp_path / "records"),
+                     "--out", str(out)])  # fmt: skip
+    assert failed.value.code == 1
+    text = capsys.readouterr().out
+    [gail] = [line for line in text.splitlines() if line.strip().startswith("gail ")]
+    assert "DIFFERS" in gail and "below by" in gail and "seeds differ" in gail, gail
+    assert "1 of 2 methods agree with the record shifted: not reproduced" in text
+
+
+def test_a_cut_rerun_is_continued_and_a_foreign_folder_refused(tiny, tmp_path, capsys):
+    """A re-run cut short is continued with --resume of its folder alone; a folder holding
+    another config's run, another program's files or strangers is refused in one line, and
+    nothing is run."""
+    from pngail_jax.analysis import run_records
+    from pngail_jax.programs import reproduce
+
+    records, finished = tiny
+    cut = tmp_path / "cut"
+    shutil.copytree(finished, cut)
+    summary = json.loads((cut / "summary.json").read_text())
+    (cut / "summary.json").write_text(json.dumps(summary | {"complete": False,
+                                                            "iterations_done": 2}))  # fmt: skip
+    calls = []
+
+    def finishes(program, argv):  # stands in for the program: the run ends as the record's
+        calls.append((program, argv))
+        shutil.copytree(finished, cut, dirs_exist_ok=True)
+        return 0
+
+    stopped = (
+        r"^the re-run stopped \(exit status 3; its reason above\): the same command continues "
+        rf"it in {cut}$"
+    )
+    with pytest.raises(run_records.RecordError, match=stopped):
+        reproduce.reproduce("tiny", records, cut, run=lambda program, argv: 3)
+    assert reproduce.reproduce("tiny", records, cut, run=finishes)
+    assert calls == [("sweep", ["--resume", str(cut)])]
+    assert "continuing the record tiny's command" in capsys.readouterr().out
+
+    def never(program, argv):
+        raise AssertionError("nothing may run")
+
+    other = tmp_path / "other"
+    shutil.copytree(finished, other)
+    config = json.loads((other / "config.json").read_text())
+    (other / "config.json").write_text(json.dumps(config | {"seeds": 3}))
+    strangers = tmp_path / "strangers"
+    strangers.mkdir()
+    (strangers / "mine.txt").write_text("x")
+    for folder, message in (
+        (other, "holds another run of experiments.sweep .its config differs from the record "
+                "tiny's in: seeds.: choose another --out"),
+        (strangers, "is not empty: it holds files it did not make .mine.txt."),
+    ):  # fmt: skip
+        with pytest.raises(run_records.RecordError, match=message) as refused:
+            reproduce.reproduce("tiny", records, folder, run=never)
+        assert "\n" not in str(refused.value)
+    assert reproduce.plan({"name": "tiny"}, "sweep", ["--seeds", "2", "--out", "x",
+                          "--overwrite"], tmp_path / "new") == (
+        "run", ["--seeds", "2", "--out", str(tmp_path / "new")],
+    )  # fmt: skip
+
+
+def test_the_tolerance_is_the_last_bit_only_for_the_records_code_on_its_machine(monkeypatch):
+    """Same code (equal commits, or commits between which no file of the package, entry points
+    or examples changed) on the same CPU model, libraries, XLA_FLAGS, platform and devices:
+    the last bit; anything else, or a commit with uncommitted changes, is another draw."""
+    import subprocess
+
+    from pngail_jax.programs.reproduce import bit_for_bit, same_code
+
+    monkeypatch.chdir(ROOT)  # same_code asks this checkout's git
+    machine = {"cpu_model": "X", "libraries": {"jax": "1"}, "xla_flags": "", "platform": "cpu",
+               "device_count": 1}  # fmt: skip
+    record = {"commit": "abc", "machine": machine}
+    assert bit_for_bit(record, {**machine, "git_commit": "abc"})
+    for change in ({"git_commit": "abc+dirty"}, {"cpu_model": "Y"}, {"xla_flags": "--x"},
+                   {"device_count": 4}, {"git_commit": None}):  # fmt: skip
+        assert not bit_for_bit(record, {**machine, "git_commit": "abc", **change}), change
+    assert not same_code("abc+dirty", "abc+dirty") and not same_code(None, None)
+    known = subprocess.run(["git", "cat-file", "-e", "65bcdfb^{commit}"], cwd=ROOT,
+                           capture_output=True).returncode == 0  # fmt: skip
+    if known:  # 30c6f3d added records/quick-pendulum only; 4a04976 changed config/saved.py
+        assert same_code("65bcdfb", "30c6f3d") and not same_code("94010a0", "4a04976")
+
+
+def test_bad_requests_are_one_line(tiny, capsys):
+    """An unknown record names those there are; a comparison's record and flags that do not
+    go with --reproduce are refused in one line."""
+    from pngail_jax.programs import record
+
+    records, _ = tiny
+    with pytest.raises(
+        SystemExit, match=r"^no record 'nope' in .* \(the records of runs there: tiny\)$"
+    ):
+        record.main(["--reproduce", "nope", "--records", str(records)])
+    with pytest.raises(SystemExit, match="the record settings-ant-v4 is a comparison of "
+                       "experiments.compare_settings; --reproduce checks the records of "
+                       "experiments.sweep and experiments.offline runs"):  # fmt: skip
+        record.main(["--reproduce", "settings-ant-v4", "--records", str(ROOT / "records")])
+    for argv in (["--reproduce", "tiny", "--check"], ["--out", "x", "--check", "r"]):
+        with pytest.raises(SystemExit):
+            record.main(argv)
+        assert len(capsys.readouterr().err.strip().splitlines()) == 1  # the error, in one line
+
+
+def test_stored_commands_are_read_in_their_older_forms():
+    """python -m offline (format 2's slip) and an installed pngail-<program> read as python -m
+    experiments.<program>; a command of no program of the package is refused."""
+    from pngail_jax.analysis.run_records import RecordError
+    from pngail_jax.programs.reproduce import rerun_arguments, stored_command
+
+    def command(*words):
+        return {"name": "r", "command": list(words)}
+
+    assert stored_command(command("python", "-m", "offline", "--seeds", "5")) == (
+        "offline", ["--seeds", "5"],
+    )  # fmt: skip
+    assert stored_command(command("pngail-compare-settings", "--env", "Ant-v4")) == (
+        "compare_settings", ["--env", "Ant-v4"],
+    )  # fmt: skip
+    assert stored_command(command("python3", "-m", "experiments.sweep")) == ("sweep", [])
+    for bad in (command("rm", "-rf", "/"), command("python", "-m", "os"), {"name": "r"}):
+        with pytest.raises(RecordError, match="the record r"):
+            stored_command(bad)
+    words = ["--out=a", "--resume", "b", "--seeds", "2", "--overwrite"]
+    assert rerun_arguments(words, Path("o")) == ["--seeds", "2", "--out", "o"]
+
+
+@pytest.mark.parametrize(
+    "folder", sorted(ROOT.glob("records/*/record.json")), ids=lambda p: p.parent.name
+)
+def test_every_committed_records_command_runs_as_written(folder, tmp_path, monkeypatch):
+    """Each committed record's command, its --out pointed into tmp_path, is read by its
+    program's flags; where every file it names is here (the authors' files beside the
+    checkout), its program's own checks pass too (parse only: nothing trains)."""
+    from pngail_jax.programs.reproduce import rerun_arguments, stored_command
+
+    monkeypatch.chdir(ROOT)
+    monkeypatch.syspath_prepend(str(ROOT))  # examples.*:preset methods, as python -m finds them
+    record = json.loads(folder.read_text())
+    program, argv = stored_command(record)
+    assert record["command"][:3] == ["python", "-m", f"experiments.{program}"]  # as stored
+    module = importlib.import_module(f"pngail_jax.programs.{program}")
+    arguments = rerun_arguments(argv, tmp_path / "out")
+    module.build_parser().parse_args(arguments)
+    named = [Path(argv[i + 1]) for i, word in enumerate(argv[:-1]) if word in ("--demos", "--conf")]
+    if all(path.exists() for path in named):
+        module.parse_args(arguments)
