@@ -175,6 +175,7 @@ def test_a_tiny_fig2_run_writes_the_page_with_every_method_resumes_and_adopts(
         assert f"| Pendulum-v1 | {display_name(method)} |" in text  # the paper's names
     assert "--only fig2 --envs Pendulum-v1" in text and (out / "fig2.png").stat().st_size > 0
     assert "Preset `test`" in text and "its numbers are not results" in text
+    assert "training phases run at small check sizes" in text  # the appendix baselines'
     results = json.loads((out / "results.json").read_text())
     final = results["fig2"]["Pendulum-v1"]["pngail"]["final"]
     assert final["seeds"] == 2 and len(final["ci95"]) == 2
