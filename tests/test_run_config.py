@@ -225,6 +225,8 @@ def test_check_budgets_shrink_the_appendix_phases_and_results_budgets_keep_the_c
         adversarial = adversarial_config(config)
         return (
             adversarial.ranking.num_steps,
+            adversarial.ranking.pairs_per_step,
+            adversarial.drex.ranking.pairs_per_step,
             adversarial.drex.bc.num_steps,
             adversarial.drex.rollouts_per_level,
             adversarial.drex.ranking.num_steps,
@@ -234,11 +236,12 @@ def test_check_budgets_shrink_the_appendix_phases_and_results_budgets_keep_the_c
 
     small = CHECK_PHASE_SIZES
     check_sizes = (
-        small["ranking_steps"], small["drex_bc_steps"], small["drex_rollouts_per_level"],
-        small["ranking_steps"], small["cail_rounds"], small["firl_discriminator_iterations"],
+        small["ranking_steps"], small["ranking_pairs_per_step"], small["ranking_pairs_per_step"],
+        small["drex_bc_steps"], small["drex_rollouts_per_level"], small["ranking_steps"],
+        small["cail_rounds"], small["firl_discriminator_iterations"],
     )  # fmt: skip
-    codebase_sizes = (10_000, 50_000, 5, 10_000, 10, 1_200)
-    assert check_sizes == (500, 2_000, 1, 500, 2, 50)
+    codebase_sizes = (10_000, 64, 64, 50_000, 5, 10_000, 10, 1_200)
+    assert check_sizes == (100, 16, 16, 500, 1, 100, 2, 50)
     check = RunConfig.preset("check")
     assert check.phase_sizes == "check" and sizes(check) == check_sizes
     assert RunConfig.from_dict(json.loads(json.dumps(check.to_dict()))).phase_sizes == "check"

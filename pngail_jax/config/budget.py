@@ -34,8 +34,12 @@ def check_eval_interval(iterations: int, eval_every: int, where: str = "settings
 # minutes on a 2-core CPU; docs/performance.md).
 PHASE_SIZES = ("codebase", "check")
 CHECK_PHASE_SIZES = {
-    "ranking_steps": 500,  # T-REX's and each D-REX member's Adam steps (codebases: 10,000)
-    "drex_bc_steps": 2_000,  # D-REX's cloning (codebase: 50,000)
+    # T-REX's and each D-REX member's reward fit: Adam steps (codebases: 10,000) and snippet
+    # pairs per step (64). A grid runs every phase its methods need in every cell, so a
+    # check grid of the appendix methods fits each of its 8 cells' 4 reward networks.
+    "ranking_steps": 100,
+    "ranking_pairs_per_step": 16,
+    "drex_bc_steps": 500,  # D-REX's cloning (codebase: 50,000)
     "drex_rollouts_per_level": 1,  # noisy episodes per noise level (codebase: 5)
     "cail_rounds": 2,  # CAIL's confidence and discriminator rounds per iteration (10)
     "firl_discriminator_iterations": 50,  # f-IRL's per iteration (codebase: 1,200)

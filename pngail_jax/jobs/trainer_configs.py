@@ -60,16 +60,17 @@ def phase_configs(phase_sizes: str, env: str) -> dict:
         return {"firl": firl}
     sizes = CHECK_PHASE_SIZES
     drex = ranking.DrexConfig()
+    fit = {"num_steps": sizes["ranking_steps"], "pairs_per_step": sizes["ranking_pairs_per_step"]}
     return {
         "firl": dataclasses.replace(
             firl, discriminator_iterations=sizes["firl_discriminator_iterations"]
         ),
-        "ranking": dataclasses.replace(ranking.RankingConfig(), num_steps=sizes["ranking_steps"]),
+        "ranking": dataclasses.replace(ranking.RankingConfig(), **fit),
         "drex": dataclasses.replace(
             drex,
             bc=dataclasses.replace(drex.bc, num_steps=sizes["drex_bc_steps"]),
             rollouts_per_level=sizes["drex_rollouts_per_level"],
-            ranking=dataclasses.replace(drex.ranking, num_steps=sizes["ranking_steps"]),
+            ranking=dataclasses.replace(drex.ranking, **fit),
         ),
         "cail": dataclasses.replace(cail.CAILConfig(), num_rounds=sizes["cail_rounds"]),
     }

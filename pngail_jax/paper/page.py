@@ -370,7 +370,8 @@ def phase_sizes_note(phase_sizes: str) -> str:
     sizes = CHECK_PHASE_SIZES
     return (
         " The appendix baselines' training phases run at small check sizes, not their "
-        f"codebases': T-REX's and each D-REX reward fit {sizes['ranking_steps']:,} steps, "
+        f"codebases': T-REX's and each D-REX reward fit {sizes['ranking_steps']:,} steps of "
+        f"{sizes['ranking_pairs_per_step']} pairs, "
         f"D-REX's cloning {sizes['drex_bc_steps']:,} steps and "
         f"{sizes['drex_rollouts_per_level']} noisy episode(s) per level, CAIL "
         f"{sizes['cail_rounds']} rounds per iteration, f-IRL "
