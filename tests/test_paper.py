@@ -403,7 +403,7 @@ def test_a_grid_config_is_the_sweep_config_of_the_same_flags(tmp_path):
         "--seeds", "2", "--iterations", "20", "--chunk-iterations", "10",
         "--label-ratio", "0.2", "--noise", "0", "--num-envs", "5", "--unroll-length", "100",
         "--eval-every", "10", "--num-eval-episodes", "1", "--classifier-steps", "500",
-        "--physics", "c", "--out", str(tmp_path / "out"),
+        "--physics", "c", "--phase-sizes", "check", "--out", str(tmp_path / "out"),
     ]  # fmt: skip
     assert config == sweep.parse_args(flags).config
     noisy = grids["Pendulum-v1-noise"]
