@@ -166,3 +166,26 @@ def test_fisher_roofline(tmp_path):
     assert [row["name"] for row in rows] == ["fisher_roofline/products", "fisher_roofline/matmuls"]
     assert all(positive(row["milliseconds"]) and positive(row["over_matmuls"]) for row in rows)
     assert rows[1]["over_matmuls"] == 1.0
+
+
+def test_cold_start(tmp_path):
+    """One cold and one warm process of a tiny Pendulum sweep: every stage and both
+    programs' compile and size are measured, and the warm process reads the cold one's
+    programs from the cache."""
+    mixture = authors_pendulum_file(tmp_path, 100)
+    extra = (
+        f"--demos {mixture} --num-envs 4 --unroll-length 50 --iterations 2 --eval-every 2 "
+        "--chunk-iterations 2 --classifier-steps 5 --num-eval-episodes 2"
+    )
+    argv = ["--cases", "pendulum", "--repeats", "1", "--cpus", "", "--extra", extra]
+    rows = rows_of("cold_start", argv, tmp_path / "rows.json")
+    assert [row["cache"] for row in rows] == ["cold", "warm"]
+    for row in rows:
+        assert all(row["stages"][stage] >= 0 for stage in row["stages"])
+        assert positive(row["total_seconds"]) and row["total_seconds"] >= row["stages"]["build"]
+        for program in ("init", "chunk"):
+            size = row["programs"][program]
+            assert size["hlo_instructions"] > 100 and size["stablehlo_lines"] > 100
+            assert sum(size["sources"].values()) <= size["hlo_instructions"]
+    cold, warm = (row["programs"]["chunk"] for row in rows)
+    assert cold["backend_seconds"] > 0 and warm["cache_seconds"] > 0

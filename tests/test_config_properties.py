@@ -99,6 +99,7 @@ FIELD_VALUES = {
     "discriminator_hidden_sizes": tuples_of(COUNTS),
     "cpu_devices": COUNTS,
     "log": tuples_of(st.sampled_from(LOG_BACKENDS) | SCALARS),
+    "phase_sizes": st.sampled_from(["codebase", "check", "paper"]) | SCALARS,
     "preset_name": PATHS,
     "baseline": st.sampled_from([*METHOD_NAMES, "trex"]) | SCALARS,
     "grid_axes": st.lists(

@@ -175,6 +175,7 @@ def test_a_tiny_fig2_run_writes_the_page_with_every_method_resumes_and_adopts(
         assert f"| Pendulum-v1 | {display_name(method)} |" in text  # the paper's names
     assert "--only fig2 --envs Pendulum-v1" in text and (out / "fig2.png").stat().st_size > 0
     assert "Preset `test`" in text and "its numbers are not results" in text
+    assert "training phases run at small check sizes" in text  # the appendix baselines'
     results = json.loads((out / "results.json").read_text())
     final = results["fig2"]["Pendulum-v1"]["pngail"]["final"]
     assert final["seeds"] == 2 and len(final["ci95"]) == 2
@@ -402,7 +403,7 @@ def test_a_grid_config_is_the_sweep_config_of_the_same_flags(tmp_path):
         "--seeds", "2", "--iterations", "20", "--chunk-iterations", "10",
         "--label-ratio", "0.2", "--noise", "0", "--num-envs", "5", "--unroll-length", "100",
         "--eval-every", "10", "--num-eval-episodes", "1", "--classifier-steps", "500",
-        "--physics", "c", "--out", str(tmp_path / "out"),
+        "--physics", "c", "--phase-sizes", "check", "--out", str(tmp_path / "out"),
     ]  # fmt: skip
     assert config == sweep.parse_args(flags).config
     noisy = grids["Pendulum-v1-noise"]

@@ -224,3 +224,50 @@ def test_a_runs_provenance_names_the_checkouts_commit():
         pytest.skip("not a git checkout")
     commit = provenance(command=["x"])["git_commit"]
     assert commit is not None and commit.removesuffix("+dirty") == head.stdout.strip()
+
+
+def test_check_budgets_shrink_the_appendix_phases_and_results_budgets_keep_the_codebases():
+    """The sweep's check preset and the paper's check and test budgets give the appendix
+    phases their small check sizes, recorded as the config's ``phase_sizes`` (config.json)
+    and in the trainer's config (config.json's ``resolved.adversarial``); the results budgets
+    (the sweep's smoke and paper presets, the paper's paper, gpu and cpu budgets) keep the
+    codebases' sizes: T-REX 10,000 steps, D-REX 50,000 cloning steps, 5 episodes per level
+    and 3 x 10,000 reward steps, CAIL 10 rounds, f-IRL 1,200 discriminator steps."""
+    from pngail_jax.config.budget import CHECK_PHASE_SIZES
+    from pngail_jax.paper.grids import grid_config
+    from pngail_jax.paper.plan import APPENDIX_COMPARISON, BUDGETS, DemoSet, GridSpec
+
+    def sizes(config: RunConfig) -> tuple:
+        adversarial = adversarial_config(config)
+        return (
+            adversarial.ranking.num_steps,
+            adversarial.ranking.pairs_per_step,
+            adversarial.drex.ranking.pairs_per_step,
+            adversarial.drex.bc.num_steps,
+            adversarial.drex.rollouts_per_level,
+            adversarial.drex.ranking.num_steps,
+            adversarial.cail.num_rounds,
+            adversarial.firl.discriminator_iterations,
+        )
+
+    small = CHECK_PHASE_SIZES
+    check_sizes = (
+        small["ranking_steps"], small["ranking_pairs_per_step"], small["ranking_pairs_per_step"],
+        small["drex_bc_steps"], small["drex_rollouts_per_level"], small["ranking_steps"],
+        small["cail_rounds"], small["firl_discriminator_iterations"],
+    )  # fmt: skip
+    codebase_sizes = (10_000, 64, 64, 50_000, 5, 10_000, 10, 1_200)
+    assert check_sizes == (100, 16, 16, 500, 1, 100, 2, 50)
+    check = RunConfig.preset("check")
+    assert check.phase_sizes == "check" and sizes(check) == check_sizes
+    assert RunConfig.from_dict(json.loads(json.dumps(check.to_dict()))).phase_sizes == "check"
+    for name in ("smoke", "paper"):
+        config = RunConfig.preset(name)
+        assert config.phase_sizes == "codebase" and sizes(config) == codebase_sizes
+    assert sizes(RunConfig.preset("check", phase_sizes="codebase")) == codebase_sizes
+    grid = GridSpec("appendix", "Pendulum-v1", DemoSet("Pendulum-v1", None), APPENDIX_COMPARISON)
+    for name, budget in BUDGETS.items():
+        expected = "check" if name in ("check", "test") else "codebase"
+        config = grid_config(grid, ("demos.npy", 1.0), budget, None)
+        assert budget.phase_sizes == config.phase_sizes == expected, name
+        assert sizes(config) == (check_sizes if expected == "check" else codebase_sizes), name

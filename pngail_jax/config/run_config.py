@@ -22,7 +22,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from pngail_jax.config.budget import check_seeds
+from pngail_jax.config.budget import check_phase_sizes, check_seeds
 from pngail_jax.config.classifier import ClassifierConfig
 from pngail_jax.config.grid_axes import check_grid_axes
 from pngail_jax.config.learner import DEFAULT_FISHER, DEFAULT_LEARNER, TRPOConfig
@@ -103,6 +103,10 @@ class RunConfig:
     # shape and the networks are the settings' either way.
     learner: str = DEFAULT_LEARNER
     discriminator_hidden_sizes: tuple[int, ...] = (100, 100)
+    # The appendix baselines' training phases: "codebase", their codebases' sizes (results),
+    # or "check", the small sizes of pngail_jax.config.budget.CHECK_PHASE_SIZES (the check
+    # preset's: a look at whether every method runs, not a result).
+    phase_sizes: str = "codebase"
     cpu_devices: int | None = None  # split a CPU into this many XLA devices
     log: tuple[str, ...] = ()  # "tensorboard" and/or "wandb"
     preset_name: str | None = None  # the preset this config started from, for the record
@@ -184,6 +188,7 @@ class RunConfig:
             if not 0 < self.bsc_eps < 0.5:
                 fail("bsc_eps", f"must lie in (0, 0.5), got {self.bsc_eps!r}")
         self._set("grid_axes", check_grid_axes(self.grid_axes))
+        self._set("phase_sizes", check_phase_sizes(self.phase_sizes))
 
     @classmethod
     def preset(cls, name: str, **overrides) -> RunConfig:
@@ -287,7 +292,8 @@ class RunConfig:
 PRESETS_BY_NAME: dict[str, dict[str, Any]] = {
     # A first look: every method runs, in about two minutes on a 2-core CPU (Pendulum-v1);
     # the same scale as experiments.paper's check preset.
-    "check": {"iterations": 20, "seeds": 2, "chunk_iterations": 10},
+    # The appendix baselines' phases at their small check sizes (``phase_sizes``).
+    "check": {"iterations": 20, "seeds": 2, "chunk_iterations": 10, "phase_sizes": "check"},
     # A few minutes on a 2-core CPU (the command line's default).
     "smoke": {"iterations": 300, "seeds": 3, "chunk_iterations": 50},
     # The paper's budget: 5,000 TRPO iterations, 5 seeds (a GPU run).

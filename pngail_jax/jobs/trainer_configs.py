@@ -10,10 +10,12 @@ from __future__ import annotations
 
 import dataclasses
 
+from pngail_jax.adversarial import cail, ranking
 from pngail_jax.adversarial.family import ADVERSARIAL
 from pngail_jax.adversarial.firl import FirlConfig
 from pngail_jax.adversarial.trainer import AdversarialConfig
 from pngail_jax.confidence import ClassifierConfig
+from pngail_jax.config.budget import CHECK_PHASE_SIZES
 from pngail_jax.config.run_config import RunConfig
 
 
@@ -44,6 +46,31 @@ def adversarial_config(config: RunConfig, num_rows: int | None = None) -> Advers
         num_demos=num_demos,
         discriminator_hidden_sizes=config.discriminator_hidden_sizes,
         phases=ADVERSARIAL.parts(config.methods),
-        firl=FirlConfig.for_env(config.env),
         gradient_penalty=config.uses_gradient_penalty,
+        **phase_configs(config.phase_sizes, config.env),
     )
+
+
+def phase_configs(phase_sizes: str, env: str) -> dict:
+    """The appendix phases' static configs of a run on ``env``: their codebases' (f-IRL's for
+    the task, the others the trainer's defaults) for "codebase"; for "check", the same with
+    the sizes of ``CHECK_PHASE_SIZES`` (every other setting of each phase kept)."""
+    firl = FirlConfig.for_env(env)
+    if phase_sizes == "codebase":
+        return {"firl": firl}
+    sizes = CHECK_PHASE_SIZES
+    drex = ranking.DrexConfig()
+    fit = {"num_steps": sizes["ranking_steps"], "pairs_per_step": sizes["ranking_pairs_per_step"]}
+    return {
+        "firl": dataclasses.replace(
+            firl, discriminator_iterations=sizes["firl_discriminator_iterations"]
+        ),
+        "ranking": dataclasses.replace(ranking.RankingConfig(), **fit),
+        "drex": dataclasses.replace(
+            drex,
+            bc=dataclasses.replace(drex.bc, num_steps=sizes["drex_bc_steps"]),
+            rollouts_per_level=sizes["drex_rollouts_per_level"],
+            ranking=dataclasses.replace(drex.ranking, **fit),
+        ),
+        "cail": dataclasses.replace(cail.CAILConfig(), num_rounds=sizes["cail_rounds"]),
+    }

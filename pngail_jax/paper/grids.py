@@ -157,6 +157,7 @@ def grid_config(
         action_scale=None if scale == 1.0 else scale,
         num_demos=num_demos,
         learner=learner,
+        phase_sizes=budget.phase_sizes,
     )
 
 

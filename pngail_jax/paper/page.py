@@ -15,6 +15,7 @@ from pngail_jax.adversarial.methods import display_name
 from pngail_jax.analysis.plots import line_style
 from pngail_jax.analysis.report import LATE_LABEL, group_label, late_evaluations
 from pngail_jax.analysis.runs import read_run_config
+from pngail_jax.config.budget import CHECK_PHASE_SIZES
 from pngail_jax.paper.plan import (
     BUDGETS,
     PAPER_TABLE1,
@@ -363,6 +364,22 @@ def write_page(
     return page
 
 
+def phase_sizes_note(phase_sizes: str) -> str:
+    """What the page says of the appendix baselines' phases at their small check sizes."""
+    if phase_sizes != "check":
+        return ""
+    sizes = CHECK_PHASE_SIZES
+    return (
+        " The appendix baselines' training phases run at small check sizes, not their "
+        f"codebases': T-REX's and each D-REX reward fit {sizes['ranking_steps']:,} steps of "
+        f"{sizes['ranking_pairs_per_step']} pairs, "
+        f"D-REX's cloning {sizes['drex_bc_steps']:,} steps and "
+        f"{sizes['drex_rollouts_per_level']} noisy episode(s) per level, CAIL "
+        f"{sizes['cail_rounds']} rounds per iteration, f-IRL "
+        f"{sizes['firl_discriminator_iterations']} discriminator steps per iteration."
+    )
+
+
 def page_header(options: dict) -> list[str]:
     """The page's title, what its numbers mean, and the command that made it."""
     budget = options["budget"]
@@ -380,7 +397,8 @@ def page_header(options: dict) -> list[str]:
         "95% percentile-bootstrap interval of the mean (the paper's own Table 4 numbers are "
         "± its std). "
         + ("**The check preset checks that everything runs; its numbers are not results.**"
-           if budget in ("check", "test") else ""),
+           if budget in ("check", "test") else "")
+        + phase_sizes_note(BUDGETS[budget].phase_sizes),
         "",
         f"Made with `{options['command']}`. {learner_line(options)}",
         "",

@@ -69,6 +69,9 @@ class Budget:
     # Solver caps of a task's grids and demonstration runs ("fast" or "I/L", as --solver
     # takes them); a task not named keeps its row's (gymnasium's own on the -v4 tasks).
     solvers: dict[str, str] = dataclasses.field(default_factory=dict)
+    # The appendix baselines' training phases: "codebase" (their codebases' sizes) or "check"
+    # (pngail_jax.config.budget.CHECK_PHASE_SIZES), RunConfig.phase_sizes of every grid.
+    phase_sizes: str = "codebase"
 
     def settings_for(self, task: str, physics: str | None, demos: bool = False):
         """The ``RunSettings`` of ``task``'s grids (``demos``: of its demonstration making,
@@ -133,6 +136,7 @@ BUDGETS = {
                 "num_eval_episodes": 1,
             },
         },  # fmt: skip
+        phase_sizes="check",
     ),
     # The paper's budget: 5,000 TRPO iterations of about 5,000 steps, 5 seeds (a GPU).
     "paper": PAPER_BUDGET,
@@ -172,6 +176,7 @@ BUDGETS = {
             "pendulum": {"num_envs": 4, "unroll_length": 50, "eval_every": 2},
             "mujoco": {"num_envs": 2, "unroll_length": 16, "eval_every": 1, "num_eval_episodes": 1},
         },  # fmt: skip
+        phase_sizes="check",
     ),
 }
 

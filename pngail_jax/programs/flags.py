@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from pngail_jax import envs
+from pngail_jax.config.budget import PHASE_SIZES
 from pngail_jax.config.learner import FISHER_FORMS, LEARNERS
 from pngail_jax.config.output import LOG_BACKENDS
 from pngail_jax.config.settings import REFERENCE_SETTINGS, RunSettings, parse_solver, settings_for
@@ -354,6 +355,14 @@ RUN_FLAGS = (
         "passes of TRPO's value fit over each batch (default 1, the reference's; "
         "docs/performance.md)",
         type=int,
+    ),
+    FieldFlag(
+        "phase_sizes",
+        "the appendix baselines' training phases (T-REX's and D-REX's reward fits, D-REX's "
+        "cloning, CAIL's rounds, f-IRL's discriminator): codebase, their codebases' sizes, or "
+        "check, small sizes that only show a method runs (default: codebase; the check "
+        "preset's: check)",
+        choices=PHASE_SIZES,
     ),
     FieldFlag(
         "cpu_devices",
