@@ -13,10 +13,17 @@ from collections.abc import Callable
 from typing import overload
 
 import numpy as np
-import scipy.stats
 from numpy.typing import ArrayLike
 
 Statistic = Callable[..., float | np.ndarray]
+
+
+def _scipy_stats():
+    """scipy.stats, imported on first use: about a third of a program's import time, read
+    only by the statistics after the last chunk (benchmarks/cold_start.py)."""
+    import scipy.stats
+
+    return scipy.stats
 
 
 def _finite(values: ArrayLike) -> np.ndarray:
@@ -41,7 +48,7 @@ def iqm(values: ArrayLike, axis: int | None = None) -> float | np.ndarray:
         finite = _finite(values)
         if finite.size == 0:
             return math.nan
-        return float(scipy.stats.trim_mean(finite, proportiontocut=0.25))
+        return float(_scipy_stats().trim_mean(finite, proportiontocut=0.25))
     x = np.moveaxis(np.asarray(values, np.float64), axis, -1)
     x = np.where(np.isfinite(x), x, np.nan)
     x = np.sort(x, axis=-1)  # NaN last
@@ -158,7 +165,7 @@ def improvement(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     Mann-Whitney identity U = (rank sum of x in the pooled sample) - n (n + 1) / 2 with
     midranks for ties."""
     n, m = x.shape[-1], y.shape[-1]
-    ranks = scipy.stats.rankdata(np.concatenate([x, y], axis=-1), axis=-1)
+    ranks = _scipy_stats().rankdata(np.concatenate([x, y], axis=-1), axis=-1)
     u = np.sum(ranks[..., :n], axis=-1) - n * (n + 1) / 2.0
     return u / (n * m)
 
@@ -236,7 +243,7 @@ def split_half_agreement(scores: ArrayLike, *, num_splits: int = 1000, seed: int
         order = rng.permutation(num_seeds)
         first = scores[:, order[:half]].mean(axis=1)
         second = scores[:, order[half : 2 * half]].mean(axis=1)
-        tau = scipy.stats.kendalltau(first, second).statistic
+        tau = _scipy_stats().kendalltau(first, second).statistic
         taus.append(0.0 if np.isnan(tau) else tau)
         same_best.append(np.argmax(first) == np.argmax(second))
         differences.append(np.mean(np.abs(first - second)))
