@@ -4,6 +4,7 @@ committed record's command parses as its program reads it today."""
 
 from __future__ import annotations
 
+import copy
 import csv
 import gzip
 import importlib
@@ -247,3 +248,29 @@ def test_every_committed_records_command_runs_as_written(folder, tmp_path, monke
     named = [Path(argv[i + 1]) for i, word in enumerate(argv[:-1]) if word in ("--demos", "--conf")]
     if all(path.exists() for path in named):
         module.parse_args(arguments)
+
+
+def test_an_offline_rerun_cut_short_or_of_an_older_record_is_the_same_run():
+    """An offline run writes its trainer's fields when it finishes, so a re-run cut short has
+    none: they are compared only where both sides have them; a record from before a setting
+    existed (``ilid_union``, ``dwbc_discriminator_updates``) ran with its default, so a re-run
+    of its command today is the same run; a changed setting still differs."""
+    from pngail_jax.analysis import run_records
+    from pngail_jax.jobs.offline_config import offline_defaults
+
+    record = json.loads((ROOT / "records/offline-pendulum-ilid-intended/record.json").read_text())
+    config = copy.deepcopy(record["config"])
+    cut = {key: value for key, value in config.items() if key != "trainer"}
+    older = copy.deepcopy(record)
+    for key in ("ilid_union", "dwbc_discriminator_updates"):
+        del older["config"]["config"][key]
+    changed = copy.deepcopy(config)
+    changed["config"]["ilid_union"] = "released"
+
+    def differences(run, against):
+        return run_records.config_differences(run, against, {}, offline_defaults())
+
+    assert differences(cut, record) == []
+    assert differences(config, older) == []
+    assert differences(cut, older) == []
+    assert differences(changed, record) == ["config.ilid_union"]

@@ -462,13 +462,18 @@ _NOT_NUMBERS = ("demos", "conf", "resolved", "log", "chunk_iterations", "cpu_dev
                 "train_seconds", "demonstrations", "input_files")  # fmt: skip
 
 
-def config_differences(config: dict, record: dict, sweep_defaults: dict) -> list[str]:
+def config_differences(
+    config: dict, record: dict, sweep_defaults: dict, offline_defaults: dict | None = None
+) -> list[str]:
     """The config fields in which a run (its ``config.json``) differs from the record's run,
     leaving out those that do not change the numbers: the top-level fields of a sweep's, the
     settings (``config``) of an offline run's with its normaliser and trainer fields. A field
-    one side of a sweep lacks (a record from before the field existed) reads as its value in
-    ``sweep_defaults``, a default ``RunConfig``'s ``to_dict()`` (which the caller, above the
-    trainers, makes: this module imports no JAX)."""
+    one side lacks (a record from before the field existed) reads as its value in
+    ``sweep_defaults``, a default ``RunConfig``'s ``to_dict()``, or for an offline run in
+    ``offline_defaults``, a default ``OfflineRunConfig``'s fields (which the caller, above the
+    trainers, makes: this module imports no JAX). An offline run's trainer fields and
+    normaliser are compared only where both sides have them: a run writes its trainer's
+    fields when it finishes, so a run cut short has none yet."""
 
     def fields(document: dict) -> dict:
         view = read_run_config(document)
@@ -483,12 +488,21 @@ def config_differences(config: dict, record: dict, sweep_defaults: dict) -> list
     mine, reference = fields(config), fields(record["config"])
     not_numbers = set(_NOT_NUMBERS) | {f"config.{key}" for key in _NOT_NUMBERS}
     keys = sorted((set(mine) | set(reference)) - not_numbers)
-    defaults = {} if read_run_config(config).program == "offline" else sweep_defaults
+    offline = read_run_config(config).program == "offline"
+    defaults = sweep_defaults
+    if offline:
+        defaults = {f"config.{key}": value for key, value in (offline_defaults or {}).items()}
 
     def value(document: dict, key: str):
         return document[key] if key in document else defaults.get(key)
 
-    return [key for key in keys if value(mine, key) != value(reference, key)]
+    def written_later(key: str) -> bool:  # an offline run's trainer part, at its end
+        partial = key.startswith("trainer.") or key == "normalizer"
+        return offline and partial and (mine.get(key) is None or reference.get(key) is None)
+
+    return [
+        key for key in keys if not written_later(key) and value(mine, key) != value(reference, key)
+    ]
 
 
 def check_comparable(run_dirs, record: dict) -> list[str]:

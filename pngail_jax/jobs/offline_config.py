@@ -123,6 +123,13 @@ class OfflineRunConfig:
         )
 
 
+def offline_defaults() -> dict:
+    """A default offline run's settings as its config.json writes them (tuples as lists):
+    what an offline record from before a field existed ran with."""
+    values = dataclasses.asdict(OfflineRunConfig())
+    return {key: list(v) if isinstance(v, tuple) else v for key, v in values.items()}
+
+
 def load_offline_config(out: str | Path) -> OfflineRunConfig:
     """The config an offline run in ``out`` began with (its config.json), or RunError."""
     path = Path(out) / "config.json"

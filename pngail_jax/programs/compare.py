@@ -114,13 +114,16 @@ def _against_record(args, scores) -> tuple[dict, str]:
     if args.expected is None:
         return {}, ""
     from pngail_jax.config.run_config import RunConfig  # JAX's import only with --expected
+    from pngail_jax.jobs.offline_config import offline_defaults
     from pngail_jax.storage.integrity import read_json
 
     record = run_records.check_record(args.expected)
     notes = run_records.check_comparable(args.runs, record)
     rows = run_records.expected_rows(scores, record)
     config = read_json(args.runs[0] / "config.json", "run config")
-    differences = run_records.config_differences(config, record, RunConfig().to_dict())
+    differences = run_records.config_differences(
+        config, record, RunConfig().to_dict(), offline_defaults()
+    )
     text = "\n" + run_records.expected_markdown(rows, record, differences, scores.statistic, notes)
     info = {"record": str(args.expected), "config_differences": differences, "rows": rows,
             "unfinished": notes}  # fmt: skip

@@ -95,6 +95,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     if args.reproduce is not None:
         if args.paths or args.name or args.check or args.upgrade or args.docs:
             parser.error("--reproduce NAME takes --out and --records alone")
+        if args.allow_unsealed:
+            parser.error("--allow-unsealed is for writing a record from a run, not --reproduce")
         return args
     if args.out is not None:
         parser.error("--out is for --reproduce NAME")

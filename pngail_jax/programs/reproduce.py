@@ -105,6 +105,7 @@ def _same_run(out: Path, record: dict) -> list[str]:
     change the numbers, ``run_records.config_differences``); RecordError when it has no
     readable config."""
     from pngail_jax.config.run_config import RunConfig  # JAX's import only when it runs
+    from pngail_jax.jobs.offline_config import offline_defaults
 
     try:
         config = read_json(out / "config.json", "run config")
@@ -113,7 +114,7 @@ def _same_run(out: Path, record: dict) -> list[str]:
             f"--out {out} holds a run whose config.json cannot be read ({error}): choose "
             "another --out"
         ) from None
-    return run_records.config_differences(config, record, RunConfig().to_dict())
+    return run_records.config_differences(config, record, RunConfig().to_dict(), offline_defaults())
 
 
 def plan(record: dict, program: str, argv: list[str], out: Path) -> tuple[str, list[str]]:
@@ -174,6 +175,11 @@ def reproduce(name: str, records: Path = Path("records"), out: Path | None = Non
         )
     record = run_records.check_record(folder)
     program, argv = stored_command(record)
+    if program not in RUN_PROGRAMS:  # e.g. a paper grid's record, which stores the plan's command
+        raise run_records.RecordError(
+            f"the record {name} stores a command of experiments.{program}; --reproduce re-runs "
+            f"the commands of {' and '.join(f'experiments.{p}' for p in RUN_PROGRAMS)} runs"
+        )
     if not Path(f"experiments/{program}.py").is_file():
         raise run_records.RecordError(
             f"run --reproduce from the root of a pngail-jax checkout: the record's command is "
@@ -221,8 +227,13 @@ def agreement(record: dict, out: Path, statistic: str = HEADLINE) -> tuple[list[
         raise run_records.RecordError(str(error)) from None
     notes = run_records.check_comparable([out], record)
     rows = run_records.expected_rows(scores, record)
-    mine = read_json(out / "config.json", "run config").get("provenance") or {}
-    exact = bit_for_bit(record, mine)
+    try:
+        document = read_json(out / "config.json", "run config")
+    except (OSError, IntegrityError) as error:
+        raise run_records.RecordError(f"{out}: its config.json cannot be read ({error})") from None
+    mine = document.get("provenance") or {}
+    resumed = document.get("resumed_provenance")  # an offline run's last resume, if any
+    exact = bit_for_bit(record, mine) and (resumed is None or bit_for_bit(record, resumed))
     lines = [
         f"Against the record {record['name']} ({scores.tasks[0]}):",
         f"  record:   {_machine(record.get('machine') or {}, record.get('commit'))}",
