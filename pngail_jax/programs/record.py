@@ -53,7 +53,8 @@ from pngail_jax.programs.cli import (
 from pngail_jax.storage.integrity import atomic_write_text
 
 
-def parse_args(argv=None) -> argparse.Namespace:
+def build_parser() -> ArgumentParser:
+    """The record program's flags."""
     parser = ArgumentParser(
         "record", description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
     )
@@ -91,6 +92,13 @@ def parse_args(argv=None) -> argparse.Namespace:
         "--out", type=path_argument,
         help="with --reproduce: the re-run's folder (default runs/reproduce-NAME)",
     )  # fmt: skip
+    return parser
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    """The flags of ``argv``, one of the program's modes (record, --check, --upgrade, --docs,
+    --reproduce) with only the flags it takes; else one line naming the clash."""
+    parser = build_parser()
     args = parser.parse_args(argv)
     if args.reproduce is not None:
         if args.paths or args.name or args.check or args.upgrade or args.docs:
