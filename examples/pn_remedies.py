@@ -7,8 +7,8 @@ examples.pn_remedies:gradient_penalty
 
 On the authors' HalfCheetah file PN-GAIL's discriminator calls the agent and the ~70% of
 demonstrations with confidence near 0 one class, separates the agent from everything else,
-and its reward sp(-z) vanishes (docs/results.md). Each preset below is PN-GAIL (eq. 11, BSC
-confidences) with one change, through a ``MethodSpec`` coefficient:
+and its reward sp(-z) vanishes (docs/results/tenth-budget.md). Each preset below is PN-GAIL
+(eq. 11, BSC confidences) with one change, through a ``MethodSpec`` coefficient:
 
 - ``negative_half``: the negative term (1 - r) sp(-z) at half weight (``pn_negative_coef``
   0.5; 0 is 2IWIL's loss without its r / mean r, 1 is PN-GAIL: a dial, ``--grid

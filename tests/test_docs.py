@@ -1,5 +1,6 @@
 """The docs say what the code does: every module is on the architecture page, every docs page
-is in the README's index, and every flag of a documented command is one its program knows."""
+is in the README's index (every results page in docs/results.md's), every link and anchor
+resolves, and every flag of a documented command is one its program knows."""
 
 import importlib
 import itertools
@@ -9,7 +10,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
 
 
 def test_every_module_is_on_the_architecture_page():
@@ -31,6 +32,74 @@ def test_every_docs_page_is_in_the_readmes_index():
     pages = sorted(path.name for path in (ROOT / "docs").glob("*.md"))
     missing = [name for name in pages if f"](docs/{name})" not in index]
     assert not missing, f"the README's docs index lacks {missing}"
+
+
+def test_every_results_page_is_in_the_results_index():
+    """docs/results.md is the index of the results pages: it links each page of docs/results/,
+    so a page added there is found from it."""
+    index = (ROOT / "docs" / "results.md").read_text()
+    pages = sorted(path.name for path in (ROOT / "docs" / "results").glob("*.md"))
+    assert len(pages) >= 5, pages
+    missing = [name for name in pages if f"](results/{name}" not in index]
+    assert not missing, f"docs/results.md does not link {missing}"
+
+
+def heading_anchor(heading: str) -> str:
+    """The anchor GitHub gives a Markdown heading: its text (a link's label, no backticks) in
+    lower case, every character but letters, digits, '_', '-' and spaces dropped, spaces
+    turned into '-'."""
+    text = re.sub(r"\[([^\]]*)\]\([^)]*\)", r"\1", heading.strip().lower()).replace("`", "")
+    return re.sub(r"[^\w\- ]", "", text).replace(" ", "-")
+
+
+def anchors(page: Path) -> set[str]:
+    """The anchors of a page's headings (outside code fences); a repeated heading's later
+    anchors get -1, -2, ..., as on GitHub."""
+    found, seen, fenced = set(), {}, False
+    for line in page.read_text().split("\n"):
+        fenced ^= line.startswith("```")
+        heading = re.match(r"#{1,6} (.+)", line)
+        if heading and not fenced:
+            anchor = heading_anchor(heading.group(1))
+            count = seen.get(anchor, 0)
+            found.add(f"{anchor}-{count}" if count else anchor)
+            seen[anchor] = count + 1
+    return found
+
+
+def test_a_heading_gets_githubs_anchor():
+    title = (
+        "Fig. 2 / 3 on the authors' Hopper and HalfCheetah files (MuJoCo's C engine, a CPU budget)"
+    )
+    assert heading_anchor(title) == (
+        "fig-2--3-on-the-authors-hopper-and-halfcheetah-files-mujocos-c-engine-a-cpu-budget"
+    )
+    assert heading_anchor("What PN-GAIL\\BSC needs: `--docs`") == "what-pn-gailbsc-needs---docs"
+    assert heading_anchor("See [the index](results.md)") == "see-the-index"
+
+
+def test_every_relative_link_and_anchor_of_the_docs_resolves(tmp_path):
+    """Each link of README.md and docs/**/*.md to a file of the repository names one that
+    exists, and its #anchor (or a same-page #anchor) one of that page's headings: a section
+    moved to another page leaves no link behind."""
+    broken = []
+    for page in PAGES:
+        text = re.sub(r"```.*?```", "", page.read_text(), flags=re.DOTALL)
+        for target in re.findall(r"\]\(([^)\s]+)\)", text):
+            if "://" in target or target.startswith("mailto:"):
+                continue
+            path, _, anchor = target.partition("#")
+            linked = (page.parent / path).resolve() if path else page
+            name = f"{page.relative_to(ROOT)}: {target}"
+            if not linked.exists():
+                broken.append(f"{name} (no such file)")
+            elif anchor and linked.suffix == ".md" and anchor not in anchors(linked):
+                broken.append(f"{name} (no such heading)")
+    assert not broken, f"broken links: {broken}"
+    # the check itself: a moved section's anchor is found broken
+    page = tmp_path / "page.md"
+    page.write_text("# Title\n\n## A section\n\n```\n# not a heading\n```\n\n## A section\n")
+    assert anchors(page) == {"title", "a-section", "a-section-1"}
 
 
 def documented_commands():

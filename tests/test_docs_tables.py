@@ -1,5 +1,5 @@
 """The docs' results tables that rest on committed run records are what their records give:
-each ``<!-- record-table NAME -->`` table of README.md and docs/*.md equals
+each ``<!-- record-table NAME -->`` table of README.md and docs/**/*.md equals
 ``record_tables.record_table`` of ``records/NAME`` (checked first: digest, whole, both
 statistics recomputed from its metrics). ``python -m experiments.record --docs`` rewrites
 them."""
@@ -51,6 +51,24 @@ def test_a_table_edited_by_hand_is_found_and_rewritten(tmp_path):
         record_tables.record_table(record, "gail")
 
 
+def test_the_results_pages_are_read_and_their_tables_rewritten(tmp_path):
+    """The results are split by subject into docs/results/*.md: ``doc_files`` holds every
+    one of them (the marked-table test above checks each), and ``--docs`` rewrites a stale
+    table on a page below docs/ as on one in it."""
+    pages = program.doc_files(ROOT)
+    split = sorted((ROOT / "docs" / "results").glob("*.md"))
+    assert len(split) >= 5 and set(split) <= set(pages)
+    markers = sum(len(program.parse_markers(page, page.read_text())) for page in split)
+    assert markers >= 20  # the 25 M, 2.5 M, Pendulum, remedy and offline records' tables
+    (tmp_path / "docs" / "results").mkdir(parents=True)
+    (tmp_path / "README.md").write_text("none\n")
+    page = tmp_path / "docs" / "results" / "offline.md"
+    page.write_text("<!-- record-table offline-hopper -->\n| old |\n<!-- /record-table -->\n")
+    assert program.rewrite_docs(tmp_path, ROOT / "records") == [page]
+    [(name, written, expected)] = program.marked_tables(page, ROOT / "records")
+    assert name == "offline-hopper" and written == expected != "| old |\n"
+
+
 def test_a_glance_table_joins_records_by_task():
     """A row per task, the records of one task joined (Pendulum's ILID comes from its own
     record), each cell the headline's mean ± s.e. over seeds, computed here in NumPy; a
@@ -78,7 +96,8 @@ def test_a_glance_table_joins_records_by_task():
 # right above it. A results table is one whose header names a result or whose cells hold a
 # mean ± s.e. or an interval; throughput, fidelity and settings tables are not (their headers
 # below).
-RESULT_DOCS = ("README.md", "docs/results.md", "docs/ppo.md", "docs/performance.md",
+SPLIT_RESULTS = sorted(f"docs/results/{page.name}" for page in (ROOT / "docs/results").glob("*.md"))
+RESULT_DOCS = ("README.md", "docs/results.md", *SPLIT_RESULTS, "docs/ppo.md", "docs/performance.md",
                "docs/demonstrations.md")  # fmt: skip
 RESULT_HEADERS = ("final", "iqm", "return", "mae", "accuracy", "p(", "per seed", "average")
 NOT_RESULTS = ("steps/s", "envs x steps per iteration", "rows per step")

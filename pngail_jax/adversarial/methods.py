@@ -85,7 +85,7 @@ class MethodSpec:
     pu_prior: jax.Array  # in [0, 1)
     pu_agent_coef: jax.Array
     pu_agent_prior: jax.Array  # in [0, 1)
-    # Remedies for a saturating PN discriminator (docs/results.md; none is a paper method):
+    # Remedies for a saturating PN discriminator (docs/results/remedies.md; none is a paper method):
     pn_negative_coef: jax.Array  # v's PN part times this (default 1; 0 drops the negative term)
     # 1: the PN risk's two classes weigh the same: the positive side (r sp(z)) divided by the
     # split's mean r, the negative side (the agent term and (1 - r) sp(-z)) by its own total

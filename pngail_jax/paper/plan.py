@@ -147,7 +147,7 @@ BUDGETS = {
     "gpu": dataclasses.replace(PAPER_BUDGET, chunk_iterations=500, solvers=GPU_SOLVERS),
     # A tenth of the paper's budget (2.5 M steps per run): Pendulum-v1 grids in about half
     # an hour each on a 2-core CPU, the MuJoCo grids of the authors' files on the C engine in
-    # 1.5-2 hours each (Hopper-v4: 122 minutes beside other jobs; docs/results.md).
+    # 1.5-2 hours each (Hopper-v4: 122 minutes beside other jobs; docs/results/tenth-budget.md).
     "cpu": dataclasses.replace(
         PAPER_BUDGET,
         iterations=500,

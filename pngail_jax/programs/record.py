@@ -10,7 +10,7 @@ training seconds, each method's final normalised returns per seed, and its metri
 gzipped (every cell and iteration): what a results table in the docs rests on, without
 checkpoints, policies or plots. Writing one checks it; ``--check`` verifies kept ones (the
 metrics file against its digest, whole against the config, the final returns recomputed).
-A table in README.md or docs/ between ``<!-- record-table NAME -->`` and
+A table in README.md or a page under docs/ between ``<!-- record-table NAME -->`` and
 ``<!-- /record-table -->`` is ``record_tables.record_table`` of ``records/NAME`` (with
 ``baseline=METHOD`` after the name: each method's probability of improvement over it), and one
 between ``<!-- record-glance NAME NAME ... -->`` and ``<!-- /record-glance -->`` is
@@ -78,7 +78,7 @@ def build_parser() -> ArgumentParser:
     parser.add_argument(
         "--docs", action="store_true",
         help="rewrite every record-table, record-glance, record-comparison, record-contrast, "
-        "record-blocks, record-diagnostics and record-seeds table of README.md and docs/*.md "
+        "record-blocks, record-diagnostics and record-seeds table of README.md and docs/**/*.md "
         "from its records (checked first)",
     )  # fmt: skip
     parser.add_argument(
@@ -361,8 +361,10 @@ def parse_markers(path: Path, text: str) -> list[Marker]:
 
 
 def doc_files(root: Path = Path(".")) -> list[Path]:
-    """The documents whose tables may rest on records: README.md and docs/*.md."""
-    return [root / "README.md", *sorted((root / "docs").glob("*.md"))]
+    """The documents whose tables may rest on records: README.md and every page under docs/
+    (docs/results/*.md included: the results pages are split by subject, and a new page is
+    found without a list to keep)."""
+    return [root / "README.md", *sorted((root / "docs").rglob("*.md"))]
 
 
 def _expected(marker: Marker, records: Path) -> str:
