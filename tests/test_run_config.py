@@ -56,7 +56,9 @@ def test_json_round_trip_and_presets(tmp_path):
         ({"methods": ()}, "methods must name at least one method"),
         ({"methods": (["gail"],)}, r"unknown method\(s\) \[\['gail'\]\]"),  # no TypeError
         ({"log": ("tensorboard", "tensorboard")}, "log backends must not repeat"),
-        ({"fisher": ["hessian"]}, "fisher must be one of"),
+        ({"learner": {"trpo": {"fisher": ["hessian"]}}}, "TRPOConfig.fisher must be one of"),
+        ({"learner": {"name": "ppo", "ppo": {"num_epochs": 0}}}, "PPOConfig.num_epochs must be"),
+        ({"learner": {"nam": "ppo"}}, r"learner: unknown key\(s\) \['nam'\]"),
         ({"discriminator_hidden_sizes": (100, 0)}, "discriminator_hidden_sizes must be positive"),
         ({"demos": 5}, "demos must be a non-empty string or None, got 5"),
         ({"env": 5}, "env must be an environment name, got 5"),

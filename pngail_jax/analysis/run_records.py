@@ -39,6 +39,7 @@ from pngail_jax.analysis.runs import (
     scores_of_metrics,
     verify_run,
 )
+from pngail_jax.config.learner import upgrade_learner_fields
 from pngail_jax.config.released_files import PAPER_NORMALIZERS
 from pngail_jax.storage.integrity import (
     IntegrityError,
@@ -477,8 +478,8 @@ def config_differences(
 
     def fields(document: dict) -> dict:
         view = read_run_config(document)
-        if view.program != "offline":
-            return document
+        if view.program != "offline":  # a sweep's of an older layout read in today's
+            return upgrade_learner_fields(document)
         return {
             **{f"{part}.{key}": value for part, values in (("config", view.settings),
                ("trainer", view.trainer)) for key, value in values.items()},

@@ -8,10 +8,8 @@ from __future__ import annotations
 
 import dataclasses
 
-from pngail_jax import envs
-from pngail_jax.config.budget import check_eval_interval
 from pngail_jax.config.grid_axes import METHOD_AXES
-from pngail_jax.config.learner import check_batch, check_cell_value, check_learner_fields
+from pngail_jax.config.learner import check_cell_value
 from pngail_jax.config.methods import check_preset, resolve
 from pngail_jax.config.output import LOG_BACKENDS
 from pngail_jax.config.presets import ALL_METHOD_NAMES, PRESETS
@@ -19,8 +17,8 @@ from pngail_jax.config.validation import fail, is_among
 
 
 def check_names(config) -> None:
-    """The names each field must be among: methods, the learner and its Fisher form
-    (``config.learner``), log backends."""
+    """The names each field must be among: methods, log backends, the grid axes' fields
+    (the learner's are its part's own: ``config.learner.LearnerConfig``)."""
     if not config.methods:
         fail(
             "methods",
@@ -43,7 +41,6 @@ def check_names(config) -> None:
             fail("methods", f": {error}")
     if len(set(config.methods)) != len(config.methods):
         fail("methods", f"must not repeat, got {list(config.methods)}")
-    check_learner_fields(config.learner, fisher=config.fisher, value_epochs=config.value_epochs)
     bad_backends = [name for name in config.log if not is_among(name, LOG_BACKENDS)]
     if bad_backends:
         fail(
@@ -60,7 +57,7 @@ def check_names(config) -> None:
             continue
         for value in values:
             try:
-                check_cell_value(config.learner, field, value)
+                check_cell_value(config.learner.name, field, value)
             except ValueError as error:
                 fail("grid_axes", f": {field}={value:g}: {error}")
     for name in config.methods:  # every value of a coefficient axis, on every method
@@ -77,29 +74,9 @@ def check_names(config) -> None:
 
 
 def check_between_fields(config) -> None:
-    """The checks between fields: the run's length and its task's settings, the
-    normalised return's ends, the demonstrations and their companion fields."""
-    check_eval_interval(config.iterations, config.settings.eval_every)
-    if config.settings.physics is not None and config.env not in envs.GYM_TASKS:
-        fail(
-            "settings.physics",
-            f": only gymnasium's MuJoCo tasks ({', '.join(envs.GYM_TASKS)}) have a choice of "
-            f"engine, not {config.env}",
-            name="RunSettings.physics",
-        )
-    if config.env == "Pendulum-v1" and config.settings.env_options:
-        cap = next(iter(config.settings.env_options))  # the first solver cap set
-        fail(
-            f"settings.{cap}",
-            ": Pendulum-v1 has no MJX solver (its solver caps stay None)",
-            name=f"RunSettings.{cap}",
-        )
-    # The learner's batch (samples per iteration against its minibatches): the one check of
-    # the trainer's config that reads the run's fields together; the trainer's config itself
-    # is built once, with the run (jobs.trainer_configs).
-    check_batch(
-        config.learner, config.settings.rollout_config(config.iterations), trpo=config.trpo_config
-    )
+    """The checks between fields (the run's length, its task's settings and its learner's
+    batch are every training job's: ``config.training``): the normalised return's ends, the
+    demonstrations and their companion fields."""
     if config.random_return is not None and config.optimal_return is None:
         fail("random_return", "needs optimal_return (the normalised return's other end)")
     if None not in (config.random_return, config.optimal_return) and not (

@@ -99,7 +99,7 @@ def build(
         raise RunError(f"{demos_path}: {error}") from None
     inputs = stack_cells(
         cells, jax.random.key(config.seed), {"bsc_eps": config.task_bsc_eps},
-        family=ADVERSARIAL, learner=config.learner,
+        family=ADVERSARIAL, learner=config.learner.name,
     )  # fmt: skip
     eval_every = config.settings.eval_every
     num_evaluations = config.iterations // eval_every
