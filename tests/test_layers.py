@@ -24,7 +24,7 @@ LAYERS = [
         (
             "config", "config.validation", "config.presets", "config.released_files",
             "config.learner", "config.budget", "config.grid_axes", "config.output",
-            "config.classifier", "config.methods",
+            "config.classifier", "config.methods", "config.demonstrations",
             "storage", "storage.integrity", "storage.outputs", "storage.compilation",
             "analysis.stats",
         ),
@@ -255,7 +255,7 @@ def test_the_analysis_imports_only_modules_without_jax():
 # The config's parts at the bottom (issue 74, item 1), each importing no JAX.
 CONFIG_PARTS = (
     "config.learner", "config.budget", "config.grid_axes", "config.output", "config.classifier",
-    "config.methods",
+    "config.methods", "config.demonstrations",
 )  # fmt: skip
 
 

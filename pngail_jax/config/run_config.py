@@ -24,11 +24,12 @@ from typing import Any
 
 from pngail_jax.config.budget import check_phase_sizes
 from pngail_jax.config.classifier import ClassifierConfig
+from pngail_jax.config.demonstrations import DemonstrationsConfig, demonstrations_part
 from pngail_jax.config.grid_axes import check_grid_axes
 from pngail_jax.config.learner import LearnerConfig, learner_part
 from pngail_jax.config.methods import resolve
 from pngail_jax.config.presets import METHOD_NAMES
-from pngail_jax.config.run_config_checks import check_between_fields, check_names
+from pngail_jax.config.run_config_checks import check_names
 from pngail_jax.config.saved import upgrade_saved_config
 from pngail_jax.config.settings import RunSettings
 from pngail_jax.config.task import (  # noqa: F401  (the tables, importable from here too)
@@ -120,12 +121,11 @@ class RunConfig:
         check_training(self)  # env, settings, the budget and the learner, as every job's
         self._check_classifier()
         self._check_numbers()
-        for name in ("demos", "conf", "confidence_field", "preset_name"):
-            value = getattr(self, name)
-            if value is not None and (not isinstance(value, str) or not value):
-                fail(name, f"must be a non-empty string or None, got {value!r}")
+        if self.preset_name is not None and (
+            not isinstance(self.preset_name, str) or not self.preset_name
+        ):
+            fail("preset_name", f"must be a non-empty string or None, got {self.preset_name!r}")
         check_names(self)
-        check_between_fields(self)
 
     def _set(self, name: str, value) -> None:
         object.__setattr__(self, name, value)
@@ -160,13 +160,8 @@ class RunConfig:
         )  # fmt: skip
         self._set("label_ratios", ratios)
         self._set("noise_stds", noise)
-        if self.action_scale is not None:
-            self._set("action_scale", real("action_scale", self.action_scale))
-            if self.action_scale <= 0:
-                fail("action_scale", f"must be finite and positive, got {self.action_scale!r}")
-        for name in ("random_return", "optimal_return"):
-            if getattr(self, name) is not None:
-                self._set(name, real(name, getattr(self, name), "be a finite number"))
+        for name, value in dataclasses.asdict(self.demonstrations).items():
+            self._set(name, value)  # the part's checks, its numbers as Python floats
         if self.bsc_eps is not None:
             self._set("bsc_eps", real("bsc_eps", self.bsc_eps, "lie in (0, 0.5)"))
             if not 0 < self.bsc_eps < 0.5:
@@ -188,6 +183,12 @@ class RunConfig:
             overrides.setdefault("settings", None)
             overrides.setdefault("classifier", None)
         return dataclasses.replace(self, **overrides)
+
+    @property
+    def demonstrations(self) -> DemonstrationsConfig:
+        """The demonstrations part of this run (its files, their units, the normalised
+        return's ends), whose fields config.json keeps flat."""
+        return demonstrations_part(self)
 
     @property
     def task_bsc_eps(self) -> float:

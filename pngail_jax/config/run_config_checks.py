@@ -1,8 +1,10 @@
 """The checks of a ``RunConfig`` that read its fields together, run when a config is made
 (``RunConfig.__post_init__``, after each field is normalised to its type): the names each
-field must be among (the methods: registered or importable presets, each once), the checks
-between fields, and those of the demonstrations' companion fields. Each failure is a
-``ConfigError`` naming the field (the command line names its flag)."""
+field must be among (the methods: registered or importable presets, each once; the log
+backends; the grid axes' values on the run's learner and methods). The checks every job's
+config shares are its parts' (``config.training``, ``config.demonstrations``,
+``config.learner``). Each failure is a ``ConfigError`` naming the field (the command line
+names its flag)."""
 
 from __future__ import annotations
 
@@ -71,36 +73,3 @@ def check_names(config) -> None:
                     check_preset(name, dataclasses.replace(preset, coefficients=changed))
                 except ValueError as error:
                     fail("grid_axes", f": {field}={value:g} on {error}")
-
-
-def check_between_fields(config) -> None:
-    """The checks between fields (the run's length, its task's settings and its learner's
-    batch are every training job's: ``config.training``): the normalised return's ends, the
-    demonstrations and their companion fields."""
-    if config.random_return is not None and config.optimal_return is None:
-        fail("random_return", "needs optimal_return (the normalised return's other end)")
-    if None not in (config.random_return, config.optimal_return) and not (
-        config.optimal_return > config.random_return
-    ):
-        fail(
-            "optimal_return",
-            f"({config.optimal_return}) must be above random_return ({config.random_return})",
-        )
-    check_demonstration_fields(config)
-
-
-def check_demonstration_fields(config) -> None:
-    if config.conf is not None and config.demos is None:
-        fail("conf", ": a confidence file needs demos (made demonstrations carry their own)")
-    is_minari = config.demos is not None and config.demos.startswith("minari:")
-    if config.confidence_field is not None and not is_minari:
-        fail(
-            "confidence_field",
-            "reads a Minari dataset's episode metadata: demos minari:<id>",
-        )
-    if (
-        config.demos is not None
-        and config.demos.endswith(".npz")
-        and (config.conf is not None or config.action_scale not in (None, 1.0))
-    ):
-        fail("demos", ": an .npz set carries its confidences and units: no conf or action_scale")

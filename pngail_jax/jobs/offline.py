@@ -72,16 +72,15 @@ def run_offline(
     separate ones together (benchmarks/offline_throughput.py, docs/methods.md)."""
     out = Path(out)
     with refusals(), claimed(out, PROGRAM, overwrite=overwrite, resume=resume) as claim:
-        run_config = config.run_config
         if resume:
             _check_resumable(out, config, allow_unsealed)
         env, demos, demos_path = _environment_and_demos(config)
-        normalizer, normalizer_source = resolve_normalizer(run_config, demos, env)
+        normalizer, normalizer_source = resolve_normalizer(config, demos, env)
         document = {
             "program": PROGRAM,
             "config": _json_config(config),
             "demonstrations": demos_path,
-            "input_files": input_files(run_config, demos_path),
+            "input_files": input_files(config.demonstrations, demos_path),
             "normalizer": normalizer,
             "normalizer_source": normalizer_source,
             "complete": False,
@@ -162,10 +161,10 @@ def _check_resumable(out: Path, config: OfflineRunConfig, allow_unsealed: bool =
 
 def _environment_and_demos(config: OfflineRunConfig):
     """(env, demonstrations, their path), or RunError naming what is wrong with them."""
-    run_config, cells = config.run_config, len(config.methods) * config.seeds
+    cells = len(config.methods) * config.seeds
     try:
-        env = env_settings.make_env(config.env, run_config.settings, cells)
-        demos, demos_path = load_or_make_demos(run_config, None, env)
+        env = env_settings.make_env(config.env, config.settings, cells)
+        demos, demos_path = load_or_make_demos(config, None, env)
         demos.check_env(env)  # before config.json is written, not in the first program
     except (DemonstrationError, FileNotFoundError, ImportError, ValueError) as error:
         raise RunError(f"demonstrations: {error}") from None

@@ -158,7 +158,7 @@ def write_config(out: Path, run: BuiltRun, command: Sequence[str] | None = None)
             "adversarial": dataclasses.asdict(run.trainer.config),
             # What each method name resolved to: a resume refuses a changed preset.
             "methods": {name: preset_record(name) for name in run.config.methods},
-            "inputs": input_files(run.config, run.demos_path),
+            "inputs": input_files(run.config.demonstrations, run.demos_path),
         },
         "provenance": provenance(command=command),
     }
