@@ -39,8 +39,8 @@ class RunDemonstrations:
 
     demos: Demonstrations
     path: str
-    normalizer: list[float] | None
-    normalizer_source: str
+    return_range: list[float] | None
+    return_range_source: str
 
     @property
     def action_scale(self) -> float:
@@ -56,11 +56,11 @@ def prepare(config: RunConfig, env, saved=None) -> RunDemonstrations:
         demos, path = load_or_make_demos(config, saved.demos_path if saved else None, env)
     except (DemonstrationError, FileNotFoundError, ImportError) as error:
         raise RunError(f"demonstrations: {error}") from None
-    if saved is not None and saved.normalizer is not None:  # as the run began
-        normalizer, source = saved.normalizer, "the run's config.json"
+    if saved is not None and saved.return_range is not None:  # as the run began
+        return_range, source = saved.return_range, "the run's config.json"
     else:
-        normalizer, source = resolve_normalizer(config, demos, env)
-    return RunDemonstrations(demos, path, normalizer, source)
+        return_range, source = resolve_return_range(config, demos, env)
+    return RunDemonstrations(demos, path, return_range, source)
 
 
 def minari_directory(dataset_id: str) -> Path | None:
@@ -150,7 +150,7 @@ def _cached_demos(cached: Path):
     return demos
 
 
-def normalizer_of(demos) -> list[float] | None:
+def return_range_of(demos) -> list[float] | None:
     metadata = demos.metadata
     if "random_return" in metadata and "optimal_return" in metadata:
         return [float(metadata["random_return"]), float(metadata["optimal_return"])]
@@ -160,16 +160,16 @@ def normalizer_of(demos) -> list[float] | None:
 RANDOM_RETURN_EPISODES = 32
 
 
-def resolve_normalizer(config, demos, env) -> tuple[list[float] | None, str]:
+def resolve_return_range(config, demos, env) -> tuple[list[float] | None, str]:
     """(random, optimal) returns and where they came from: the flags, the demonstrations'
     metadata, or the flag's optimal return with a random return measured here (uniform
     random actions, ``RANDOM_RETURN_EPISODES`` episodes, a key of ``config.seed``).
     ``config``: a job's config with its base seed and its demonstrations part."""
     seed, config = config.seed, config.demonstrations
     if config.optimal_return is None:
-        normalizer = normalizer_of(demos)
+        return_range = return_range_of(demos)
         source = demos.metadata.get("normalizer_source", "the demonstrations' metadata")
-        return normalizer, source if normalizer else "none"
+        return return_range, source if return_range else "none"
     if config.random_return is not None:
         return [config.random_return, config.optimal_return], "--random-return, --optimal-return"
     key = jax.random.fold_in(jax.random.key(seed), 7)

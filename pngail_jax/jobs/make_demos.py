@@ -115,7 +115,7 @@ class Checkpoint(NamedTuple):
     iteration: int
     seed: int
     policy_params: Any
-    normalizer: Any
+    normalizer: Any  # the policy's observation statistics (rl.ObservationNormalizer)
     eval_return: float
 
 
@@ -158,7 +158,7 @@ def make_claimed(config: MakeDemosConfig, claim: Claim) -> Path:
     episodes = CheckpointEpisodes(env, config.rollout_config)
     picked = pick_policies(config, env, snapshots, episodes)
     demos = roll_out_mixture(config, env, picked, episodes)
-    path = write_demonstrations(out, demos, {k: demos.metadata[k] for k in NORMALIZER_KEYS})
+    path = write_demonstrations(out, demos, {k: demos.metadata[k] for k in RETURN_RANGE_KEYS})
     print(policies_table(picked))
     _, first_rows = np.unique(demos.trajectory_ids, return_index=True)
     confidences = [float(c) for c in demos.confidence[np.sort(first_rows)]]
@@ -336,13 +336,16 @@ def _labelled_rows(parts, env, picked: Picked):
     return rows, trajectory_returns
 
 
-NORMALIZER_KEYS = ("env", "random_return", "optimal_return")
+# What normalizer.json holds (its name kept for the folders already written): the task and
+# the normalised return's ends, the random and optimal returns.
+RETURN_RANGE_KEYS = ("env", "random_return", "optimal_return")
 
 
-def write_demonstrations(out: Path, demos: Demonstrations, normalizer: dict) -> Path:
-    """``normalizer.json``, then ``demos.npz`` (the mark of a finished run), each written to
-    a temporary sibling and renamed, so a kill never leaves a truncated file behind."""
-    atomic_write_text(out / "normalizer.json", json.dumps(normalizer, indent=2))
+def write_demonstrations(out: Path, demos: Demonstrations, return_range: dict) -> Path:
+    """``normalizer.json`` (``return_range``: the task, the random and the optimal return),
+    then ``demos.npz`` (the mark of a finished run), each written to a temporary sibling and
+    renamed, so a kill never leaves a truncated file behind."""
+    atomic_write_text(out / "normalizer.json", json.dumps(return_range, indent=2))
     path = out / DEMOS_FILE
     with atomic_path(path) as temporary:  # keeps the .npz suffix np.savez would append
         save_npz(temporary, demos)
