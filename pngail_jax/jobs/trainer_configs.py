@@ -3,7 +3,7 @@ turns a sweep's ``RunConfig`` into the ``AdversarialConfig`` its trainer is buil
 ``sized_classifier`` gives the confidence classifier the unlabelled batch width a grid's label
 ratios need (the offline job's trainer config takes it too). The config itself
 (``pngail_jax.config``) imports no trainer for this: checking a ``RunConfig`` checks its
-learner's batch (``run_config_checks``), and the trainer's config is built once, here, when
+learner's batch (``config.training``), and the trainer's config is built once, here, when
 the run is built (``jobs.build``, ``jobs.early_rewards``)."""
 
 from __future__ import annotations
