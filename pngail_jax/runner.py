@@ -25,9 +25,11 @@ from pngail_jax.jobs.demonstrations import (  # noqa: F401
     input_files,
     load_or_make_demos,
     minari_directory,
-    normalizer_of,
-    resolve_normalizer,
 )
+from pngail_jax.jobs.demonstrations import (  # noqa: F401
+    resolve_return_range as resolve_normalizer,
+)
+from pngail_jax.jobs.demonstrations import return_range_of as normalizer_of  # noqa: F401
 from pngail_jax.jobs.errors import RunError  # noqa: F401
 from pngail_jax.jobs.record import (  # noqa: F401
     SEAL,

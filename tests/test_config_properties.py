@@ -21,7 +21,7 @@ from pngail_jax import envs
 from pngail_jax.adversarial.methods import METHOD_NAMES
 from pngail_jax.analysis.tracking import BACKENDS as LOG_BACKENDS
 from pngail_jax.confidence import ClassifierConfig
-from pngail_jax.config.learner import FISHER_FORMS
+from pngail_jax.config.learner import FISHER_FORMS, LearnerConfig, PPOConfig, TRPOConfig
 from pngail_jax.config.run_config import RunConfig
 from pngail_jax.config.settings import RunSettings
 from pngail_jax.config.validation import ConfigError
@@ -92,10 +92,19 @@ FIELD_VALUES = {
     )
     | JUNK,
     "bsc_eps": FLOATS,
-    "fisher": st.sampled_from(FISHER_FORMS) | JUNK,
-    "learner": st.sampled_from(LEARNERS) | JUNK,
-    "fisher_subsample": COUNTS,
-    "value_epochs": COUNTS,
+    "learner": st.sampled_from(LEARNERS)
+    | st.builds(
+        LearnerConfig,
+        name=st.sampled_from(LEARNERS),
+        trpo=st.builds(TRPOConfig, fisher=st.sampled_from(FISHER_FORMS)),
+        ppo=st.builds(PPOConfig, num_epochs=st.integers(1, 5), normalize_rewards=st.booleans()),
+    )
+    | JUNK
+    | st.dictionaries(
+        st.sampled_from(["name", "trpo", "ppo", "x"]),
+        JUNK | st.sampled_from(LEARNERS) | st.fixed_dictionaries({"fisher": JUNK}),
+        max_size=2,
+    ),
     "discriminator_hidden_sizes": tuples_of(COUNTS),
     "cpu_devices": COUNTS,
     "log": tuples_of(st.sampled_from(LOG_BACKENDS) | SCALARS),
@@ -149,14 +158,13 @@ def assert_stored_types(config: RunConfig) -> None:
     assert type(config.env) is str and kinds(config.methods, str) and kinds(config.log, str)
     assert kinds(config.label_ratios, float) and kinds(config.noise_stds, float)
     assert kinds(config.discriminator_hidden_sizes, int)
-    for name in ("seeds", "iterations", "seed", "chunk_iterations", "fisher_subsample",
-                 "value_epochs"):  # fmt: skip
+    for name in ("seeds", "iterations", "seed", "chunk_iterations"):
         assert type(getattr(config, name)) is int, name
     for name in ("num_demos", "cpu_devices"):
         assert getattr(config, name) is None or type(getattr(config, name)) is int, name
     for name in ("demos", "conf", "confidence_field", "preset_name"):
         assert getattr(config, name) is None or type(getattr(config, name)) is str, name
-    assert type(config.fisher) is str and type(config.learner) is str
+    assert type(config.learner) is LearnerConfig and type(config.learner.name) is str
     for name in ("action_scale", "bsc_eps", "random_return", "optimal_return"):
         assert getattr(config, name) is None or type(getattr(config, name)) is float, name
     assert type(config.settings) is RunSettings and type(config.classifier) is ClassifierConfig
@@ -404,8 +412,8 @@ def test_one_name_and_one_default_per_concept_across_programs(tmp_path, capsys):
     from pngail_jax.programs import train_rl
     from pngail_jax.rl import TRPOConfig
 
-    fisher = train_rl.parse_args([]).fisher
-    assert fisher == RunConfig().fisher == TRPOConfig().fisher == "gauss_newton"
+    fisher = train_rl.parse_args([]).learner.trpo.fisher
+    assert fisher == RunConfig().learner.trpo.fisher == TRPOConfig().fisher == "gauss_newton"
     out = ["--env", "Hopper", "--out", str(tmp_path / "new")]
     old = compare_settings.parse_args([*out, "--eval-episodes", "7"])
     assert old.num_eval_episodes == 7

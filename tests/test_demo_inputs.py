@@ -347,15 +347,15 @@ def test_normalisers_from_flags_or_a_measured_random_policy():
 
     env = envs.make("Pendulum-v1")
     plain = Demonstrations(np.zeros((4, 3), np.float32), np.zeros((4, 1), np.float32))
-    assert demos_job.resolve_normalizer(RunConfig(), plain, env) == (None, "none")
+    assert demos_job.resolve_return_range(RunConfig(), plain, env) == (None, "none")
     given = RunConfig(random_return=-1200, optimal_return=-150)
-    assert demos_job.resolve_normalizer(given, plain, env)[0] == [-1200.0, -150.0]
-    measured, source = demos_job.resolve_normalizer(RunConfig(optimal_return=-150), plain, env)
+    assert demos_job.resolve_return_range(given, plain, env)[0] == [-1200.0, -150.0]
+    measured, source = demos_job.resolve_return_range(RunConfig(optimal_return=-150), plain, env)
     assert -1500 < measured[0] < -900 and measured[1] == -150.0  # Pendulum's random policy
     assert "measured" in source
-    assert demos_job.resolve_normalizer(RunConfig(optimal_return=-150), plain, env)[0] == measured
+    assert demos_job.resolve_return_range(RunConfig(optimal_return=-150), plain, env)[0] == measured
     with pytest.raises(demos_job.RunError, match=r"--optimal-return -2000 is not above the random"):
-        demos_job.resolve_normalizer(RunConfig(optimal_return=-2000), plain, env)
+        demos_job.resolve_return_range(RunConfig(optimal_return=-2000), plain, env)
     with pytest.raises(ValueError, match="random_return needs optimal_return"):
         RunConfig(random_return=-1200)
     with pytest.raises(ValueError, match=r"optimal_return \(-1300.0\) must be above"):

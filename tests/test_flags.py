@@ -26,15 +26,24 @@ def field_value(config, path):
 
 def test_every_flag_sets_a_field_and_every_field_has_a_flag():
     config = RunConfig()
-    for flag in (*flags.RUN_FLAGS, *flags.SETTINGS_FLAGS):
+    for flag in (*flags.RUN_FLAGS, *flags.SETTINGS_FLAGS, *flags.LEARNER_FLAGS):
         field_value(config, flag.field)  # AttributeError for a field that does not exist
     top = {flag.field for flag in flags.RUN_FLAGS if "." not in flag.field}
     fields = {field.name for field in dataclasses.fields(RunConfig)}
-    assert fields - NOT_FLAGS == top
+    assert fields - NOT_FLAGS == top | {"learner"}  # the learner part: LEARNER_FLAGS
+    learner = {flag.field for flag in flags.LEARNER_FLAGS}
+    assert {"learner.name", "learner.trpo.fisher", "learner.ppo.num_epochs"} <= learner
+    for part in (config.learner.trpo, config.learner.ppo):  # TRPO's and PPO's own flags
+        assert {f.name for f in dataclasses.fields(part)} >= {
+            flag.field.split(".")[2]
+            for flag in flags.LEARNER_FLAGS
+            if flag.field.count(".") == 2
+            and flag.field.split(".")[1] == type(part).__name__[:-6].lower()
+        }
     settings = {flag.field.split(".")[1] for flag in flags.SETTINGS_FLAGS}
     settings.add("ls_iterations")  # --solver sets both caps
     assert settings == {field.name for field in dataclasses.fields(REFERENCE_SETTINGS)}
-    names = [flag.name for flag in (*flags.RUN_FLAGS, *flags.SETTINGS_FLAGS)]
+    names = [flag.name for flag in (*flags.RUN_FLAGS, *flags.SETTINGS_FLAGS, *flags.LEARNER_FLAGS)]
     assert len(set(names)) == len(names)
 
 
@@ -84,6 +93,12 @@ def test_settings_flags_override_the_table_or_the_reference(capsys):
         (["--num-envs", "0"], "--num-envs must be a positive integer, got 0"),
         (["--value-epochs", "0"], "--value-epochs must be a positive integer, got 0"),
         (["--value-epochs", "3", "--learner", "ppo"], "--value-epochs is TRPO's value fit"),
+        (["--fisher-subsample", "0"], "--fisher-subsample must be a positive integer, got 0"),
+        (["--ppo-epochs", "0"], "--ppo-epochs must be a positive integer, got 0"),
+        (
+            ["--learner", "ppo", "--ppo-minibatches", "100000"],
+            "samples per iteration (num_envs x unroll_length = 5000) must be at least PPO's",
+        ),
         (["--iterations", "25"], "--iterations (25) must be a multiple of the evaluation"),
         (["--conf", __file__], "--conf: a confidence file needs demos"),
     ],
@@ -129,5 +144,20 @@ def test_a_resume_refuses_a_method_whose_preset_changed(tmp_path):
 
 def test_value_epochs_reach_the_learners_config(tmp_path):
     config = sweep.parse_args(["--value-epochs", "3", "--out", str(tmp_path / "out")]).config
-    assert config.value_epochs == 3
+    assert config.learner.trpo.num_value_epochs == 3
     assert adversarial_config(config).trpo.num_value_epochs == 3
+
+
+def test_ppo_settings_reach_the_learners_config_and_config_json(tmp_path):
+    """PPO's static settings are set from the sweep's flags as TRPO's are, kept in the
+    config's learner part (config.json) and given to the trainer."""
+    argv = ["--learner", "ppo", "--ppo-epochs", "4", "--ppo-minibatches", "8",
+            "--no-ppo-normalize-rewards", "--no-ppo-clip-value-loss"]  # fmt: skip
+    argv += ["--out", str(tmp_path)]
+    config = sweep.parse_args(argv).config
+    ppo = adversarial_config(config).ppo
+    assert config.learner.name == "ppo" and adversarial_config(config).learner == "ppo"
+    assert (ppo.num_epochs, ppo.num_minibatches) == (4, 8)
+    assert not ppo.normalize_rewards and not ppo.clip_value_loss and ppo.anneal_learning_rate
+    assert RunConfig.from_dict(json.loads(json.dumps(config.to_dict()))) == config
+    assert config.to_dict()["learner"]["ppo"]["num_epochs"] == 4

@@ -24,7 +24,7 @@ LAYERS = [
         (
             "config", "config.validation", "config.presets", "config.released_files",
             "config.learner", "config.budget", "config.grid_axes", "config.output",
-            "config.classifier", "config.methods",
+            "config.classifier", "config.methods", "config.demonstrations",
             "storage", "storage.integrity", "storage.outputs", "storage.compilation",
             "analysis.stats",
         ),
@@ -34,8 +34,8 @@ LAYERS = [
     (
         "run config",
         (
-            "config.task", "config.settings", "config.run_config", "config.run_config_checks",
-            "config.saved",
+            "config.task", "config.settings", "config.training", "config.run_config",
+            "config.run_config_checks", "config.saved",
         ),
     ),
     ("demonstrations", ("demos", "demos.*")),
@@ -234,8 +234,8 @@ PLAIN_TABLES = ("config.released_files", "config.presets")
 # What the reading of run folders may import, those inside functions too: itself and modules
 # that import no JAX (checked by importing each in a fresh interpreter below).
 NO_JAX = (
-    "config.validation", "config.presets", "config.released_files", "config.output", "storage",
-    "storage.integrity", "storage.outputs", "analysis", "analysis.*",
+    "config.validation", "config.presets", "config.released_files", "config.output",
+    "config.learner", "storage", "storage.integrity", "storage.outputs", "analysis", "analysis.*",
 )  # fmt: skip
 ANALYSIS = sorted(name for name in MODULES if name == "analysis" or name.startswith("analysis."))
 
@@ -255,7 +255,7 @@ def test_the_analysis_imports_only_modules_without_jax():
 # The config's parts at the bottom (issue 74, item 1), each importing no JAX.
 CONFIG_PARTS = (
     "config.learner", "config.budget", "config.grid_axes", "config.output", "config.classifier",
-    "config.methods",
+    "config.methods", "config.demonstrations",
 )  # fmt: skip
 
 

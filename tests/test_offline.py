@@ -201,6 +201,29 @@ def test_bad_configs_are_refused_in_one_line(field, value, match):
         dataclasses.replace(TINY, **{field: value})
 
 
+@pytest.mark.parametrize(
+    ("overrides", "match"),
+    [
+        ({"conf": "/x/conf.npy"}, "conf: a confidence file needs demos"),
+        ({"demos": "/x/set.npz", "action_scale": 2.0}, "an .npz set carries its confidences"),
+        ({"action_scale": -1.0}, "action_scale must be finite and positive"),
+        ({"seed": 2**63}, r"seed must be an integer in \[0, 2\*\*63\)"),
+        ({"noise_std": -0.1}, "noise_std must be finite and >= 0"),
+        ({"env": "NoSuchTask-v0"}, "env: "),
+    ],
+)
+def test_an_offline_run_config_checks_its_parts_when_made(overrides, match):
+    """The demonstrations part, the budget's seeds and the task are checked where the sweep's
+    are, when an OfflineRunConfig is made (not when its run first reads them)."""
+    from pngail_jax.jobs.offline_config import OfflineRunConfig
+
+    with pytest.raises(ValueError, match=match):
+        OfflineRunConfig(**overrides)
+    config = OfflineRunConfig(demos="/x/a_mixture.npy", action_scale=2)
+    assert config.demonstrations.action_scale == 2.0 and config.demonstrations.demos == config.demos
+    assert config.settings.num_eval_episodes == config.trainer_config(1000).num_eval_episodes
+
+
 def test_demonstrations_without_confidences_are_refused(demos):
     bare = dataclasses.replace(demos, confidence=None)
     with pytest.raises(ValueError, match="need confidences"):

@@ -241,7 +241,8 @@ def test_the_sweep_runs_with_ppo_and_keeps_a_cloned_policy_cloned(demos_path, tm
     args[args.index("--seeds") + 1] = "1"
     main([*args, "--learner", "ppo"])
     config = json.loads((out / "config.json").read_text())
-    assert config["learner"] == "ppo"
+    assert config["learner"]["name"] == "ppo"
+    assert config["learner"]["ppo"] == config["resolved"]["adversarial"]["ppo"]
     assert config["resolved"]["adversarial"]["learner"] == "ppo"
     with (out / "metrics.csv").open() as file:
         rows = list(csv.DictReader(file))

@@ -3,6 +3,7 @@
 
 import dataclasses
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -56,7 +57,9 @@ def test_json_round_trip_and_presets(tmp_path):
         ({"methods": ()}, "methods must name at least one method"),
         ({"methods": (["gail"],)}, r"unknown method\(s\) \[\['gail'\]\]"),  # no TypeError
         ({"log": ("tensorboard", "tensorboard")}, "log backends must not repeat"),
-        ({"fisher": ["hessian"]}, "fisher must be one of"),
+        ({"learner": {"trpo": {"fisher": ["hessian"]}}}, "TRPOConfig.fisher must be one of"),
+        ({"learner": {"name": "ppo", "ppo": {"num_epochs": 0}}}, "PPOConfig.num_epochs must be"),
+        ({"learner": {"nam": "ppo"}}, r"learner: unknown key\(s\) \['nam'\]"),
         ({"discriminator_hidden_sizes": (100, 0)}, "discriminator_hidden_sizes must be positive"),
         ({"demos": 5}, "demos must be a non-empty string or None, got 5"),
         ({"env": 5}, "env must be an environment name, got 5"),
@@ -116,6 +119,54 @@ def test_a_config_json_from_before_run_config_still_reads():
     assert (config.settings.num_envs, config.settings.unroll_length) == (4, 50)
     assert upgrade_saved_config(old)["resolved"]["demos_path"] == "/d/mix.npy"
     assert dataclasses.asdict(config)["methods"] == ("gail",)
+
+
+ROOT = Path(__file__).resolve().parents[1]
+# The records of a run folder (a sweep's, an offline run's): each keeps its config.json (a
+# settings comparison's keeps its arms' results instead).
+RECORDS = sorted(
+    path for path in ROOT.glob("records/*/record.json") if "config" in json.loads(path.read_text())
+)
+
+
+@pytest.mark.parametrize("path", RECORDS, ids=lambda path: path.parent.name)
+def test_every_committed_records_config_json_reads_as_the_run_it_was(path):
+    """Each committed record's config.json (most of a layout before the learner part: a flat
+    ``learner``, ``fisher``, ``fisher_subsample``, ``value_epochs``, no PPO settings) reads
+    as the config it ran: the flat keys in the learner part, every setting it did not hold
+    at the default it ran with; today's config of it is no other run to the records'
+    comparison (``config_differences``), and it round-trips through today's layout."""
+    from pngail_jax.analysis.run_records import config_differences
+    from pngail_jax.analysis.runs import read_run_config
+    from pngail_jax.config.learner import LearnerConfig, PPOConfig, TRPOConfig
+    from pngail_jax.jobs.offline_config import OfflineRunConfig, offline_defaults
+
+    record = json.loads(path.read_text())
+    document = record["config"]
+    if read_run_config(document).program == "offline":
+        values = {**offline_defaults(), **read_run_config(document).settings}
+        for name in ("methods", "hidden_sizes"):
+            values[name] = tuple(values[name])
+        assert OfflineRunConfig(**values).demonstrations.demos == document["config"]["demos"]
+        return
+    config = RunConfig.from_dict(document)
+    trpo = TRPOConfig(
+        fisher=document.get("fisher", "gauss_newton"),
+        fisher_subsample=document.get("fisher_subsample", 1),
+        num_value_epochs=document.get("value_epochs", 1),
+    )
+    if isinstance(document.get("learner"), dict):  # a record of today's layout
+        assert config.learner == LearnerConfig(**{
+            **document["learner"], "trpo": TRPOConfig(**document["learner"]["trpo"]),
+            "ppo": PPOConfig(**document["learner"]["ppo"]),
+        })  # fmt: skip
+    else:
+        assert config.learner == LearnerConfig(document.get("learner", "trpo"), trpo, PPOConfig())
+    today = json.loads(json.dumps(config.to_dict()))
+    assert RunConfig.from_dict(today) == config
+    assert config_differences(today, record, RunConfig().to_dict()) == []
+    older = {**today, "learner": {**today["learner"], "name": "ppo"}}
+    assert config_differences(older, record, RunConfig().to_dict()) == ["learner"]
 
 
 def test_numbers_are_stored_in_their_annotated_types():

@@ -10,8 +10,8 @@ from pngail_jax.analysis.run_records import planned_iterations
 from pngail_jax.analysis.runs import (
     read_run_config,
     recorded_inputs,
-    run_normalizer,
     run_progress_numbers,
+    run_return_range,
     sealed_part,
 )
 
@@ -58,8 +58,8 @@ def test_a_sweeps_config_reads_as_its_settings_and_what_it_resolved():
     assert view.program == "sweep" and view.settings is SWEEP
     assert view.settings["env"] == "Pendulum-v1" and view.settings["methods"] == ["gail", "pngail"]
     assert view.sealed == {k: v for k, v in SWEEP.items() if k != "provenance"}
-    assert view.inputs == INPUTS and view.normalizer == [-1500.0, -150.0]
-    assert view.normalizer_source == "paper Table 3"
+    assert view.inputs == INPUTS and view.return_range == [-1500.0, -150.0]
+    assert view.return_range_source == "paper Table 3"
     assert (view.label_ratios, view.noise_stds) == ([0.2, 0.5], [0.0])
     assert view.planned_iterations == 40 and view.complete is None and view.trainer == {}
 
@@ -70,8 +70,8 @@ def test_an_offline_runs_config_reads_as_its_nested_settings():
     assert view.settings["env"] == "Pendulum-v1" and view.settings["seeds"] == 3
     assert set(view.sealed) == {"program", "config", "demonstrations", "input_files",
                                 "normalizer", "normalizer_source"}  # fmt: skip
-    assert view.inputs == INPUTS and view.normalizer == [-1500.0, -150.0]
-    assert view.normalizer_source == "given"
+    assert view.inputs == INPUTS and view.return_range == [-1500.0, -150.0]
+    assert view.return_range_source == "given"
     assert (view.label_ratios, view.noise_stds) == ([0.3], [0.1])
     assert view.planned_iterations == 20  # 2,000 gradient steps of 100 per iteration
     assert view.complete is True and view.trainer == {"batch_size": 16}
@@ -82,7 +82,7 @@ def test_the_readers_of_one_part_agree_with_the_view(document, tmp_path):
     view = read_run_config(document)
     assert sealed_part(document) == view.sealed
     assert recorded_inputs(document) == view.inputs
-    assert run_normalizer(document) == view.normalizer
+    assert run_return_range(document) == view.return_range
     assert planned_iterations(document) == view.planned_iterations
     progress = run_progress_numbers(tmp_path, document)  # no summary.json beside it
     assert progress == ((20, 20) if view.program == "offline" else None)
@@ -91,12 +91,12 @@ def test_the_readers_of_one_part_agree_with_the_view(document, tmp_path):
 def test_a_config_missing_parts_reads_as_empty():
     bare = read_run_config({"program": "offline"})
     assert bare.settings == {} and bare.inputs == {} and bare.planned_iterations is None
-    assert (bare.normalizer, bare.complete) == (None, None)
+    assert (bare.return_range, bare.complete) == (None, None)
     unfinished = read_run_config({**OFFLINE, "complete": False})
     assert run_progress_numbers(Path("."), {**OFFLINE, "complete": False}) is None
     assert unfinished.planned_iterations == 20
     sweep = read_run_config({"env": "Pendulum-v1", "iterations": "40"})
-    assert sweep.inputs == {} and sweep.normalizer is None and sweep.planned_iterations is None
+    assert sweep.inputs == {} and sweep.return_range is None and sweep.planned_iterations is None
 
 
 def test_no_other_module_tells_the_two_layouts_apart():

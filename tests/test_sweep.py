@@ -860,11 +860,20 @@ def test_compare_expected_says_where_a_run_lies_against_a_record(finished, tmp_p
     changed = {**record["config"], "iterations": 8, "log": ["x"]}
     assert run_records.config_differences(changed, record, defaults) == ["iterations"]
     # a field the record's run did not have yet is its default there
-    older = {**record, "config": {k: v for k, v in record["config"].items() if k != "value_epochs"}}
+    older = {**record, "config": {k: v for k, v in record["config"].items() if k != "seed"}}
     assert run_records.config_differences(record["config"], older, defaults) == []
-    assert run_records.config_differences(
-        {**record["config"], "value_epochs": 3}, older, defaults
-    ) == ["value_epochs"]
+    assert run_records.config_differences({**record["config"], "seed": 3}, older, defaults) == [
+        "seed"
+    ]
+    # a record of the layout before the learner part (flat learner, fisher, value_epochs,
+    # no PPO settings) reads as what it ran: today's run of the same settings does not differ
+    flat = {k: v for k, v in record["config"].items() if k != "learner"}
+    flat.update(learner="trpo", fisher="gauss_newton", fisher_subsample=1, value_epochs=1)
+    flat_record = {**record, "config": flat}
+    assert run_records.config_differences(record["config"], flat_record, defaults) == []
+    more_epochs = json.loads(json.dumps(record["config"]))
+    more_epochs["learner"]["trpo"]["num_value_epochs"] = 3
+    assert run_records.config_differences(more_epochs, flat_record, defaults) == ["learner"]
     # A record of seeds 0.0-0.9 (IQM 0.45): a 5-seed re-run's IQM lands within 13/60 of it
     # (test_rerun_spread_is_the_95th_percentile_of_the_iqm_shifts_of_draws).
     ten = [k / 10 for k in range(10)]

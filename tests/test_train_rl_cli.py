@@ -278,9 +278,13 @@ def test_a_sigterm_releases_the_lock_and_says_how_to_resume(tmp_path, monkeypatc
 
 
 def test_value_epochs_are_refused_for_ppo_in_one_line():
+    from pngail_jax.config.learner import LearnerConfig, TRPOConfig
     from pngail_jax.config.validation import ConfigError
     from pngail_jax.jobs.train_rl import TrainRLConfig
 
-    with pytest.raises(ConfigError, match="value_epochs is TRPO's value fit"):
-        TrainRLConfig(learner="ppo", value_epochs=3)
-    assert TrainRLConfig(value_epochs=3).trpo_config.num_value_epochs == 3
+    more_epochs = TRPOConfig(num_value_epochs=3)
+    with pytest.raises(ConfigError, match="num_value_epochs is TRPO's value fit"):
+        TrainRLConfig(learner=LearnerConfig(name="ppo", trpo=more_epochs))
+    config = TrainRLConfig(learner=LearnerConfig(trpo=more_epochs))
+    assert config.learner.settings.num_value_epochs == 3
+    assert config.document()["trpo"]["num_value_epochs"] == 3

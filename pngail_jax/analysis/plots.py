@@ -19,7 +19,7 @@ def plot_curves(
     path: Path,
     cells,
     metrics,
-    normalizer,
+    return_range,
     title: str,
     excluded=(),
     xlabel: str = "M environment steps per run",
@@ -35,7 +35,7 @@ def plot_curves(
     import matplotlib.pyplot as plt
 
     returns = np.asarray(metrics["eval/return"], np.float64)
-    values = normalize(returns, normalizer) if normalizer is not None else returns
+    values = normalize(returns, return_range) if return_range is not None else returns
     evaluated = ~np.isnan(returns).all(axis=0)
     settings = list(dict.fromkeys(cell.setting for cell in cells))
     methods = list(dict.fromkeys(cell.method for cell in cells))
@@ -54,12 +54,12 @@ def plot_curves(
             if rows:
                 steps = np.asarray(metrics["env_steps"])[rows[0], evaluated] / 1e6
                 _plot_mean(axis, method, steps, values[rows][:, evaluated], colors[method])
-        if normalizer is not None:
+        if return_range is not None:
             axis.axhline(1.0, color="grey", ls="--", lw=0.8)
             axis.axhline(0.0, color="grey", ls=":", lw=0.8)
         axis.set(
             xlabel=xlabel,
-            ylabel="normalised return" if normalizer is not None else "return",
+            ylabel="normalised return" if return_range is not None else "return",
             title=setting if len(settings) > 1 else None,
         )
         axis.grid(alpha=0.3)

@@ -65,12 +65,12 @@ NULL_MEANS = (
 )
 
 
-def normalize(returns, normalizer: tuple[float, float] | None):
+def normalize(returns, return_range: tuple[float, float] | None):
     """(R - R_random) / (R_optimal - R_random); NaN when no normaliser is known."""
     returns = np.asarray(returns, np.float64)
-    if normalizer is None:
+    if return_range is None:
         return np.full_like(returns, np.nan)
-    random_return, optimal_return = normalizer
+    random_return, optimal_return = return_range
     return (returns - random_return) / (optimal_return - random_return)
 
 
@@ -79,7 +79,7 @@ def _format(value) -> str:
 
 
 def write_metrics_csv(
-    path: Path, cells, metrics, normalizer, chunk_seconds=(), extra_columns=None
+    path: Path, cells, metrics, return_range, chunk_seconds=(), extra_columns=None
 ) -> None:
     """One row per cell and iteration; empty fields where a value is undefined (NaN).
 
@@ -91,7 +91,7 @@ def write_metrics_csv(
     A metric the run did not record (an appendix-only trainer, a checkpoint of an older
     version) leaves its column empty. ``extra_columns`` ({column: metric}) adds columns after
     ``CSV_COLUMNS`` (the offline program's ``offline.METRICS_CSV_COLUMNS``)."""
-    normalized = normalize(metrics["eval/return"], normalizer)
+    normalized = normalize(metrics["eval/return"], return_range)
     num_iterations = metrics["env_steps"].shape[1]
     per_cell = bool(chunk_seconds) and isinstance(chunk_seconds[0], (list, tuple, np.ndarray))
     if not per_cell:
@@ -252,7 +252,7 @@ def seed_figures(evaluations: np.ndarray, statistic: str) -> np.ndarray:
     raise ValueError(f"statistic {statistic!r}: give late_average or final")
 
 
-def _per_cell(cells, metrics, normalizer, excluded):
+def _per_cell(cells, metrics, return_range, excluded):
     """float64[G] per cell: final, training-averaged and late-averaged (the last
     ``LATE_SHARE`` of the evaluations) returns, raw and normalised; NaN for excluded cells."""
     returns = np.asarray(metrics["eval/return"], np.float64)
@@ -267,14 +267,16 @@ def _per_cell(cells, metrics, normalizer, excluded):
     values = {"final_return": final, "average_return": average, "late_average_return": late}
     for name in list(values):
         values[name][list(excluded)] = np.nan
-        values[name.replace("_return", "_normalized_return")] = normalize(values[name], normalizer)
+        values[name.replace("_return", "_normalized_return")] = normalize(
+            values[name], return_range
+        )
     return values
 
 
 def summarize(
     cells,
     metrics,
-    normalizer,
+    return_range,
     train_env_steps_per_second,
     compile_seconds,
     excluded=(),
@@ -297,7 +299,7 @@ def summarize(
     probability that each other method's seed beats its seed.
     """
     excluded = set(excluded)
-    values = _per_cell(cells, metrics, normalizer, excluded)
+    values = _per_cell(cells, metrics, return_range, excluded)
     settings, groups = group_cells(cells)
     methods = {
         label: _method_row(cells, indices, values, metrics, excluded)
@@ -316,7 +318,7 @@ def summarize(
         "improvement": {"over": baseline} if baseline else {"of": "pngail"},
         "train_env_steps_per_second": float(train_env_steps_per_second),
         "compile_seconds": float(compile_seconds),
-        "normalizer": None if normalizer is None else [float(x) for x in normalizer],
+        "normalizer": None if return_range is None else [float(x) for x in return_range],
     }
 
 

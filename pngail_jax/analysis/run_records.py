@@ -33,12 +33,13 @@ from pngail_jax.analysis.runs import (
     RunReadError,
     read_run_config,
     read_scored_rows,
-    run_normalizer,
     run_progress_numbers,
+    run_return_range,
     run_scores,
     scores_of_metrics,
     verify_run,
 )
+from pngail_jax.config.learner import upgrade_learner_fields
 from pngail_jax.config.released_files import PAPER_NORMALIZERS
 from pngail_jax.storage.integrity import (
     IntegrityError,
@@ -273,8 +274,8 @@ def _check_config_facts(folder: Path, record: dict) -> None:
     settings = view.settings
     metrics = folder / METRICS_FILE
     try:
-        normalizer = run_normalizer(config)
-        read_scored_rows(metrics, normalizer)
+        return_range = run_return_range(config)
+        read_scored_rows(metrics, return_range)
         cells, ratios, noises, reached, steps = _metrics_facts(metrics)
     except RunReadError as error:
         raise RecordError(str(error)) from None
@@ -310,7 +311,7 @@ def _check_config_facts(folder: Path, record: dict) -> None:
         )
     if view.program != "offline":
         _check_steps(settings.get("settings") or {}, steps, refuse)
-    _check_task(where, config, normalizer)
+    _check_task(where, config, return_range)
 
 
 def _check_steps(rollout: dict, steps: dict, refuse) -> None:
@@ -345,19 +346,19 @@ def _metrics_facts(metrics: Path):
     return cells, ratios, noises, reached, steps
 
 
-def _check_task(where: Path, config: dict, normalizer: list[float] | None) -> None:
+def _check_task(where: Path, config: dict, return_range: list[float] | None) -> None:
     """RecordError unless a record of an authors' file whose normaliser is the paper's Table
     3 row has that row's normaliser and that file's task (on a made set the metrics carry no
     witness of the task: the record's digest alone keeps it)."""
 
     view = read_run_config(config)
-    settings, source = view.settings, view.normalizer_source
+    settings, source = view.settings, view.return_range_source
     demos = Path(str(settings.get("demos") or "")).name.removesuffix("_mixture.npy")
     if source == "paper Table 3" and demos in PAPER_NORMALIZERS:
         task = str(settings.get("env"))
-        if list(PAPER_NORMALIZERS[demos]) != normalizer:
+        if list(PAPER_NORMALIZERS[demos]) != return_range:
             raise RecordError(
-                f"{where}: its normaliser {normalizer} is not the paper's Table 3 row of "
+                f"{where}: its normaliser {return_range} is not the paper's Table 3 row of "
                 f"{demos}, {list(PAPER_NORMALIZERS[demos])}, which it names as its source: the "
                 "record was edited"
             )
@@ -477,12 +478,12 @@ def config_differences(
 
     def fields(document: dict) -> dict:
         view = read_run_config(document)
-        if view.program != "offline":
-            return document
+        if view.program != "offline":  # a sweep's of an older layout read in today's
+            return upgrade_learner_fields(document)
         return {
             **{f"{part}.{key}": value for part, values in (("config", view.settings),
                ("trainer", view.trainer)) for key, value in values.items()},
-            "normalizer": view.normalizer,
+            "normalizer": view.return_range,
         }  # fmt: skip
 
     mine, reference = fields(config), fields(record["config"])

@@ -60,8 +60,12 @@ class RunConfigView:
     settings: dict  # env, methods, seeds, demos, ...: what the run was asked to do
     sealed: dict  # what the run's config seal covers
     inputs: dict  # the input files' records (integrity.file_record), by name
-    normalizer: object  # the (random, optimal) returns as written (run_normalizer checks them)
-    normalizer_source: str | None  # where they came from ("paper Table 3", ...)
+    # The normalised return's ends, (random, optimal), as written (config.json's key
+    # "normalizer", kept for the runs already written; run_return_range checks them), and
+    # where they came from ("paper Table 3", ...). "normalizer" in the code is the policy's
+    # observation statistics (rl.ObservationNormalizer) alone.
+    return_range: object
+    return_range_source: str | None
     label_ratios: list  # the grid's label ratios (the offline program runs one)
     noise_stds: list  # the grid's confidence noises (the offline program runs one)
     planned_iterations: int | None  # the iterations it plans, where the config says
@@ -97,8 +101,8 @@ def read_run_config(document: dict) -> RunConfigView:
             settings=settings,
             sealed={key: document[key] for key in OFFLINE_SEALED if key in document},
             inputs=document.get("input_files") or {},
-            normalizer=document.get("normalizer"),
-            normalizer_source=document.get("normalizer_source"),
+            return_range=document.get("normalizer"),
+            return_range_source=document.get("normalizer_source"),
             label_ratios=[settings.get("label_ratio")],
             noise_stds=[settings.get("noise_std")],
             planned_iterations=planned,
@@ -112,8 +116,8 @@ def read_run_config(document: dict) -> RunConfigView:
         settings=document,
         sealed={key: value for key, value in document.items() if key != "provenance"},
         inputs=resolved.get("inputs") or {},
-        normalizer=resolved.get("normalizer"),
-        normalizer_source=resolved.get("normalizer_source"),
+        return_range=resolved.get("normalizer"),
+        return_range_source=resolved.get("normalizer_source"),
         label_ratios=document.get("label_ratios"),
         noise_stds=document.get("noise_stds"),
         planned_iterations=planned if isinstance(planned, int) else None,
@@ -382,11 +386,11 @@ def sealed_document(
     return document, unsealed if changes is None else []
 
 
-def run_normalizer(document: dict) -> list[float] | None:
+def run_return_range(document: dict) -> list[float] | None:
     """The (random, optimal) returns a run's config.json (or a record's config) sealed: the
     sweep's ``resolved.normalizer``, the offline program's ``normalizer``; None when the run
     knew none (its normalised column is then empty)."""
-    value = read_run_config(document).normalizer
+    value = read_run_config(document).return_range
     if value is None:
         return None
     if (
@@ -410,7 +414,7 @@ def _written_close(stated: float, recomputed: float, scale: float) -> bool:
     return abs(stated - recomputed) <= WRITTEN_RELATIVE * max(abs(scale), 1e-300) + 1e-9
 
 
-def read_scored_rows(path: Path, normalizer: list[float] | None) -> dict:
+def read_scored_rows(path: Path, return_range: list[float] | None) -> dict:
     """Every evaluated row of a metrics file (a run's ``metrics.csv`` or a record's
     ``metrics.csv.gz``), checked: its ``normalized_return`` is its ``eval_return`` through
     ``normalizer`` (empty when there is none, and in a row without an evaluation), to the
@@ -431,14 +435,14 @@ def read_scored_rows(path: Path, normalizer: list[float] | None) -> dict:
                     )
                 continue
             value = float(evaluated)
-            if normalizer is None:
+            if return_range is None:
                 if score not in ("", "nan"):
                     raise RunReadError(
                         f"{where}: normalised return {score} where the run knew no random "
                         "and optimal returns: the file was edited"
                     )
             elif math.isfinite(value):
-                random_return, optimal_return = normalizer
+                random_return, optimal_return = return_range
                 span = optimal_return - random_return
                 expected = (value - random_return) / span
                 written = float(score) if score not in ("", "nan") else math.nan
@@ -486,7 +490,7 @@ _FIGURE_FIELDS = tuple(
 
 
 def _check_summary_figures(
-    rows: dict, summary: dict, normalizer: list[float] | None, who: str
+    rows: dict, summary: dict, return_range: list[float] | None, who: str
 ) -> None:
     """UntrustedRun unless each seed's final, late-average and training-average returns
     (raw and normalised) in ``summary.json`` are those its evaluations in metrics.csv give
@@ -514,11 +518,11 @@ def _check_summary_figures(
                     else (f"iterations {read[0]}-{read[-1]}")
                 )
                 checks = [(name, value, scale)]
-                if normalizer is not None:
-                    width = normalizer[1] - normalizer[0]
+                if return_range is not None:
+                    width = return_range[1] - return_range[0]
                     checks.append((
                         name.replace("_return", "_normalized_return"),
-                        (value - normalizer[0]) / width,
+                        (value - return_range[0]) / width,
                         scale / abs(width),
                     ))  # fmt: skip
                 for field, recomputed, magnitude in checks:
@@ -556,13 +560,13 @@ def _check_metrics_agree_with_summary(directory: Path, document: dict, who: str)
     progress = run_progress_numbers(directory, document)
     try:
         summary = read_json(summary_path, "run summary") if summary_path.exists() else None
-        normalizer = run_normalizer(document)
+        return_range = run_return_range(document)
     except (OSError, IntegrityError, RunReadError) as error:
         raise UntrustedRun(f"{who}: {error}") from None
     try:
         reached = iterations_per_cell(metrics)
         _check_whole(metrics, reached, progress, read_run_config(document).settings)
-        rows = read_scored_rows(metrics, normalizer)
+        rows = read_scored_rows(metrics, return_range)
     except UNREADABLE as error:
         raise damaged(metrics, error, UntrustedRun) from None
     except RunReadError as error:
@@ -574,10 +578,10 @@ def _check_metrics_agree_with_summary(directory: Path, document: dict, who: str)
         return
     stated = summary.get("normalizer")
     if "normalizer" in summary and (
-        stated is not None if normalizer is None else stated != normalizer
+        stated is not None if return_range is None else stated != return_range
     ):
         raise UntrustedRun(
-            f"{who}: summary.json's normaliser {stated!r} is not config.json's {normalizer!r}: "
+            f"{who}: summary.json's normaliser {stated!r} is not config.json's {return_range!r}: "
             "one of them was edited"
         )
-    _check_summary_figures(rows, summary, normalizer, who)
+    _check_summary_figures(rows, summary, return_range, who)

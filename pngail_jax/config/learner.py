@@ -9,6 +9,7 @@ these describe and re-exports the names (``rl.on_policy``, ``rl.trpo``, ``rl.ppo
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from typing import Literal
 
 from pngail_jax.config.validation import ConfigError, fail, is_among
@@ -41,17 +42,6 @@ def learner_name(name) -> str:
     if not is_among(name, LEARNERS):
         raise ConfigError("learner", f"must be one of {', '.join(LEARNERS)}, got {name!r}")
     return name
-
-
-def check_learner_fields(learner, *, fisher=DEFAULT_FISHER, value_epochs=1) -> None:
-    """A config's learner fields: the learner's name, TRPO's Fisher form, and TRPO's value
-    epochs left at 1 under PPO (which fits its value in its own epochs). ConfigError naming
-    the field."""
-    learner_name(learner)
-    if not is_among(fisher, FISHER_FORMS):
-        fail("fisher", f"must be one of {FISHER_FORMS}, got {fisher!r}")
-    if learner == "ppo" and value_epochs != 1:
-        fail("value_epochs", "is TRPO's value fit; PPO fits its value in its own epochs")
 
 
 def hyperparam_names(name: str) -> tuple[str, ...]:
@@ -183,19 +173,14 @@ class TRPOConfig:
             "num_value_epochs",
             "num_cg_iterations",
             "num_backtracks",
+            "fisher_subsample",
         ):
             value = getattr(self, name)
-            if not isinstance(value, int) or value < 1:
-                raise ValueError(f"TRPOConfig.{name} must be a positive integer, got {value!r}")
-        if not isinstance(self.fisher_subsample, int) or self.fisher_subsample < 1:
-            raise ValueError(
-                "TRPOConfig.fisher_subsample must be a positive integer, "
-                f"got {self.fisher_subsample!r}"
-            )
-        if self.fisher not in FISHER_FORMS:
-            raise ValueError(
-                f"TRPOConfig.fisher must be one of {FISHER_FORMS}, got {self.fisher!r}"
-            )
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                fail(name, f"must be a positive integer, got {value!r}", name=f"TRPOConfig.{name}")
+        if not is_among(self.fisher, FISHER_FORMS):
+            fail("fisher", f"must be one of {FISHER_FORMS}, got {self.fisher!r}",
+                 name="TRPOConfig.fisher")  # fmt: skip
 
     def check_batch(self, rollout: RolloutConfig) -> None:
         """Raises ValueError when the rollout has fewer samples than value minibatches."""
@@ -224,10 +209,10 @@ class PPOConfig:
         for name in ("num_epochs", "num_minibatches"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
-                raise ValueError(f"PPOConfig.{name} must be a positive integer, got {value!r}")
+                fail(name, f"must be a positive integer, got {value!r}", name=f"PPOConfig.{name}")
         for name in ("clip_value_loss", "anneal_learning_rate", "normalize_rewards"):
             if not isinstance(getattr(self, name), bool):
-                raise ValueError(f"PPOConfig.{name} must be True or False")
+                fail(name, "must be True or False", name=f"PPOConfig.{name}")
 
     def check_batch(self, config: RolloutConfig) -> None:
         """Raises ValueError when the rollout has fewer samples than minibatches."""
@@ -247,3 +232,102 @@ def check_batch(
         (PPOConfig() if ppo is None else ppo).check_batch(config)
     else:
         (TRPOConfig() if trpo is None else trpo).check_batch(config)
+
+
+@dataclasses.dataclass(frozen=True)
+class LearnerConfig:
+    """The learner part of a job's config (the sweep's ``RunConfig``, ``TrainRLConfig``,
+    ``MakeDemosConfig``): which policy learner trains the policy (``name``: "trpo", the
+    paper's, or "ppo") and each learner's static settings, of which the running one's are
+    read. Written to config.json as ``{"name": ..., "trpo": {...}, "ppo": {...}}``
+    (``learner_part`` reads it back; ``upgrade_learner_fields`` reads the older flat keys)."""
+
+    name: str = DEFAULT_LEARNER
+    trpo: TRPOConfig = TRPOConfig()
+    ppo: PPOConfig = PPOConfig()
+
+    def __post_init__(self):
+        learner_name(self.name)
+        for part, kind in (("trpo", TRPOConfig), ("ppo", PPOConfig)):
+            if not isinstance(getattr(self, part), kind):
+                fail(f"learner.{part}", f"must be a {kind.__name__}, got {getattr(self, part)!r}")
+        if self.name == "ppo" and self.trpo.num_value_epochs != 1:
+            fail(
+                "learner.trpo.num_value_epochs",
+                "is TRPO's value fit; PPO fits its value in its own epochs",
+            )
+
+    @property
+    def settings(self) -> TRPOConfig | PPOConfig:
+        """The running learner's own static settings."""
+        return self.ppo if self.name == "ppo" else self.trpo
+
+    def check_batch(self, rollout: RolloutConfig) -> None:
+        """ValueError when ``rollout`` has fewer samples than the running learner splits each
+        iteration's batch into."""
+        check_batch(self.name, rollout, self.ppo, self.trpo)
+
+    def replace(self, **changes) -> LearnerConfig:
+        return dataclasses.replace(self, **changes)
+
+
+def learner_part(value) -> LearnerConfig:
+    """A job config's ``learner`` as its part: a ``LearnerConfig`` as it is, a learner's name
+    as that learner with the default settings, a config.json object read strictly (a key
+    that is no field: ConfigError naming it). ConfigError naming ``learner`` otherwise."""
+    if isinstance(value, LearnerConfig):
+        return value
+    if isinstance(value, str):
+        return LearnerConfig(name=value)
+    if not isinstance(value, Mapping):
+        fail("learner", f"must be a LearnerConfig or a learner's name, got {value!r}")
+    values = dict(_known_keys(LearnerConfig, "learner", value))
+    for part, kind in (("trpo", TRPOConfig), ("ppo", PPOConfig)):
+        if isinstance(values.get(part), Mapping):
+            fields = _known_keys(kind, f"learner.{part}", values[part])
+            try:
+                values[part] = kind(**fields)
+            except ConfigError as error:
+                raise error.nested(part).nested("learner") from None
+    return LearnerConfig(**values)
+
+
+def _known_keys(kind, where: str, data: Mapping) -> Mapping:
+    unknown = sorted((key for key in data if key not in _field_names(kind)), key=str)
+    if unknown:
+        fail(where, f": unknown key(s) {unknown}; known: {', '.join(sorted(_field_names(kind)))}")
+    return data
+
+
+def _field_names(kind) -> set[str]:
+    return {field.name for field in dataclasses.fields(kind)}
+
+
+# The flat keys a sweep's config.json held before the learner part (issue 74), each with the
+# TRPOConfig field it set.
+FLAT_TRPO_KEYS = {
+    "fisher": "fisher",
+    "fisher_subsample": "fisher_subsample",
+    "value_epochs": "num_value_epochs",
+}
+
+
+def upgrade_learner_fields(data: Mapping) -> dict:
+    """A sweep's config.json from before the learner part in today's layout: its flat
+    ``learner`` (a name, or absent: TRPO), ``fisher``, ``fisher_subsample`` and
+    ``value_epochs`` as ``learner = {"name", "trpo", "ppo"}``, every setting it did not hold
+    at the value it ran with (the defaults: PPO's settings could not be set then). Today's
+    layout unchanged. Imports no JAX (``analysis`` reads records with it)."""
+    learner = data.get("learner")
+    flat = [key for key in FLAT_TRPO_KEYS if key in data]
+    if isinstance(learner, Mapping) or (learner is None and not flat):
+        return dict(data)
+    upgraded = {key: value for key, value in data.items() if key not in FLAT_TRPO_KEYS}
+    trpo = dataclasses.asdict(TRPOConfig())
+    trpo.update({FLAT_TRPO_KEYS[key]: data[key] for key in flat})
+    upgraded["learner"] = {
+        "name": DEFAULT_LEARNER if learner is None else learner,
+        "trpo": trpo,
+        "ppo": dataclasses.asdict(PPOConfig()),
+    }
+    return upgraded

@@ -22,15 +22,16 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from pngail_jax.config.budget import check_phase_sizes, check_seeds
+from pngail_jax.config.budget import check_phase_sizes
 from pngail_jax.config.classifier import ClassifierConfig
+from pngail_jax.config.demonstrations import DemonstrationsConfig, demonstrations_part
 from pngail_jax.config.grid_axes import check_grid_axes
-from pngail_jax.config.learner import DEFAULT_FISHER, DEFAULT_LEARNER, TRPOConfig
+from pngail_jax.config.learner import LearnerConfig, learner_part
 from pngail_jax.config.methods import resolve
 from pngail_jax.config.presets import METHOD_NAMES
-from pngail_jax.config.run_config_checks import check_between_fields, check_names
+from pngail_jax.config.run_config_checks import check_names
 from pngail_jax.config.saved import upgrade_saved_config
-from pngail_jax.config.settings import RunSettings, settings_for
+from pngail_jax.config.settings import RunSettings
 from pngail_jax.config.task import (  # noqa: F401  (the tables, importable from here too)
     TASK_BSC_EPS,
     TASK_CLASSIFIER_STEPS,
@@ -39,6 +40,7 @@ from pngail_jax.config.task import (  # noqa: F401  (the tables, importable from
     task_classifier,
     task_num_demos,
 )
+from pngail_jax.config.training import check_training
 from pngail_jax.config.validation import (
     ConfigError,
     fail,
@@ -95,13 +97,11 @@ class RunConfig:
     settings: RunSettings | None = None
     classifier: ClassifierConfig | None = None  # None: the task's (task_classifier)
     bsc_eps: float | None = None  # None: the task's (TASK_BSC_EPS, else 0.01)
-    fisher: str = DEFAULT_FISHER
-    fisher_subsample: int = 1
-    # TRPO's value fit: passes over each batch (1: the reference's; rl.TRPOConfig)
-    value_epochs: int = 1
-    # The policy learner: "trpo" (the paper's) or "ppo" (pngail_jax.rl.learners); the rollout's
-    # shape and the networks are the settings' either way.
-    learner: str = DEFAULT_LEARNER
+    # The policy learner (pngail_jax.config.learner.LearnerConfig): its name, "trpo" (the
+    # paper's) or "ppo", and each one's static settings (TRPO's Fisher product and value fit,
+    # PPO's epochs and minibatches); a name alone is that learner at its defaults. The
+    # rollout's shape and the networks are the settings' either way.
+    learner: LearnerConfig = LearnerConfig()
     discriminator_hidden_sizes: tuple[int, ...] = (100, 100)
     # The appendix baselines' training phases: "codebase", their codebases' sizes (results),
     # or "check", the small sizes of pngail_jax.config.budget.CHECK_PHASE_SIZES (the check
@@ -118,32 +118,20 @@ class RunConfig:
         for name in _TUPLE_FIELDS:
             value = getattr(self, name)
             self._set(name, tuple(value) if isinstance(value, list | tuple) else (value,))
-        self._check_task()
+        check_training(self)  # env, settings, the budget and the learner, as every job's
+        self._check_classifier()
         self._check_numbers()
-        for name in ("demos", "conf", "confidence_field", "preset_name"):
-            value = getattr(self, name)
-            if value is not None and (not isinstance(value, str) or not value):
-                fail(name, f"must be a non-empty string or None, got {value!r}")
+        if self.preset_name is not None and (
+            not isinstance(self.preset_name, str) or not self.preset_name
+        ):
+            fail("preset_name", f"must be a non-empty string or None, got {self.preset_name!r}")
         check_names(self)
-        check_between_fields(self)
 
     def _set(self, name: str, value) -> None:
         object.__setattr__(self, name, value)
 
-    def _check_task(self) -> None:
-        """The environment's name, and its settings and classifier (None: its own)."""
-        if not isinstance(self.env, str) or not self.env:
-            fail("env", f"must be an environment name, got {self.env!r}")
-        if self.settings is None:  # the environment's row (raises for an unknown environment)
-            self._set("settings", _env_settings(self.env))
-        elif not isinstance(self.settings, RunSettings):
-            fail(
-                "settings",
-                "must be a pngail_jax.config.settings.RunSettings (None: the environment's row), "
-                f"got {type(self.settings).__name__}",
-            )
-        else:
-            _env_settings(self.env)  # the name must be known even when settings are given
+    def _check_classifier(self) -> None:
+        """The classifier (None: the task's)."""
         if self.classifier is None:
             self._set("classifier", task_classifier(self.env))
         if not isinstance(self.classifier, ClassifierConfig):
@@ -156,11 +144,7 @@ class RunConfig:
 
     def _check_numbers(self) -> None:
         """Counts, grid axes and the optional numbers, each in its stored type."""
-        seeds, seed = check_seeds(self.seeds, self.seed)
-        self._set("seeds", seeds)
-        for name in ("iterations", "chunk_iterations", "fisher_subsample", "value_epochs"):
-            self._set(name, integer(name, getattr(self, name), minimum=1))
-        self._set("seed", seed)
+        self._set("chunk_iterations", integer("chunk_iterations", self.chunk_iterations, 1))
         for name, minimum, below in (("num_demos", 2, 2**31), ("cpu_devices", 1, None)):
             if getattr(self, name) is not None:  # num_demos: a row index is an int32
                 self._set(name, integer(name, getattr(self, name), minimum, below=below))
@@ -176,13 +160,8 @@ class RunConfig:
         )  # fmt: skip
         self._set("label_ratios", ratios)
         self._set("noise_stds", noise)
-        if self.action_scale is not None:
-            self._set("action_scale", real("action_scale", self.action_scale))
-            if self.action_scale <= 0:
-                fail("action_scale", f"must be finite and positive, got {self.action_scale!r}")
-        for name in ("random_return", "optimal_return"):
-            if getattr(self, name) is not None:
-                self._set(name, real(name, getattr(self, name), "be a finite number"))
+        for name, value in dataclasses.asdict(self.demonstrations).items():
+            self._set(name, value)  # the part's checks, its numbers as Python floats
         if self.bsc_eps is not None:
             self._set("bsc_eps", real("bsc_eps", self.bsc_eps, "lie in (0, 0.5)"))
             if not 0 < self.bsc_eps < 0.5:
@@ -206,6 +185,12 @@ class RunConfig:
         return dataclasses.replace(self, **overrides)
 
     @property
+    def demonstrations(self) -> DemonstrationsConfig:
+        """The demonstrations part of this run (its files, their units, the normalised
+        return's ends), whose fields config.json keeps flat."""
+        return demonstrations_part(self)
+
+    @property
     def task_bsc_eps(self) -> float:
         return task_bsc_eps(self.env, self.bsc_eps)
 
@@ -221,15 +206,6 @@ class RunConfig:
         """Rows per split for demonstrations of ``num_rows`` rows: ``num_demos``, or the
         task's paper size (``TASK_NUM_DEMOS``) capped at ``num_rows``, or every row."""
         return task_num_demos(self.env, num_rows, self.num_demos)
-
-    @property
-    def trpo_config(self) -> TRPOConfig:
-        """TRPO's static settings of this run (its value fit and Fisher product)."""
-        return TRPOConfig(
-            num_value_epochs=self.value_epochs,
-            fisher=self.fisher,
-            fisher_subsample=self.fisher_subsample,
-        )
 
     @property
     def uses_gradient_penalty(self) -> bool:
@@ -272,6 +248,8 @@ class RunConfig:
         values = {key: value for key, value in data.items() if key in fields}
         if isinstance(values.get("settings"), Mapping):
             values["settings"] = _nested(RunSettings, "settings", values["settings"])
+        if isinstance(values.get("learner"), Mapping):
+            values["learner"] = learner_part(values["learner"])
         if isinstance(values.get("classifier"), Mapping):
             classifier = _nested_fields(ClassifierConfig, "classifier", values["classifier"])
             values["classifier"] = ClassifierConfig(**_classifier_fields(classifier))
@@ -304,15 +282,6 @@ PRESETS_BY_NAME: dict[str, dict[str, Any]] = {
 # -- field checks (pngail_jax.config.validation): each returns the value in its stored type -------
 
 _TUPLE_FIELDS = ("methods", "label_ratios", "noise_stds", "log", "discriminator_hidden_sizes")
-
-
-def _env_settings(env: str) -> RunSettings:
-    """The table's settings of ``env``; ConfigError naming it when ``envs.make`` does not
-    know it."""
-    try:
-        return settings_for(env)
-    except (TypeError, ValueError) as error:  # a relative module name (".x:f") is a TypeError
-        fail("env", f": {error}")
 
 
 def _fields_of(instance) -> dict[str, Any]:

@@ -1,17 +1,17 @@
 """The checks of a ``RunConfig`` that read its fields together, run when a config is made
 (``RunConfig.__post_init__``, after each field is normalised to its type): the names each
-field must be among (the methods: registered or importable presets, each once), the checks
-between fields, and those of the demonstrations' companion fields. Each failure is a
-``ConfigError`` naming the field (the command line names its flag)."""
+field must be among (the methods: registered or importable presets, each once; the log
+backends; the grid axes' values on the run's learner and methods). The checks every job's
+config shares are its parts' (``config.training``, ``config.demonstrations``,
+``config.learner``). Each failure is a ``ConfigError`` naming the field (the command line
+names its flag)."""
 
 from __future__ import annotations
 
 import dataclasses
 
-from pngail_jax import envs
-from pngail_jax.config.budget import check_eval_interval
 from pngail_jax.config.grid_axes import METHOD_AXES
-from pngail_jax.config.learner import check_batch, check_cell_value, check_learner_fields
+from pngail_jax.config.learner import check_cell_value
 from pngail_jax.config.methods import check_preset, resolve
 from pngail_jax.config.output import LOG_BACKENDS
 from pngail_jax.config.presets import ALL_METHOD_NAMES, PRESETS
@@ -19,8 +19,8 @@ from pngail_jax.config.validation import fail, is_among
 
 
 def check_names(config) -> None:
-    """The names each field must be among: methods, the learner and its Fisher form
-    (``config.learner``), log backends."""
+    """The names each field must be among: methods, log backends, the grid axes' fields
+    (the learner's are its part's own: ``config.learner.LearnerConfig``)."""
     if not config.methods:
         fail(
             "methods",
@@ -43,7 +43,6 @@ def check_names(config) -> None:
             fail("methods", f": {error}")
     if len(set(config.methods)) != len(config.methods):
         fail("methods", f"must not repeat, got {list(config.methods)}")
-    check_learner_fields(config.learner, fisher=config.fisher, value_epochs=config.value_epochs)
     bad_backends = [name for name in config.log if not is_among(name, LOG_BACKENDS)]
     if bad_backends:
         fail(
@@ -60,7 +59,7 @@ def check_names(config) -> None:
             continue
         for value in values:
             try:
-                check_cell_value(config.learner, field, value)
+                check_cell_value(config.learner.name, field, value)
             except ValueError as error:
                 fail("grid_axes", f": {field}={value:g}: {error}")
     for name in config.methods:  # every value of a coefficient axis, on every method
@@ -74,56 +73,3 @@ def check_names(config) -> None:
                     check_preset(name, dataclasses.replace(preset, coefficients=changed))
                 except ValueError as error:
                     fail("grid_axes", f": {field}={value:g} on {error}")
-
-
-def check_between_fields(config) -> None:
-    """The checks between fields: the run's length and its task's settings, the
-    normalised return's ends, the demonstrations and their companion fields."""
-    check_eval_interval(config.iterations, config.settings.eval_every)
-    if config.settings.physics is not None and config.env not in envs.GYM_TASKS:
-        fail(
-            "settings.physics",
-            f": only gymnasium's MuJoCo tasks ({', '.join(envs.GYM_TASKS)}) have a choice of "
-            f"engine, not {config.env}",
-            name="RunSettings.physics",
-        )
-    if config.env == "Pendulum-v1" and config.settings.env_options:
-        cap = next(iter(config.settings.env_options))  # the first solver cap set
-        fail(
-            f"settings.{cap}",
-            ": Pendulum-v1 has no MJX solver (its solver caps stay None)",
-            name=f"RunSettings.{cap}",
-        )
-    # The learner's batch (samples per iteration against its minibatches): the one check of
-    # the trainer's config that reads the run's fields together; the trainer's config itself
-    # is built once, with the run (jobs.trainer_configs).
-    check_batch(
-        config.learner, config.settings.rollout_config(config.iterations), trpo=config.trpo_config
-    )
-    if config.random_return is not None and config.optimal_return is None:
-        fail("random_return", "needs optimal_return (the normalised return's other end)")
-    if None not in (config.random_return, config.optimal_return) and not (
-        config.optimal_return > config.random_return
-    ):
-        fail(
-            "optimal_return",
-            f"({config.optimal_return}) must be above random_return ({config.random_return})",
-        )
-    check_demonstration_fields(config)
-
-
-def check_demonstration_fields(config) -> None:
-    if config.conf is not None and config.demos is None:
-        fail("conf", ": a confidence file needs demos (made demonstrations carry their own)")
-    is_minari = config.demos is not None and config.demos.startswith("minari:")
-    if config.confidence_field is not None and not is_minari:
-        fail(
-            "confidence_field",
-            "reads a Minari dataset's episode metadata: demos minari:<id>",
-        )
-    if (
-        config.demos is not None
-        and config.demos.endswith(".npz")
-        and (config.conf is not None or config.action_scale not in (None, 1.0))
-    ):
-        fail("demos", ": an .npz set carries its confidences and units: no conf or action_scale")

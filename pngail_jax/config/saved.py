@@ -13,10 +13,20 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+from pngail_jax.config.learner import upgrade_learner_fields
+
 
 def upgrade_saved_config(data: dict[str, Any]) -> dict[str, Any]:
-    """A config.json written before ``RunConfig`` (flat keys) in today's layout; today's
+    """A config.json of an older layout in today's, step by step: one written before
+    ``RunConfig`` (flat keys), then one from before the learner part (its flat ``learner``,
+    ``fisher``, ``fisher_subsample``, ``value_epochs``: ``upgrade_learner_fields``). Today's
     unchanged."""
+    return upgrade_learner_fields(_upgrade_flat_config(data))
+
+
+def _upgrade_flat_config(data: dict[str, Any]) -> dict[str, Any]:
+    """A config.json written before ``RunConfig`` (flat keys) in the first ``RunConfig``
+    layout."""
     if "classifier_steps" not in data:  # the old layout's mark
         return data
     from pngail_jax.config.settings import REFERENCE_SETTINGS

@@ -38,12 +38,12 @@ class BuiltRun:
         return self.demonstrations.path
 
     @property
-    def normalizer(self) -> list[float] | None:
-        return self.demonstrations.normalizer
+    def return_range(self) -> list[float] | None:
+        return self.demonstrations.return_range
 
     @property
-    def normalizer_source(self) -> str:
-        return self.demonstrations.normalizer_source
+    def return_range_source(self) -> str:
+        return self.demonstrations.return_range_source
 
     @property
     def action_scale(self) -> float:
@@ -99,7 +99,7 @@ def build(
         raise RunError(f"{demos_path}: {error}") from None
     inputs = stack_cells(
         cells, jax.random.key(config.seed), {"bsc_eps": config.task_bsc_eps},
-        family=ADVERSARIAL, learner=config.learner,
+        family=ADVERSARIAL, learner=config.learner.name,
     )  # fmt: skip
     eval_every = config.settings.eval_every
     num_evaluations = config.iterations // eval_every
@@ -130,16 +130,16 @@ def announce_inputs(
 ) -> None:
     """The notes on what the run reads: its normaliser, an applied action scale, clipped
     demonstration actions."""
-    demos, normalizer = demonstrations.demos, demonstrations.normalizer
-    if normalizer is None:
+    demos, return_range = demonstrations.demos, demonstrations.return_range
+    if return_range is None:
         print(
             "note: the demonstrations carry no random/optimal returns: no normalised return "
             "(give --optimal-return, and --random-return or it is measured)"
         )
     elif config.optimal_return is not None and not resumed:
         print(
-            f"normalised return: random {normalizer[0]:.1f}, optimal {normalizer[1]:.1f} "
-            f"({demonstrations.normalizer_source})"
+            f"normalised return: random {return_range[0]:.1f}, optimal {return_range[1]:.1f} "
+            f"({demonstrations.return_range_source})"
         )
     if action_scale_note(demos):
         print(action_scale_note(demos))

@@ -24,7 +24,7 @@ import orbax.checkpoint as ocp
 from pngail_jax import envs
 from pngail_jax.analysis.report import json_safe, read_evaluations
 from pngail_jax.config import validation
-from pngail_jax.config.learner import DEFAULT_FISHER
+from pngail_jax.config.learner import LearnerConfig, TRPOConfig
 from pngail_jax.config.saved import provenance
 from pngail_jax.config.settings import REFERENCE_SETTINGS, parse_solver, settings_for
 from pngail_jax.jobs.errors import refusals
@@ -121,10 +121,10 @@ class CompareSettingsConfig:
             iterations=self.iterations,
             seeds=self.seeds,
             seed=self.seed,
-            fisher=DEFAULT_FISHER,
-            fisher_subsample=fisher_subsample,
-            value_epochs=value_epochs,
             settings=settings,
+            learner=LearnerConfig(
+                trpo=TRPOConfig(fisher_subsample=fisher_subsample, num_value_epochs=value_epochs)
+            ),
         )
 
 

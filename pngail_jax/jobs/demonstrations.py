@@ -15,6 +15,7 @@ from pathlib import Path
 
 import jax
 
+from pngail_jax.config.demonstrations import DemonstrationsConfig
 from pngail_jax.config.run_config import RunConfig
 from pngail_jax.demos import (
     DemonstrationError,
@@ -38,8 +39,8 @@ class RunDemonstrations:
 
     demos: Demonstrations
     path: str
-    normalizer: list[float] | None
-    normalizer_source: str
+    return_range: list[float] | None
+    return_range_source: str
 
     @property
     def action_scale(self) -> float:
@@ -55,11 +56,11 @@ def prepare(config: RunConfig, env, saved=None) -> RunDemonstrations:
         demos, path = load_or_make_demos(config, saved.demos_path if saved else None, env)
     except (DemonstrationError, FileNotFoundError, ImportError) as error:
         raise RunError(f"demonstrations: {error}") from None
-    if saved is not None and saved.normalizer is not None:  # as the run began
-        normalizer, source = saved.normalizer, "the run's config.json"
+    if saved is not None and saved.return_range is not None:  # as the run began
+        return_range, source = saved.return_range, "the run's config.json"
     else:
-        normalizer, source = resolve_normalizer(config, demos, env)
-    return RunDemonstrations(demos, path, normalizer, source)
+        return_range, source = resolve_return_range(config, demos, env)
+    return RunDemonstrations(demos, path, return_range, source)
 
 
 def minari_directory(dataset_id: str) -> Path | None:
@@ -70,9 +71,10 @@ def minari_directory(dataset_id: str) -> Path | None:
     return directory if directory.is_dir() else None
 
 
-def input_files(config: RunConfig, demos_path: str) -> dict:
+def input_files(config: DemonstrationsConfig, demos_path: str) -> dict:
     """``{role: integrity.file_record}`` of the files a run reads its demonstrations from
-    (a local Minari dataset by its whole directory)."""
+    (a local Minari dataset by its whole directory); ``config``: the run's demonstrations
+    part."""
     if demos_path.startswith(MINARI_PREFIX):
         files = {"confidence file": config.conf} if config.conf else {}
         dataset = minari_directory(demos_path.removeprefix(MINARI_PREFIX))
@@ -98,18 +100,20 @@ def demos_cache() -> Path:
     return Path(os.environ.get(DEMO_CACHE_VARIABLE) or DEMO_CACHE).expanduser()
 
 
-def load_or_make_demos(config: RunConfig, saved_path: str | None = None, env=None):
-    """The demonstrations and the path they came from: ``config.demos`` (a file of rows that
-    is not an authors' one is split by ``env``'s sizes), else made once with
-    ``jobs.make_demos`` (its defaults: 1:4 optimal to intermediate trajectories) and
-    reused from ``demos_cache()/<env>/``."""
-    source = saved_path or config.demos
+def load_or_make_demos(config, saved_path: str | None = None, env=None):
+    """The demonstrations and the path they came from: ``config.demonstrations.demos`` (a
+    file of rows that is not an authors' one is split by ``env``'s sizes), else made once
+    with ``jobs.make_demos`` (its defaults: 1:4 optimal to intermediate trajectories) and
+    reused from ``demos_cache()/<config.env>/``. ``config``: a job's config with its task
+    (``env``) and its demonstrations part (``RunConfig``, ``OfflineRunConfig``)."""
+    files = config.demonstrations
+    source = saved_path or files.demos
     if source is not None:
         demos = load_demonstrations(
             source,
-            config.conf,
-            config.action_scale,
-            confidence_field=config.confidence_field,
+            files.conf,
+            files.action_scale,
+            confidence_field=files.confidence_field,
             observation_size=None if env is None else env.observation_size,
             action_size=None if env is None else env.action_size,
         )
@@ -146,7 +150,7 @@ def _cached_demos(cached: Path):
     return demos
 
 
-def normalizer_of(demos) -> list[float] | None:
+def return_range_of(demos) -> list[float] | None:
     metadata = demos.metadata
     if "random_return" in metadata and "optimal_return" in metadata:
         return [float(metadata["random_return"]), float(metadata["optimal_return"])]
@@ -156,17 +160,19 @@ def normalizer_of(demos) -> list[float] | None:
 RANDOM_RETURN_EPISODES = 32
 
 
-def resolve_normalizer(config: RunConfig, demos, env) -> tuple[list[float] | None, str]:
+def resolve_return_range(config, demos, env) -> tuple[list[float] | None, str]:
     """(random, optimal) returns and where they came from: the flags, the demonstrations'
     metadata, or the flag's optimal return with a random return measured here (uniform
-    random actions, ``RANDOM_RETURN_EPISODES`` episodes, a key of ``config.seed``)."""
+    random actions, ``RANDOM_RETURN_EPISODES`` episodes, a key of ``config.seed``).
+    ``config``: a job's config with its base seed and its demonstrations part."""
+    seed, config = config.seed, config.demonstrations
     if config.optimal_return is None:
-        normalizer = normalizer_of(demos)
+        return_range = return_range_of(demos)
         source = demos.metadata.get("normalizer_source", "the demonstrations' metadata")
-        return normalizer, source if normalizer else "none"
+        return return_range, source if return_range else "none"
     if config.random_return is not None:
         return [config.random_return, config.optimal_return], "--random-return, --optimal-return"
-    key = jax.random.fold_in(jax.random.key(config.seed), 7)
+    key = jax.random.fold_in(jax.random.key(seed), 7)
     random_return = random_policy_return(env, key, RANDOM_RETURN_EPISODES)
     if not config.optimal_return > random_return:
         raise RunError(

@@ -35,15 +35,15 @@ import numpy as np
 
 from pngail_jax.config import settings as env_settings
 from pngail_jax.config import validation
-from pngail_jax.config.budget import check_eval_interval, check_seeds
-from pngail_jax.config.learner import DEFAULT_LEARNER, check_learner_fields
+from pngail_jax.config.learner import LearnerConfig
+from pngail_jax.config.training import check_training
 from pngail_jax.demos.generate import normalized_return, random_policy_return, rollout_episodes
 from pngail_jax.demos.npz import save_npz
 from pngail_jax.demos.types import Demonstrations
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.jobs.train_seeds import train_seeds
 from pngail_jax.rl import PolicyTrainer
-from pngail_jax.rl.learners import check_batch, learner_hyperparams, make_learner
+from pngail_jax.rl.learners import learner_hyperparams, make_learner
 from pngail_jax.storage.checkpoint import save_trpo_policies
 from pngail_jax.storage.integrity import atomic_path, atomic_write_text
 from pngail_jax.storage.outputs import Claim, claimed
@@ -67,23 +67,21 @@ class MakeDemosConfig:
     intermediate_target: float = 0.45  # normalised return the intermediate policy is picked near
     measure_episodes: int = 64  # episodes for the random and optimal returns
     settings: env_settings.RunSettings | None = None
-    learner: str = DEFAULT_LEARNER  # the policy learner that trains the candidates (rl.learners)
+    # The policy learner that trains the candidates (config.learner.LearnerConfig; a name
+    # alone is that learner at its defaults).
+    learner: LearnerConfig = LearnerConfig()
 
     def __post_init__(self):
-        if self.settings is None:
-            object.__setattr__(self, "settings", env_settings.settings_for(self.env, eval_every=10))
-        check_learner_fields(self.learner)
-        for name in ("iterations", "num_trajectories", "measure_episodes"):
-            value = getattr(self, name)
-            validation.integer(name, value, 1)
-        check_seeds(self.seeds, self.seed)
+        # env, settings (the table's, evaluated every 10 iterations), the budget and the
+        # learner, as every training job's
+        check_training(self, eval_every=10)
+        for name in ("num_trajectories", "measure_episodes"):
+            validation.integer(name, getattr(self, name), 1)
         self.ratio_parts  # noqa: B018  (checks the ratio)
-        check_eval_interval(self.iterations, self.settings.eval_every)
         if not 0 < self.intermediate_target < 1:
             validation.fail(
                 "intermediate_target", f"must be in (0, 1), got {self.intermediate_target}"
             )
-        check_batch(self.learner, self.rollout_config)
 
     @property
     def ratio_parts(self) -> tuple[float, float]:
@@ -117,7 +115,7 @@ class Checkpoint(NamedTuple):
     iteration: int
     seed: int
     policy_params: Any
-    normalizer: Any
+    normalizer: Any  # the policy's observation statistics (rl.ObservationNormalizer)
     eval_return: float
 
 
@@ -160,7 +158,7 @@ def make_claimed(config: MakeDemosConfig, claim: Claim) -> Path:
     episodes = CheckpointEpisodes(env, config.rollout_config)
     picked = pick_policies(config, env, snapshots, episodes)
     demos = roll_out_mixture(config, env, picked, episodes)
-    path = write_demonstrations(out, demos, {k: demos.metadata[k] for k in NORMALIZER_KEYS})
+    path = write_demonstrations(out, demos, {k: demos.metadata[k] for k in RETURN_RANGE_KEYS})
     print(policies_table(picked))
     _, first_rows = np.unique(demos.trajectory_ids, return_index=True)
     confidences = [float(c) for c in demos.confidence[np.sort(first_rows)]]
@@ -176,11 +174,12 @@ def train_candidates(config: MakeDemosConfig, env, out: Path) -> list[Checkpoint
     """TRPO on the true reward, every evaluated checkpoint of every seed kept (in memory and
     under ``out/checkpoints/iter_XXXX/``)."""
     rollout = config.rollout_config
-    learner = make_learner(config.learner, rollout, env)
+    part = config.learner
+    learner = make_learner(part.name, rollout, env, part.ppo, part.trpo)
     trainer = PolicyTrainer(rollout, env, learner=learner)
     hyperparams = jax.tree.map(
         lambda x: jnp.broadcast_to(x, (config.seeds, *x.shape)),
-        learner_hyperparams(config.learner),
+        learner_hyperparams(config.learner.name),
     )
     snapshots: list[Checkpoint] = []
 
@@ -194,7 +193,7 @@ def train_candidates(config: MakeDemosConfig, env, out: Path) -> list[Checkpoint
             snapshots.append(Checkpoint(iteration, seed, *pick, float(returns[seed])))
 
     print(
-        f"1/3 training {config.learner.upper()} on {config.env} ({config.seeds} seeds x "
+        f"1/3 training {config.learner.name.upper()} on {config.env} ({config.seeds} seeds x "
         f"{config.iterations} iterations; {env_settings.describe(config.settings)})",
         flush=True,
     )
@@ -301,8 +300,8 @@ def roll_out_mixture(
         "num_optimal_trajectories": num_optimal,
         "trajectory_returns": trajectory_returns,
         "optimal_beats_random": picked.optimal_return > picked.random_return,
-        "source": f"experiments.make_demos (deterministic {config.learner.upper()} policies)",
-        "learner": config.learner,
+        "source": f"experiments.make_demos (deterministic {config.learner.name.upper()} policies)",
+        "learner": config.learner.name,
         "env_options": config.settings.env_options,
     }
     demos = Demonstrations(**{k: np.concatenate(v) for k, v in rows.items()}, metadata=metadata)
@@ -337,13 +336,16 @@ def _labelled_rows(parts, env, picked: Picked):
     return rows, trajectory_returns
 
 
-NORMALIZER_KEYS = ("env", "random_return", "optimal_return")
+# What normalizer.json holds (its name kept for the folders already written): the task and
+# the normalised return's ends, the random and optimal returns.
+RETURN_RANGE_KEYS = ("env", "random_return", "optimal_return")
 
 
-def write_demonstrations(out: Path, demos: Demonstrations, normalizer: dict) -> Path:
-    """``normalizer.json``, then ``demos.npz`` (the mark of a finished run), each written to
-    a temporary sibling and renamed, so a kill never leaves a truncated file behind."""
-    atomic_write_text(out / "normalizer.json", json.dumps(normalizer, indent=2))
+def write_demonstrations(out: Path, demos: Demonstrations, return_range: dict) -> Path:
+    """``normalizer.json`` (``return_range``: the task, the random and the optimal return),
+    then ``demos.npz`` (the mark of a finished run), each written to a temporary sibling and
+    renamed, so a kill never leaves a truncated file behind."""
+    atomic_write_text(out / "normalizer.json", json.dumps(return_range, indent=2))
     path = out / DEMOS_FILE
     with atomic_path(path) as temporary:  # keeps the .npz suffix np.savez would append
         save_npz(temporary, demos)

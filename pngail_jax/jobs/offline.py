@@ -36,7 +36,7 @@ from pngail_jax.jobs.chunks import (
     run_chunks,
     start,
 )
-from pngail_jax.jobs.demonstrations import input_files, load_or_make_demos, resolve_normalizer
+from pngail_jax.jobs.demonstrations import input_files, load_or_make_demos, resolve_return_range
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.jobs.offline_config import PROGRAM, OfflineRunConfig, load_offline_config
 from pngail_jax.offline.family import OFFLINE
@@ -72,18 +72,17 @@ def run_offline(
     separate ones together (benchmarks/offline_throughput.py, docs/methods.md)."""
     out = Path(out)
     with refusals(), claimed(out, PROGRAM, overwrite=overwrite, resume=resume) as claim:
-        run_config = config.run_config
         if resume:
             _check_resumable(out, config, allow_unsealed)
         env, demos, demos_path = _environment_and_demos(config)
-        normalizer, normalizer_source = resolve_normalizer(run_config, demos, env)
+        return_range, return_range_source = resolve_return_range(config, demos, env)
         document = {
             "program": PROGRAM,
             "config": _json_config(config),
             "demonstrations": demos_path,
-            "input_files": input_files(run_config, demos_path),
-            "normalizer": normalizer,
-            "normalizer_source": normalizer_source,
+            "input_files": input_files(config.demonstrations, demos_path),
+            "normalizer": return_range,
+            "normalizer_source": return_range_source,
             "complete": False,
             "provenance": provenance(command=command),
         }
@@ -95,13 +94,13 @@ def run_offline(
         _announce(config, len(cells), trainer_config.num_demos or demos.num_rows)
         start_time = time.perf_counter()
         runs = [
-            _run_group(config, OfflineTrainer(trainer, env, demos), group, normalizer,
+            _run_group(config, OfflineTrainer(trainer, env, demos), group, return_range,
                        out / "checkpoints" / "+".join(methods), resume)
             for methods, trainer, group in _programs(config, trainer_config, cells)
         ]  # fmt: skip
         compile_seconds = sum(grid.compile_seconds for grid, _, _ in runs)
         progress = _joined(cells, runs)
-        summary = _write_outputs(out, config, cells, progress, normalizer, compile_seconds)
+        summary = _write_outputs(out, config, cells, progress, return_range, compile_seconds)
         _complete(out, document, trainer_config, progress, start_time, resume, command)
     print(f"-> {out}/{{config.json,metrics.csv,summary.md,summary.json,curves.png}}")
     return summary
@@ -162,10 +161,10 @@ def _check_resumable(out: Path, config: OfflineRunConfig, allow_unsealed: bool =
 
 def _environment_and_demos(config: OfflineRunConfig):
     """(env, demonstrations, their path), or RunError naming what is wrong with them."""
-    run_config, cells = config.run_config, len(config.methods) * config.seeds
+    cells = len(config.methods) * config.seeds
     try:
-        env = env_settings.make_env(config.env, run_config.settings, cells)
-        demos, demos_path = load_or_make_demos(run_config, None, env)
+        env = env_settings.make_env(config.env, config.settings, cells)
+        demos, demos_path = load_or_make_demos(config, None, env)
         demos.check_env(env)  # before config.json is written, not in the first program
     except (DemonstrationError, FileNotFoundError, ImportError, ValueError) as error:
         raise RunError(f"demonstrations: {error}") from None
@@ -181,7 +180,7 @@ def _environment_and_demos(config: OfflineRunConfig):
 
 
 def _run_group(
-    config: OfflineRunConfig, trainer: OfflineTrainer, cells, normalizer, checkpoints, resume
+    config: OfflineRunConfig, trainer: OfflineTrainer, cells, return_range, checkpoints, resume
 ):
     """One program's cells, compiled and run in chunks with a progress line and a checkpoint
     (in ``checkpoints``) each, from its last intact checkpoint when ``resume``: (grid, cells,
@@ -214,7 +213,7 @@ def _run_group(
         done *= trainer_config.steps_per_iteration
         rate = steps_per_chunk / progress.last_chunk_seconds
         returns = metrics["eval/return"][:, -1]
-        shown = report.normalize(returns, normalizer) if normalizer is not None else returns
+        shown = report.normalize(returns, return_range) if return_range is not None else returns
         best = int(np.nanargmax(shown)) if np.isfinite(shown).any() else 0
         left = (num_chunks - progress.chunks_done) * progress.last_chunk_seconds
         return (
@@ -269,16 +268,16 @@ def _json_config(config) -> dict:
     return {k: list(v) if isinstance(v, tuple) else v for k, v in values.items()}
 
 
-def _write_outputs(out, config, cells, progress, normalizer, compile_seconds) -> dict:
+def _write_outputs(out, config, cells, progress, return_range, compile_seconds) -> dict:
     """metrics.csv (``env_steps`` 0: no environment step is taken), summary.json / .md and
     curves.png; returns the summary."""
     metrics = {**progress.metrics, **progress.init_metrics}
     metrics["env_steps"] = np.zeros_like(progress.metrics["gradient_steps"], np.int64)
-    _write_metrics(out / "metrics.csv", cells, metrics, normalizer, progress.timing)
+    _write_metrics(out / "metrics.csv", cells, metrics, return_range, progress.timing)
     excluded = nonfinite_cells(progress.metrics, config.eval_every)
     seconds = max(progress.timing["seconds"], 1e-9)
     baseline = "bc-all" if "bc-all" in config.methods else None
-    summary = report.summarize(cells, metrics, normalizer, 0.0, compile_seconds,
+    summary = report.summarize(cells, metrics, return_range, 0.0, compile_seconds,
                                excluded, baseline)  # fmt: skip
     summary["gradient_steps"] = config.gradient_steps
     summary["gradient_steps_per_second"] = progress.timing["steps"] / seconds
@@ -301,7 +300,7 @@ def _write_outputs(out, config, cells, progress, normalizer, compile_seconds) ->
     markdown = report.summary_markdown(summary, cells, metrics, title, notes)
     report.write_summary(out, summary, markdown)
     gradient = {**metrics, "env_steps": progress.metrics["gradient_steps"]}
-    plots.plot_curves(out / "curves.png", cells, gradient, normalizer, title, excluded,
+    plots.plot_curves(out / "curves.png", cells, gradient, return_range, title, excluded,
                        xlabel="M gradient steps per run")  # fmt: skip
     print(markdown)
     return summary
@@ -345,11 +344,11 @@ def _dwbc_summary(metrics: dict, config) -> tuple[dict, str]:
     return dwbc, note
 
 
-def _write_metrics(path, cells, metrics, normalizer, timing) -> None:
+def _write_metrics(path, cells, metrics, return_range, timing) -> None:
     """metrics.csv by the sweep's writer, each cell with its own program's chunk ends as its
     wall clock (the programs run one after another), and the columns of
     ``offline.METRICS_CSV_COLUMNS`` whose metrics the run recorded (DWBC's discriminator at
     each evaluation, where DWBC ran)."""
     per_cell = [timing["chunk_seconds"][timing["group_of_cell"][i]] for i in range(len(cells))]
     extra = {column: name for column, name in METRICS_CSV_COLUMNS.items() if name in metrics}
-    report.write_metrics_csv(path, cells, metrics, normalizer, per_cell, extra)
+    report.write_metrics_csv(path, cells, metrics, return_range, per_cell, extra)

@@ -10,9 +10,12 @@ import dataclasses
 from pathlib import Path
 
 from pngail_jax.analysis.runs import read_run_config
-from pngail_jax.config.run_config import RunConfig
-from pngail_jax.config.settings import settings_for
+from pngail_jax.config.budget import check_seeds
+from pngail_jax.config.demonstrations import DemonstrationsConfig, demonstrations_part
+from pngail_jax.config.settings import RunSettings
 from pngail_jax.config.task import task_classifier, task_num_demos
+from pngail_jax.config.training import task_settings
+from pngail_jax.config.validation import real
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.jobs.trainer_configs import sized_classifier
 from pngail_jax.offline.family import OFFLINE
@@ -55,7 +58,10 @@ class OfflineRunConfig:
             raise ValueError(f"methods must be distinct and not empty, got {self.methods!r}")
         for method in self.methods:  # an unknown name: one line naming the known ones
             OFFLINE.check_method(method)
-        for name in ("seeds", "gradient_steps", "steps_per_iteration", "eval_every",
+        check_seeds(self.seeds, self.seed)
+        self.demonstrations  # noqa: B018  (the demonstrations part's checks)
+        self.settings  # noqa: B018  (the task's row: an unknown task is refused)
+        for name in ("gradient_steps", "steps_per_iteration", "eval_every",
                      "chunk_iterations", "batch_size", "ilid_discriminator_steps"):  # fmt: skip
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
@@ -68,6 +74,8 @@ class OfflineRunConfig:
             )
         if not 0 < self.label_ratio < 1:
             raise ValueError(f"label_ratio must lie in (0, 1), got {self.label_ratio!r}")
+        if not real("noise_std", self.noise_std, "be finite and >= 0") >= 0:
+            raise ValueError(f"noise_std must be finite and >= 0, got {self.noise_std!r}")
         if not 0 < self.ilid_discriminator_learning_rate < 1:
             raise ValueError(
                 "ilid_discriminator_learning_rate must lie in (0, 1), got "
@@ -92,14 +100,16 @@ class OfflineRunConfig:
         return self.gradient_steps // self.dwbc_discriminator_updates
 
     @property
-    def run_config(self) -> RunConfig:
-        """The sweep's config of the same task and files: what the demonstrations, the
-        normaliser and the environment are read with."""
-        return RunConfig(
-            env=self.env, demos=self.demos, conf=self.conf, action_scale=self.action_scale,
-            methods=("gail",), seeds=self.seeds, seed=self.seed,
-            label_ratios=(self.label_ratio,), noise_stds=(self.noise_std,),
-        )  # fmt: skip
+    def demonstrations(self) -> DemonstrationsConfig:
+        """The demonstrations part (the files and their units; the normalised return's ends
+        are the demonstrations' own), as the sweep's: what ``jobs.demonstrations`` reads."""
+        return demonstrations_part(self)
+
+    @property
+    def settings(self) -> RunSettings:
+        """The task's row of ``config.settings``: its environment's solver and evaluation
+        episodes, as the sweep's on the same task."""
+        return task_settings(self.env)
 
     def trainer_config(self, num_rows: int) -> OfflineConfig:
         """The offline trainer's static config on demonstrations of ``num_rows`` rows: the
@@ -111,7 +121,7 @@ class OfflineRunConfig:
             num_iterations=self.gradient_steps // self.steps_per_iteration,
             steps_per_iteration=self.steps_per_iteration,
             eval_every=self.eval_every,
-            num_eval_episodes=self.num_eval_episodes or settings_for(self.env).num_eval_episodes,
+            num_eval_episodes=self.num_eval_episodes or self.settings.num_eval_episodes,
             batch_size=self.batch_size,
             hidden_sizes=self.hidden_sizes,
             num_demos=num_demos,

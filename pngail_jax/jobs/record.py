@@ -41,7 +41,7 @@ class SavedRun:
     platform: str
     local_device_count: int
     inputs: dict  # {role: integrity.file_record} of the input files; {} from older versions
-    normalizer: list[float] | None = None  # what the run normalised returns by
+    return_range: list[float] | None = None  # what the run normalised returns by
 
 
 SEAL = CONFIG_SEAL
@@ -95,7 +95,7 @@ def load_saved(directory: Path, allow_unsealed: bool = False) -> SavedRun:
             devices["platform"],
             devices["local_device_count"],
             read_run_config(data).inputs,
-            read_run_config(data).normalizer,
+            read_run_config(data).return_range,
         )
     except IntegrityError as error:
         raise RunError(f"--resume {directory}: {error}") from None
@@ -148,8 +148,8 @@ def write_config(out: Path, run: BuiltRun, command: Sequence[str] | None = None)
         **run.config.to_dict(),
         "resolved": {
             "demos_path": run.demos_path,
-            "normalizer": run.normalizer,
-            "normalizer_source": run.normalizer_source,
+            "normalizer": run.return_range,
+            "normalizer_source": run.return_range_source,
             "action_scale": run.action_scale,
             "num_demos": run.trainer.num_demos,
             "bsc_eps": run.config.task_bsc_eps,
@@ -158,7 +158,7 @@ def write_config(out: Path, run: BuiltRun, command: Sequence[str] | None = None)
             "adversarial": dataclasses.asdict(run.trainer.config),
             # What each method name resolved to: a resume refuses a changed preset.
             "methods": {name: preset_record(name) for name in run.config.methods},
-            "inputs": input_files(run.config, run.demos_path),
+            "inputs": input_files(run.config.demonstrations, run.demos_path),
         },
         "provenance": provenance(command=command),
     }

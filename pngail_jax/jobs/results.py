@@ -78,10 +78,10 @@ def write_outputs(out: Path, run: BuiltRun, progress: Progress) -> str:
     metrics = {**progress.metrics, **progress.init_metrics}
     chunk_seconds = progress.timing.get("chunk_seconds", [])
     known = chunk_seconds if None not in chunk_seconds else ()
-    report.write_metrics_csv(out / "metrics.csv", cells, metrics, run.normalizer, known)
+    report.write_metrics_csv(out / "metrics.csv", cells, metrics, run.return_range, known)
     title = title_of(config, len(cells))
     diverged = nonfinite_cells(progress.metrics, config.settings.eval_every)
-    plots.plot_curves(out / "curves.png", cells, metrics, run.normalizer, title, diverged)
+    plots.plot_curves(out / "curves.png", cells, metrics, run.return_range, title, diverged)
     plots.plot_diagnostics(out / "diagnostics.png", cells, metrics, title, diverged)
     done = progress.iterations_done(run.grid)
     summary = {
@@ -91,7 +91,7 @@ def write_outputs(out: Path, run: BuiltRun, progress: Progress) -> str:
         **report.summarize(
             cells,
             metrics,
-            run.normalizer,
+            run.return_range,
             progress.timing["steps"] / progress.timing["seconds"],
             run.grid.compile_seconds,
             excluded=diverged,

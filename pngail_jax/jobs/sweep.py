@@ -255,17 +255,17 @@ def _progress_line(built: BuiltRun, progress: Progress, chunk_metrics, reported_
         f"iter {iteration:5d}/{config.iterations}  env steps "
         f"{iteration * config.settings.samples_per_iteration:,}/run  {rate:,.0f} steps/s  "
         f"ETA {format_seconds(remaining)}  "
-        f"best {_best_cell(built.cells, chunk_metrics, built.normalizer)}"
+        f"best {_best_cell(built.cells, chunk_metrics, built.return_range)}"
     )
     return "\n".join(lines)
 
 
-def _best_cell(cells, chunk_metrics, normalizer) -> str:
+def _best_cell(cells, chunk_metrics, return_range) -> str:
     final = chunk_metrics["eval/return"][:, -1]
     if not np.isfinite(final).any():
         return "(none finite)"
     index = int(np.nanargmax(final))
     cell = cells[index]
-    normalized = normalize(final[index], normalizer)
+    normalized = normalize(final[index], return_range)
     extra = f" ({normalized:.2f})" if np.isfinite(normalized) else ""
     return f"{cell.method}/seed {cell.seed} {final[index]:.1f}{extra}"

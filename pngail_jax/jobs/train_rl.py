@@ -25,14 +25,13 @@ import numpy as np
 from pngail_jax.analysis.report import write_seed_metrics_csv
 from pngail_jax.analysis.runs import UntrustedRun, sealed_document
 from pngail_jax.config import settings as env_settings
-from pngail_jax.config import validation
-from pngail_jax.config.budget import check_eval_interval, check_seeds
-from pngail_jax.config.learner import DEFAULT_FISHER, DEFAULT_LEARNER, check_learner_fields
+from pngail_jax.config.learner import LearnerConfig
+from pngail_jax.config.training import check_training
 from pngail_jax.jobs.chunks import nanmean
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.jobs.train_seeds import train_seeds
-from pngail_jax.rl import PolicyTrainer, PPOConfig, RolloutConfig, TRPOConfig, TRPOHyperparams
-from pngail_jax.rl.learners import check_batch, learner_hyperparams, make_learner
+from pngail_jax.rl import PolicyTrainer, RolloutConfig, TRPOConfig, TRPOHyperparams
+from pngail_jax.rl.learners import learner_hyperparams, make_learner
 from pngail_jax.storage.checkpoint import save_trpo_policies
 from pngail_jax.storage.integrity import (
     CONFIG_SEAL,
@@ -60,63 +59,37 @@ METRIC_COLUMNS = {
 @dataclasses.dataclass(frozen=True)
 class TrainRLConfig:
     """A TRPO (or, ``learner="ppo"``, PPO) run on the true reward. ``settings`` None: the
-    task's row of ``pngail_jax.config.settings``. ``truncation_as_terminal``: the reference's GAE,
-    which does not bootstrap through time limits. ``ppo``: PPO's static settings."""
+    task's row of ``pngail_jax.config.settings``. ``learner``: the policy learner's part
+    (``config.learner.LearnerConfig``: its name and each learner's static settings; a name
+    alone is that learner at its defaults). ``truncation_as_terminal``: the reference's GAE,
+    which does not bootstrap through time limits."""
 
     env: str = "Pendulum-v1"
     iterations: int = 100
     seeds: int = 3
     seed: int = 0
-    fisher: str = DEFAULT_FISHER
-    fisher_subsample: int = 1
-    value_epochs: int = 1
     truncation_as_terminal: bool = False
     settings: env_settings.RunSettings | None = None
-    learner: str = DEFAULT_LEARNER
-    ppo: PPOConfig = PPOConfig()
+    learner: LearnerConfig = LearnerConfig()
 
     def __post_init__(self):
-        if self.settings is None:
-            object.__setattr__(self, "settings", env_settings.settings_for(self.env))
-        for name in ("iterations", "fisher_subsample", "value_epochs"):
-            validation.integer(name, getattr(self, name), 1)
-        check_seeds(self.seeds, self.seed)
-        check_learner_fields(self.learner, fisher=self.fisher, value_epochs=self.value_epochs)
-        check_eval_interval(self.iterations, self.settings.eval_every)
-        rollout, trpo = self.rollout_config, self.trpo_config  # each config's own checks
-        try:
-            check_batch(self.learner, rollout, self.ppo, trpo)
-        except ValueError as error:
-            validation.fail(self.learner, str(error))
+        check_training(self)  # env, settings, the budget and the learner, as every job's
 
     @property
     def rollout_config(self) -> RolloutConfig:
         return self.settings.rollout_config(self.iterations)
 
     @property
-    def trpo_config(self) -> TRPOConfig:
-        return TRPOConfig(
-            num_value_epochs=self.value_epochs,
-            fisher=self.fisher,
-            fisher_subsample=self.fisher_subsample,
-        )
-
-    @property
     def hyperparams(self) -> TRPOHyperparams:
         return learner_hyperparams(
-            self.learner, bootstrap_truncation=not self.truncation_as_terminal
+            self.learner.name, bootstrap_truncation=not self.truncation_as_terminal
         )
 
     def trainer(self, env) -> PolicyTrainer:
         """The trainer of this run in ``env`` (its learner on the true reward)."""
         config = self.rollout_config
-        learner = make_learner(self.learner, config, env, self.ppo, self.trpo_config)
+        learner = make_learner(self.learner.name, config, env, self.learner.ppo, self.learner.trpo)
         return PolicyTrainer(config, env, learner=learner)
-
-    @property
-    def learner_config(self) -> TRPOConfig | PPOConfig:
-        """The running learner's own settings."""
-        return self.ppo if self.learner == "ppo" else self.trpo_config
 
     def document(self, command: Sequence[str] | None = None) -> dict:
         """config.json's content (``command``: the flags a program was given, which its
@@ -129,9 +102,9 @@ class TrainRLConfig:
                     "settings": dataclasses.asdict(self.settings),
                     "seeds": self.seeds,
                     "seed": self.seed,
-                    "learner": self.learner,
+                    "learner": self.learner.name,
                     "rollout": dataclasses.asdict(self.rollout_config),
-                    self.learner: dataclasses.asdict(self.learner_config),
+                    self.learner.name: dataclasses.asdict(self.learner.settings),
                     "hyperparams": jax.tree.map(lambda x: x.item(), self.hyperparams).__dict__,
                     "argv": None if command is None else list(command),
                 }
@@ -210,7 +183,7 @@ def check_resumable(out: Path, document: dict) -> None:
 def _train(config: TrainRLConfig, env, out: Path) -> None:
     rollout = config.rollout_config
     trainer = config.trainer(env)
-    learner = config.learner.upper()
+    learner = config.learner.name.upper()
     hyperparams = jax.tree.map(
         lambda x: jnp.broadcast_to(x, (config.seeds, *x.shape)), config.hyperparams
     )
@@ -223,7 +196,7 @@ def _train(config: TrainRLConfig, env, out: Path) -> None:
     start = time.perf_counter()
     state, metrics = train_seeds(trainer, hyperparams, keys, checkpoints=out / "checkpoints")
     final_returns = metrics["eval/return"][:, -1]
-    write_seed_metrics_csv(out / "metrics.csv", metrics, METRIC_COLUMNS[config.learner])
+    write_seed_metrics_csv(out / "metrics.csv", metrics, METRIC_COLUMNS[config.learner.name])
     plot_learning_curve(
         out / "learning_curve.png", metrics, f"{learner} on {config.env} ({config.seeds} seeds)"
     )

@@ -3,7 +3,7 @@ turns a sweep's ``RunConfig`` into the ``AdversarialConfig`` its trainer is buil
 ``sized_classifier`` gives the confidence classifier the unlabelled batch width a grid's label
 ratios need (the offline job's trainer config takes it too). The config itself
 (``pngail_jax.config``) imports no trainer for this: checking a ``RunConfig`` checks its
-learner's batch (``run_config_checks``), and the trainer's config is built once, here, when
+learner's batch (``config.training``), and the trainer's config is built once, here, when
 the run is built (``jobs.build``, ``jobs.early_rewards``)."""
 
 from __future__ import annotations
@@ -40,8 +40,9 @@ def adversarial_config(config: RunConfig, num_rows: int | None = None) -> Advers
     num_demos = config.num_demos if num_rows is None else config.task_num_demos(num_rows)
     return AdversarialConfig(
         rollout=config.settings.rollout_config(config.iterations),
-        learner=config.learner,
-        trpo=config.trpo_config,
+        learner=config.learner.name,
+        trpo=config.learner.trpo,
+        ppo=config.learner.ppo,
         classifier=sized_classifier(config.classifier, config.label_ratios, num_demos),
         num_demos=num_demos,
         discriminator_hidden_sizes=config.discriminator_hidden_sizes,

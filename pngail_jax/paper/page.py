@@ -213,8 +213,8 @@ def table4_markdown(figure: Figure, results: dict) -> list[str]:
         lines.append("| " + " | ".join(row) + " |")
     optimal = ["optimal policy"]
     for task in tasks:
-        normalizer = results[task].get("normalizer")
-        ours = _number(normalizer[1], 1) if normalizer else "n/a"
+        return_range = results[task].get("normalizer")
+        ours = _number(return_range[1], 1) if return_range else "n/a"
         optimal += [ours, ours, _number(PAPER_TABLE4_OPTIMAL[paper_column[task]], 2)]
     lines.append("| " + " | ".join(optimal) + " |")
     return lines
@@ -292,7 +292,7 @@ def figure_results(out: Path, figures: list[Figure], grids) -> dict:
         }
         for task, series_list in figure.panels.items():  # the grid's random / optimal returns
             config = read_json(out / "grids" / series_list[0].grid / "config.json")
-            results[figure.name][task]["normalizer"] = read_run_config(config).normalizer
+            results[figure.name][task]["normalizer"] = read_run_config(config).return_range
     return results
 
 

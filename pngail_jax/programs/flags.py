@@ -18,7 +18,13 @@ from typing import Any
 
 from pngail_jax import envs
 from pngail_jax.config.budget import PHASE_SIZES
-from pngail_jax.config.learner import FISHER_FORMS, LEARNERS
+from pngail_jax.config.learner import (
+    FISHER_FORMS,
+    LEARNERS,
+    LearnerConfig,
+    PPOConfig,
+    TRPOConfig,
+)
 from pngail_jax.config.output import LOG_BACKENDS
 from pngail_jax.config.settings import REFERENCE_SETTINGS, RunSettings, parse_solver, settings_for
 from pngail_jax.config.task import TASK_CLASSIFIER_STEPS
@@ -336,27 +342,6 @@ RUN_FLAGS = (
     ),
     FieldFlag("bsc_eps", "BSC's clip (default 0.01; 0.05 on Walker2d, the paper's)", type=float),
     FieldFlag(
-        "learner",
-        "the policy learner under every method: trpo (the paper's) or ppo (docs/ppo.md) "
-        "(default trpo)",
-        choices=LEARNERS,
-    ),
-    FieldFlag(
-        "fisher",
-        "Fisher-vector product: the same matrix either way (the Hessian of the mean KL at the "
-        "current policy); gauss_newton is 1.7x faster here (default gauss_newton)",
-        choices=FISHER_FORMS,
-    ),
-    FieldFlag(
-        "fisher_subsample", "Fisher products on every k-th time step (default 1: all)", type=int
-    ),
-    FieldFlag(
-        "value_epochs",
-        "passes of TRPO's value fit over each batch (default 1, the reference's; "
-        "docs/performance.md)",
-        type=int,
-    ),
-    FieldFlag(
         "phase_sizes",
         "the appendix baselines' training phases (T-REX's and D-REX's reward fits, D-REX's "
         "cloning, CAIL's rounds, f-IRL's discriminator): codebase, their codebases' sizes, or "
@@ -377,3 +362,95 @@ RUN_FLAGS = (
         convert=_log_backends,
     ),
 )
+
+
+_TRPO, _PPO = TRPOConfig(), PPOConfig()
+# The policy learner's part (pngail_jax.config.learner.LearnerConfig) for every program that
+# trains a policy (the sweep, train_rl, make_demos): its name, TRPO's settings and PPO's.
+LEARNER_FLAGS = (
+    FieldFlag(
+        "learner.name",
+        "the policy learner: trpo (the paper's) or ppo (docs/ppo.md) (default trpo)",
+        flag="--learner",
+        choices=LEARNERS,
+        also=("learner",),
+    ),
+    FieldFlag(
+        "learner.trpo.fisher",
+        "TRPO's Fisher-vector product: the same matrix either way (the Hessian of the mean KL "
+        "at the current policy); hessian is the reference's form, gauss_newton 1.7x faster "
+        f"here (default {_TRPO.fisher})",
+        flag="--fisher",
+        choices=FISHER_FORMS,
+    ),
+    FieldFlag(
+        "learner.trpo.fisher_subsample",
+        f"TRPO's Fisher products on every k-th time step (default {_TRPO.fisher_subsample}: all)",
+        flag="--fisher-subsample",
+        type=int,
+    ),
+    FieldFlag(
+        "learner.trpo.num_value_epochs",
+        "passes of TRPO's value fit over each batch (default "
+        f"{_TRPO.num_value_epochs}, the reference's; docs/performance.md)",
+        flag="--value-epochs",
+        type=int,
+    ),
+    FieldFlag(
+        "learner.ppo.num_epochs",
+        f"PPO's epochs over each batch (default {_PPO.num_epochs})",
+        flag="--ppo-epochs",
+        type=int,
+    ),
+    FieldFlag(
+        "learner.ppo.num_minibatches",
+        f"PPO's minibatches per epoch (default {_PPO.num_minibatches})",
+        flag="--ppo-minibatches",
+        type=int,
+    ),
+    FieldFlag(
+        "learner.ppo.clip_value_loss",
+        "PPO's clipped value loss (default: on)",
+        flag="--ppo-clip-value-loss",
+        boolean=True,
+    ),
+    FieldFlag(
+        "learner.ppo.anneal_learning_rate",
+        "PPO's learning rate annealed linearly to 0 over the run (default: on)",
+        flag="--ppo-anneal-learning-rate",
+        boolean=True,
+    ),
+    FieldFlag(
+        "learner.ppo.normalize_rewards",
+        "PPO's rewards divided by the running std of the discounted return, clipped to "
+        "[-10, 10] (default: on)",
+        flag="--ppo-normalize-rewards",
+        boolean=True,
+    ),
+)
+
+
+def add_learner_flags(parser) -> None:
+    group = parser.add_argument_group(
+        "policy learner (pngail_jax.config.learner.LearnerConfig; each learner reads its own)"
+    )
+    add_flags(group, LEARNER_FLAGS)
+
+
+def learner_from_flags(parser, args, base: LearnerConfig | None = None) -> LearnerConfig:
+    """The ``LearnerConfig`` the learner flags give, from ``base`` (None: the defaults);
+    exits naming the flag of a bad value."""
+    base = base or LearnerConfig()
+    given = given_values(parser, args, LEARNER_FLAGS)
+    try:
+        parts = {}
+        for part in ("trpo", "ppo"):
+            try:
+                parts[part] = dataclasses.replace(
+                    getattr(base, part), **given.get(f"learner.{part}", {})
+                )
+            except ConfigError as error:
+                raise error.nested(part).nested("learner") from None
+        return LearnerConfig(name=given.get("learner", {}).get("name", base.name), **parts)
+    except ConfigError as error:
+        parser.error(flag_message(error, [LEARNER_FLAGS]))

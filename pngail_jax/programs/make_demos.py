@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from pngail_jax.config.learner import LEARNERS
 from pngail_jax.config.validation import ConfigError
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.jobs.make_demos import MakeDemosConfig, make_demonstrations
@@ -57,12 +56,6 @@ def parse_args(argv=None) -> argparse.Namespace:
     )
     parser.add_argument("--iterations", type=int, default=150, help="policy iterations")
     parser.add_argument("--seeds", type=int, default=3, help="policy seeds; the best is optimal")
-    parser.add_argument(
-        "--learner",
-        choices=LEARNERS,
-        default="trpo",
-        help="the policy learner: trpo (the paper's) or ppo (docs/ppo.md)",
-    )
     parser.add_argument("--seed", type=int, default=0, help="base PRNG seed")
     parser.add_argument("--ratio", default="1:4", help="optimal:intermediate trajectories")
     parser.add_argument(
@@ -80,6 +73,7 @@ def parse_args(argv=None) -> argparse.Namespace:
         default=64,
         help="episodes for the random and optimal returns",
     )
+    flags.add_learner_flags(parser)
     flags.add_settings_flags(parser)
     # Checkpoints are kept at every evaluation, and the intermediate policy is picked among
     # them: finer than the table's evaluation interval by default.
@@ -91,6 +85,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     check_positive(parser, args, ("iterations", "seeds", "num_trajectories", "measure_episodes"))
     check_finite(parser, args, ("intermediate_target",))
     args.settings = flags.settings_from_flags(parser, args, args.env)
+    args.learner = flags.learner_from_flags(parser, args)
     try:
         args.config = config_from(MakeDemosConfig, args)
     except ConfigError as error:  # every field of MakeDemosConfig is the flag of its name

@@ -112,6 +112,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="start a new run from a saved config.json (flags given override it) (default: none)",
     )
     flags.add_flags(parser, flags.RUN_FLAGS, defaults=SMOKE)
+    flags.add_learner_flags(parser)
     _add_output_flags(add)
     flags.add_settings_flags(parser)
     add_compile_cache_flags(parser)
@@ -216,13 +217,16 @@ def config_from_flags(parser, args) -> RunConfig:
     settings = flags.settings_from_flags(parser, args, env, base.settings if same_task else None)
     # Another task: its own classifier, as RunConfig.replace gives.
     classifier = base.classifier if same_task else task_classifier(env)
-    tables = [flags.RUN_FLAGS, flags.SETTINGS_FLAGS]
+    learner = flags.learner_from_flags(parser, args, base.learner)
+    tables = [flags.RUN_FLAGS, flags.SETTINGS_FLAGS, flags.LEARNER_FLAGS]
     try:
         classifier = dataclasses.replace(classifier, **given.get("classifier", {}))
     except ConfigError as error:
         parser.error(flags.flag_message(error.nested("classifier"), tables))
     try:
-        config = base.replace(env=env, settings=settings, classifier=classifier, **top)
+        config = base.replace(
+            env=env, settings=settings, classifier=classifier, learner=learner, **top
+        )
     except ConfigError as error:
         parser.error(flags.flag_message(error, tables))
     except ValueError as error:  # a check between fields that names no single one

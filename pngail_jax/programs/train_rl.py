@@ -18,7 +18,6 @@ import time
 from pathlib import Path
 
 from pngail_jax.config.budget import check_eval_interval
-from pngail_jax.config.learner import DEFAULT_FISHER, FISHER_FORMS, LEARNERS
 from pngail_jax.config.validation import ConfigError
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.jobs.train_rl import TrainRLConfig, train_rl
@@ -38,7 +37,6 @@ from pngail_jax.programs.cli import (
     signals_stop_at_a_checkpoint,
     use_compile_cache,
 )
-from pngail_jax.rl.learners import check_batch
 from pngail_jax.storage.integrity import IntegrityError, read_json
 from pngail_jax.storage.outputs import output_owner
 
@@ -50,12 +48,6 @@ def build_parser() -> argparse.ArgumentParser:
     add = parser.add_argument
     add("--env", default="Pendulum-v1", help=ENV_HELP)
     add("--iterations", type=int, default=100, help="policy iterations (rollout + update)")
-    add(
-        "--learner",
-        choices=LEARNERS,
-        default="trpo",
-        help="the policy learner: trpo (the paper's) or ppo (docs/ppo.md)",
-    )
     add("--seeds", type=int, default=3, help="seeds, trained side by side")
     add("--seed", type=int, default=0, help="base PRNG seed")
     add(
@@ -77,24 +69,12 @@ def build_parser() -> argparse.ArgumentParser:
         "(default: a new run)",
     )
     add(
-        "--fisher",
-        choices=FISHER_FORMS,
-        default=DEFAULT_FISHER,
-        help="Fisher-vector product form (the same matrix; hessian is the reference's form)",
-    )
-    add("--fisher-subsample", type=int, default=1, help="Fisher products on every k-th step")
-    add(
-        "--value-epochs",
-        type=int,
-        default=1,
-        help="passes of TRPO's value fit over each batch (default 1, the reference's)",
-    )
-    add(
         "--truncation-as-terminal",
         action="store_true",
         help="the reference's GAE: no bootstrapping through time limits",
     )
     add("--fast-solver", action="store_true", help="deprecated: the same as --solver fast")
+    flags.add_learner_flags(parser)
     flags.add_settings_flags(parser)
     add_compile_cache_flags(parser)
     return parser
@@ -115,7 +95,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     note_deprecated(argv, {"--fast-solver": "--solver fast"})
     _check(parser, args)
     if args.out is None:
-        args.out = Path("runs") / f"{args.learner}-{args.env}-{time.strftime('%Y%m%d-%H%M%S')}"
+        args.out = Path("runs") / f"{args.learner.name}-{args.env}-{time.strftime('%Y%m%d-%H%M%S')}"
     claim_output(parser, args.out, "train_rl", args.overwrite)
     args.argv = argv
     return args
@@ -127,14 +107,15 @@ def _check(parser, args) -> None:
         if args.solver not in (None, "fast"):
             parser.error("--fast-solver and --solver disagree")
         args.solver = "fast"
-    check_positive(parser, args, ("iterations", "seeds", "fisher_subsample", "value_epochs"))
+    check_positive(parser, args, ("iterations", "seeds"))
     args.settings = flags.settings_from_flags(parser, args, args.env)
+    args.learner = flags.learner_from_flags(parser, args)
     try:
         check_eval_interval(args.iterations, args.settings.eval_every, "--eval-every")
     except ConfigError as error:
         parser.error(error.named("--iterations"))
     try:
-        check_batch(args.learner, args.settings.rollout_config(args.iterations))
+        args.learner.check_batch(args.settings.rollout_config(args.iterations))
     except ValueError as error:
         parser.error(str(error))
 
