@@ -293,7 +293,7 @@ def part_compiles(built) -> dict[str, float]:
         run = functools.partial(trainer.run_blocks, num_blocks=grid.blocks_per_chunk)
         return jax.vmap(run)(*args)
 
-    def without_classifier(config, spec, coef, inputs, split, key):
+    def without_classifier(config, spec, coef, inputs, split, key, compiled=True):
         mean = jnp.where(split.labelled, split.confidence, 0.0).sum()
         mean = mean / jnp.maximum(split.labelled.sum(), 1)
         return jnp.where(split.labelled, split.confidence, mean), mean
