@@ -13,7 +13,8 @@ wall clock between them:
 - ``demonstrations``: the cells, the environment and the demonstrations read (and checked);
 - ``build``: the trainer and the grid's two compiles, ``init`` and ``chunk``, each split by
   JAX's own compile events (``jax.monitoring``: tracing, lowering to StableHLO, XLA's
-  compile or the persistent cache's retrieval);
+  compile or the persistent cache's retrieval, and the cache's hits); the grid compiles the
+  two side by side (``grid.compile_side_by_side``), so their seconds may overlap;
 - ``init``: the grid's init program run (the split, the confidence classifier, the method's
   set-up phases);
 - ``first_chunk``: the first chunk of ``chunk_iterations`` iterations (ending in an
@@ -29,8 +30,13 @@ them), the largest first.
 
     python benchmarks/cold_start.py --json cold_start.json             # both cases, twice
     python benchmarks/cold_start.py --cases pendulum --repeats 1
+    python benchmarks/cold_start.py --trees before=/tmp/old,after=.    # two checkouts
 
-Row schema: ``{name, case, repeat, cache, cpus, total_seconds, stages: {...}, programs:
+``--trees`` measures each case with each checkout's ``pngail_jax`` (the child's
+``PYTHONPATH``; e.g. ``git archive COMMIT pngail_jax | tar -x -C /tmp/old``), the trees one
+after the other within each repeat, so a before and after share the machine's minute.
+
+Row schema: ``{name, case, tree, repeat, cache, cpus, total_seconds, stages: {...}, programs:
 {init|chunk: {compile_seconds, cache_hits, trace_seconds, lower_seconds, backend_seconds,
 cache_seconds, stablehlo_chars, stablehlo_lines, hlo_instructions, while_loops, fusions,
 flops, sources}}, command, device, jax_version}``.
