@@ -52,15 +52,17 @@ def cache_programs_with_callbacks(directory: str | Path) -> bool:
 
     Why that is safe in this JAX: a CPU program reaches its callbacks through an FFI call
     that names a callback by its index in the lowered module's list, not by an address baked
-    into the program (the reason JAX once had to refuse them); the list is handed to the
-    executable when it is loaded. So an entry is keyed by JAX's own cache key of the module
-    (its text with the callback indices, the compile options, the backend, the JAX and
-    jaxlib versions) and loaded with the callbacks this process lowered for the same module,
-    in the same order: the program is the one XLA would compile, and it calls this process's
-    Python functions. Returns whether it is on: it steps aside (JAX's own compile as before)
-    in a JAX whose internals differ (checked: the private function it wraps and its
-    arguments), and the wrapper itself for a multi-process run, a program without
-    callbacks, and any failure to read or write an entry."""
+    into the program; the list is handed to the executable when it is loaded. So an entry
+    is keyed by JAX's own cache key of the module (its text with the callback indices, the
+    compile options, the backend, the JAX and jaxlib versions) and loaded with the callbacks
+    this process lowered for the same module, in the same order: the program is the one XLA
+    would compile, and it calls this process's Python functions.
+
+    Returns whether it is on: it steps aside (JAX's own compile as before) in a JAX whose
+    internals differ (checked: the private function it wraps and its arguments), and the
+    wrapper itself for a multi-process run, a backend other than the CPU, a program without
+    callbacks, the cache turned off (``jax_enable_compilation_cache``) and any failure to
+    read or write an entry."""
     import inspect
 
     try:
@@ -92,7 +94,12 @@ def _compile_or_read(original, backend, computation, devices, compile_options, h
     arguments = (backend, computation, devices, compile_options, host_callbacks,
                  executable_devices, pgle_profiler)  # fmt: skip
     directory = _callback_cache.get("directory")
-    if not host_callbacks or directory is None or jax.process_count() > 1:
+    enabled = jax.config.jax_enable_compilation_cache and directory is not None
+    # CPU only: its callbacks by index are what this was checked against (a TPU's lower
+    # another way); one process only, as JAX's cache writes from one.
+    if not (host_callbacks and enabled and backend.platform == "cpu"):
+        return original(*arguments)
+    if jax.process_count() > 1:
         return original(*arguments)
     try:
         path = directory / cache_key.get(computation, devices, compile_options, backend)
