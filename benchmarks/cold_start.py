@@ -13,7 +13,8 @@ wall clock between them:
 - ``demonstrations``: the cells, the environment and the demonstrations read (and checked);
 - ``build``: the trainer and the grid's two compiles, ``init`` and ``chunk``, each split by
   JAX's own compile events (``jax.monitoring``: tracing, lowering to StableHLO, XLA's
-  compile or the persistent cache's retrieval);
+  compile or the persistent cache's retrieval, and the cache's hits); the grid compiles the
+  two side by side (``grid.compile_side_by_side``), so their seconds may overlap;
 - ``init``: the grid's init program run (the split, the confidence classifier, the method's
   set-up phases);
 - ``first_chunk``: the first chunk of ``chunk_iterations`` iterations (ending in an
@@ -29,9 +30,14 @@ them), the largest first.
 
     python benchmarks/cold_start.py --json cold_start.json             # both cases, twice
     python benchmarks/cold_start.py --cases pendulum --repeats 1
+    python benchmarks/cold_start.py --trees before=/tmp/old,after=.    # two checkouts
 
-Row schema: ``{name, case, repeat, cache, cpus, total_seconds, stages: {...}, programs:
-{init|chunk: {compile_seconds, trace_seconds, lower_seconds, backend_seconds,
+``--trees`` measures each case with each checkout's ``pngail_jax`` (the child's
+``PYTHONPATH``; e.g. ``git archive COMMIT pngail_jax | tar -x -C /tmp/old``), the trees one
+after the other within each repeat, so a before and after share the machine's minute.
+
+Row schema: ``{name, case, tree, repeat, cache, cpus, total_seconds, stages: {...}, programs:
+{init|chunk: {compile_seconds, cache_hits, trace_seconds, lower_seconds, backend_seconds,
 cache_seconds, stablehlo_chars, stablehlo_lines, hlo_instructions, while_loops, fusions,
 flops, sources}}, command, device, jax_version}``.
 """
@@ -72,6 +78,12 @@ def parse_args(argv=None):
     parser.add_argument(
         "--extra", default="", help="flags added to every case's sweep command (a smaller run)"
     )
+    parser.add_argument(
+        "--trees",
+        default="",
+        help="LABEL=PATH,...: measure each case with each checkout's pngail_jax (the child's "
+        "PYTHONPATH), one after the other per repeat ('': this checkout's)",
+    )
     parser.add_argument("--json", help="write the rows here")
     parser.add_argument("--dump", help="write each case's programs' HLO texts under this folder")
     parser.add_argument(
@@ -85,9 +97,13 @@ def parse_args(argv=None):
 
 
 class CompileEvents:
-    """JAX's compile-duration events (``jax.monitoring``), each with its wall-clock end."""
+    """JAX's compile-duration events (``jax.monitoring``), each with its wall-clock end and
+    the grid program it belongs to: ``init`` or ``chunk`` by the traced function's name
+    (``trainer.init``, ``trainer.run_blocks``), the cache's reads (which carry no name) by
+    the thread (``grid.compile_side_by_side`` compiles init in its own), else ``other``."""
 
     NAMES = {
+        "cache_hits": "cache_hits",
         "/jax/core/compile/jaxpr_trace_duration": "trace_seconds",
         "/jax/core/compile/jaxpr_to_mlir_module_duration": "lower_seconds",
         "/jax/core/compile/backend_compile_duration": "backend_seconds",
@@ -97,18 +113,37 @@ class CompileEvents:
     def __init__(self):
         import jax
 
-        self.events: list[tuple[float, str, float]] = []
+        self.events: list[tuple[float, str, float, str]] = []
         jax.monitoring.register_event_duration_secs_listener(self._record)
+        jax.monitoring.register_event_listener(self._count)
 
-    def _record(self, event: str, duration: float, **_) -> None:
-        if event in self.NAMES:
-            self.events.append((time.time(), self.NAMES[event], duration))
+    def _count(self, event: str, **_) -> None:
+        """A read of the persistent cache that found the program (a count, no duration)."""
+        if event == "/jax/compilation_cache/cache_hits":
+            self._record("cache_hits", 1.0)
 
-    def between(self, start: float, end: float) -> dict[str, float]:
-        """Seconds per kind of the events that ended in ``[start, end)``."""
+    def _record(self, event: str, duration: float, fun_name: str | None = None, **_) -> None:
+        import threading
+
+        from pngail_jax import grid
+
+        if event not in self.NAMES:
+            return
+        if fun_name is None:  # a tree before the side-by-side compiles has no such thread
+            thread = getattr(grid, "COMPILE_THREAD", None)
+            own = thread is not None and threading.current_thread().name.startswith(thread)
+            program = "init" if own else "chunk"
+        else:
+            name = fun_name.removeprefix("jit(").removesuffix(")")
+            program = {"init": "init", "run_blocks": "chunk"}.get(name, "other")
+        self.events.append((time.time(), self.NAMES[event], duration, program))
+
+    def between(self, start: float, end: float, program: str | None = None) -> dict[str, float]:
+        """Seconds per kind of the events of ``program`` (None: every one) that ended in
+        ``[start, end)``."""
         totals = dict.fromkeys(self.NAMES.values(), 0.0)
-        for stamp, kind, duration in self.events:
-            if start <= stamp < end:
+        for stamp, kind, duration, of in self.events:
+            if start <= stamp < end and program in (None, of):
                 totals[kind] += duration
         return totals
 
@@ -139,15 +174,15 @@ def run_stages(argv: list[str], out: Path) -> tuple[dict, dict, object]:
     state, metrics = built.grid.run_chunk(state)
     jax.block_until_ready((state, metrics))
     stamps["first_chunk"] = time.time()
-    boundary = stamps["build"] - built.grid.chunk_compile_seconds
+    build_window = stamps["demonstrations"], stamps["build"]
     programs = {
         "init": {
             "compile_seconds": built.grid.init_compile_seconds,
-            **events.between(stamps["demonstrations"], boundary),
+            **events.between(*build_window, "init"),
         },
         "chunk": {
             "compile_seconds": built.grid.chunk_compile_seconds,
-            **events.between(boundary, stamps["build"]),
+            **events.between(*build_window, "chunk"),
         },
     }
     programs["other"] = events.between(stamps["build"], stamps["first_chunk"])
@@ -293,7 +328,7 @@ def part_compiles(built) -> dict[str, float]:
         run = functools.partial(trainer.run_blocks, num_blocks=grid.blocks_per_chunk)
         return jax.vmap(run)(*args)
 
-    def without_classifier(config, spec, coef, inputs, split, key):
+    def without_classifier(config, spec, coef, inputs, split, key, compiled=True):
         mean = jnp.where(split.labelled, split.confidence, 0.0).sum()
         mean = mean / jnp.maximum(split.labelled.sum(), 1)
         return jnp.where(split.labelled, split.confidence, mean), mean
@@ -342,10 +377,11 @@ def child(instructions: dict) -> dict:
 
 
 def measure(argv: list[str], cache: Path, cpus: set[int] | None, dump: str | None,
-            parts: bool = False) -> dict:  # fmt: skip
+            parts: bool = False, tree: str | None = None) -> dict:  # fmt: skip
     """One child process measuring the sweep of ``argv`` with the compilation cache ``cache``
     (its row, or an ``error`` with the child's last output; ``dump``: see ``--dump``;
-    ``parts``: compile the programs' parts alone too, ``part_compiles``)."""
+    ``parts``: compile the programs' parts alone too, ``part_compiles``; ``tree``: a
+    checkout whose ``pngail_jax`` the child imports, None: this one's)."""
     instructions = {"argv": argv, "cache": str(cache), "launched": time.time(), "dump": dump,
                     "parts": parts}  # fmt: skip
     pin = ["taskset", "-c", ",".join(map(str, sorted(cpus)))] if cpus else []
@@ -354,7 +390,11 @@ def measure(argv: list[str], cache: Path, cpus: set[int] | None, dump: str | Non
         capture_output=True,
         text=True,
         check=False,
-        env={**os.environ, "PNGAIL_JAX_COMPILATION_CACHE": str(cache)},
+        env={
+            **os.environ,
+            "PNGAIL_JAX_COMPILATION_CACHE": str(cache),
+            **({"PYTHONPATH": str(Path(tree).resolve())} if tree else {}),
+        },
     )
     results = [line for line in done.stdout.splitlines() if line.startswith("RESULT ")]
     if done.returncode != 0 or not results:
@@ -363,50 +403,62 @@ def measure(argv: list[str], cache: Path, cpus: set[int] | None, dump: str | Non
 
 
 def case_rows(name: str, args, cpus: set[int] | None) -> list[dict]:
-    """``args.repeats`` cold-then-warm pairs of case ``name``, each cold one on an empty cache."""
+    """``args.repeats`` cold-then-warm pairs of case ``name`` for each tree of ``--trees``
+    (the trees one after the other within a repeat), each cold one on an empty cache."""
     from common import context
 
     argv = [*CASES[name].split(), *args.extra.split()]
+    trees = [tuple(pair.split("=", 1)) for pair in args.trees.split(",") if pair] or [("", None)]
     rows = []
     for repeat in range(args.repeats):
-        with tempfile.TemporaryDirectory(prefix="cold-start-cache-") as cache:
-            for kind in ("cold", "warm"):
-                dump = args.dump and f"{args.dump}/{name}" if kind == "cold" else None
-                parts = args.parts and kind == "cold" and repeat == 0
-                row = measure(argv, Path(cache), cpus, dump, parts)
-                if "error" in row:
-                    raise SystemExit(f"{name} ({kind}) failed:\n{row['error']}")
-                rows.append({
-                    "name": f"{name}/{kind}", "case": name, "repeat": repeat, "cache": kind,
-                    "cpus": sorted(cpus) if cpus else None, **row,
-                    "command": "python -m experiments.sweep " + " ".join(argv), **context(),
-                })  # fmt: skip
-                print(f"{name} {kind} #{repeat + 1}: {row['total_seconds']:.1f} s", flush=True)
+        for label, tree in trees:
+            with tempfile.TemporaryDirectory(prefix="cold-start-cache-") as cache:
+                for kind in ("cold", "warm"):
+                    dump = args.dump and f"{args.dump}/{name}{label}" if kind == "cold" else None
+                    parts = args.parts and kind == "cold" and repeat == 0
+                    row = measure(argv, Path(cache), cpus, dump, parts, tree)
+                    if "error" in row:
+                        raise SystemExit(f"{name} {label} ({kind}) failed:\n{row['error']}")
+                    rows.append({
+                        "name": f"{name}/{kind}", "case": name, "tree": label, "repeat": repeat,
+                        "cache": kind, "cpus": sorted(cpus) if cpus else None, **row,
+                        "command": "python -m experiments.sweep " + " ".join(argv), **context(),
+                    })  # fmt: skip
+                    total = row["total_seconds"]
+                    print(f"{name} {label} {kind} #{repeat + 1}: {total:.1f} s", flush=True)
     return rows
+
+
+def program_seconds(program: dict) -> float:
+    """A program's compile seconds by JAX's events (tracing, lowering, XLA, cache reads),
+    which mean the same in every tree; with the compiles side by side, the two programs'
+    seconds overlap in time."""
+    kinds = ("trace_seconds", "lower_seconds", "backend_seconds", "cache_seconds")
+    return sum(program[kind] for kind in kinds)
 
 
 def stage_table(rows: list[dict]) -> str:
     """One line per measurement: each stage's seconds and each program's compile."""
     from common import markdown_table
 
-    header = ["case", "cache", "#", *STAGES, "init compile", "chunk compile", "total"]
+    header = ["case", "tree", "cache", "#", *STAGES, "init compile", "chunk compile", "total"]
     lines = []
     for row in rows:
         stages, programs = row["stages"], row["programs"]
         lines.append([
-            row["case"], row["cache"], row["repeat"] + 1,
+            row["case"], row.get("tree", ""), row["cache"], row["repeat"] + 1,
             *(f"{stages[stage]:.1f}" for stage in STAGES),
-            *(f"{programs[name]['compile_seconds']:.1f}" for name in ("init", "chunk")),
+            *(f"{program_seconds(programs[name]):.1f}" for name in ("init", "chunk")),
             f"{row['total_seconds']:.1f}",
         ])  # fmt: skip
-    return markdown_table(header, lines, "llr" + "r" * (len(header) - 3))
+    return markdown_table(header, lines, "lllr" + "r" * (len(header) - 4))
 
 
 def program_table(rows: list[dict]) -> str:
     """Each case's programs (its first cold measurement): compile split and size."""
     from common import markdown_table
 
-    header = ["case", "program", "trace s", "lower s", "XLA s", "StableHLO lines",
+    header = ["case", "tree", "program", "trace s", "lower s", "XLA s", "StableHLO lines",
               "HLO instructions", "while loops", "fusions", "GFLOP"]  # fmt: skip
     lines = []
     for row in rows:
@@ -415,12 +467,13 @@ def program_table(rows: list[dict]) -> str:
         for name in ("init", "chunk"):
             p = row["programs"][name]
             lines.append([
-                row["case"], name, f"{p['trace_seconds']:.1f}", f"{p['lower_seconds']:.1f}",
-                f"{p['backend_seconds']:.1f}", f"{p['stablehlo_lines']:,}",
+                row["case"], row.get("tree", ""), name, f"{p['trace_seconds']:.1f}",
+                f"{p['lower_seconds']:.1f}", f"{p['backend_seconds']:.1f}",
+                f"{p['stablehlo_lines']:,}",
                 f"{p['hlo_instructions']:,}", p["while_loops"], p["fusions"],
                 "-" if p["flops"] is None else f"{p['flops'] / 1e9:.2f}",
             ])  # fmt: skip
-    return markdown_table(header, lines, "ll" + "r" * 8)
+    return markdown_table(header, lines, "lll" + "r" * 8)
 
 
 def main(argv=None) -> list[dict]:
@@ -439,11 +492,12 @@ def main(argv=None) -> list[dict]:
     print()
     print(program_table(rows))
     for row in rows:
+        case = f"{row['case']} {row.get('tree', '')}".strip()
         if row.get("part_compiles"):
             parts = ", ".join(f"{k} {v:.1f} s" for k, v in row["part_compiles"].items())
-            print(f"\n{row['case']}: compiles alone, no cache: {parts}")
+            print(f"\n{case}: compiles alone, no cache: {parts}")
         if row["cache"] == "cold" and row["repeat"] == 0:
-            print(f"\n{row['case']}: the chunk program's instructions by source")
+            print(f"\n{case}: the chunk program's instructions by source")
             for source, count in list(row["programs"]["chunk"]["sources"].items())[:12]:
                 print(f"  {count:6,}  {source}")
     write_rows(args.json, rows)

@@ -292,12 +292,22 @@ def risk_estimator_variance(
 
 
 def split_confidences(
-    config: ClassifierConfig, spec: ClassifierSpec, classifier_coef, inputs, split, key
+    config: ClassifierConfig,
+    spec: ClassifierSpec,
+    classifier_coef,
+    inputs,
+    split,
+    key,
+    compiled: bool = True,
 ):
     """(float[M] the confidence every row of a split trains with, the labelled rows' mean):
     the given one on D_c's rows; on the rest the classifier's prediction (trained on the
     split's ``inputs`` float[M, O + A] by ``spec``), or D_c's mean for a method without a
-    classifier (``classifier_coef`` 0). ``split`` is a ``demos.Split``."""
+    classifier (``classifier_coef`` 0). ``split`` is a ``demos.Split``.
+
+    ``compiled`` False (static) leaves the classifier out of the program: right only where
+    ``classifier_coef`` is 0, which then reads the same numbers as with it (the cond below
+    takes, or under ``vmap`` selects, the branch without it)."""
     num_labelled = split.labelled.sum()
     mean_labelled = jnp.where(split.labelled, split.confidence, 0.0).sum() / jnp.maximum(
         num_labelled, 1
@@ -310,8 +320,11 @@ def split_confidences(
         )
         return predicted
 
-    # Under vmap a cond with a batched predicate runs both branches; alone, only one.
-    predicted = jax.lax.cond(classifier_coef > 0, classify, lambda: without_classifier)
+    if compiled:
+        # Under vmap a cond with a batched predicate runs both branches; alone, only one.
+        predicted = jax.lax.cond(classifier_coef > 0, classify, lambda: without_classifier)
+    else:
+        predicted = without_classifier
     confidence = jnp.where(
         split.labelled,
         split.confidence,

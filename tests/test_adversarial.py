@@ -242,3 +242,50 @@ def test_gradient_penalty_is_compiled_only_when_asked_and_refused_otherwise():
         _small_trainer(demos, gradient_penalty=True).check_methods(["pngail-gp-test"])
     finally:
         PRESETS.pop("pngail-gp-test")  # other tests list the registered methods
+
+
+def test_a_grid_that_reads_no_classifier_leaves_it_out_with_every_number_the_same():
+    """GAIL and IC-GAIL (``classifier_coef`` 0) by a trainer that compiles no confidence
+    classifier: every bit of their state and metrics as by the trainer that compiles it (the
+    program before), and as GAIL's cell beside PN-GAIL's, which reads it; the program without
+    it is smaller; a method that reads it is refused by a trainer without it."""
+    demos = _random_demos()
+    key = jax.random.key(0)
+    inputs = stack_cells(make_cells(["gail", "icgail"], 2), key, family=ADVERSARIAL)
+    leaner = _small_trainer(demos, confidence_classifier=False)
+    full = _small_trainer(demos)
+    without = jax.jit(jax.vmap(leaner.train))(*inputs)
+    chex.assert_trees_all_equal(without, jax.jit(jax.vmap(full.train))(*inputs))
+    # GAIL's cells (seeds 0 and 1) beside PN-GAIL's in a grid that compiles the classifier.
+    mixed_inputs = stack_cells(make_cells(["gail", "pngail"], 2), key, family=ADVERSARIAL)
+    mixed = jax.jit(jax.vmap(full.train))(*mixed_inputs)
+    chex.assert_trees_all_equal(
+        jax.tree.map(lambda x: x[:2], mixed), jax.tree.map(lambda x: x[:2], without)
+    )
+    sizes = [
+        len(jax.jit(jax.vmap(trainer.init)).lower(*inputs).as_text()) for trainer in (leaner, full)
+    ]
+    assert sizes[0] < 0.8 * sizes[1], sizes
+    with pytest.raises(ValueError, match="pngail read the confidence classifier"):
+        leaner.check_methods(["gail", "pngail"])
+    leaner.check_methods(["gail", "icgail", "wgail"])
+
+
+def test_which_grids_train_a_classifier():
+    """The static choice of ``AdversarialConfig.confidence_classifier``: a grid trains the
+    classifier when a method's preset or a ``classifier_coef`` axis gives a cell one."""
+    from pngail_jax.adversarial.methods import trains_classifier
+
+    readers = {"2iwil", "pngail", "pngail-no-bsc", "pngail-no-pn", "bc-weighted"}
+    for name in PRESETS:
+        assert trains_classifier([name]) == (name in readers), name
+    assert not trains_classifier(["gail", "icgail", "wgail", "trex", "drex", "cail"])
+    assert trains_classifier(["gail", "pngail"])
+    assert trains_classifier(["gail"], [("classifier_coef", (0.0, 1.0))])
+    assert not trains_classifier(["gail"], [("classifier_coef", (0.0,)), ("pn_coef", (1.0,))])
+    # A sweep's trainer: the paper's seven train it, GAIL alone does not.
+    from pngail_jax.config.run_config import RunConfig
+    from pngail_jax.jobs.trainer_configs import adversarial_config
+
+    assert adversarial_config(RunConfig()).confidence_classifier
+    assert not adversarial_config(RunConfig(methods=("gail", "wgail"))).confidence_classifier

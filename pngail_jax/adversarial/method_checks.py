@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pngail_jax.adversarial.methods import required_phases, resolve
+from pngail_jax.adversarial.methods import required_phases, resolve, trains_classifier
 from pngail_jax.adversarial.ranking import RankingConfig, Trajectories
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import DemonstrationError
@@ -21,11 +21,13 @@ def check_methods(
     gradient_penalty: bool,
     trajectories: Trajectories | None,
     ranking: RankingConfig,
+    classifier: bool = True,
 ) -> None:
     """Raises ``DemonstrationError`` naming the methods that need what the demonstrations do
     not carry (confidences; trajectories, of at least two confidences, long enough for
-    T-REX's snippets), and ``ValueError`` naming those that need a phase or the gradient
-    penalty the trainer does not compile."""
+    T-REX's snippets), and ``ValueError`` naming those that need a phase, the gradient
+    penalty or the confidence classifier (``classifier`` False: not compiled) the trainer
+    does not compile."""
     readers = [name for name in methods if resolve(name).confidence_source != "none"]
     if not has_confidence and readers:
         raise DemonstrationError(
@@ -45,6 +47,12 @@ def check_methods(
         raise ValueError(
             f"{', '.join(penalised)} use a gradient penalty, which this trainer does not "
             "compile: AdversarialConfig(gradient_penalty=True)"
+        )
+    classified = [name for name in methods if trains_classifier([name])]
+    if classified and not classifier:
+        raise ValueError(
+            f"{', '.join(classified)} read the confidence classifier, which this trainer does "
+            "not compile: AdversarialConfig(confidence_classifier=True)"
         )
     _check_rankings(methods, trajectories, ranking)
 

@@ -118,6 +118,18 @@ def method_spec(name: str, **overrides: float) -> MethodSpec:
     return MethodSpec(**{k: jnp.asarray(v, jnp.float32) for k, v in values.items()})
 
 
+def trains_classifier(methods, axes=()) -> bool:
+    """Whether a grid of ``methods`` (names) and grid ``axes`` (``(field, values)`` pairs)
+    has a cell that reads the confidence classifier (``classifier_coef`` nonzero: a preset's
+    or a ``classifier_coef`` axis' value): the static choice of
+    ``AdversarialConfig.confidence_classifier``."""
+    by_method = any(
+        (METHOD_DEFAULTS | resolve(name).coefficients)["classifier_coef"] for name in methods
+    )
+    by_axis = any(value for field, values in axes if field == "classifier_coef" for value in values)
+    return bool(by_method or by_axis)
+
+
 def stack(trees):
     """Stacks equal-structure pytrees (specs, hyperparameters) along a new leading axis."""
     return jax.tree.map(lambda *leaves: jnp.stack(leaves), *trees)

@@ -81,6 +81,11 @@ class AdversarialConfig:
     # Compile the discriminator's gradient penalty (MethodSpec.gradient_penalty_coef): only
     # grids with a cell that uses it pay for its second pass through the discriminator.
     gradient_penalty: bool = False
+    # Compile the confidence classifier (MethodSpec.classifier_coef 1: 2IWIL, PN-GAIL and its
+    # ablations, weighted BC). Under vmap init runs it for every cell, read or not, so a grid
+    # in which no cell reads it (GAIL, IC-GAIL, WGAIL, most appendix baselines) leaves it out:
+    # 45% of init's compile on Pendulum, the same numbers (``methods.trains_classifier``).
+    confidence_classifier: bool = True
 
     def __post_init__(self):
         check_batch(self.learner, self.rollout, self.ppo, self.trpo)
@@ -257,7 +262,7 @@ class AdversarialTrainer:
         """``method_checks.check_methods`` against what this trainer has and compiles."""
         check_methods(
             methods, self.has_confidence, self.config.phases, self.config.gradient_penalty,
-            self.trajectories, self.config.ranking,
+            self.trajectories, self.config.ranking, self.config.confidence_classifier,
         )  # fmt: skip
 
     @property
@@ -278,6 +283,7 @@ class AdversarialTrainer:
         confidence, mean_labelled = split_confidences(
             self.config.classifier, spec.classifier, spec.classifier_coef,
             self._classifier_inputs[split.indices], split, classifier_key,
+            compiled=self.config.confidence_classifier,
         )  # fmt: skip
         disc_params = self.discriminator.init(disc_key, inputs[0])
         learner_state = self.learner.init(learner_key)

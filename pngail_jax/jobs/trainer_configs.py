@@ -13,6 +13,7 @@ import dataclasses
 from pngail_jax.adversarial import cail, ranking
 from pngail_jax.adversarial.family import ADVERSARIAL
 from pngail_jax.adversarial.firl import FirlConfig
+from pngail_jax.adversarial.methods import trains_classifier
 from pngail_jax.adversarial.trainer import AdversarialConfig
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.config.budget import CHECK_PHASE_SIZES
@@ -48,6 +49,7 @@ def adversarial_config(config: RunConfig, num_rows: int | None = None) -> Advers
         discriminator_hidden_sizes=config.discriminator_hidden_sizes,
         phases=ADVERSARIAL.parts(config.methods),
         gradient_penalty=config.uses_gradient_penalty,
+        confidence_classifier=trains_classifier(config.methods, config.grid_axes),
         **phase_configs(config.phase_sizes, config.env),
     )
 
