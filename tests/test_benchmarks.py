@@ -69,8 +69,9 @@ def test_env_throughput(tmp_path):
 
 
 def test_grid_throughput(tmp_path):
+    # 4 iterations: at 1, a loaded machine timed the evaluation as long as the whole chunk
     argv = [
-        "--env", "Pendulum-v1", "--sizes", "1", "--iterations", "1", "--classifier-steps", "10",
+        "--env", "Pendulum-v1", "--sizes", "1", "--iterations", "4", "--classifier-steps", "10",
         "--no-compile-times", "--num-envs", "4", "--unroll-length", "50",
     ]  # fmt: skip
     (row,) = rows_of("grid_throughput", argv, tmp_path / "rows.json")
