@@ -228,7 +228,9 @@ def peer_rows(demos_path: str) -> tuple[dict, tuple[float, float]]:
     demos = load_released(demos_path)
     env = envs.make("Pendulum-v1")
     obs = demos.observations.astype(np.float32)
-    ids = demos.trajectory_ids
+    # A file without trajectories (not the authors' layout) is one trajectory here: imitation
+    # needs a next observation per row, which its discriminator (no next state) never reads.
+    ids = demos.trajectory_ids if demos.trajectory_ids is not None else np.zeros(len(obs))
     last = np.append(ids[1:] != ids[:-1], True)
     rows_index = np.arange(len(obs))
     following = np.where(last, rows_index, np.minimum(rows_index + 1, len(obs) - 1))
