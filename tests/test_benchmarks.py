@@ -192,3 +192,81 @@ def test_cold_start(tmp_path):
         cold, warm = (row["programs"][program] for row in rows)
         assert cold["backend_seconds"] > 0 and cold["cache_hits"] == 0, program
         assert warm["cache_hits"] == 1 and warm["cache_seconds"] > 0, program
+
+
+def test_vs_imitation(tmp_path):
+    """What needs no imitation: the rows the peer is fed (the authors' file's torque scale
+    applied, clipped to the bound, each row's next row in its own trajectory), the peer's
+    batches, our sweep's command line and the tables from made-up runs."""
+    module = __import__("vs_imitation")
+    stored = np.zeros((400, 4), np.float32)
+    stored[:, :3] = np.arange(1200, dtype=np.float32).reshape(400, 3)
+    stored[:3, 3] = [-3.0, 0.5, 1.5]  # torque / 2, as the authors store it
+    np.save(tmp_path / "Pendulum-v1_mixture.npy", stored)
+    np.save(tmp_path / "Pendulum-v1_mixture_conf.npy", np.repeat([[0.2], [0.9]], 200, axis=0))
+    rows, normalizer = module.peer_rows(str(tmp_path / "Pendulum-v1_mixture.npy"))
+    assert normalizer == (-1200.96, -116.81)  # the paper's Table 3 for Pendulum
+    np.testing.assert_array_equal(rows["acts"][:4, 0], [-2.0, 1.0, 2.0, 0.0])  # 2x, clipped
+    np.testing.assert_array_equal(rows["next_obs"][:199], rows["obs"][1:200])
+    np.testing.assert_array_equal(rows["next_obs"][[199, 399]], rows["obs"][[199, 399]])
+    assert np.flatnonzero(rows["dones"]).tolist() == [199, 399]
+    batch = next(iter(module.DrawnRows(rows, 1000, seed=0)))
+    assert batch["obs"].shape == (1000, 3) and len(np.unique(batch["obs"][:, 0])) < 400
+    # Each drawn row keeps its own fields together: obs row i is 3i, 3i+1, 3i+2.
+    np.testing.assert_array_equal(batch["obs"][:, 1], batch["obs"][:, 0] + 1)
+
+    args = module.parse_args(["--budgets", "500000"])
+    command = module.our_command(args, 500_000, 2, tmp_path)
+    assert command[command.index("--iterations") + 1] == "100" and "--eval-every" not in command
+    assert command[command.index("--seed") + 1] == "2"
+    quick = module.parse_args(["--quick"])
+    assert quick.budgets == "10000" and quick.seeds == 1
+    assert module.our_command(quick, 10_000, 0, tmp_path)[-4:] == [
+        "--chunk-iterations", "2", "--eval-every", "2",
+    ]  # fmt: skip
+
+    def run(library, seed, seconds, rate):
+        return {
+            "library": library, "budget": 500_000, "seed": seed, "total_seconds": seconds,
+            "total_cpu_seconds": seconds - 10, "train_env_steps_per_second": rate,
+            "final_normalized_return": 0.1 * seed,
+        }  # fmt: skip
+
+    made = [run("pngail-jax", 0, 40.0, 40_000.0), run("pngail-jax", 1, 50.0, 50_000.0),
+            run("imitation", 0, 150.0, 6_000.0), run("imitation", 1, 160.0, 6_000.0)]  # fmt: skip
+    # Rate 45,000 / 6,000 = 7.5x; whole process 155 / 45 = 3.4x, in CPU 145 / 35 = 4.1x.
+    assert "| 500,000 | 7.5x | 3.4x | 4.1x | 3x: wall met, CPU met |" in module.ratio_table(made)
+    line = "| pngail-jax | 500,000 | 2 | 45,000 ± 5,000 | 45.0 ± 5.0 | 35.0 ± 5.0 | 0.05 ± 0.05 |"
+    assert line in module.runs_table(made)
+
+
+def peer_interpreter() -> str:
+    """The benchmark's default peer interpreter, or skip: imitation is an optional extra of
+    the benchmark, never a test dependency."""
+    import subprocess
+
+    python = __import__("vs_imitation").parse_args([]).peer_python
+    if Path(python).exists():
+        check = [python, "-c", "import imitation, sb3_contrib"]
+        found = subprocess.run(check, capture_output=True, check=False).returncode == 0
+    else:
+        found = False
+    if not found:
+        pytest.skip(f"no interpreter with imitation at {python} (benchmarks/peer-requirements.txt)")
+    return python
+
+
+@pytest.mark.heavy  # a cold compile of our sweep and imitation's imports, two processes
+def test_vs_imitation_runs_both_libraries(tmp_path):
+    peer_interpreter()
+    mixture = authors_pendulum_file(tmp_path, 1000)
+    argv = ["--quick", "--demos", str(mixture), "--num-envs", "4", "--unroll-length", "50",
+            "--cpus", ""]  # fmt: skip
+    rows = rows_of("vs_imitation", argv, tmp_path / "rows.json")
+    assert sorted(row["library"] for row in rows) == ["imitation", "pngail-jax"]
+    for row in rows:
+        assert row["budget"] == 400 and positive(row["total_seconds"])
+        assert 0 < row["total_cpu_seconds"] <= 2 * row["total_seconds"]
+        assert positive(row["train_env_steps_per_second"])
+        assert math.isfinite(row["final_normalized_return"])
+    assert rows[1]["versions"]["imitation"] == "1.0.1"
