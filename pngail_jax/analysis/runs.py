@@ -127,7 +127,7 @@ def read_run_config(document: dict) -> RunConfigView:
       ``OFFLINE_SEALED`` is sealed when it begins.
     """
     program = "offline" if document.get("program") == "offline" else "sweep"
-    if "family" in document:
+    if "family" in document:  # the mark of run_document's layout (config.saved.is_run_document)
         return _read_run_document(document, program)
     if program == "offline":
         settings = document.get("config") or {}

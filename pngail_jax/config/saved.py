@@ -26,11 +26,18 @@ def upgrade_saved_config(data: dict[str, Any]) -> dict[str, Any]:
     return upgrade_learner_fields(_upgrade_flat_config(sweep_sections(data)))
 
 
+def is_run_document(data: Any) -> bool:
+    """Whether a run's config.json (or a record's config) is of ``analysis.runs.run_document``'s
+    layout, every run's since issue 74 (marked by its ``family``), rather than one of the two
+    before it. (``analysis.runs.read_run_config`` tests the same mark: config/ imports no
+    reading module, and the reading layer no run config.)"""
+    return isinstance(data, dict) and "family" in data and isinstance(data.get("config"), dict)
+
+
 def sweep_sections(data: dict[str, Any]) -> dict[str, Any]:
-    """A config.json in ``analysis.runs.run_document``'s layout (marked by its ``family``)
-    as the config's fields with its ``resolved`` and ``provenance`` beside them; a document
-    of an older layout as it is."""
-    if "family" not in data or not isinstance(data.get("config"), dict):
+    """A config.json in ``analysis.runs.run_document``'s layout as the config's fields with
+    its ``resolved`` and ``provenance`` beside them; a document of an older layout as it is."""
+    if not is_run_document(data):
         return data
     return {
         **data["config"],

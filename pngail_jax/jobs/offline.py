@@ -21,7 +21,13 @@ import jax
 import numpy as np
 
 from pngail_jax.analysis import plots, report
-from pngail_jax.analysis.runs import UntrustedRun, run_document, sealed_part, verify_run
+from pngail_jax.analysis.runs import (
+    UntrustedRun,
+    read_run_config,
+    run_document,
+    sealed_part,
+    verify_run,
+)
 from pngail_jax.analysis.tracking import ticking
 from pngail_jax.config import settings as env_settings
 from pngail_jax.config.saved import provenance
@@ -126,7 +132,7 @@ def _complete(
     if resume:
         document = read_json(out / "config.json", "offline run config")
         document["resumed_provenance"] = provenance(command=command)
-    if "family" not in document:  # the old layout wrote the trainer's fields as it ended
+    if not read_run_config(document).trainer:  # the old layout wrote them as it ended
         document["trainer"] = _json_config(dataclasses.replace(trainer_config, components=()))
     seconds = {"wall_seconds": time.perf_counter() - start_time,
                "train_seconds": progress.timing["seconds"]}  # fmt: skip
