@@ -209,7 +209,7 @@ def sweep_resumes_bit_exactly(tmp_path, physics: str):
          "--classifier-steps", "20", "--physics", physics, "--out", str(whole)]
     )  # fmt: skip
     saved = json.loads((whole / "config.json").read_text())
-    assert saved["env"] == "Hopper-v4" and saved["resolved"]["physics"] == physics
+    assert saved["config"]["env"] == "Hopper-v4" and saved["resolved"]["physics"] == physics
     killed = tmp_path / "killed"
     shutil.copytree(whole, killed)
     shutil.rmtree(killed / "checkpoints" / "chunk_0002")

@@ -335,7 +335,8 @@ def test_the_ilid_union_flag_reaches_config_metrics_record_and_resume(tmp_path, 
 
     summary = program.main(argv)
     document = json.loads((out / "config.json").read_text())
-    assert document["config"]["ilid_union"] == document["trainer"]["ilid_union"] == "released"
+    assert document["config"]["ilid_union"] == "released"
+    assert document["resolved"]["trainer"]["ilid_union"] == "released"
     assert load_offline_config(out).ilid_union == "released"
     assert summary["ilid"]["union_zero_share"] > 0.999
     assert "of its draws are zero rows" in (out / "summary.md").read_text()

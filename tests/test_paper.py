@@ -282,11 +282,17 @@ def assert_a_sweep_of_the_grid_is_adopted(out, text, monkeypatch):
     other = out.parent / "other"
     shutil.copytree(sweep, other)
     config = json.loads((other / "config.json").read_text())
-    (other / "config.json").write_text(json.dumps({**config, "seeds": 3}))
-    with pytest.raises(SystemExit, match=r"config.json was changed since the run began \(seeds"):
+
+    def with_fields(**changes):  # the sweep's config.json with these config fields
+        return {**config, "config": {**config["config"], **changes}}
+
+    (other / "config.json").write_text(json.dumps(with_fields(seeds=3)))
+    with pytest.raises(
+        SystemExit, match=r"config.json was changed since the run began \(config.seeds"
+    ):
         paper.main(["--resume", str(out), "--adopt", str(other)])  # edited by hand: refused
-    (other / "config.json").write_text(json.dumps({**config, "seed": 7}))  # another base seed
-    seal(other / CONFIG_SEAL, sealed_part({**config, "seed": 7}))  # as its run sealed it
+    (other / "config.json").write_text(json.dumps(with_fields(seed=7)))  # another base seed
+    seal(other / CONFIG_SEAL, sealed_part(with_fields(seed=7)))  # as its run sealed it
     with pytest.raises(SystemExit, match="seed 7, the plan's 0 .the plan so far is kept: --r"):
         paper.main(["--resume", str(out), "--adopt", str(other)])
     adopted = paper.main(["--resume", str(out), "--adopt", str(sweep)]).read_text()

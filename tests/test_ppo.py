@@ -241,9 +241,9 @@ def test_the_sweep_runs_with_ppo_and_keeps_a_cloned_policy_cloned(demos_path, tm
     args[args.index("--seeds") + 1] = "1"
     main([*args, "--learner", "ppo"])
     config = json.loads((out / "config.json").read_text())
-    assert config["learner"]["name"] == "ppo"
-    assert config["learner"]["ppo"] == config["resolved"]["adversarial"]["ppo"]
-    assert config["resolved"]["adversarial"]["learner"] == "ppo"
+    assert config["config"]["learner"]["name"] == "ppo"
+    assert config["config"]["learner"]["ppo"] == config["resolved"]["trainer"]["ppo"]
+    assert config["resolved"]["trainer"]["learner"] == "ppo"
     with (out / "metrics.csv").open() as file:
         rows = list(csv.DictReader(file))
     learnt = [row for row in rows if row["method"] in METHOD_NAMES]

@@ -45,7 +45,7 @@ def shifted_copy(
     name = folder.name
     shutil.copytree(records / source, folder)
     record = json.loads((folder / "record.json").read_text())
-    low, high = record["config"]["resolved"]["normalizer"]
+    low, high = read_run_config(record["config"]).return_range
     metrics = folder / "metrics.csv.gz"
     rows = list(csv.DictReader(io.StringIO(gzip.decompress(metrics.read_bytes()).decode())))
     for row in rows:
@@ -144,7 +144,9 @@ def test_a_cut_rerun_is_continued_and_a_foreign_folder_refused(tiny, tmp_path, c
     other = tmp_path / "other"
     shutil.copytree(finished, other)
     config = json.loads((other / "config.json").read_text())
-    (other / "config.json").write_text(json.dumps(config | {"seeds": 3}))
+    (other / "config.json").write_text(
+        json.dumps(config | {"config": config["config"] | {"seeds": 3}})
+    )
     strangers = tmp_path / "strangers"
     strangers.mkdir()
     (strangers / "mine.txt").write_text("x")

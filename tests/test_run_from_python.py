@@ -121,7 +121,7 @@ def test_a_grid_axis_keys_the_csv_the_summary_and_the_policies(finished, demos_p
     policies = out / "policies" / "gail" / "label_ratio=0.2,noise=0,max_kl=0.005" / "policy.json"
     assert policies.exists()
     config = json.loads((out / "config.json").read_text())
-    assert config["grid_axes"] == [["max_kl", [0.005, 0.01]]]
+    assert config["config"]["grid_axes"] == [["max_kl", [0.005, 0.01]]]
 
 
 def test_a_registered_method_resumes_from_its_record(demos_path, tmp_path, capsys):

@@ -2,14 +2,16 @@
 layout and the offline program's nested one read into the same view, and no other module
 tells the two layouts apart. Small dicts in each layout, as the programs write them."""
 
+import dataclasses
 from pathlib import Path
 
 import pytest
 
-from pngail_jax.analysis.run_records import planned_iterations
+from pngail_jax.analysis.run_records import config_differences, planned_iterations
 from pngail_jax.analysis.runs import (
     read_run_config,
     recorded_inputs,
+    run_document,
     run_progress_numbers,
     run_return_range,
     sealed_part,
@@ -109,3 +111,60 @@ def test_no_other_module_tells_the_two_layouts_apart():
         if 'get("program") == "offline"' in path.read_text()
     }
     assert found == {"analysis/runs.py": 1, "storage/outputs.py": 1}
+
+
+def _today(old: dict) -> dict:
+    """``old`` (``SWEEP`` or ``OFFLINE``, of the layouts before ``run_document``) as the
+    programs write it today: the same config, resolutions and provenance."""
+    if old.get("program") == "offline":
+        resolved = {"demos_path": old["demonstrations"], "inputs": old["input_files"],
+                    "return_range": old["normalizer"], "trainer": old["trainer"],
+                    "return_range_source": old["normalizer_source"]}  # fmt: skip
+        document = run_document("offline", old["config"], resolved, old["provenance"])
+        return {**document, "complete": old["complete"]}
+    config = {key: value for key, value in old.items() if key not in ("resolved", "provenance")}
+    resolved = {"inputs": old["resolved"]["inputs"],
+                "return_range": old["resolved"]["normalizer"],
+                "return_range_source": old["resolved"]["normalizer_source"]}  # fmt: skip
+    return run_document("sweep", config, resolved, old["provenance"])
+
+
+@pytest.mark.parametrize("old", [SWEEP, OFFLINE], ids=["sweep", "offline"])
+def test_an_old_layout_and_todays_read_to_the_same_view(old):
+    """The upgrade step: a config.json of either layout before ``run_document`` and the
+    same run written today read the same (the seal covers each layout's own parts)."""
+    new = _today(old)
+    assert new["program"] == read_run_config(old).program
+    assert new["family"] == {"sweep": "adversarial", "offline": "offline"}[new["program"]]
+    old_view, new_view = read_run_config(old), read_run_config(new)
+    fields = {key: value for key, value in old_view.settings.items()
+              if key not in ("resolved", "provenance")}  # fmt: skip
+    assert new_view.settings == fields
+    assert dataclasses.replace(old_view, settings={}, sealed={}) == dataclasses.replace(
+        new_view, settings={}, sealed={}
+    )
+    assert new_view.sealed == {key: new[key] for key in ("program", "family", "config", "resolved")}
+    assert sealed_part(new) == new_view.sealed and "provenance" not in sealed_part(new)
+    assert run_return_range(new) == run_return_range(old) == [-1500.0, -150.0]
+    assert planned_iterations(new) == planned_iterations(old)
+    # a record of either layout compared with a run of the other: no field differs
+    assert config_differences(new, {"config": old}, {}, {}) == []
+    assert config_differences(old, {"config": new}, {}, {}) == []
+    changed = {**new, "config": {**new["config"], "seeds": 7}}
+    assert config_differences(changed, {"config": old}, {}, {}) == [
+        "seeds" if old is SWEEP else "config.seeds"
+    ]
+
+
+def test_a_sweeps_config_of_todays_layout_reads_as_the_flat_one_for_its_config():
+    """``RunConfig.from_dict`` and a resume read a sweep's config.json of today's layout as
+    the flat one: its config's fields with ``resolved`` and ``provenance`` beside them."""
+    from pngail_jax.config.saved import sweep_sections, upgrade_saved_config
+
+    new = _today(SWEEP)
+    assert sweep_sections(new) == {**new["config"], "resolved": new["resolved"],
+                                   "provenance": new["provenance"]}  # fmt: skip
+    assert sweep_sections(SWEEP) is SWEEP  # an old layout as it is
+    flat = {key: value for key, value in upgrade_saved_config(SWEEP).items() if key != "resolved"}
+    today = upgrade_saved_config(new)
+    assert {key: value for key, value in today.items() if key != "resolved"} == flat

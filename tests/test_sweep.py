@@ -83,7 +83,7 @@ def test_sweep_writes_every_output(finished, demos_path, tmp_path, capsys):
     assert config["provenance"]["libraries"]["jax"] and config["provenance"]["device_count"] == 1
     # What decides whether another run gives the same bits (docs/sweep.md).
     assert config["provenance"]["cpu_model"] and "xla_flags" in config["provenance"]
-    assert config["resolved"]["adversarial"]["rollout"]["num_envs"] == 4
+    assert config["resolved"]["trainer"]["rollout"]["num_envs"] == 4
     assert config["resolved"]["inputs"]["demonstrations"]["sha256"].startswith("sha256:")
     check_exported_policies(out, final)
 
@@ -91,7 +91,7 @@ def test_sweep_writes_every_output(finished, demos_path, tmp_path, capsys):
     copy = tmp_path / "copy"
     sweep.main(["--config", str(out / "config.json"), "--out", str(copy), "--log", "tensorboard"])
     assert metrics_numbers(copy / "metrics.csv") == metrics_numbers(out / "metrics.csv")
-    assert json.loads((copy / "config.json").read_text())["log"] == ["tensorboard"]
+    assert json.loads((copy / "config.json").read_text())["config"]["log"] == ["tensorboard"]
     assert any((copy / "tensorboard").iterdir())
     with pytest.raises(SystemExit, match="^2$"):  # a second run into the same directory
         sweep.parse_args(tiny_sweep_args(demos_path, out))
@@ -362,8 +362,8 @@ def test_outputs_never_claim_more_than_the_checkpoints_hold(finished, tmp_path, 
 @pytest.mark.parametrize(
     ("field", "value", "named"),
     [
-        ("label_ratios", [0.1], "label_ratios: was [0.2], now [0.1]"),
-        ("iterations", 8, "iterations: was 4, now 8"),
+        ("config.label_ratios", [0.1], "config.label_ratios: was [0.2], now [0.1]"),
+        ("config.iterations", 8, "config.iterations: was 4, now 8"),
         ("resolved.demos_path", "/elsewhere/demos.npz", "resolved.demos_path: was "),
     ],
 )
@@ -620,16 +620,25 @@ def test_record_check_finds_each_kind_of_damage(finished, tmp_path):
 @pytest.mark.parametrize(
     "edit, message",
     [
-        (lambda c, r: c.update(label_ratios=[0.4]), r"label ratios \[0.4\], its metrics"),
-        (lambda c, r: c.update(noise_stds=[0.1]), r"confidence noises \[0.1\], its metrics"),
-        (lambda c, r: c.update(iterations=40), "config plans 40 and its metrics.csv.gz ends at 4"),
+        (lambda c, r: c["config"].update(label_ratios=[0.4]), r"label ratios \[0.4\], its metrics"),
+        (
+            lambda c, r: c["config"].update(noise_stds=[0.1]),
+            r"confidence noises \[0.1\], its metrics",
+        ),
+        (
+            lambda c, r: c["config"].update(iterations=40),
+            "config plans 40 and its metrics.csv.gz ends at 4",
+        ),
         (lambda c, r: r.update(iterations_done=3), "iterations done 3, its metrics.csv.gz 4"),
         (lambda c, r: r.update(complete=False), "complete: False"),
-        (lambda c, r: c.update(seeds=3), "gail has seeds 3, its metrics.csv.gz 2"),
-        (lambda c, r: c.update(methods=["gail"]), r"methods \['gail'\], its metrics"),
-        (lambda c, r: c["settings"].update(num_envs=5), "250 environment steps an iteration"),
+        (lambda c, r: c["config"].update(seeds=3), "gail has seeds 3, its metrics.csv.gz 2"),
+        (lambda c, r: c["config"].update(methods=["gail"]), r"methods \['gail'\], its metrics"),
         (
-            lambda c, r: c["resolved"].update(normalizer=[-1300.0, -100.0]),
+            lambda c, r: c["config"]["settings"].update(num_envs=5),
+            "250 environment steps an iteration",
+        ),
+        (
+            lambda c, r: c["resolved"].update(return_range=[-1300.0, -100.0]),
             "normalised return .* is not its evaluation .* through the run's normaliser",
         ),
     ],
@@ -775,7 +784,7 @@ def test_the_verification_reads_every_number_it_passes_on(finished, tmp_path):
     from pngail_jax.programs import record as record_program
 
     config = json.loads((finished / "config.json").read_text())
-    random_return, optimal_return = config["resolved"]["normalizer"]
+    random_return, optimal_return = config["resolved"]["return_range"]
 
     def both(iteration, value):
         def change(row):
@@ -857,22 +866,27 @@ def test_compare_expected_says_where_a_run_lies_against_a_record(finished, tmp_p
     other = Scores({"gail": {"Hopper-v4": np.array([0.5])}})
     with pytest.raises(run_records.RecordError, match="is of Pendulum-v1; your runs are of Hopper"):
         run_records.expected_rows(other, record)
-    changed = {**record["config"], "iterations": 8, "log": ["x"]}
+    document, fields = record["config"], record["config"]["config"]
+
+    def with_fields(**changes):  # the record's config.json with these config fields
+        return {**document, "config": {**fields, **changes}}
+
+    changed = with_fields(iterations=8, log=["x"])
     assert run_records.config_differences(changed, record, defaults) == ["iterations"]
     # a field the record's run did not have yet is its default there
-    older = {**record, "config": {k: v for k, v in record["config"].items() if k != "seed"}}
-    assert run_records.config_differences(record["config"], older, defaults) == []
-    assert run_records.config_differences({**record["config"], "seed": 3}, older, defaults) == [
-        "seed"
-    ]
-    # a record of the layout before the learner part (flat learner, fisher, value_epochs,
-    # no PPO settings) reads as what it ran: today's run of the same settings does not differ
-    flat = {k: v for k, v in record["config"].items() if k != "learner"}
+    without_seed = {k: v for k, v in fields.items() if k != "seed"}
+    older = {**record, "config": {**document, "config": without_seed}}
+    assert run_records.config_differences(document, older, defaults) == []
+    assert run_records.config_differences(with_fields(seed=3), older, defaults) == ["seed"]
+    # a record of the sweep's flat layout before runs.run_document, and before the learner
+    # part (flat learner, fisher, value_epochs, no PPO settings), reads as what it ran:
+    # today's run of the same settings does not differ
+    flat = {k: v for k, v in fields.items() if k != "learner"}
     flat.update(learner="trpo", fisher="gauss_newton", fisher_subsample=1, value_epochs=1)
-    flat_record = {**record, "config": flat}
-    assert run_records.config_differences(record["config"], flat_record, defaults) == []
-    more_epochs = json.loads(json.dumps(record["config"]))
-    more_epochs["learner"]["trpo"]["num_value_epochs"] = 3
+    flat_record = {**record, "config": {**flat, "resolved": document["resolved"]}}
+    assert run_records.config_differences(document, flat_record, defaults) == []
+    more_epochs = json.loads(json.dumps(document))
+    more_epochs["config"]["learner"]["trpo"]["num_value_epochs"] = 3
     assert run_records.config_differences(more_epochs, flat_record, defaults) == ["learner"]
     # A record of seeds 0.0-0.9 (IQM 0.45): a 5-seed re-run's IQM lands within 13/60 of it
     # (test_rerun_spread_is_the_95th_percentile_of_the_iqm_shifts_of_draws).

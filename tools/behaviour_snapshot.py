@@ -126,7 +126,8 @@ TINY_RL = "--iterations 4 --eval-every 2 --seeds 2 --num-envs 4 --unroll-length 
 # It patches jobs.trainer_configs.adversarial_config (RunConfig.adversarial_config before
 # issue 74's item 1): if the refactor removes that, the driver fails
 # (exit status != 0); if the sweep stops calling it, the sizes in config.json's
-# resolved.adversarial (ranking, drex, bc, firl) show the difference. Every other invocation,
+# resolved.trainer (resolved.adversarial before issue 74's one layout: ranking, drex, bc,
+# firl) show the difference. Every other invocation,
 # and a second appendix sweep of the cheap phases (bc, cail) at their real sizes, runs the
 # programs as they are.
 TINY_PHASES_DRIVER = """

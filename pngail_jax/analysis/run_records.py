@@ -479,7 +479,7 @@ def config_differences(
     def fields(document: dict) -> dict:
         view = read_run_config(document)
         if view.program != "offline":  # a sweep's of an older layout read in today's
-            return upgrade_learner_fields(document)
+            return upgrade_learner_fields(view.settings)
         return {
             **{f"{part}.{key}": value for part, values in (("config", view.settings),
                ("trainer", view.trainer)) for key, value in values.items()},

@@ -45,57 +45,92 @@ STATISTICS = {  # what a score is, as the tables and plots say it
 RUN_PROGRAMS = ("sweep", "offline")  # the programs whose runs compare (and records) read
 
 
-# What an offline run's seal covers: config.json's parts fixed when the run began (it adds
-# the trainer's fields, its seconds and "complete" when it ends).
+# What an offline run's seal covered in the layout before ``run_document`` (config.json's
+# parts fixed when the run began; it added the trainer's fields, its seconds and "complete"
+# when it ended).
 OFFLINE_SEALED = ("program", "config", "demonstrations", "input_files", "normalizer",
                   "normalizer_source")  # fmt: skip
+# What the seal leaves out in the layout of ``run_document``: what a run writes as it runs or
+# ends (where it ran, whether it is complete, its seconds). Everything else is fixed when it
+# begins, a key added by hand included.
+RUN_UNSEALED = ("provenance", "resumed_provenance", "complete", "wall_seconds", "train_seconds")
+FAMILIES = {"sweep": "adversarial", "offline": "offline"}  # each program's method family
+
+
+def run_document(program: str, config: dict, resolved: dict, provenance: dict) -> dict:
+    """The one layout of a run's ``config.json``, whichever program writes it (``sweep``:
+    ``jobs.record.write_config``; ``offline``: ``jobs.offline.run_offline``)::
+
+        {"program": "sweep" | "offline",
+         "family": "adversarial" | "offline",      # the method family it ran
+         "config": {the job config's fields: RunConfig's or OfflineRunConfig's},
+         "resolved": {what the config resolved to when the run began: "demos_path",
+                      "inputs" (each input file's integrity.file_record), "return_range"
+                      (random, optimal) and "return_range_source", "trainer" (the
+                      trainer's static config), and the program's own: a sweep's
+                      "methods" (their presets), "physics", "action_scale", "num_demos",
+                      "bsc_eps"},
+         "provenance": {where and with what it ran: provenance()},
+         ...}  # the offline program adds "complete", its seconds and, when resumed,
+               # "resumed_provenance" as it ends
+
+    The seal covers all but ``RUN_UNSEALED``: ``program``, ``family``, ``config`` and
+    ``resolved``, and any key added by hand.
+    Files of the two layouts before this one still read (``read_run_config``) and resume
+    as they are: a resume never writes a run's config.json in another layout."""
+    return {
+        "program": program,
+        "family": FAMILIES[program],
+        "config": config,
+        "resolved": resolved,
+        "provenance": provenance,
+    }
 
 
 @dataclasses.dataclass(frozen=True)
 class RunConfigView:
-    """A run's ``config.json`` (or a record's ``config``), whichever program wrote it, read
-    the same way (``read_run_config``)."""
+    """A run's ``config.json`` (or a record's ``config``), whichever program wrote it and in
+    whichever layout, read the same way (``read_run_config``)."""
 
     program: str  # "sweep" or "offline"
     settings: dict  # env, methods, seeds, demos, ...: what the run was asked to do
     sealed: dict  # what the run's config seal covers
     inputs: dict  # the input files' records (integrity.file_record), by name
-    # The normalised return's ends, (random, optimal), as written (config.json's key
-    # "normalizer", kept for the runs already written; run_return_range checks them), and
-    # where they came from ("paper Table 3", ...). "normalizer" in the code is the policy's
-    # observation statistics (rl.ObservationNormalizer) alone.
+    # The normalised return's ends, (random, optimal), as written (the key "normalizer" in
+    # the layouts before run_document; run_return_range checks them), and where they came
+    # from ("paper Table 3", ...). "normalizer" in the code is the policy's observation
+    # statistics (rl.ObservationNormalizer) alone.
     return_range: object
     return_range_source: str | None
     label_ratios: list  # the grid's label ratios (the offline program runs one)
     noise_stds: list  # the grid's confidence noises (the offline program runs one)
     planned_iterations: int | None  # the iterations it plans, where the config says
     complete: bool | None  # the offline program's "complete" (a sweep's is in summary.json)
-    trainer: dict  # the offline trainer's fields, written when it ends ({} for a sweep)
+    trainer: dict  # the offline trainer's fields ({} for a sweep, and before an old run ends)
 
 
 def read_run_config(document: dict) -> RunConfigView:
     """The one reader of a run's ``config.json`` (or of a run record's ``config``, the same
     document without its provenance): every reader of run folders and records goes through
-    it, so the two layouts on disk are told apart here alone.
+    it, so the layouts on disk are told apart here alone.
 
-    The two layouts (left as the programs write them; a change needs an upgrade step):
+    Today's layout is ``run_document``'s (marked by its ``family``). The two before it are
+    read as they always were (their runs resume, compare and reproduce unchanged):
 
-    - ``experiments.sweep`` (``jobs.record.write_config``), flat: the ``RunConfig``'s fields
-      at the top (``env``, ``methods``, ``seeds``, ``label_ratios``, ``noise_stds``,
-      ``iterations``, ...), ``resolved`` (``inputs``, ``normalizer``, ``normalizer_source``,
-      the methods' presets, ...) and ``provenance`` (where it ran; not sealed);
-    - ``experiments.offline`` (``jobs.offline.run_offline``), nested: ``{"program": "offline",
-      "config": {the OfflineRunConfig's fields: env, methods, seeds, label_ratio, noise_std,
-      gradient_steps, steps_per_iteration, ...}, "demonstrations", "input_files",
-      "normalizer", "normalizer_source", "provenance", "trainer", "complete", ...}``, of
-      which ``OFFLINE_SEALED`` is sealed when it begins.
+    - ``experiments.sweep``'s, flat: the ``RunConfig``'s fields at the top (``env``,
+      ``methods``, ``seeds``, ``label_ratios``, ``noise_stds``, ``iterations``, ...),
+      ``resolved`` (``inputs``, ``normalizer``, ``normalizer_source``, the methods' presets,
+      ``adversarial``, ...) and ``provenance`` (where it ran; not sealed);
+    - ``experiments.offline``'s, nested: ``{"program": "offline", "config": {the
+      OfflineRunConfig's fields}, "demonstrations", "input_files", "normalizer",
+      "normalizer_source", "provenance", "trainer", "complete", ...}``, of which
+      ``OFFLINE_SEALED`` is sealed when it begins.
     """
-    if document.get("program") == "offline":
+    program = "offline" if document.get("program") == "offline" else "sweep"
+    if "family" in document:  # the mark of run_document's layout (config.saved.is_run_document)
+        return _read_run_document(document, program)
+    if program == "offline":
         settings = document.get("config") or {}
-        steps, per_iteration = settings.get("gradient_steps"), settings.get("steps_per_iteration")
-        planned = None
-        if isinstance(steps, int) and isinstance(per_iteration, int) and per_iteration > 0:
-            planned = steps // per_iteration
         return RunConfigView(
             program="offline",
             settings=settings,
@@ -105,7 +140,7 @@ def read_run_config(document: dict) -> RunConfigView:
             return_range_source=document.get("normalizer_source"),
             label_ratios=[settings.get("label_ratio")],
             noise_stds=[settings.get("noise_std")],
-            planned_iterations=planned,
+            planned_iterations=_offline_planned(settings),
             complete=document.get("complete"),
             trainer=document.get("trainer") or {},
         )
@@ -124,6 +159,38 @@ def read_run_config(document: dict) -> RunConfigView:
         complete=None,
         trainer={},
     )
+
+
+def _read_run_document(document: dict, program: str) -> RunConfigView:
+    """``read_run_config`` of a document in ``run_document``'s layout, written by
+    ``program``."""
+    settings = document.get("config") or {}
+    resolved = document.get("resolved") or {}
+    offline = program == "offline"
+    planned = settings.get("iterations")
+    return RunConfigView(
+        program=program,
+        settings=settings,
+        sealed={key: value for key, value in document.items() if key not in RUN_UNSEALED},
+        inputs=resolved.get("inputs") or {},
+        return_range=resolved.get("return_range"),
+        return_range_source=resolved.get("return_range_source"),
+        label_ratios=[settings.get("label_ratio")] if offline else settings.get("label_ratios"),
+        noise_stds=[settings.get("noise_std")] if offline else settings.get("noise_stds"),
+        planned_iterations=_offline_planned(settings)
+        if offline
+        else (planned if isinstance(planned, int) else None),
+        complete=document.get("complete") if offline else None,
+        trainer=(resolved.get("trainer") or {}) if offline else {},
+    )
+
+
+def _offline_planned(settings: dict) -> int | None:
+    """An offline run's iterations: its gradient steps over the steps per iteration."""
+    steps, per_iteration = settings.get("gradient_steps"), settings.get("steps_per_iteration")
+    if isinstance(steps, int) and isinstance(per_iteration, int) and per_iteration > 0:
+        return steps // per_iteration
+    return None
 
 
 def run_scores(run_dir: Path, statistic: str = HEADLINE) -> tuple[str, dict[str, np.ndarray]]:
@@ -278,8 +345,9 @@ class UntrustedRun(RunReadError):
 
 
 def sealed_part(document: dict) -> dict:
-    """What a run's config seal covers: a sweep's config.json but its provenance (where it
-    ran); an offline run's ``OFFLINE_SEALED`` parts (``read_run_config``)."""
+    """What a run's config seal covers: all but ``RUN_UNSEALED``; in the layouts before it,
+    a sweep's config.json but its provenance (where it ran), an offline run's
+    ``OFFLINE_SEALED`` parts (``read_run_config``)."""
     return read_run_config(document).sealed
 
 
@@ -387,9 +455,10 @@ def sealed_document(
 
 
 def run_return_range(document: dict) -> list[float] | None:
-    """The (random, optimal) returns a run's config.json (or a record's config) sealed: the
-    sweep's ``resolved.normalizer``, the offline program's ``normalizer``; None when the run
-    knew none (its normalised column is then empty)."""
+    """The (random, optimal) returns a run's config.json (or a record's config) sealed
+    (``resolved.return_range``; in older layouts the sweep's ``resolved.normalizer``, the
+    offline program's ``normalizer``); None when the run knew none (its normalised column
+    is then empty)."""
     value = read_run_config(document).return_range
     if value is None:
         return None

@@ -227,8 +227,9 @@ class RunConfig:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> RunConfig:
-        """The config of ``to_dict`` (or of a ``config.json``, whose ``RECORD_KEYS`` sections,
-        ``resolved`` and ``provenance``, are ignored; an old layout is upgraded first).
+        """The config of ``to_dict`` (or of a ``config.json`` of any layout, read by
+        ``upgrade_saved_config`` first: today's ``config`` unwrapped, an old layout upgraded;
+        its ``RECORD_KEYS`` sections, ``resolved`` and ``provenance``, are ignored).
 
         Strict, because a hand-edited file is easy to get wrong: ValueError naming the key on
         a key that is not a field (a typo would otherwise be dropped silently) and on a value

@@ -17,11 +17,33 @@ from pngail_jax.config.learner import upgrade_learner_fields
 
 
 def upgrade_saved_config(data: dict[str, Any]) -> dict[str, Any]:
-    """A config.json of an older layout in today's, step by step: one written before
-    ``RunConfig`` (flat keys), then one from before the learner part (its flat ``learner``,
-    ``fisher``, ``fisher_subsample``, ``value_epochs``: ``upgrade_learner_fields``). Today's
-    unchanged."""
-    return upgrade_learner_fields(_upgrade_flat_config(data))
+    """A sweep's config.json, of any layout, as ``RunConfig.from_dict`` and a resume read
+    it: the config's fields beside its ``resolved`` and ``provenance`` sections. Today's
+    layout (``analysis.runs.run_document``) has them nested (``sweep_sections``); older
+    flat ones are brought up step by step: one written before ``RunConfig`` (flat keys),
+    then one from before the learner part (its flat ``learner``, ``fisher``,
+    ``fisher_subsample``, ``value_epochs``: ``upgrade_learner_fields``)."""
+    return upgrade_learner_fields(_upgrade_flat_config(sweep_sections(data)))
+
+
+def is_run_document(data: Any) -> bool:
+    """Whether a run's config.json (or a record's config) is of ``analysis.runs.run_document``'s
+    layout, every run's since issue 74 (marked by its ``family``), rather than one of the two
+    before it. (``analysis.runs.read_run_config`` tests the same mark: config/ imports no
+    reading module, and the reading layer no run config.)"""
+    return isinstance(data, dict) and "family" in data and isinstance(data.get("config"), dict)
+
+
+def sweep_sections(data: dict[str, Any]) -> dict[str, Any]:
+    """A config.json in ``analysis.runs.run_document``'s layout as the config's fields with
+    its ``resolved`` and ``provenance`` beside them; a document of an older layout as it is."""
+    if not is_run_document(data):
+        return data
+    return {
+        **data["config"],
+        "resolved": data.get("resolved") or {},
+        "provenance": data.get("provenance") or {},
+    }
 
 
 def _upgrade_flat_config(data: dict[str, Any]) -> dict[str, Any]:

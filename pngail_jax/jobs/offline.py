@@ -21,7 +21,13 @@ import jax
 import numpy as np
 
 from pngail_jax.analysis import plots, report
-from pngail_jax.analysis.runs import UntrustedRun, sealed_part, verify_run
+from pngail_jax.analysis.runs import (
+    UntrustedRun,
+    read_run_config,
+    run_document,
+    sealed_part,
+    verify_run,
+)
 from pngail_jax.analysis.tracking import ticking
 from pngail_jax.config import settings as env_settings
 from pngail_jax.config.saved import provenance
@@ -76,21 +82,22 @@ def run_offline(
             _check_resumable(out, config, allow_unsealed)
         env, demos, demos_path = _environment_and_demos(config)
         return_range, return_range_source = resolve_return_range(config, demos, env)
+        trainer_config = config.trainer_config(demos.num_rows)
+        resolved = {
+            "demos_path": demos_path,
+            "inputs": input_files(config.demonstrations, demos_path),
+            "return_range": return_range,
+            "return_range_source": return_range_source,
+            "trainer": _json_config(dataclasses.replace(trainer_config, components=())),
+        }
         document = {
-            "program": PROGRAM,
-            "config": _json_config(config),
-            "demonstrations": demos_path,
-            "input_files": input_files(config.demonstrations, demos_path),
-            "normalizer": return_range,
-            "normalizer_source": return_range_source,
+            **run_document(PROGRAM, _json_config(config), resolved, provenance(command=command)),
             "complete": False,
-            "provenance": provenance(command=command),
         }
         if not resume:
             _begin(claim, out, document)
         cells = make_cells(config.methods, config.seeds, (config.label_ratio,),
                            (config.noise_std,))  # fmt: skip
-        trainer_config = config.trainer_config(demos.num_rows)
         _announce(config, len(cells), trainer_config.num_demos or demos.num_rows)
         start_time = time.perf_counter()
         runs = [
@@ -119,15 +126,17 @@ def _announce(config: OfflineRunConfig, num_cells: int, num_rows: int) -> None:
 def _complete(
     out: Path, document, trainer_config, progress, start_time, resume, command=None
 ) -> None:
-    """config.json marked complete, with the trainer's fields and the run's seconds (a resumed
-    run keeps the document it began with, this session's machine beside it)."""
+    """config.json marked complete, with the run's seconds (a resumed run keeps the document
+    it began with, in its layout, this session's machine beside it); a document of the layout
+    before ``runs.run_document`` gets the trainer's fields too, as it always did."""
     if resume:
         document = read_json(out / "config.json", "offline run config")
         document["resumed_provenance"] = provenance(command=command)
-    trainer = _json_config(dataclasses.replace(trainer_config, components=()))
+    if not read_run_config(document).trainer:  # the old layout wrote them as it ended
+        document["trainer"] = _json_config(dataclasses.replace(trainer_config, components=()))
     seconds = {"wall_seconds": time.perf_counter() - start_time,
                "train_seconds": progress.timing["seconds"]}  # fmt: skip
-    write_json(out / "config.json", {**document, "trainer": trainer, "complete": True, **seconds})
+    write_json(out / "config.json", {**document, "complete": True, **seconds})
 
 
 def _programs(config: OfflineRunConfig, trainer_config: OfflineConfig, cells):

@@ -1,5 +1,6 @@
-"""A sweep's record and the checks of its resume: config.json (the config, what it resolved
-to, the digests of its input files, provenance) and its seal; ``load_saved``, which reads a
+"""A sweep's record and the checks of its resume: config.json (``runs.run_document``'s
+layout: the config, what it resolved to, the digests of its input files, provenance) and
+its seal; ``load_saved``, which reads a
 run back and refuses a changed config, method or input; which outputs a resume finds
 finished or stale."""
 
@@ -14,7 +15,12 @@ from pathlib import Path
 
 from pngail_jax.adversarial import methods
 from pngail_jax.adversarial.methods import preset_record
-from pngail_jax.analysis.runs import changed_inputs_refusal, read_run_config, sealed_part
+from pngail_jax.analysis.runs import (
+    changed_inputs_refusal,
+    read_run_config,
+    run_document,
+    sealed_part,
+)
 from pngail_jax.config.run_config import RunConfig
 from pngail_jax.config.saved import provenance, upgrade_saved_config
 from pngail_jax.config.validation import ConfigError
@@ -94,8 +100,8 @@ def load_saved(directory: Path, allow_unsealed: bool = False) -> SavedRun:
             devices["device_count"],
             devices["platform"],
             devices["local_device_count"],
-            read_run_config(data).inputs,
-            read_run_config(data).return_range,
+            read_run_config(raw).inputs,
+            read_run_config(raw).return_range,
         )
     except IntegrityError as error:
         raise RunError(f"--resume {directory}: {error}") from None
@@ -142,26 +148,24 @@ def check_inputs(saved: SavedRun, allow_changed: bool) -> None:
 
 
 def write_config(out: Path, run: BuiltRun, command: Sequence[str] | None = None) -> None:
-    """config.json: the RunConfig, what it resolved to (with the SHA-256 of every input file,
-    which ``--resume`` checks), and provenance."""
-    document = {
-        **run.config.to_dict(),
-        "resolved": {
-            "demos_path": run.demos_path,
-            "normalizer": run.return_range,
-            "normalizer_source": run.return_range_source,
-            "action_scale": run.action_scale,
-            "num_demos": run.trainer.num_demos,
-            "bsc_eps": run.config.task_bsc_eps,
-            # The engine that ran (RunSettings.physics None: chosen from the platform).
-            "physics": getattr(run.env, "physics", None),
-            "adversarial": dataclasses.asdict(run.trainer.config),
-            # What each method name resolved to: a resume refuses a changed preset.
-            "methods": {name: preset_record(name) for name in run.config.methods},
-            "inputs": input_files(run.config.demonstrations, run.demos_path),
-        },
-        "provenance": provenance(command=command),
+    """config.json in the one layout of every run (``runs.run_document``): the RunConfig,
+    what it resolved to (with the SHA-256 of every input file, which ``--resume`` checks),
+    and provenance."""
+    resolved = {
+        "demos_path": run.demos_path,
+        "inputs": input_files(run.config.demonstrations, run.demos_path),
+        "return_range": run.return_range,
+        "return_range_source": run.return_range_source,
+        "trainer": dataclasses.asdict(run.trainer.config),
+        # What each method name resolved to: a resume refuses a changed preset.
+        "methods": {name: preset_record(name) for name in run.config.methods},
+        # The engine that ran (RunSettings.physics None: chosen from the platform).
+        "physics": getattr(run.env, "physics", None),
+        "action_scale": run.action_scale,
+        "num_demos": run.trainer.num_demos,
+        "bsc_eps": run.config.task_bsc_eps,
     }
+    document = run_document("sweep", run.config.to_dict(), resolved, provenance(command=command))
     # What the run is created with, apart from the file a user may edit: every resume
     # compares config.json with it (provenance aside) and refuses a change, naming it.
     # Sealed first, so that a config.json never exists without its seal.
