@@ -303,7 +303,9 @@ def compile_side_by_side(lowered: Sequence[Any]) -> list[tuple[Any, float]]:
     """``(compiled, seconds)`` of each of the ``lowered`` programs (``jax.stages.Lowered``),
     the last compiled in this thread and each other in a thread of its own at the same
     time: XLA's compile (or the persistent cache's read) releases the GIL, so on a second
-    core the shorter compiles cost no wall time. ``seconds`` is each one's own compile."""
+    core the shorter compiles cost no wall time. ``seconds`` is each one's own compile.
+    On the CPU only: a GPU's compile times candidate kernels (autotuning), which two
+    compiles at once would time against each other, so there they run one after another."""
 
     def timed(program):
         start = time.perf_counter()
@@ -311,8 +313,8 @@ def compile_side_by_side(lowered: Sequence[Any]) -> list[tuple[Any, float]]:
         return compiled, time.perf_counter() - start
 
     *others, last = lowered
-    if not others:
-        return [timed(last)]
+    if not others or jax.default_backend() != "cpu":
+        return [timed(program) for program in lowered]
     threads = concurrent.futures.ThreadPoolExecutor(len(others), COMPILE_THREAD)
     with threads as pool:
         futures = [pool.submit(timed, program) for program in others]

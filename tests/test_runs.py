@@ -168,3 +168,14 @@ def test_a_sweeps_config_of_todays_layout_reads_as_the_flat_one_for_its_config()
     flat = {key: value for key, value in upgrade_saved_config(SWEEP).items() if key != "resolved"}
     today = upgrade_saved_config(new)
     assert {key: value for key, value in today.items() if key != "resolved"} == flat
+
+
+def test_a_hand_edited_layout_with_a_part_that_is_no_object_reads_as_empty():
+    """A config.json whose ``config`` or ``resolved`` was edited into a string reads as an
+    empty part (the seal check then names the change in one line), not an AttributeError."""
+    from pngail_jax.analysis.runs import read_run_config
+
+    view = read_run_config(
+        {"program": "sweep", "family": "adversarial", "config": "x", "resolved": 3}
+    )
+    assert view.settings == {} and view.inputs == {} and view.return_range is None

@@ -164,8 +164,12 @@ def read_run_config(document: dict) -> RunConfigView:
 def _read_run_document(document: dict, program: str) -> RunConfigView:
     """``read_run_config`` of a document in ``run_document``'s layout, written by
     ``program``."""
-    settings = document.get("config") or {}
-    resolved = document.get("resolved") or {}
+    # A part that is not an object (a hand-edited file) reads as empty: the seal check then
+    # names the change in one line, where .get on a string would raise deep inside.
+    settings, resolved = (
+        part if isinstance(part, dict) else {}
+        for part in (document.get("config"), document.get("resolved"))
+    )
     offline = program == "offline"
     planned = settings.get("iterations")
     return RunConfigView(
