@@ -22,6 +22,7 @@ from pngail_jax.analysis.report import (
     metrics_rows,
     read_evaluations,
     seed_figures,
+    summary_return_range,
 )
 from pngail_jax.storage.integrity import (
     CONFIG_SEAL,
@@ -657,10 +658,8 @@ def _check_metrics_agree_with_summary(directory: Path, document: dict, who: str)
         return  # none, or cut to its progress fields: nothing stated to compare
     if progress is None or done != progress[0]:
         return
-    stated = summary.get("normalizer")
-    if "normalizer" in summary and (
-        stated is not None if return_range is None else stated != return_range
-    ):
+    states, stated = summary_return_range(summary)
+    if states and (stated is not None if return_range is None else stated != return_range):
         raise UntrustedRun(
             f"{who}: summary.json's normaliser {stated!r} is not config.json's {return_range!r}: "
             "one of them was edited"
