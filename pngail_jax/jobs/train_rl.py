@@ -187,7 +187,7 @@ def flat_document(document: dict) -> dict:
         for part in (document.get("config"), document.get("resolved"))
     )  # a hand-edited part that is no object reads as empty (the seal names the change)
     learner = config.get("learner") if isinstance(config.get("learner"), dict) else {}
-    name = learner.get("name")
+    name = learner.get("name") if isinstance(learner.get("name"), str) else None
     flat = {key: config.get(key) for key in ("env", "settings", "seeds", "seed", "argv")}
     flat.update({key: resolved.get(key) for key in ("env_options", "rollout", "hyperparams")})
     return {**flat, "learner": name, str(name): learner.get(name)}
