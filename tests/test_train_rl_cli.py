@@ -311,6 +311,23 @@ def test_a_run_begun_in_an_older_layout_resumes(run_dir, tmp_path, monkeypatch, 
     assert (out / "config.json").read_bytes() == written
 
 
+def test_a_run_begun_from_python_is_not_resumed_by_the_program(tmp_path, capsys):
+    """A run begun with jobs.train_rl (no flags: "argv" null) cannot be resumed by
+    --resume DIR, which would read this process's own flags instead: one line says how."""
+    from pngail_jax.jobs.train_rl import TrainRLConfig
+    from pngail_jax.storage.integrity import CONFIG_SEAL, write_sealed
+
+    out = tmp_path / "from-python"
+    out.mkdir()
+    document = TrainRLConfig(iterations=10, seeds=2).document()
+    assert document["config"]["argv"] is None
+    write_sealed(out / "config.json", document, out / CONFIG_SEAL)
+    assert outputs.output_owner(out) == "train_rl"  # known by its program, without a marker
+    with pytest.raises(SystemExit, match="^2$"):
+        train_rl.main(["--resume", str(out)])
+    assert "no flags to resume with (a run begun from Python" in capsys.readouterr().err
+
+
 def test_older_layouts_are_upgraded_to_the_flat_one():
     """upgrade_document: the layout with the rollout's settings in "trpo" (a PPO run's "trpo"
     held TRPO's unused settings, which go) and the one before the value fit's epochs in the
