@@ -255,6 +255,74 @@ def test_ilid_selects_other_rows_that_lead_to_expert_like_states(demos, grid_run
             assert row + 1 < len(ids) and ids[row + 1] == ids[row]
 
 
+@pytest.mark.parametrize(
+    ("overrides", "field", "flag", "reason"),
+    [
+        ({"label_ratio": 1.5}, "label_ratio", "--label-ratio", "must lie in (0, 1), got 1.5"),
+        ({"label_ratio": 0.0}, "label_ratio", "--label-ratio", "must lie in (0, 1), got 0.0"),
+        ({"noise_std": -0.1}, "noise_std", "--noise", "must be finite and >= 0, got -0.1"),
+        ({"methods": ("gail",)}, "methods", "--methods", ": unknown offline method 'gail'"),
+        ({"methods": ("bc-all", "bc-all")}, "methods", "--methods", "must be distinct"),
+        ({"methods": ()}, "methods", "--methods", "must be a non-empty list"),
+        ({"seeds": 0}, "seeds", "--seeds", "must be a positive integer, got 0"),
+        ({"seed": -1}, "seed", "--seed", "must be an integer in [0, 2**63), got -1"),
+        ({"gradient_steps": 0}, "gradient_steps", "--gradient-steps",
+         "must be a positive integer, got 0"),
+        ({"steps_per_iteration": 0}, "steps_per_iteration", "--steps-per-iteration",
+         "must be a positive integer, got 0"),
+        ({"eval_every": 0}, "eval_every", "--eval-every", "must be a positive integer, got 0"),
+        ({"chunk_iterations": 0}, "chunk_iterations", "--chunk-iterations",
+         "must be a positive integer, got 0"),
+        ({"batch_size": 0}, "batch_size", "--batch-size", "must be a positive integer, got 0"),
+        ({"ilid_discriminator_steps": 0}, "ilid_discriminator_steps",
+         "--ilid-discriminator-steps", "must be a positive integer, got 0"),
+        ({"gradient_steps": 1500}, "gradient_steps", "--gradient-steps",
+         "(1500) must be a multiple of steps_per_iteration x eval_every = 5000"),
+        ({"ilid_discriminator_learning_rate": 2.0}, "ilid_discriminator_learning_rate",
+         "--ilid-discriminator-learning-rate", "must lie in (0, 1), got 2.0"),
+        ({"dwbc_discriminator_updates": 3}, "dwbc_discriminator_updates",
+         "--dwbc-discriminator-updates", "must be a positive integer that divides gradient_steps"),
+        ({"action_scale": -1.0}, "action_scale", "--action-scale",
+         "must be finite and positive, got -1.0"),
+        ({"conf": "c.npy"}, "conf", "--conf", ": a confidence file needs demos"),
+    ],
+)  # fmt: skip
+def test_each_bad_offline_flag_is_named_in_one_line(
+    overrides, field, flag, reason, tmp_path, capsys
+):
+    """OfflineRunConfig's checks raise ConfigError with the field's path (as RunConfig's);
+    the offline program names the flag that set it, in one line."""
+    from pngail_jax.config.validation import ConfigError
+    from pngail_jax.jobs.offline_config import OfflineRunConfig
+    from pngail_jax.programs import offline as program
+
+    with pytest.raises(ConfigError) as refused:
+        OfflineRunConfig(**overrides)
+    assert refused.value.field == field and refused.value.reason.startswith(reason)
+    argv = []
+    for name, value in overrides.items():
+        text = ",".join(value) if isinstance(value, tuple) else str(value)
+        argv += [program.FLAGS.get(name, "--" + name.replace("_", "-")), text]
+    with pytest.raises(SystemExit, match="^2$"):
+        program.parse_args([*argv, "--out", str(tmp_path / "refused")])
+    error = capsys.readouterr().err.strip()
+    assert "\n" not in error and f"error: {flag}{'' if reason[0] == ':' else ' '}{reason}" in error
+
+
+def test_an_offline_run_config_stores_its_numbers_in_their_types():
+    """A NumPy count and an int ratio read as Python ints and floats (config.json and the
+    trainer's static config see the same values)."""
+    from pngail_jax.jobs.offline_config import OfflineRunConfig
+
+    config = OfflineRunConfig(
+        seeds=np.int64(2), noise_std=0, methods=["bc-all"], hidden_sizes=[8],
+        dwbc_discriminator_updates=np.int32(500),
+    )  # fmt: skip
+    assert type(config.seeds) is int and type(config.noise_std) is float
+    assert config.methods == ("bc-all",) and config.hidden_sizes == (8,)
+    assert type(config.dwbc_discriminator_updates) is int
+
+
 def test_demonstrations_a_run_cannot_use_are_refused_before_it_writes(demos_path, tmp_path):
     """ILID on rows without trajectories, and demonstrations of another task: one line each,
     before config.json is written."""

@@ -395,5 +395,5 @@ def test_dwbc_discriminator_updates_set_its_cadence_and_bad_values_are_one_line(
         program.parse_args([*argv, "--dwbc-discriminator-updates", "3000",
                             "--out", str(tmp_path / "b")])  # fmt: skip
     error = capsys.readouterr().err
-    assert "dwbc_discriminator_updates must be a positive integer that divides" in error
+    assert "--dwbc-discriminator-updates must be a positive integer that divides" in error
     assert error.count("\n") == 1

@@ -414,6 +414,9 @@ def test_runs_made_before_the_marker_are_known_by_their_own_files(tmp_path):
     trpo = folder("trpo", {"config.json": '{"trpo": {}}', "policy.json": "{}"})
     assert output_owner(trpo) == "train_rl"  # not a sweep: its config.json has no "resolved"
     assert output_owner(folder("cut", {"config.json": '{"trpo": {}}'})) == "train_rl"
+    # Today's layout (analysis.runs.run_document) names its program beside "resolved".
+    today = '{"program": "train_rl", "family": "reinforcement", "config": {}, "resolved": {}}'
+    assert output_owner(folder("today", {"config.json": today})) == "train_rl"
     assert output_owner(folder("demos", {"normalizer.json": "{}"})) == "make_demos"
     assert output_owner(folder("mine", {"config.json": '{"lr": 3}'})) is None  # not ours
     reason = outputs.output_refusal(tmp_path / "mine", "sweep", overwrite=True)

@@ -67,7 +67,7 @@ def test_table4_puts_ours_beside_the_papers_for_each_task():
         "Pendulum-v1": {
             "pngail": {"late_average_return": [-400.0, 12.5], "average_return": [-600.0, 30.0]},
             "gail": {"late_average_return": [-700.0, None], "average_return": [-800.0, 40.0]},
-            "normalizer": [-1200.96, -116.81],
+            "return_range": [-1200.96, -116.81],
         },
         "Ant-v4": {
             "pngail": {"late_average_return": [2500.0, 100.0], "average_return": [1500.0, 90.0]},

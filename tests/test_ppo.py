@@ -264,9 +264,10 @@ def test_train_rl_with_ppo_writes_its_columns_and_a_loadable_policy(tmp_path):
         "--learner", "ppo", "--iterations", "4", "--seeds", "2", "--eval-every", "2",
         "--num-envs", "4", "--unroll-length", "50", "--out", str(out),
     ])  # fmt: skip
-    config = json.loads((out / "config.json").read_text())
-    assert config["learner"] == "ppo" and config["ppo"]["num_epochs"] == 10
-    assert "clip_eps" in config["hyperparams"]
+    document = json.loads((out / "config.json").read_text())
+    learner = document["config"]["learner"]
+    assert learner["name"] == "ppo" and learner["ppo"]["num_epochs"] == 10
+    assert "clip_eps" in document["resolved"]["hyperparams"]
     header = (out / "metrics.csv").read_text().splitlines()[0].split(",")
     assert {"ppo/kl", "ppo/clip_fraction"} <= set(header)
     policy = load_policy(out)

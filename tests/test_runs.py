@@ -101,14 +101,27 @@ def test_a_config_missing_parts_reads_as_empty():
     assert sweep.inputs == {} and sweep.return_range is None and sweep.planned_iterations is None
 
 
+def test_a_train_rl_document_reads_as_its_program():
+    """train_rl writes the same layout (its family: reinforcement); its seal covers all but
+    the provenance, as every run's."""
+    config = {"env": "Pendulum-v1", "iterations": 10, "seeds": 2, "argv": ["--seeds", "2"]}
+    document = run_document("train_rl", config, {"rollout": {"num_envs": 4}}, {"python": "3"})
+    assert (document["program"], document["family"]) == ("train_rl", "reinforcement")
+    view = read_run_config(document)
+    assert view.program == "train_rl" and view.settings == config
+    assert sealed_part(document) == {k: v for k, v in document.items() if k != "provenance"}
+    assert (view.planned_iterations, view.return_range, view.inputs) == (10, None, {})
+
+
 def test_no_other_module_tells_the_two_layouts_apart():
     """The offline layout is recognised in ``read_run_config`` alone (and in
     ``storage.outputs.output_owner``, below the reading layer, which names the program that
     owns a folder copied without its marker)."""
+    marks = ('get("program") == "offline"', 'get("program") in ("offline"')
     found = {
-        str(path.relative_to(PACKAGE)): path.read_text().count('get("program") == "offline"')
+        str(path.relative_to(PACKAGE)): sum(path.read_text().count(mark) for mark in marks)
         for path in PACKAGE.rglob("*.py")
-        if 'get("program") == "offline"' in path.read_text()
+        if any(mark in path.read_text() for mark in marks)
     }
     assert found == {"analysis/runs.py": 1, "storage/outputs.py": 1}
 

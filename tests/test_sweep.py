@@ -800,6 +800,10 @@ def test_the_verification_reads_every_number_it_passes_on(finished, tmp_path):
         if (row["method"], row["seed"], row["iteration"]) == ("gail", "0", "4"):
             row["normalized_return"] = "0.9"
 
+    def edited_under_the_old_key(summary):
+        del summary["return_range"]
+        summary["normalizer"] = [-1000.0, 0.0]
+
     def summary_edit(run, edit):
         path = run / "summary.json"
         summary = json.loads(path.read_text())
@@ -817,7 +821,10 @@ def test_the_verification_reads_every_number_it_passes_on(finished, tmp_path):
             late_average_normalized_return=0.7)),
          r"summary.json gives gail seed 0 late_average_normalized_return 0.7, metrics.csv's "
          r"evaluations \(iteration 4\)"),
-        (lambda run: summary_edit(run, lambda s: s.update(normalizer=[-1000.0, 0.0])),
+        (lambda run: summary_edit(run, lambda s: s.update(return_range=[-1000.0, 0.0])),
+         r"summary.json's normaliser \[-1000.0, 0.0\] is not config.json's"),
+        # A summary.json written before "return_range" had its name says "normalizer".
+        (lambda run: summary_edit(run, edited_under_the_old_key),
          r"summary.json's normaliser \[-1000.0, 0.0\] is not config.json's"),
     ]  # fmt: skip
     for index, (damage, message) in enumerate(cases):
@@ -833,6 +840,33 @@ def test_the_verification_reads_every_number_it_passes_on(finished, tmp_path):
                 program.main(argv)
             assert "\n" not in str(refused.value.code), refused.value.code
         assert not (tmp_path / f"cmp{index}").exists() and not (tmp_path / "rec").exists()
+
+
+def test_a_summary_written_before_return_range_had_its_name_reads(finished, tmp_path):
+    """A new summary.json names the normalised return's ends "return_range"; one written
+    before says "normalizer", and compare and record read that run as they read a new one."""
+    import shutil
+
+    from pngail_jax.analysis.report import summary_return_range
+    from pngail_jax.programs import compare as compare_program
+    from pngail_jax.programs import record as record_program
+
+    summary = json.loads((finished / "summary.json").read_text())
+    config = json.loads((finished / "config.json").read_text())
+    assert "normalizer" not in summary
+    assert summary["return_range"] == config["resolved"]["return_range"]
+    run = tmp_path / "old-summary"
+    shutil.copytree(finished, run)
+    old = {
+        ("normalizer" if key == "return_range" else key): value for key, value in summary.items()
+    }
+    (run / "summary.json").write_text(json.dumps(old))
+    assert summary_return_range(old) == (True, summary["return_range"])
+    assert summary_return_range({"methods": {}}) == (False, None)
+    compare_program.main([str(run), "--out", str(tmp_path / "compared")])
+    assert (tmp_path / "compared").is_dir()
+    [folder] = record_program.main([str(run), "--name", "old", "--records", str(tmp_path / "r")])
+    assert (folder / "record.json").is_file()
 
 
 def test_compare_expected_says_where_a_run_lies_against_a_record(finished, tmp_path):

@@ -44,9 +44,19 @@ def test_outputs_are_written(run_dir):
     lines = (run_dir / "metrics.csv").read_text().splitlines()
     assert lines[0].startswith("seed,iteration,env_steps,eval/return")
     assert len(lines) == 1 + 2 * 4
-    config = json.loads((run_dir / "config.json").read_text())
-    assert config["rollout"]["num_iterations"] == 4 and config["seeds"] == 2
-    assert config["trpo"]["fisher"] == "gauss_newton" and "num_envs" not in config["trpo"]
+    document = json.loads((run_dir / "config.json").read_text())
+    # Every run's layout (analysis.runs.run_document): what was asked, what it resolved to.
+    assert (document["program"], document["family"]) == ("train_rl", "reinforcement")
+    assert document.keys() == {"program", "family", "config", "resolved", "provenance"}
+    config, resolved = document["config"], document["resolved"]
+    assert config["iterations"] == 4 and config["seeds"] == 2 and config["seed"] == 0
+    assert config["learner"]["name"] == "trpo" and config["learner"]["trpo"]["fisher"] == (
+        "gauss_newton"
+    )
+    assert config["argv"][config["argv"].index("--iterations") + 1] == "4"
+    assert resolved["rollout"]["num_iterations"] == 4 and resolved["rollout"]["num_envs"] == 4
+    assert resolved["hyperparams"]["bootstrap_truncation"] is True
+    assert document["provenance"]["command_line"][:3] == ["python", "-m", "experiments.train_rl"]
 
 
 def test_load_policy_picks_best_seed_and_acts(run_dir, capsys):
@@ -158,7 +168,7 @@ def _stopped_after_first_block(run_dir, out, monkeypatch):
     """The fixture's run again into ``out``, stopped after its first block's checkpoint."""
     from pngail_jax.jobs import chunks
 
-    argv = [*json.loads((run_dir / "config.json").read_text())["argv"]]
+    argv = [*json.loads((run_dir / "config.json").read_text())["config"]["argv"]]
     argv[argv.index("--out") + 1] = str(out)
     save = chunks.save_checkpoint
 
@@ -188,11 +198,12 @@ def test_an_interrupted_run_resumes_to_the_same_numbers(run_dir, tmp_path, monke
     config_path = out / "config.json"
     began = config_path.read_text()
     edited = json.loads(began)
-    edited["seed"], edited["argv"] = 5, [*edited["argv"], "--seed", "5"]
+    config = edited["config"]
+    config["seed"], config["argv"] = 5, [*config["argv"], "--seed", "5"]
     config_path.write_text(json.dumps(edited))
     with pytest.raises(SystemExit, match="config.json was changed since the run began") as stop:
         train_rl.main(["--resume", str(out)])
-    assert "seed: was 0, now 5" in str(stop.value)
+    assert "config.seed: was 0, now 5" in str(stop.value)
     config_path.write_text(began)
     sealed = (out / ".config.sealed.json").read_bytes()
     (out / ".config.sealed.json").unlink()
@@ -203,6 +214,7 @@ def test_an_interrupted_run_resumes_to_the_same_numbers(run_dir, tmp_path, monke
     assert "resumed from" in capsys.readouterr().out
     assert (out / "metrics.csv").read_bytes() == (run_dir / "metrics.csv").read_bytes()
     assert not (out / "checkpoints").exists()
+    assert config_path.read_text() == began  # a resume never rewrites config.json
     with pytest.raises(SystemExit, match="^2$"):
         train_rl.main(["--resume", str(out)])
     assert f"--resume {out}: the run is complete (its policy.json is written)" in (
@@ -210,29 +222,132 @@ def test_an_interrupted_run_resumes_to_the_same_numbers(run_dir, tmp_path, monke
     )
 
 
-def test_a_run_begun_before_the_rollout_section_resumes(run_dir, tmp_path, monkeypatch):
-    """A run whose sealed config.json has the layout from before the rollout's settings had
-    their own section ("trpo" held them beside TRPO's) resumes to the uninterrupted run's
-    numbers; in that layout a PPO run's "trpo" held TRPO's unused settings, which go."""
-    from pngail_jax.jobs.train_rl import upgrade_document
+def _config_of(argv):
+    """The TrainRLConfig that experiments.train_rl's flags ``argv`` give."""
+    from pngail_jax.jobs.train_rl import TrainRLConfig
+    from pngail_jax.programs.cli import config_from
+
+    parser = train_rl.build_parser()
+    args = parser.parse_args(argv)
+    train_rl._check(parser, args)
+    return config_from(TrainRLConfig, args)
+
+
+def _flat_document(config, argv) -> dict:
+    """config.json as train_rl wrote it before every run's layout (analysis.runs.run_document):
+    flat, as TrainRLConfig.document wrote it at commit 3152989."""
+    import dataclasses
+
+    return json.loads(
+        json.dumps(
+            {
+                "env": config.env,
+                "env_options": config.settings.env_options,
+                "settings": dataclasses.asdict(config.settings),
+                "seeds": config.seeds,
+                "seed": config.seed,
+                "learner": config.learner.name,
+                "rollout": dataclasses.asdict(config.rollout_config),
+                config.learner.name: dataclasses.asdict(config.learner.settings),
+                "hyperparams": jax.tree.map(lambda x: x.item(), config.hyperparams).__dict__,
+                "argv": list(argv),
+            }
+        )
+    )
+
+
+def test_a_changed_config_is_refused_on_resume_in_one_line(run_dir, tmp_path, monkeypatch):
+    """train_rl(config, resume=True) with another config than the run began with: one line
+    naming the field, in the layout the run began in."""
+    import dataclasses
+
+    from pngail_jax.jobs.errors import RunError
+    from pngail_jax.jobs.train_rl import train_rl as train_rl_job
+
+    out = tmp_path / "stopped"
+    _stopped_after_first_block(run_dir, out, monkeypatch)
+    argv = json.loads((out / "config.json").read_text())["config"]["argv"]
+    other = dataclasses.replace(_config_of(argv), seed=1)
+    with pytest.raises(RunError) as refused:
+        train_rl_job(other, out, resume=True, command=argv)
+    assert str(refused.value) == (
+        f"cannot resume {out}: these flags give another run (config.seed: was 0, now 1)"
+    )
+
+
+@pytest.mark.parametrize("layout", ["flat", "rollout in trpo"])
+def test_a_run_begun_in_an_older_layout_resumes(run_dir, tmp_path, monkeypatch, layout):
+    """A run whose sealed config.json has one of train_rl's layouts before every run's (the
+    flat one the code wrote until commit 3152989, and the one before the rollout's settings
+    had their own section, when "trpo" held them beside TRPO's) resumes to the uninterrupted
+    run's numbers, its config.json never rewritten; a changed config is refused in one line
+    naming the field in that layout's keys."""
+    import dataclasses
+
+    from pngail_jax.jobs.errors import RunError
+    from pngail_jax.jobs.train_rl import flat_document
+    from pngail_jax.jobs.train_rl import train_rl as train_rl_job
     from pngail_jax.storage.integrity import CONFIG_SEAL, write_sealed
 
     out = tmp_path / "old-layout"
     _stopped_after_first_block(run_dir, out, monkeypatch)
     today = json.loads((out / "config.json").read_text())
-    old = {key: value for key, value in today.items() if key != "rollout"}
-    old["trpo"] = {**today["rollout"], **today["trpo"]}
+    argv = today["config"]["argv"]
+    config = _config_of(argv)
+    old = _flat_document(config, argv)
+    assert flat_document(today) == old and flat_document(old) == old
+    if layout == "rollout in trpo":
+        old = {key: value for key, value in old.items() if key != "rollout"}
+        old["trpo"] = {**today["resolved"]["rollout"], **today["config"]["learner"]["trpo"]}
     write_sealed(out / "config.json", old, out / CONFIG_SEAL)
-    assert upgrade_document(old) == today and upgrade_document(today) is today
+    written = (out / "config.json").read_bytes()
+    with pytest.raises(RunError) as refused:
+        train_rl_job(dataclasses.replace(config, seed=1), out, resume=True, command=argv)
+    assert str(refused.value) == (
+        f"cannot resume {out}: these flags give another run (seed: was 0, now 1)"
+    )
     train_rl.main(["--resume", str(out)])
     assert (out / "metrics.csv").read_bytes() == (run_dir / "metrics.csv").read_bytes()
+    assert (out / "config.json").read_bytes() == written
+
+
+def test_a_run_begun_from_python_is_not_resumed_by_the_program(tmp_path, capsys):
+    """A run begun with jobs.train_rl (no flags: "argv" null) cannot be resumed by
+    --resume DIR, which would read this process's own flags instead: one line says how."""
+    from pngail_jax.jobs.train_rl import TrainRLConfig
+    from pngail_jax.storage.integrity import CONFIG_SEAL, write_sealed
+
+    out = tmp_path / "from-python"
+    out.mkdir()
+    document = TrainRLConfig(iterations=10, seeds=2).document()
+    assert document["config"]["argv"] is None
+    write_sealed(out / "config.json", document, out / CONFIG_SEAL)
+    assert outputs.output_owner(out) == "train_rl"  # known by its program, without a marker
+    with pytest.raises(SystemExit, match="^2$"):
+        train_rl.main(["--resume", str(out)])
+    assert "no flags to resume with (a run begun from Python" in capsys.readouterr().err
+
+
+def test_older_layouts_are_upgraded_to_the_flat_one():
+    """upgrade_document: the layout with the rollout's settings in "trpo" (a PPO run's "trpo"
+    held TRPO's unused settings, which go) and the one before the value fit's epochs in the
+    flat layout's last form; that form and today's layout unchanged."""
+    from pngail_jax.jobs.train_rl import TrainRLConfig, upgrade_document
+
+    today = TrainRLConfig(iterations=10, seeds=2).document(["--seeds", "2"])
+    assert upgrade_document(today) is today
+    flat = _flat_document(TrainRLConfig(iterations=10, seeds=2), ["--seeds", "2"])
+    assert upgrade_document(flat) is flat
+    old = {key: value for key, value in flat.items() if key != "rollout"}
+    old["trpo"] = {**flat["rollout"], **flat["trpo"]}
+    assert upgrade_document(old) == flat
     ppo = upgrade_document({**old, "learner": "ppo", "ppo": {"num_epochs": 10}})
-    assert "trpo" not in ppo and ppo["rollout"] == today["rollout"] and ppo["ppo"]
-    trpo = {key: value for key, value in today["trpo"].items() if key != "num_value_epochs"}
-    before_epochs = {**today, "trpo": trpo}  # the layout before the value fit's epochs
-    assert upgrade_document(before_epochs) == today
+    assert "trpo" not in ppo and ppo["rollout"] == flat["rollout"] and ppo["ppo"]
+    trpo = {key: value for key, value in flat["trpo"].items() if key != "num_value_epochs"}
+    before_epochs = {**flat, "trpo": trpo}  # the layout before the value fit's epochs
+    assert upgrade_document(before_epochs) == flat
     old["trpo"].pop("num_value_epochs")
-    assert upgrade_document(old) == today
+    assert upgrade_document(old) == flat
 
 
 def test_resume_checks_again_under_the_lock(run_dir, tmp_path, monkeypatch, capsys):
@@ -287,4 +402,4 @@ def test_value_epochs_are_refused_for_ppo_in_one_line():
         TrainRLConfig(learner=LearnerConfig(name="ppo", trpo=more_epochs))
     config = TrainRLConfig(learner=LearnerConfig(trpo=more_epochs))
     assert config.learner.settings.num_value_epochs == 3
-    assert config.document()["trpo"]["num_value_epochs"] == 3
+    assert config.document()["config"]["learner"]["trpo"]["num_value_epochs"] == 3

@@ -273,6 +273,12 @@ def _per_cell(cells, metrics, return_range, excluded):
     return values
 
 
+# summary.json's key for the normalised return's ends, (random, optimal); the summaries
+# written before it was named (issue 74) say "normalizer", and every reader takes both.
+RETURN_RANGE_KEY = "return_range"
+_OLD_RETURN_RANGE_KEY = "normalizer"
+
+
 def summarize(
     cells,
     metrics,
@@ -318,8 +324,17 @@ def summarize(
         "improvement": {"over": baseline} if baseline else {"of": "pngail"},
         "train_env_steps_per_second": float(train_env_steps_per_second),
         "compile_seconds": float(compile_seconds),
-        "normalizer": None if return_range is None else [float(x) for x in return_range],
+        RETURN_RANGE_KEY: None if return_range is None else [float(x) for x in return_range],
     }
+
+
+def summary_return_range(summary: dict) -> tuple[bool, object]:
+    """(whether ``summary`` (a summary.json) states the normalised return's ends, what it
+    states: [random, optimal], or None for a run without them), of either key."""
+    for key in (RETURN_RANGE_KEY, _OLD_RETURN_RANGE_KEY):
+        if key in summary:
+            return True, summary[key]
+    return False, None
 
 
 def _method_row(cells, indices, values, metrics, excluded) -> dict:
@@ -409,8 +424,9 @@ def summary_markdown(summary, cells, metrics, title: str, notes: Sequence[str] =
     no interval for a single seed; a classifier error only for methods that read
     confidences (``methods.reads_confidences``)."""
     _, groups = group_cells(cells)
-    if "normalizer" in summary:  # what the run normalised by (finite values or not)
-        normalised = summary["normalizer"] is not None
+    stated, return_range = summary_return_range(summary)
+    if stated:  # what the run normalised by (finite values or not)
+        normalised = return_range is not None
     else:
         normalised = any(
             np.isfinite(row["final_normalized_return_mean"]) for row in summary["methods"].values()

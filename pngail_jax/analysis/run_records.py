@@ -483,7 +483,7 @@ def config_differences(
         return {
             **{f"{part}.{key}": value for part, values in (("config", view.settings),
                ("trainer", view.trainer)) for key, value in values.items()},
-            "normalizer": view.return_range,
+            "return_range": view.return_range,
         }  # fmt: skip
 
     mine, reference = fields(config), fields(record["config"])
@@ -498,7 +498,7 @@ def config_differences(
         return document[key] if key in document else defaults.get(key)
 
     def written_later(key: str) -> bool:  # an offline run's trainer part, at its end
-        partial = key.startswith("trainer.") or key == "normalizer"
+        partial = key.startswith("trainer.") or key == "return_range"
         return offline and partial and (mine.get(key) is None or reference.get(key) is None)
 
     return [

@@ -22,6 +22,7 @@ from pngail_jax.analysis.report import (
     metrics_rows,
     read_evaluations,
     seed_figures,
+    summary_return_range,
 )
 from pngail_jax.storage.integrity import (
     CONFIG_SEAL,
@@ -54,22 +55,27 @@ OFFLINE_SEALED = ("program", "config", "demonstrations", "input_files", "normali
 # ends (where it ran, whether it is complete, its seconds). Everything else is fixed when it
 # begins, a key added by hand included.
 RUN_UNSEALED = ("provenance", "resumed_provenance", "complete", "wall_seconds", "train_seconds")
-FAMILIES = {"sweep": "adversarial", "offline": "offline"}  # each program's method family
+# Each program's method family: the sweep's adversarial methods, the offline program's,
+# and train_rl's reinforcement learning on the true reward (no demonstrations).
+FAMILIES = {"sweep": "adversarial", "offline": "offline", "train_rl": "reinforcement"}
 
 
 def run_document(program: str, config: dict, resolved: dict, provenance: dict) -> dict:
     """The one layout of a run's ``config.json``, whichever program writes it (``sweep``:
-    ``jobs.record.write_config``; ``offline``: ``jobs.offline.run_offline``)::
+    ``jobs.record.write_config``; ``offline``: ``jobs.offline.run_offline``; ``train_rl``:
+    ``jobs.train_rl.TrainRLConfig.document``)::
 
-        {"program": "sweep" | "offline",
-         "family": "adversarial" | "offline",      # the method family it ran
-         "config": {the job config's fields: RunConfig's or OfflineRunConfig's},
+        {"program": "sweep" | "offline" | "train_rl",
+         "family": "adversarial" | "offline" | "reinforcement",  # what it ran (FAMILIES)
+         "config": {the job config's fields: RunConfig's, OfflineRunConfig's or
+                    TrainRLConfig's (with train_rl's "argv", the flags --resume reads)},
          "resolved": {what the config resolved to when the run began: "demos_path",
                       "inputs" (each input file's integrity.file_record), "return_range"
                       (random, optimal) and "return_range_source", "trainer" (the
                       trainer's static config), and the program's own: a sweep's
                       "methods" (their presets), "physics", "action_scale", "num_demos",
-                      "bsc_eps"},
+                      "bsc_eps"; train_rl's are "env_options", "rollout" and
+                      "hyperparams" alone},
          "provenance": {where and with what it ran: provenance()},
          ...}  # the offline program adds "complete", its seconds and, when resumed,
                # "resumed_provenance" as it ends
@@ -77,7 +83,8 @@ def run_document(program: str, config: dict, resolved: dict, provenance: dict) -
     The seal covers all but ``RUN_UNSEALED``: ``program``, ``family``, ``config`` and
     ``resolved``, and any key added by hand.
     Files of the two layouts before this one still read (``read_run_config``) and resume
-    as they are: a resume never writes a run's config.json in another layout."""
+    as they are: a resume never writes a run's config.json in another layout (train_rl's
+    flat layouts: ``jobs.train_rl.flat_document``)."""
     return {
         "program": program,
         "family": FAMILIES[program],
@@ -92,7 +99,7 @@ class RunConfigView:
     """A run's ``config.json`` (or a record's ``config``), whichever program wrote it and in
     whichever layout, read the same way (``read_run_config``)."""
 
-    program: str  # "sweep" or "offline"
+    program: str  # "sweep", "offline" or (its seal alone is read) "train_rl"
     settings: dict  # env, methods, seeds, demos, ...: what the run was asked to do
     sealed: dict  # what the run's config seal covers
     inputs: dict  # the input files' records (integrity.file_record), by name
@@ -128,7 +135,9 @@ def read_run_config(document: dict) -> RunConfigView:
     """
     program = "offline" if document.get("program") == "offline" else "sweep"
     if "family" in document:  # the mark of run_document's layout (config.saved.is_run_document)
-        return _read_run_document(document, program)
+        named = document.get("program")
+        known = isinstance(named, str) and named in FAMILIES
+        return _read_run_document(document, named if known else program)
     if program == "offline":
         settings = document.get("config") or {}
         return RunConfigView(
@@ -649,10 +658,8 @@ def _check_metrics_agree_with_summary(directory: Path, document: dict, who: str)
         return  # none, or cut to its progress fields: nothing stated to compare
     if progress is None or done != progress[0]:
         return
-    stated = summary.get("normalizer")
-    if "normalizer" in summary and (
-        stated is not None if return_range is None else stated != return_range
-    ):
+    states, stated = summary_return_range(summary)
+    if states and (stated is not None if return_range is None else stated != return_range):
         raise UntrustedRun(
             f"{who}: summary.json's normaliser {stated!r} is not config.json's {return_range!r}: "
             "one of them was edited"

@@ -42,6 +42,8 @@ from pngail_jax.config.task import (  # noqa: F401  (the tables, importable from
 )
 from pngail_jax.config.training import check_training
 from pngail_jax.config.validation import (
+    LABEL_RATIO_RANGE,
+    NOISE_STD_RANGE,
     ConfigError,
     fail,
     float_axis,
@@ -151,13 +153,9 @@ class RunConfig:
         sizes = layer_sizes("discriminator_hidden_sizes", self.discriminator_hidden_sizes)
         self._set("discriminator_hidden_sizes", sizes)
         ratios = float_axis(
-            "label_ratios", self.label_ratios, "lie in (0, 1)", lambda r: 0 < r < 1,
-            name="label ratios",
-        )  # fmt: skip
-        noise = float_axis(
-            "noise_stds", self.noise_stds, "be finite and >= 0", lambda s: s >= 0,
-            name="noise stds",
-        )  # fmt: skip
+            "label_ratios", self.label_ratios, *LABEL_RATIO_RANGE, name="label ratios"
+        )
+        noise = float_axis("noise_stds", self.noise_stds, *NOISE_STD_RANGE, name="noise stds")
         self._set("label_ratios", ratios)
         self._set("noise_stds", noise)
         for name, value in dataclasses.asdict(self.demonstrations).items():

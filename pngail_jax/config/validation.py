@@ -1,4 +1,5 @@
-"""Field checks shared by every config (``RunConfig``, ``RunSettings``, the classifier's).
+"""Field checks shared by every config (``RunConfig``, ``OfflineRunConfig``, ``RunSettings``,
+the classifier's).
 
 Each check returns the value in its stored type (a NumPy integer as a Python ``int``, an
 ``int`` in a float field as a ``float``) or raises ``ConfigError`` naming the field. A
@@ -72,6 +73,25 @@ def real(field: str, value, requirement: str = "be finite and positive", *, name
         except OverflowError:  # an int beyond float's range
             pass
     if not math.isfinite(number):
+        fail(field, f"must {requirement}, got {value!r}", name=name)
+    return number
+
+
+# A range as (requirement, test): what a message says a value must do, and the test of it.
+# The per-cell data settings' ranges are written here once, for the sweep's axes (label
+# ratios, noise stds) and the offline program's single values (label ratio, noise std).
+OPEN_UNIT_INTERVAL = ("lie in (0, 1)", lambda value: 0 < value < 1)
+LABEL_RATIO_RANGE = OPEN_UNIT_INTERVAL
+NOISE_STD_RANGE = ("be finite and >= 0", lambda value: value >= 0)
+
+
+def within(field: str, value, rule: tuple, *, name=None) -> float:
+    """``value`` as a Python float when it is a finite real number (not a bool) meeting
+    ``rule`` (requirement, test: ``LABEL_RATIO_RANGE``, say); else ConfigError "``field``
+    must ``requirement``"."""
+    requirement, valid = rule
+    number = real(field, value, requirement, name=name)
+    if not valid(number):
         fail(field, f"must {requirement}, got {value!r}", name=name)
     return number
 

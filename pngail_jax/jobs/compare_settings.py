@@ -28,7 +28,7 @@ from pngail_jax.config.learner import LearnerConfig, TRPOConfig
 from pngail_jax.config.saved import provenance
 from pngail_jax.config.settings import REFERENCE_SETTINGS, parse_solver, settings_for
 from pngail_jax.jobs.errors import refusals
-from pngail_jax.jobs.train_rl import TrainRLConfig, train_rl, upgrade_document
+from pngail_jax.jobs.train_rl import TrainRLConfig, flat_document, train_rl
 from pngail_jax.networks import GaussianPolicy
 from pngail_jax.rl.on_policy import ObservationNormalizer
 from pngail_jax.rl.rollout import evaluate
@@ -304,7 +304,7 @@ def evaluate_arms(config: CompareSettingsConfig, directories: dict) -> tuple[dic
     results, curves = {}, {}
     for arm, directory in directories.items():
         curves[arm] = read_arm_curves(directory)
-        saved = upgrade_document(json.loads((directory / "config.json").read_text()))
+        saved = flat_document(json.loads((directory / "config.json").read_text()))
         metadata, arrays = saved_policies(directory)
         final = {}
         for name, solver in physics.items():

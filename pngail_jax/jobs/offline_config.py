@@ -7,6 +7,7 @@ job that runs it is ``jobs.offline.run_offline``.
 from __future__ import annotations
 
 import dataclasses
+import numbers
 from pathlib import Path
 
 from pngail_jax.analysis.runs import read_run_config
@@ -15,7 +16,15 @@ from pngail_jax.config.demonstrations import DemonstrationsConfig, demonstration
 from pngail_jax.config.settings import RunSettings
 from pngail_jax.config.task import task_classifier, task_num_demos
 from pngail_jax.config.training import task_settings
-from pngail_jax.config.validation import real
+from pngail_jax.config.validation import (
+    LABEL_RATIO_RANGE,
+    NOISE_STD_RANGE,
+    OPEN_UNIT_INTERVAL,
+    fail,
+    integer,
+    layer_sizes,
+    within,
+)
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.jobs.trainer_configs import sized_classifier
 from pngail_jax.offline.family import OFFLINE
@@ -54,43 +63,67 @@ class OfflineRunConfig:
     dwbc_discriminator_updates: int | None = None
 
     def __post_init__(self):
-        if not self.methods or len(set(self.methods)) != len(self.methods):
-            raise ValueError(f"methods must be distinct and not empty, got {self.methods!r}")
-        for method in self.methods:  # an unknown name: one line naming the known ones
-            OFFLINE.check_method(method)
-        check_seeds(self.seeds, self.seed)
+        """Each field checked, in its stored type: ConfigError (a ValueError) naming it by
+        its field, which the offline program turns into its flag."""
+        self._check_methods()
+        seeds, seed = check_seeds(self.seeds, self.seed)
+        self._set("seeds", seeds)
+        self._set("seed", seed)
         self.demonstrations  # noqa: B018  (the demonstrations part's checks)
         self.settings  # noqa: B018  (the task's row: an unknown task is refused)
         for name in ("gradient_steps", "steps_per_iteration", "eval_every",
                      "chunk_iterations", "batch_size", "ilid_discriminator_steps"):  # fmt: skip
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"{name} must be a positive integer, got {value!r}")
+            self._set(name, integer(name, getattr(self, name), minimum=1))
         block = self.steps_per_iteration * self.eval_every
         if self.gradient_steps % block:
-            raise ValueError(
-                f"gradient_steps ({self.gradient_steps}) must be a multiple of "
-                f"steps_per_iteration x eval_every = {block} (one evaluation each)"
+            fail(
+                "gradient_steps",
+                f"({self.gradient_steps}) must be a multiple of steps_per_iteration x "
+                f"eval_every = {block} (one evaluation each)",
             )
-        if not 0 < self.label_ratio < 1:
-            raise ValueError(f"label_ratio must lie in (0, 1), got {self.label_ratio!r}")
-        if not real("noise_std", self.noise_std, "be finite and >= 0") >= 0:
-            raise ValueError(f"noise_std must be finite and >= 0, got {self.noise_std!r}")
-        if not 0 < self.ilid_discriminator_learning_rate < 1:
-            raise ValueError(
-                "ilid_discriminator_learning_rate must lie in (0, 1), got "
-                f"{self.ilid_discriminator_learning_rate!r}"
-            )
+        self._set("label_ratio", within("label_ratio", self.label_ratio, LABEL_RATIO_RANGE))
+        self._set("noise_std", within("noise_std", self.noise_std, NOISE_STD_RANGE))
+        rate = self.ilid_discriminator_learning_rate
+        rate = within("ilid_discriminator_learning_rate", rate, OPEN_UNIT_INTERVAL)
+        self._set("ilid_discriminator_learning_rate", rate)
         check_union(self.ilid_union)
+        if self.num_eval_episodes is not None:
+            self._set("num_eval_episodes", integer("num_eval_episodes", self.num_eval_episodes, 1))
+        self._set("hidden_sizes", layer_sizes("hidden_sizes", self.hidden_sizes))
+        self._check_dwbc_updates()
+
+    def _set(self, name: str, value) -> None:
+        object.__setattr__(self, name, value)  # frozen: a value stored in its own type
+
+    def _check_methods(self) -> None:
+        """Offline presets (or ``<preset>+bsc``), distinct, at least one."""
+        if not isinstance(self.methods, list | tuple) or not self.methods:
+            fail("methods", f"must be a non-empty list of offline methods, got {self.methods!r}")
+        self._set("methods", tuple(self.methods))
+        for method in self.methods:  # an unknown name: one line naming the known ones
+            try:
+                OFFLINE.check_method(method)
+            except ValueError as error:
+                fail("methods", f": {error}")
+        if len(set(self.methods)) != len(self.methods):
+            fail("methods", f"must be distinct, got {list(self.methods)}")
+
+    def _check_dwbc_updates(self) -> None:
+        """DWBC's discriminator updates: None (its codebase's cadence), or a positive count
+        that divides the gradient steps (evenly spaced)."""
         updates = self.dwbc_discriminator_updates
-        if updates is not None and (
-            isinstance(updates, bool) or not isinstance(updates, int) or updates < 1
+        if updates is None:
+            return
+        if (
+            isinstance(updates, bool) or not isinstance(updates, numbers.Integral) or updates < 1
             or self.gradient_steps % updates
         ):  # fmt: skip
-            raise ValueError(
-                f"dwbc_discriminator_updates must be a positive integer that divides "
-                f"gradient_steps ({self.gradient_steps}), got {updates!r}"
+            fail(
+                "dwbc_discriminator_updates",
+                f"must be a positive integer that divides gradient_steps "
+                f"({self.gradient_steps}), got {updates!r}",
             )
+        self._set("dwbc_discriminator_updates", int(updates))
 
     @property
     def dwbc_discriminator_every(self) -> int:

@@ -23,9 +23,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from pngail_jax.analysis.report import write_seed_metrics_csv
-from pngail_jax.analysis.runs import UntrustedRun, sealed_document
+from pngail_jax.analysis.runs import UntrustedRun, run_document, sealed_document, sealed_part
 from pngail_jax.config import settings as env_settings
 from pngail_jax.config.learner import LearnerConfig
+from pngail_jax.config.saved import is_run_document, provenance
 from pngail_jax.config.training import check_training
 from pngail_jax.jobs.chunks import nanmean
 from pngail_jax.jobs.errors import RunError, refusals
@@ -92,24 +93,34 @@ class TrainRLConfig:
         return PolicyTrainer(config, env, learner=learner)
 
     def document(self, command: Sequence[str] | None = None) -> dict:
-        """config.json's content (``command``: the flags a program was given, which its
-        ``--resume`` reads back)."""
-        return json.loads(
-            json.dumps(
-                {
-                    "env": self.env,
-                    "env_options": self.settings.env_options,
-                    "settings": dataclasses.asdict(self.settings),
-                    "seeds": self.seeds,
-                    "seed": self.seed,
-                    "learner": self.learner.name,
-                    "rollout": dataclasses.asdict(self.rollout_config),
-                    self.learner.name: dataclasses.asdict(self.learner.settings),
-                    "hyperparams": jax.tree.map(lambda x: x.item(), self.hyperparams).__dict__,
-                    "argv": None if command is None else list(command),
-                }
-            )
+        """config.json's content, in every run's layout (``analysis.runs.run_document``):
+        ``config``, what the run was asked (its fields, the learner part whole, and
+        ``argv``: the flags a program was given, which its ``--resume`` reads back; None
+        from Python), ``resolved``, what that gave when the run began (the environment's
+        options, the rollout, the learner's hyperparameters), and ``provenance``."""
+        config = {
+            "env": self.env,
+            "iterations": self.iterations,
+            "seeds": self.seeds,
+            "seed": self.seed,
+            "truncation_as_terminal": self.truncation_as_terminal,
+            "settings": dataclasses.asdict(self.settings),
+            "learner": dataclasses.asdict(self.learner),
+            "argv": None if command is None else list(command),
+        }
+        resolved = {
+            "env_options": self.settings.env_options,
+            "rollout": dataclasses.asdict(self.rollout_config),
+            "hyperparams": jax.tree.map(lambda x: x.item(), self.hyperparams).__dict__,
+        }
+        # provenance's command line: the program's, as it can be run again (the flags alone
+        # would not run); from Python, this process's.
+        where = (
+            provenance()
+            if command is None
+            else provenance(argv=list(command), program="experiments.train_rl")
         )
+        return json.loads(json.dumps(run_document(PROGRAM, config, resolved, where)))
 
 
 def train_rl(
@@ -135,16 +146,19 @@ def train_rl(
             check_resumable(out, document)
         else:
             claim.prepare()
-            write_sealed(out / "config.json", document, out / CONFIG_SEAL)
+            # Sealed first, so that a config.json never exists without its seal.
+            write_sealed(out / "config.json", document, out / CONFIG_SEAL, sealed_part(document))
         _train(config, env, out)
     return out
 
 
 def upgrade_document(document: dict) -> dict:
-    """A train_rl config.json of an older layout in today's (today's unchanged): the rollout's
-    settings moved from "trpo" (which held them beside TRPO's, whichever learner ran) to
-    "rollout"; a TRPO section lacking a field added since (``num_value_epochs``) has its
-    default."""
+    """A train_rl config.json of the flat layout before ``runs.run_document`` in its last form
+    (that form unchanged): the rollout's settings moved from "trpo" (which held them beside
+    TRPO's, whichever learner ran) to "rollout"; a TRPO section lacking a field added since
+    (``num_value_epochs``) has its default. A document of today's layout as it is."""
+    if is_run_document(document):
+        return document
     upgraded, old = document, document.get("trpo")
     if isinstance(old, dict) and "num_envs" in old:
         shared = {field.name for field in dataclasses.fields(RolloutConfig)}
@@ -159,22 +173,52 @@ def upgrade_document(document: dict) -> dict:
     return upgraded
 
 
+def flat_document(document: dict) -> dict:
+    """A train_rl config.json of any layout in the keys of the flat one (every layout holds
+    them): ``env``, ``env_options``, ``settings``, ``seeds``, ``seed``, ``learner`` (the
+    name), ``rollout``, the running learner's settings under its name, ``hyperparams`` and
+    ``argv``. What ``compare_settings`` reads of an arm, and what a resume of a run begun
+    in a flat layout compares (that layout held no more)."""
+    document = upgrade_document(document)
+    if not is_run_document(document):
+        return document
+    config, resolved = (
+        part if isinstance(part, dict) else {}
+        for part in (document.get("config"), document.get("resolved"))
+    )  # a hand-edited part that is no object reads as empty (the seal names the change)
+    learner = config.get("learner") if isinstance(config.get("learner"), dict) else {}
+    name = learner.get("name") if isinstance(learner.get("name"), str) else None
+    flat = {key: config.get(key) for key in ("env", "settings", "seeds", "seed", "argv")}
+    flat.update({key: resolved.get(key) for key in ("env_options", "rollout", "hyperparams")})
+    return {**flat, "learner": name, str(name): learner.get(name)}
+
+
+def _sealed(document: dict) -> dict:
+    """What a train_rl config.json's seal covers: in ``runs.run_document``'s layout all but
+    its provenance (``runs.sealed_part``), in the flat ones before it the whole file."""
+    return sealed_part(document) if is_run_document(document) else document
+
+
 def check_resumable(out: Path, document: dict) -> None:
     """Refuses to resume a finished run, a run without its seal, or one whose flags or
     config.json differ from the config it was sealed with when it began (``document``: what
-    the resumed flags give)."""
+    the resumed flags give, in today's layout). A run begun in a flat layout is compared in
+    that layout's keys (``flat_document``); its config.json is never rewritten."""
     if output_owner(out) != PROGRAM:
         raise RunError(f"--resume {out} holds no run of experiments.train_rl")
     if (out / "policy.json").exists():
         raise RunError(f"--resume {out}: the run is complete (its policy.json is written)")
     try:
         saved, _ = sealed_document(
-            out, f"--resume {out}", what="train_rl run config", part=lambda document: document,
+            out, f"--resume {out}", what="train_rl run config", part=_sealed,
             unsealed_remedy="start a new run",
         )  # fmt: skip
     except UntrustedRun as error:
         raise RunError(str(error)) from None
-    changes = document_differences(upgrade_document(saved), document)
+    if is_run_document(saved):
+        changes = document_differences(sealed_part(saved), sealed_part(document))
+    else:
+        changes = document_differences(upgrade_document(saved), flat_document(document))
     if changes:
         listed = "; ".join(changes[:5])
         raise RunError(f"cannot resume {out}: these flags give another run ({listed})")

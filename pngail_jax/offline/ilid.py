@@ -25,6 +25,7 @@ import jax
 import jax.numpy as jnp
 import optax
 
+from pngail_jax.config.validation import fail, is_among
 from pngail_jax.fitting import adam_step, squared_norm
 from pngail_jax.networks import LogitDiscriminator
 from pngail_jax.offline.losses import clipped_probability, ilid_discriminator_loss, ilid_selection
@@ -36,9 +37,10 @@ RELEASED_UNION_PADDING = 1_000_000
 
 
 def check_union(union: str, name: str = "ilid_union") -> None:
-    """ValueError in one line unless ``union`` is one of ``ILID_UNIONS``."""
-    if union not in ILID_UNIONS:
-        raise ValueError(f"{name} must be one of {', '.join(ILID_UNIONS)}, got {union!r}")
+    """ConfigError (a ValueError) naming the field ``ilid_union`` (called ``name``) unless
+    ``union`` is one of ``ILID_UNIONS``."""
+    if not is_among(union, ILID_UNIONS):
+        fail("ilid_union", f"must be one of {', '.join(ILID_UNIONS)}, got {union!r}", name=name)
 
 
 def uniform_over(mask: jax.Array) -> jax.Array:

@@ -213,7 +213,7 @@ def table4_markdown(figure: Figure, results: dict) -> list[str]:
         lines.append("| " + " | ".join(row) + " |")
     optimal = ["optimal policy"]
     for task in tasks:
-        return_range = results[task].get("normalizer")
+        return_range = results[task].get("return_range")
         ours = _number(return_range[1], 1) if return_range else "n/a"
         optimal += [ours, ours, _number(PAPER_TABLE4_OPTIMAL[paper_column[task]], 2)]
     lines.append("| " + " | ".join(optimal) + " |")
@@ -270,7 +270,7 @@ def made_expert_notes(out: Path, grids) -> list[str]:
 
 
 def figure_results(out: Path, figures: list[Figure], grids) -> dict:
-    """``{figure: {task: {series label: statistics, "normalizer": [random, optimal]}}}`` from
+    """``{figure: {task: {series label: statistics, "return_range": [random, optimal]}}}`` from
     the grids' curves and summaries under ``out/grids``."""
     shown = {s.grid for figure in figures for series in figure.panels.values() for s in series}
     loaded = {
@@ -292,7 +292,7 @@ def figure_results(out: Path, figures: list[Figure], grids) -> dict:
         }
         for task, series_list in figure.panels.items():  # the grid's random / optimal returns
             config = read_json(out / "grids" / series_list[0].grid / "config.json")
-            results[figure.name][task]["normalizer"] = read_run_config(config).return_range
+            results[figure.name][task]["return_range"] = read_run_config(config).return_range
     return results
 
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from pngail_jax.config.validation import ConfigError
 from pngail_jax.demos import released_task
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.jobs.offline import OfflineRunConfig, load_offline_config, run_offline
@@ -42,6 +43,8 @@ from pngail_jax.programs.cli import (
 from pngail_jax.storage.outputs import output_owner
 
 DEFAULTS = OfflineRunConfig()
+# OfflineRunConfig's fields whose flag is not the field's name with dashes.
+FLAGS = {"noise_std": "--noise"}
 
 
 def build_parser() -> ArgumentParser:
@@ -161,7 +164,9 @@ def parse_args(argv=None) -> argparse.Namespace:
             ilid_union=args.ilid_union,
             dwbc_discriminator_updates=args.dwbc_discriminator_updates,
         )  # fmt: skip
-    except ValueError as error:
+    except ConfigError as error:  # named by its field: the flag of that name
+        parser.error(error.named(FLAGS.get(error.field, "--" + error.field.replace("_", "-"))))
+    except ValueError as error:  # a check that reads several fields says them itself
         parser.error(str(error))
     return args
 

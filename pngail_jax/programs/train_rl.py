@@ -20,7 +20,7 @@ from pathlib import Path
 from pngail_jax.config.budget import check_eval_interval
 from pngail_jax.config.validation import ConfigError
 from pngail_jax.jobs.errors import RunError
-from pngail_jax.jobs.train_rl import TrainRLConfig, train_rl
+from pngail_jax.jobs.train_rl import TrainRLConfig, flat_document, train_rl
 from pngail_jax.programs import flags
 from pngail_jax.programs.cli import (
     ENV_HELP,
@@ -131,9 +131,15 @@ def _resumed_args(parser, given: argparse.Namespace, argv: list[str]) -> argpars
     if (directory / "policy.json").exists():
         parser.error(f"--resume {directory}: the run is complete (its policy.json is written)")
     try:
-        stored = read_json(directory / "config.json", "train_rl run config")["argv"]
-    except (OSError, IntegrityError, KeyError, TypeError) as error:
+        document = read_json(directory / "config.json", "train_rl run config")
+        stored = flat_document(document)["argv"]  # whichever layout the run began in
+    except (OSError, IntegrityError, KeyError, TypeError, AttributeError) as error:
         parser.error(f"--resume {directory}: no flags to resume with ({error})")
+    if not isinstance(stored, list):  # begun from Python (jobs.train_rl), with no flags
+        parser.error(
+            f"--resume {directory}: no flags to resume with (a run begun from Python: "
+            "resume it with pngail_jax.jobs.train_rl.train_rl(..., resume=True))"
+        )
     args = parser.parse_args(stored)
     _check(parser, args)
     args.out, args.resume, args.argv = directory, directory, stored

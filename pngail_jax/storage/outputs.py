@@ -177,14 +177,15 @@ def output_owner(directory: Path) -> str | None:
         if any((directory / name).exists() for name in names):
             return program
     config = directory / "config.json"
-    if config.is_file():  # the sweep's has what it resolved; train_rl's (cut short) has not
+    if config.is_file():  # today's layout names its program (analysis.runs.run_document)
         try:
             document = json.loads(config.read_text())
         except (OSError, ValueError):
             return None
         if isinstance(document, dict):
-            if document.get("program") == "offline":
-                return "offline"
+            if document.get("program") in ("offline", "train_rl"):
+                return document["program"]
+            # The flat layouts before it: the sweep's has what it resolved; train_rl's has not.
             if "resolved" in document:
                 return "sweep"
             return "train_rl" if "rollout" in document or "trpo" in document else None
