@@ -330,7 +330,7 @@ def run_peer(args, budget: int, seed: int, cpu: int | None, rows_path: Path) -> 
     }
 
 
-def run_all(args, jobs: list[tuple[str, int, int]], rows_path: Path, normalizer) -> list[dict]:
+def run_all(args, jobs: list[tuple[str, int, int]], rows_path: Path, return_range) -> list[dict]:
     """Every ``(library, budget, seed)`` job, one per CPU of ``--cpus`` at a time (the rows
     so far written to ``--json`` after each, so a long run cut short keeps what it measured)."""
     from common import context, write_rows
@@ -339,7 +339,7 @@ def run_all(args, jobs: list[tuple[str, int, int]], rows_path: Path, normalizer)
     free: queue.Queue = queue.Queue()
     for cpu in cpus:
         free.put(cpu)
-    random_return, optimal_return = normalizer
+    random_return, optimal_return = return_range
     finished: list[dict] = []
     lock = threading.Lock()
 
@@ -465,13 +465,13 @@ def main(argv=None) -> list[dict]:
     steps = args.num_envs * args.unroll_length
     if any(budget < steps or budget % steps for budget in budgets):
         raise SystemExit(f"--budgets: each a positive multiple of {steps:,} env steps")
-    rows_for_peer, normalizer = peer_rows(args.demos)
+    rows_for_peer, return_range = peer_rows(args.demos)
     jobs = [(library, budget, seed) for budget in budgets for seed in range(args.seeds)
             for library in libraries]  # fmt: skip
     with tempfile.TemporaryDirectory(prefix="vs-imitation-rows-") as scratch:
         rows_path = Path(scratch) / "rows.npz"
         np.savez(rows_path, **rows_for_peer)
-        rows = run_all(args, jobs, rows_path, normalizer)
+        rows = run_all(args, jobs, rows_path, return_range)
     print(runs_table(rows))
     print()
     print(ratio_table(rows))

@@ -72,16 +72,17 @@ def authors_data() -> Path:
     return next((folder for folder in candidates if folder.exists()), candidates[0])
 
 
-def as_sweep_run(directory: Path, normalizer, **config) -> Path:
+def as_sweep_run(directory: Path, return_range, **config) -> Path:
     """``directory`` (a metrics.csv written by hand, perhaps a summary.json) made a sweep run
     the programs trust (``runs.verify_run``): marked as the sweep's, with a sealed config.json
-    naming the ``normalizer`` its normalised returns were written with, and ``config``."""
+    naming the ``return_range`` its normalised returns were written with (under the older
+    layouts' key ``normalizer``, which every reader still takes), and ``config``."""
     from pngail_jax.analysis.runs import sealed_part
     from pngail_jax.storage.integrity import CONFIG_SEAL, seal
     from pngail_jax.storage.outputs import prepare_output
 
     prepare_output(directory, "sweep")
-    document = {**config, "resolved": {"normalizer": list(normalizer)}}
+    document = {**config, "resolved": {"normalizer": list(return_range)}}
     (Path(directory) / "config.json").write_text(json.dumps(document))
     seal(Path(directory) / CONFIG_SEAL, sealed_part(document))
     return Path(directory)

@@ -204,8 +204,8 @@ def test_vs_imitation(tmp_path):
     stored[:3, 3] = [-3.0, 0.5, 1.5]  # torque / 2, as the authors store it
     np.save(tmp_path / "Pendulum-v1_mixture.npy", stored)
     np.save(tmp_path / "Pendulum-v1_mixture_conf.npy", np.repeat([[0.2], [0.9]], 200, axis=0))
-    rows, normalizer = module.peer_rows(str(tmp_path / "Pendulum-v1_mixture.npy"))
-    assert normalizer == (-1200.96, -116.81)  # the paper's Table 3 for Pendulum
+    rows, return_range = module.peer_rows(str(tmp_path / "Pendulum-v1_mixture.npy"))
+    assert return_range == (-1200.96, -116.81)  # the paper's Table 3 for Pendulum
     np.testing.assert_array_equal(rows["acts"][:4, 0], [-2.0, 1.0, 2.0, 0.0])  # 2x, clipped
     np.testing.assert_array_equal(rows["next_obs"][:199], rows["obs"][1:200])
     np.testing.assert_array_equal(rows["next_obs"][[199, 399]], rows["obs"][[199, 399]])

@@ -147,8 +147,9 @@ def test_a_task_where_a_method_has_no_finite_score_is_left_out():
 
 
 def sealed_config(directory, document):
-    """config.json and the seal a run writes with it; the normaliser the fake runs' metrics
-    are written with (random -1000, optimal 0) unless ``document`` resolves another."""
+    """config.json and the seal a run writes with it; the return range the fake runs' metrics
+    are written with (random -1000, optimal 0, under the older layouts' key "normalizer")
+    unless ``document`` resolves another."""
     document = {"resolved": {"normalizer": [-1000.0, 0.0]}, **document}
     (directory / "config.json").write_text(json.dumps(document))
     seal(directory / CONFIG_SEAL, sealed_part(document))

@@ -339,7 +339,7 @@ def test_a_plain_file_of_rows_loads_for_any_environment_by_its_sizes(tmp_path):
     assert set(inputs) == {"demonstrations", "confidence file"}
 
 
-def test_normalisers_from_flags_or_a_measured_random_policy():
+def test_return_range_from_flags_or_a_measured_random_policy():
     """--optimal-return alone: the random end is measured (uniform random actions, a fixed
     key: the same number twice); both flags: taken as given; neither: the file's own."""
     from pngail_jax.config.run_config import RunConfig

@@ -130,6 +130,19 @@ def _pendulum_file(directory, confidence):
     return directory / "Pendulum-v1_mixture.npy"
 
 
+def test_an_authors_file_carries_the_papers_return_range(tmp_path):
+    """A file named as an authors' one carries the paper's Table 3 return range (the random
+    and optimal returns its normalised returns use) in its metadata; the table's name from
+    before issue 74 still imports, from both places."""
+    from pngail_jax.config.released_files import PAPER_NORMALIZERS, PAPER_RETURN_RANGES
+    from pngail_jax.demos.released import PAPER_NORMALIZERS as re_exported
+
+    metadata = load_released(_pendulum_file(tmp_path, [1.0] * 200)).metadata
+    assert (metadata["random_return"], metadata["optimal_return"]) == (-1200.96, -116.81)
+    assert metadata["normalizer_source"] == "paper Table 3"  # the key demos.npz files hold
+    assert PAPER_NORMALIZERS is PAPER_RETURN_RANGES and re_exported is PAPER_RETURN_RANGES
+
+
 def test_released_trajectories_follow_the_documented_layout_or_the_given_length(tmp_path):
     two_episodes = _pendulum_file(tmp_path, np.repeat([1.0, 0.4], 200))
     np.testing.assert_array_equal(load_released(two_episodes).trajectory_ids // 200, 0)

@@ -10,7 +10,7 @@ from conftest import as_sweep_run
 from pngail_jax.analysis import plots, report, stats
 from pngail_jax.grid import make_cells, nonfinite_cells
 
-NORMALIZER = (-1200.0, -200.0)
+RETURN_RANGE = (-1200.0, -200.0)
 
 
 def synthetic_metrics(cells, num_iterations=6, eval_every=3):
@@ -38,7 +38,7 @@ def test_summary_groups_by_method_and_setting_and_drops_diverged_cells(tmp_path)
     metrics["disc/loss"][4, 2] = np.nan  # pngail seed 1 at label ratio 0.1 diverges
     diverged = nonfinite_cells(metrics, eval_every=3)
     assert diverged.tolist() == [4]
-    summary = report.summarize(cells, metrics, NORMALIZER, 1000.0, 2.0, excluded=diverged)
+    summary = report.summarize(cells, metrics, RETURN_RANGE, 1000.0, 2.0, excluded=diverged)
     assert list(summary["methods"]) == [
         "gail [label_ratio=0.1,noise=0]",
         "pngail [label_ratio=0.1,noise=0]",
@@ -76,7 +76,7 @@ def test_summary_groups_by_method_and_setting_and_drops_diverged_cells(tmp_path)
         is None
     )
 
-    report.write_metrics_csv(tmp_path / "m.csv", cells, metrics, NORMALIZER, (1.5, 3.25))
+    report.write_metrics_csv(tmp_path / "m.csv", cells, metrics, RETURN_RANGE, (1.5, 3.25))
     with open(tmp_path / "m.csv") as file:
         rows = list(csv.DictReader(file))
     assert len(rows) == len(cells) * 6
@@ -92,7 +92,7 @@ def test_summary_groups_by_method_and_setting_and_drops_diverged_cells(tmp_path)
         rtol=1e-4,
     )
 
-    plots.plot_curves(tmp_path / "curves.png", cells, metrics, NORMALIZER, "test")
+    plots.plot_curves(tmp_path / "curves.png", cells, metrics, RETURN_RANGE, "test")
     assert (tmp_path / "curves.png").stat().st_size > 10_000
     markdown = report.summary_markdown(summary, cells, metrics, "test")
     # per method and setting, PN-GAIL's improvement over each baseline, and per seed
@@ -112,9 +112,9 @@ def test_one_seed_gets_no_interval_and_raw_returns_no_normalised_column():
     assert "give --optimal-return for normalised ones" in markdown
 
 
-def test_no_normaliser_gives_nan_normalised_returns():
+def test_no_return_range_gives_nan_normalised_returns():
     assert np.isnan(report.normalize([-300.0], None)).all()
-    np.testing.assert_allclose(report.normalize([-700.0], NORMALIZER), [0.5])
+    np.testing.assert_allclose(report.normalize([-700.0], RETURN_RANGE), [0.5])
 
 
 def test_a_method_whose_seeds_all_diverge_is_null_with_a_reason(tmp_path):
@@ -123,7 +123,7 @@ def test_a_method_whose_seeds_all_diverge_is_null_with_a_reason(tmp_path):
     metrics["disc/loss"][2:, 4] = np.inf  # both pngail seeds
     metrics["eval/return"][2:, 5] = np.nan
     summary = report.summarize(
-        cells, metrics, NORMALIZER, 1.0, 1.0, excluded=nonfinite_cells(metrics, 3)
+        cells, metrics, RETURN_RANGE, 1.0, 1.0, excluded=nonfinite_cells(metrics, 3)
     )
     report.write_summary(tmp_path, summary, "# summary\n")
 
@@ -149,7 +149,7 @@ def test_late_average_is_the_mean_of_the_last_fifth_of_the_evaluations():
     assert [report.late_evaluations(n) for n in (30, 50, 5, 11, 1)] == [6, 10, 1, 3, 1]
     cells = make_cells(["gail", "pngail"], 2)
     metrics = synthetic_metrics(cells, num_iterations=300, eval_every=10)
-    summary = report.summarize(cells, metrics, NORMALIZER, 1000.0, 2.0)
+    summary = report.summarize(cells, metrics, RETURN_RANGE, 1000.0, 2.0)
     assert summary["headline"] == {"statistic": "late_average", "late_share": 0.2}
     evaluations = metrics["eval/return"][:, 9::10]  # iterations 10, 20, ..., 300
     assert evaluations.shape == (4, 30) and np.isfinite(evaluations).all()
@@ -181,10 +181,10 @@ def test_seeds_puts_a_methods_seeds_side_by_side_with_their_training(tmp_path, c
 
     cells = make_cells(["gail", "pngail"], 3)
     metrics = synthetic_metrics(cells, num_iterations=20, eval_every=5)
-    summary = report.summarize(cells, metrics, NORMALIZER, 1000.0, 2.0)
-    report.write_metrics_csv(tmp_path / "metrics.csv", cells, metrics, NORMALIZER)
+    summary = report.summarize(cells, metrics, RETURN_RANGE, 1000.0, 2.0)
+    report.write_metrics_csv(tmp_path / "metrics.csv", cells, metrics, RETURN_RANGE)
     report.write_summary(tmp_path / ".", summary, "")
-    as_sweep_run(tmp_path, NORMALIZER)
+    as_sweep_run(tmp_path, RETURN_RANGE)
     table = seeds.main([str(tmp_path), "--method", "pngail", "--share", "0.25"])
     lates = [row["late_average_normalized_return"] for row in table]
     assert lates == sorted(lates, reverse=True) and len(table) == 3  # best seed first
@@ -200,12 +200,12 @@ def test_seeds_puts_a_methods_seeds_side_by_side_with_their_training(tmp_path, c
     # Two settings: each one's numbers from its own rows and summary entry, exactly.
     cells = make_cells(["pngail"], 2, noise_stds=(0.0, 0.1))
     metrics = synthetic_metrics(cells, num_iterations=10, eval_every=5)
-    summary = report.summarize(cells, metrics, NORMALIZER, 1000.0, 2.0)
-    report.write_metrics_csv(tmp_path / "metrics.csv", cells, metrics, NORMALIZER)
+    summary = report.summarize(cells, metrics, RETURN_RANGE, 1000.0, 2.0)
+    report.write_metrics_csv(tmp_path / "metrics.csv", cells, metrics, RETURN_RANGE)
     report.write_summary(tmp_path / ".", summary, "")
     _, table = seeds.seed_table(tmp_path, "pngail", "label_ratio=0.2,noise=0")
     finals = {row["seed"]: row["final_normalized_return"] for row in table}
-    expected = report.normalize(metrics["eval/return"][:2, -1], NORMALIZER)
+    expected = report.normalize(metrics["eval/return"][:2, -1], RETURN_RANGE)
     np.testing.assert_allclose([finals[0], finals[1]], expected)
     with pytest.raises(SystemExit, match="several settings, pick one with --setting"):
         seeds.seed_table(tmp_path, "pngail")
@@ -233,7 +233,7 @@ def test_read_evaluations_keeps_the_evaluated_rows_per_group(tmp_path):
     steps, values = curves[("gail", "s")]
     assert steps.tolist() == [20, 40] and values.tolist() == [[0.25, 0.75], [0.5, 0.8]]
     steps, values = curves[("pngail", "s")]
-    assert steps.tolist() == [20] and np.isnan(values).all()  # evaluated, no normaliser
+    assert steps.tolist() == [20] and np.isnan(values).all()  # evaluated, no return range
     with path.open("a") as file:  # seed 0 evaluated at 6, seed 1 not (diverged): NaN there
         file.write("gail,s,0,6,60,-1.0,0.9\n")
     steps, values = report.read_evaluations(path, "eval_return", group_by=("method",))[("gail",)]
@@ -251,7 +251,7 @@ def test_a_baseline_turns_the_improvement_around(tmp_path):
     table says so."""
     cells = make_cells(["gail", "wgail", "pngail"], 3)
     metrics = synthetic_metrics(cells)
-    summary = report.summarize(cells, metrics, NORMALIZER, 1000.0, 2.0, baseline="gail")
+    summary = report.summarize(cells, metrics, RETURN_RANGE, 1000.0, 2.0, baseline="gail")
     final = metrics["eval/return"][:, -1]
     improvement = summary["probability_of_improvement"]
     assert list(improvement) == ["wgail", "pngail"] and summary["improvement"] == {"over": "gail"}
@@ -260,7 +260,7 @@ def test_a_baseline_turns_the_improvement_around(tmp_path):
     )
     text = report.summary_markdown(summary, cells, metrics, "t")
     assert "| method | P(method > GAIL) | 95% CI |" in text
-    default = report.summarize(cells, metrics, NORMALIZER, 1000.0, 2.0)
+    default = report.summarize(cells, metrics, RETURN_RANGE, 1000.0, 2.0)
     assert default["improvement"] == {"of": "pngail"} and list(
         default["probability_of_improvement"]
     ) == ["gail", "wgail"]
@@ -295,7 +295,7 @@ def test_one_seed_a_method_gives_a_single_comparison_not_an_interval():
     says n = 1, as its other columns do."""
     cells = make_cells(["gail", "pngail"], 1)
     metrics = synthetic_metrics(cells)
-    summary = report.summarize(cells, metrics, NORMALIZER, 1000.0, 2.0)
+    summary = report.summarize(cells, metrics, RETURN_RANGE, 1000.0, 2.0)
     assert summary["probability_of_improvement"]["gail"]["seeds"] == [1, 1]
     row = next(
         line
@@ -309,7 +309,7 @@ def test_one_seed_a_method_gives_a_single_comparison_not_an_interval():
 def test_summary_tables_name_methods_as_the_paper_does():
     cells = make_cells(["pngail-no-bsc", "2iwil"], 2, label_ratios=(0.1, 0.2))
     metrics = synthetic_metrics(cells)
-    summary = report.summarize(cells, metrics, NORMALIZER, 1000.0, 2.0)
+    summary = report.summarize(cells, metrics, RETURN_RANGE, 1000.0, 2.0)
     text = report.summary_markdown(summary, cells, metrics, "t")
     assert "pngail-no-bsc" in next(iter(summary["methods"]))  # the JSON keeps the ids
     rows = {line.split(" | ")[0] for line in text.splitlines() if line.startswith("| ")}

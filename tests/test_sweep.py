@@ -639,17 +639,17 @@ def test_record_check_finds_each_kind_of_damage(finished, tmp_path):
         ),
         (
             lambda c, r: c["resolved"].update(return_range=[-1300.0, -100.0]),
-            "normalised return .* is not its evaluation .* through the run's normaliser",
+            "normalised return .* is not its evaluation .* through the run's return range",
         ),
     ],
     ids=["label_ratios", "noise", "iterations", "done", "complete", "seeds", "methods",
-         "steps", "normalizer"],
+         "steps", "return_range"],
 )  # fmt: skip
 def test_record_check_recomputes_its_config_from_its_metrics(
     finished, tmp_path, edit, message, capsys
 ):
     """A record's config facts (task, methods, seeds, label ratios and noises, iterations done
-    and planned, completeness, steps per iteration, normaliser) edited with the digest made
+    and planned, completeness, steps per iteration, return range) edited with the digest made
     again are refused, each naming what its metrics say; the record itself passes."""
     from pngail_jax.programs import record as program
 
@@ -663,8 +663,8 @@ def test_record_check_recomputes_its_config_from_its_metrics(
     assert "\n" not in str(refused.value.code)
 
 
-def test_a_records_task_is_that_of_its_authors_file_and_normaliser(tmp_path):
-    """The task of a record on an authors' file (the paper's Table 3 normaliser, which its
+def test_a_records_task_is_that_of_its_authors_file_and_return_range(tmp_path):
+    """The task of a record on an authors' file (the paper's Table 3 return range, which its
     scores agree with) cannot be changed, even with the digest made again. (On a made set
     the task has no witness in the metrics: the digest alone keeps it.)"""
     from pngail_jax.programs import record as program
@@ -676,7 +676,7 @@ def test_a_records_task_is_that_of_its_authors_file_and_normaliser(tmp_path):
     record["config"]["config"]["env"] = "HalfCheetah-v4"
     write_edited(folder, record)
     with pytest.raises(SystemExit, match="the task is HalfCheetah-v4, its demonstrations and "
-                       "normaliser .* are Pendulum-v1's"):  # fmt: skip
+                       "return range .* are Pendulum-v1's"):  # fmt: skip
         program.main(["--check", str(folder)])
 
 
@@ -779,7 +779,7 @@ def test_the_verification_reads_every_number_it_passes_on(finished, tmp_path):
     the file, method, seed and iteration: a normalised return edited alone; evaluations
     edited in both columns, consistently, before the last (the training average no longer
     the summary's) or at it (the final return no longer the summary's); a late average edited
-    in summary.json; a normaliser edited in summary.json."""
+    in summary.json; a return range edited in summary.json."""
     from pngail_jax.programs import compare as compare_program
     from pngail_jax.programs import record as record_program
 
@@ -822,10 +822,10 @@ def test_the_verification_reads_every_number_it_passes_on(finished, tmp_path):
          r"summary.json gives gail seed 0 late_average_normalized_return 0.7, metrics.csv's "
          r"evaluations \(iteration 4\)"),
         (lambda run: summary_edit(run, lambda s: s.update(return_range=[-1000.0, 0.0])),
-         r"summary.json's normaliser \[-1000.0, 0.0\] is not config.json's"),
+         r"summary.json's return range \[-1000.0, 0.0\] is not config.json's"),
         # A summary.json written before "return_range" had its name says "normalizer".
         (lambda run: summary_edit(run, edited_under_the_old_key),
-         r"summary.json's normaliser \[-1000.0, 0.0\] is not config.json's"),
+         r"summary.json's return range \[-1000.0, 0.0\] is not config.json's"),
     ]  # fmt: skip
     for index, (damage, message) in enumerate(cases):
         run = tmp_path / f"run{index}"

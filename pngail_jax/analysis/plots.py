@@ -27,7 +27,7 @@ def plot_curves(
     """Normalised evaluation return vs environment steps (``metrics["env_steps"]``; the
     offline family passes its gradient steps there, with its ``xlabel``): the mean over seeds
     with its 95% bootstrap interval per method (one panel per setting), like the paper's
-    Fig. 2. Falls back to raw returns without a normaliser. Cells in ``excluded`` (diverged)
+    Fig. 2. Falls back to raw returns without a return range. Cells in ``excluded`` (diverged)
     are left out, as from the summary."""
     import matplotlib
 

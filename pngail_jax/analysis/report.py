@@ -66,7 +66,7 @@ NULL_MEANS = (
 
 
 def normalize(returns, return_range: tuple[float, float] | None):
-    """(R - R_random) / (R_optimal - R_random); NaN when no normaliser is known."""
+    """(R - R_random) / (R_optimal - R_random); NaN when no return range is known."""
     returns = np.asarray(returns, np.float64)
     if return_range is None:
         return np.full_like(returns, np.nan)
@@ -420,7 +420,7 @@ def _mean_se(row, name: str, digits: int) -> str:
 
 def summary_markdown(summary, cells, metrics, title: str, notes: Sequence[str] = ()) -> str:
     """Markdown tables of ``summary``: per method, per seed, and PN-GAIL's probability of
-    improvement over each baseline. Normalised columns only when the run has a normaliser;
+    improvement over each baseline. Normalised columns only when the run has a return range;
     no interval for a single seed; a classifier error only for methods that read
     confidences (``methods.reads_confidences``)."""
     _, groups = group_cells(cells)

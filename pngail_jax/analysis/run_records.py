@@ -40,7 +40,7 @@ from pngail_jax.analysis.runs import (
     verify_run,
 )
 from pngail_jax.config.learner import upgrade_learner_fields
-from pngail_jax.config.released_files import PAPER_NORMALIZERS
+from pngail_jax.config.released_files import PAPER_RETURN_RANGES
 from pngail_jax.storage.integrity import (
     IntegrityError,
     atomic_path,
@@ -260,10 +260,10 @@ def check_record(folder: Path) -> dict:
 
 def _check_config_facts(folder: Path, record: dict) -> None:
     """RecordError unless the facts of the record's config are those its metrics file
-    gives: every normalised return is its evaluation through the config's normaliser
+    gives: every normalised return is its evaluation through the config's return range
     (``runs.read_scored_rows``), the methods, the seeds of each, the label ratios and
     confidence noises, the iterations done (and the environment steps each took, for a
-    sweep) and planned, whether it is complete, and the task, where the normaliser is the
+    sweep) and planned, whether it is complete, and the task, where the return range is the
     paper's Table 3 row of an authors' file (that row's task is the config's)."""
 
     where = folder / RECORD_FILE
@@ -347,25 +347,25 @@ def _metrics_facts(metrics: Path):
 
 
 def _check_task(where: Path, config: dict, return_range: list[float] | None) -> None:
-    """RecordError unless a record of an authors' file whose normaliser is the paper's Table
-    3 row has that row's normaliser and that file's task (on a made set the metrics carry no
+    """RecordError unless a record of an authors' file whose return range is the paper's
+    Table 3 row has that row's return range and that file's task (on a made set the metrics carry no
     witness of the task: the record's digest alone keeps it)."""
 
     view = read_run_config(config)
     settings, source = view.settings, view.return_range_source
     demos = Path(str(settings.get("demos") or "")).name.removesuffix("_mixture.npy")
-    if source == "paper Table 3" and demos in PAPER_NORMALIZERS:
+    if source == "paper Table 3" and demos in PAPER_RETURN_RANGES:
         task = str(settings.get("env"))
-        if list(PAPER_NORMALIZERS[demos]) != return_range:
+        if list(PAPER_RETURN_RANGES[demos]) != return_range:
             raise RecordError(
-                f"{where}: its normaliser {return_range} is not the paper's Table 3 row of "
-                f"{demos}, {list(PAPER_NORMALIZERS[demos])}, which it names as its source: the "
+                f"{where}: its return range {return_range} is not the paper's Table 3 row of "
+                f"{demos}, {list(PAPER_RETURN_RANGES[demos])}, which it names as its source: the "
                 "record was edited"
             )
         if task.split("-v")[0] != demos.split("-v")[0]:
             raise RecordError(
                 f"{where}: its config says the task is {task}, its demonstrations and "
-                f"normaliser (which its {METRICS_FILE} scores agree with) are {demos}'s: the "
+                f"return range (which its {METRICS_FILE} scores agree with) are {demos}'s: the "
                 "record was edited"
             )
 
@@ -468,12 +468,12 @@ def config_differences(
 ) -> list[str]:
     """The config fields in which a run (its ``config.json``) differs from the record's run,
     leaving out those that do not change the numbers: the top-level fields of a sweep's, the
-    settings (``config``) of an offline run's with its normaliser and trainer fields. A field
+    settings (``config``) of an offline run's with its return range and trainer fields. A field
     one side lacks (a record from before the field existed) reads as its value in
     ``sweep_defaults``, a default ``RunConfig``'s ``to_dict()``, or for an offline run in
     ``offline_defaults``, a default ``OfflineRunConfig``'s fields (which the caller, above the
     trainers, makes: this module imports no JAX). An offline run's trainer fields and
-    normaliser are compared only where both sides have them: a run writes its trainer's
+    return range are compared only where both sides have them: a run writes its trainer's
     fields when it finishes, so a run cut short has none yet."""
 
     def fields(document: dict) -> dict:

@@ -481,7 +481,7 @@ def run_return_range(document: dict) -> list[float] | None:
         or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
         or not value[1] != value[0]
     ):
-        raise RunReadError(f"its normaliser {value!r} is not two different returns")
+        raise RunReadError(f"its return range {value!r} is not two different returns")
     return [float(value[0]), float(value[1])]
 
 
@@ -499,10 +499,10 @@ def _written_close(stated: float, recomputed: float, scale: float) -> bool:
 def read_scored_rows(path: Path, return_range: list[float] | None) -> dict:
     """Every evaluated row of a metrics file (a run's ``metrics.csv`` or a record's
     ``metrics.csv.gz``), checked: its ``normalized_return`` is its ``eval_return`` through
-    ``normalizer`` (empty when there is none, and in a row without an evaluation), to the
+    ``return_range`` (empty when there is none, and in a row without an evaluation), to the
     file's rounding. Returns, per (method, setting) and seed, {iteration: eval_return}.
     RunReadError naming the file, method, seed and iteration of the first row that
-    disagrees (a score edited, or the normaliser)."""
+    disagrees (a score edited, or the return range)."""
 
     rows: dict[tuple[str, str], dict[int, dict[int, float]]] = {}
     try:
@@ -534,7 +534,7 @@ def read_scored_rows(path: Path, return_range: list[float] | None) -> dict:
                 ):
                     raise RunReadError(
                         f"{where}: normalised return {score or 'empty'} is not its evaluation "
-                        f"{evaluated} through the run's normaliser ({expected:.6g}): one of "
+                        f"{evaluated} through the run's return range ({expected:.6g}): one of "
                         "them was edited"
                     )
             group = rows.setdefault((row["method"], row["setting"]), {})
@@ -630,7 +630,7 @@ def _check_summary_figures(
 def _check_metrics_agree_with_summary(directory: Path, document: dict, who: str) -> None:
     """UntrustedRun unless metrics.csv is whole (every cell of the config, each to the
     iteration summary.json says), its every normalised return is its evaluation through the
-    sealed normaliser (``read_scored_rows``), summary.json states the same normaliser, and
+    sealed return range (``read_scored_rows``), summary.json states the same return range, and
     each seed's final, late-average and training-average figures in summary.json are those
     metrics.csv gives (``_check_summary_figures``; 6 significant digits there; a diverged
     seed, null in the summary, is not compared). A summary behind metrics.csv (a stop
@@ -661,7 +661,7 @@ def _check_metrics_agree_with_summary(directory: Path, document: dict, who: str)
     states, stated = summary_return_range(summary)
     if states and (stated is not None if return_range is None else stated != return_range):
         raise UntrustedRun(
-            f"{who}: summary.json's normaliser {stated!r} is not config.json's {return_range!r}: "
+            f"{who}: summary.json's return range {stated!r} is not config.json's {return_range!r}: "
             "one of them was edited"
         )
     _check_summary_figures(rows, summary, return_range, who)

@@ -1,5 +1,5 @@
 """The authors' released files as data: their sizes, our task of each, their layouts and
-scales, and the paper's Table 3 normalisers. Imports nothing, so any module may read them."""
+scales, and the paper's Table 3 return ranges. Imports nothing, so any module may read them."""
 
 # Observation sizes of the paper's released files (gym -v2 MuJoCo tasks), to split [s, a].
 RELEASED_OBSERVATION_SIZES = {
@@ -42,8 +42,9 @@ RELEASED_TRAJECTORY_LENGTHS = {"Pendulum-v1": 200}
 RELEASED_ACTION_SCALES = {"Pendulum-v1": 2.0}
 
 
-# The paper's Table 3: (random policy, optimal policy) returns, the normaliser of its figures.
-PAPER_NORMALIZERS = {
+# The paper's Table 3: (random policy, optimal policy) returns, the return range of its figures
+# (their normalised returns' ends).
+PAPER_RETURN_RANGES = {
     "Pendulum-v1": (-1200.96, -116.81),
     "Ant-v2": (-72.30, 4143.10),
     "HalfCheetah-v2": (-288.44, 3467.32),
@@ -51,3 +52,7 @@ PAPER_NORMALIZERS = {
     "Swimmer-v2": (2.31, 348.99),
     "Walker2d-v2": (1.91, 3694.13),
 }
+
+# PAPER_RETURN_RANGES's name before issue 74, kept for code outside the package that imports
+# it (in the code "normalizer" is the policy's observation statistics alone).
+PAPER_NORMALIZERS = PAPER_RETURN_RANGES

@@ -3,7 +3,8 @@
 torque divided by 2; loaded by its name it is multiplied by 2 (``action_scale`` None),
 ``action_scale=1`` keeps the rows as stored (``docs/demonstrations.md``). Any other ``.npy`` of
 rows ``[s, a]`` loads the same way, given the observation size (an environment's) and
-optionally a confidence file. The paper's Table 3 normalisers come with the authors' files."""
+optionally a confidence file. The paper's Table 3 return ranges (random and optimal returns)
+come with the authors' files."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ import numpy as np
 
 from pngail_jax.config.released_files import (  # noqa: F401  (the tables, importable from here too)
     PAPER_NORMALIZERS,
+    PAPER_RETURN_RANGES,
     RELEASED_ACTION_SCALES,
     RELEASED_ACTION_SIZES,
     RELEASED_OBSERVATION_SIZES,
@@ -134,8 +136,8 @@ def _metadata(mixture_path: Path, env_name: str | None, action_scale: float, sou
         "action_scale_source": source,
         "source": f"{'released layout' if env_name is not None else 'rows'}: {mixture_path.name}",
     }
-    if env_name in PAPER_NORMALIZERS:
-        random_return, optimal_return = PAPER_NORMALIZERS[env_name]
+    if env_name in PAPER_RETURN_RANGES:
+        random_return, optimal_return = PAPER_RETURN_RANGES[env_name]
         metadata |= {
             "random_return": random_return,
             "optimal_return": optimal_return,

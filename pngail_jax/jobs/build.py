@@ -1,5 +1,5 @@
 """Building a sweep, as named steps (``build_run``): its cells, its environment, its
-demonstrations (``jobs.demonstrations.prepare``: read or made, and their normaliser), then
+demonstrations (``jobs.demonstrations.prepare``: read or made, and their return range), then
 ``build``, which receives them: the trainer and the compiled ``Grid``."""
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ class BuiltRun:
 
 def build_run(config: RunConfig, saved=None) -> BuiltRun:
     """Every step of a sweep's build (``saved``: a resumed run's ``record.SavedRun``, whose
-    demonstrations and normaliser are those it began with)."""
+    demonstrations and return range are those it began with)."""
     cells = run_cells(config)
     env = make_run_env(config, cells)
     demonstrations = prepare(config, env, saved)
@@ -128,7 +128,7 @@ def build(
 def announce_inputs(
     demonstrations: RunDemonstrations, trainer, config: RunConfig, resumed: bool
 ) -> None:
-    """The notes on what the run reads: its normaliser, an applied action scale, clipped
+    """The notes on what the run reads: its return range, an applied action scale, clipped
     demonstration actions."""
     demos, return_range = demonstrations.demos, demonstrations.return_range
     if return_range is None:

@@ -1,7 +1,7 @@
 """A sweep's demonstrations, the step of its lifecycle before the build: read from the file
 the config names (or a resumed run's own path), or made once with ``jobs.make_demos`` and
-cached (``demos_cache``); the normaliser of their returns (the flags, their metadata, or a
-random return measured here); and the record of the input files a resume checks.
+cached (``demos_cache``); their return range, the random and optimal returns (the flags, their
+metadata, or a random return measured here); and the record of the input files a resume checks.
 
     demonstrations = prepare(config, env)      # a RunDemonstrations
     built = build.build(config, env, cells, demonstrations)
@@ -34,7 +34,7 @@ from pngail_jax.storage.outputs import claimed
 
 @dataclasses.dataclass(frozen=True)
 class RunDemonstrations:
-    """A run's demonstrations, the path they came from, and the normaliser of its returns
+    """A run's demonstrations, the path they came from, and their return range
     ((random, optimal), None without one) with where that came from."""
 
     demos: Demonstrations
@@ -50,7 +50,7 @@ class RunDemonstrations:
 
 def prepare(config: RunConfig, env, saved=None) -> RunDemonstrations:
     """The demonstrations of ``config`` for ``env`` (``saved``, a resumed run's
-    ``record.SavedRun``: its demonstrations from the path it began with, its normaliser).
+    ``record.SavedRun``: its demonstrations from the path it began with, its return range).
     Raises ``RunError`` with one line."""
     try:
         demos, path = load_or_make_demos(config, saved.demos_path if saved else None, env)

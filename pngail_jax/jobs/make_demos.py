@@ -14,7 +14,7 @@
 3. ``roll_out_mixture``: ``num_trajectories`` deterministic (mean-action) episodes at the
    optimal:intermediate ``ratio`` (1:4 as the paper's Pendulum set), each trajectory labelled
    with its return normalised between random and optimal (clipped to [0, 1]); actions clipped
-   to the bounds, as the environment applies them; the normaliser in the metadata.
+   to the bounds, as the environment applies them; the random and optimal returns in the metadata.
 
 ``demos.npz`` is written last and atomically (a temporary sibling renamed onto it), so its
 presence means the making finished; ``python -m experiments.make_demos`` is this with flags.

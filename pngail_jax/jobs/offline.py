@@ -6,7 +6,7 @@ beating BC on every row) and curves.png, so the rows join the sweep's tables.
 
 A program of its own rather than sweep methods: the offline trainer has no rollout, learner
 or discriminator schedule of the adversarial grid, so its config (gradient steps, batch size)
-shares almost nothing with ``RunConfig``; what it shares (demonstrations, normaliser, split,
+shares almost nothing with ``RunConfig``; what it shares (demonstrations, return range, split,
 evaluation, summary) it takes from the same functions.
 """
 

@@ -247,10 +247,10 @@ def weak_expert_notes(out: Path, grids) -> list[str]:
 
 def made_expert_notes(out: Path, grids) -> list[str]:
     """One line per made demonstration set: its measured random and optimal returns (the
-    normalisers of its task's figures) beside the paper's Table 3 returns of that task."""
-    from pngail_jax.config.released_files import PAPER_NORMALIZERS
+    return range of its task's figures) beside the paper's Table 3 returns of that task."""
+    from pngail_jax.config.released_files import PAPER_RETURN_RANGES
 
-    paper = {name.rsplit("-v", 1)[0]: returns for name, returns in PAPER_NORMALIZERS.items()}
+    paper = {name.rsplit("-v", 1)[0]: returns for name, returns in PAPER_RETURN_RANGES.items()}
     notes = []
     for task, metadata in made_sets(out, grids):
         random, optimal = paper.get(task.rsplit("-v", 1)[0], (None, None))  # Ant-v4 -> Ant

@@ -109,7 +109,7 @@ def seed_table(run: Path, method: str, setting: str | None = None, share: float 
         row = {"seed": seed}
         for name in ("final_normalized_return", "late_average_normalized_return"):
             value = per_seed.get(seed, {}).get(name)
-            if value is None:  # no normaliser: the raw return, named so
+            if value is None:  # no return range: the raw return, named so
                 value = per_seed.get(seed, {}).get(name.replace("_normalized", ""))
             row[name] = math.nan if value is None else value
         for name in ("confidence_mae", "confidence_rmse"):

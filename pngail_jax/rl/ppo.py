@@ -207,8 +207,8 @@ class PPO(OnPolicyLearner):
     def batch(
         self, hyperparams, state, transitions, rewards
     ) -> tuple[ObservationNormalizer, PPOBatch]:
-        """The normaliser after this rollout and the flattened batch with GAE advantages and
-        value targets (one pass, the value network before the update)."""
+        """The observation normaliser after this rollout and the flattened batch with GAE
+        advantages and value targets (one pass, the value network before the update)."""
         normalizer = self.updated_normalizer(state, transitions)
         obs = normalizer(transitions.obs)
         values = self.value.apply(state.value_params, obs)
