@@ -360,3 +360,19 @@ def upgrade_learner_fields(data: Mapping) -> dict:
         "ppo": dataclasses.asdict(PPOConfig()),
     }
     return upgraded
+
+
+def upgrade_trainer_learner(trainer: Mapping) -> dict:
+    """A sweep's ``resolved.trainer`` (its ``AdversarialConfig`` as written) from before the
+    trainer's learner part in today's layout: the learner's name ``learner`` with ``trpo``
+    and ``ppo`` beside it as ``learner = {"name", "trpo", "ppo"}``, the same values. Any
+    other object unchanged (today's; an offline run's trainer, which has no learner)."""
+    if not isinstance(trainer.get("learner"), str):
+        return dict(trainer)
+    upgraded = {key: value for key, value in trainer.items() if key not in ("trpo", "ppo")}
+    upgraded["learner"] = {
+        "name": trainer["learner"],
+        "trpo": trainer.get("trpo"),
+        "ppo": trainer.get("ppo"),
+    }
+    return upgraded
