@@ -263,8 +263,9 @@ def test_the_sweep_runs_with_ppo_and_keeps_a_cloned_policy_cloned(demos_path, tm
     main([*args, "--learner", "ppo"])
     config = json.loads((out / "config.json").read_text())
     assert config["config"]["learner"]["name"] == "ppo"
-    assert config["config"]["learner"]["ppo"] == config["resolved"]["trainer"]["ppo"]
-    assert config["resolved"]["trainer"]["learner"] == "ppo"
+    # The trainer's learner is the config's learner part, the same object (issue 74).
+    assert config["resolved"]["trainer"]["learner"] == config["config"]["learner"]
+    assert "ppo" not in config["resolved"]["trainer"]
     with (out / "metrics.csv").open() as file:
         rows = list(csv.DictReader(file))
     learnt = [row for row in rows if row["method"] in METHOD_NAMES]
