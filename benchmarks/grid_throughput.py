@@ -123,7 +123,7 @@ from pngail_jax.adversarial.methods import METHOD_NAMES
 from pngail_jax.adversarial.trainer import AdversarialConfig, AdversarialTrainer, TrainState
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.config import settings as env_settings
-from pngail_jax.config.learner import DEFAULT_FISHER, FISHER_FORMS, LEARNERS
+from pngail_jax.config.learner import DEFAULT_FISHER, FISHER_FORMS, LEARNERS, LearnerConfig
 from pngail_jax.demos import Demonstrations, load_demonstrations
 from pngail_jax.grid import Grid, make_cells, nonfinite_cells, stack_cells
 from pngail_jax.programs import flags
@@ -177,7 +177,7 @@ def full_episode_trpo(env_name: str, settings, train, cells: int) -> TRPO | None
         if settings.physics == "warp":
             options["warp_batch"] = cells * max(settings.num_envs, settings.num_eval_episodes)
     env = envs.make(env_name, terminate_when_unhealthy=False, **options)
-    return TRPO(train.config.rollout, env, train.config.trpo)
+    return TRPO(train.config.rollout, env, train.config.learner.trpo)
 
 
 @contextlib.contextmanager
@@ -339,10 +339,9 @@ def make_grid_train(args, env, demos):
     chunk_settings = args.env_settings.replace(eval_every=args.iterations)
     config = AdversarialConfig(
         rollout=chunk_settings.rollout_config(args.iterations),
-        trpo=TRPOConfig(fisher=args.fisher),
+        learner=LearnerConfig(name=args.learner, trpo=TRPOConfig(fisher=args.fisher)),
         classifier=ClassifierConfig(num_steps=args.classifier_steps),
         num_demos=None,
-        learner=args.learner,
     )
     return AdversarialTrainer(config, env, demos)
 

@@ -79,7 +79,7 @@ from pngail_jax.adversarial.trainer import (
     AdversarialTrainer,
 )
 from pngail_jax.confidence import ClassifierConfig
-from pngail_jax.config.learner import DEFAULT_FISHER, FISHER_FORMS
+from pngail_jax.config.learner import DEFAULT_FISHER, FISHER_FORMS, LearnerConfig
 from pngail_jax.config.settings import describe, make_env, settings_for
 from pngail_jax.demos import Demonstrations
 from pngail_jax.fitting import adam_step
@@ -178,7 +178,7 @@ class Phases:
         self.trainer = AdversarialTrainer(
             AdversarialConfig(
                 rollout=self.config,
-                trpo=trpo.trpo,
+                learner=LearnerConfig(trpo=trpo.trpo),
                 classifier=ClassifierConfig(num_steps=10),
                 num_demos=num_demo_rows,
             ),

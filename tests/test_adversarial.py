@@ -2,6 +2,7 @@
 controller's, made here; and the authors', where their file is present)."""
 
 import dataclasses
+import warnings
 
 import chex
 import jax
@@ -18,7 +19,7 @@ from pngail_jax.adversarial.trainer import AdversarialConfig, AdversarialTrainer
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import Demonstrations, load_demonstrations
 from pngail_jax.grid import make_cells, stack_cells
-from pngail_jax.rl import RolloutConfig, TRPOConfig
+from pngail_jax.rl import LearnerConfig, PPOConfig, RolloutConfig, TRPOConfig
 
 SHARED_PENDULUM = authors_data()
 
@@ -44,7 +45,7 @@ def test_gail_learns_pendulum_from_the_optimal_trajectory():
     np.testing.assert_array_equal(optimal.confidence, 1.0)
     config = AdversarialConfig(
         rollout=RolloutConfig(num_iterations=150, eval_every=10),
-        trpo=TRPOConfig(fisher="gauss_newton"),
+        learner=LearnerConfig(trpo=TRPOConfig(fisher="gauss_newton")),
         classifier=ClassifierConfig(num_steps=100),  # GAIL reads no confidences
     )
     trainer = AdversarialTrainer(config, env, optimal)
@@ -142,7 +143,7 @@ def test_demonstration_actions_reach_every_learned_comparison_clipped_as_the_age
         rollout=RolloutConfig(
             num_envs=4, unroll_length=25, num_iterations=2, eval_every=1, num_eval_episodes=1
         ),
-        trpo=TRPOConfig(num_value_minibatches=5),
+        learner=LearnerConfig(trpo=TRPOConfig(num_value_minibatches=5)),
         classifier=ClassifierConfig(num_steps=20),
         wgail_refresh_every=1,
         phases=required_phases(methods),
@@ -169,7 +170,7 @@ def _small_trainer(demos, **config):
     )
     config = AdversarialConfig(
         rollout=rollout,
-        trpo=TRPOConfig(num_value_minibatches=5),
+        learner=LearnerConfig(trpo=TRPOConfig(num_value_minibatches=5)),
         classifier=ClassifierConfig(num_steps=20),
         **config,
     )
@@ -291,3 +292,45 @@ def test_which_grids_train_a_classifier():
 
     assert adversarial_config(RunConfig()).confidence_classifier
     assert not adversarial_config(RunConfig(methods=("gail", "wgail"))).confidence_classifier
+
+
+# -- the static config's learner part ---------------------------------------------------------
+
+
+def test_the_learner_is_its_part_and_a_name_is_that_learner_at_its_defaults():
+    """``AdversarialConfig.learner`` is the job configs' ``LearnerConfig``: a name converts
+    to that learner at its defaults, and the trainer's static config (config.json's
+    ``resolved.trainer``) holds it as one object, no learner settings beside it."""
+    ppo = AdversarialConfig(learner="ppo")
+    assert ppo == AdversarialConfig(learner=LearnerConfig(name="ppo"))
+    assert type(ppo.learner) is LearnerConfig and AdversarialConfig().learner == LearnerConfig()
+    written = dataclasses.asdict(ppo)
+    assert "trpo" not in written and "ppo" not in written
+    assert written["learner"] == dataclasses.asdict(LearnerConfig(name="ppo"))
+    assert hash(ppo) == hash(AdversarialConfig(learner=LearnerConfig(name="ppo")))
+    with pytest.raises(ValueError, match="learner must be one of trpo, ppo, got 'sac'"):
+        AdversarialConfig(learner="sac")
+    # The running learner's batch is checked, the other's not read: 30 value minibatches
+    # (TRPO's default) do not fit 4 x 5 samples; PPO's 4 minibatches do.
+    small = RolloutConfig(num_envs=4, unroll_length=5, num_iterations=2, eval_every=1)
+    with pytest.raises(ValueError, match="at least the 30 value minibatches"):
+        AdversarialConfig(rollout=small)
+    learner = LearnerConfig(name="ppo", ppo=PPOConfig(num_minibatches=4))
+    assert AdversarialConfig(rollout=small, learner=learner).learner.ppo.num_minibatches == 4
+
+
+def test_the_old_learner_settings_keywords_still_work_with_a_deprecation_warning():
+    """``trpo=`` and ``ppo=`` beside a name (before the learner part) give the same config as
+    the new spelling, which the warning names; ``dataclasses.replace`` keeps the part."""
+    settings = TRPOConfig(num_value_minibatches=5)
+    with pytest.warns(DeprecationWarning, match=r"learner=LearnerConfig\(name=..., trpo=...\)"):
+        old = AdversarialConfig(trpo=settings)
+    assert old == AdversarialConfig(learner=LearnerConfig(trpo=settings))
+    with pytest.warns(DeprecationWarning, match=r"AdversarialConfig\(trpo=..., ppo=...\)"):
+        both = AdversarialConfig(learner="ppo", trpo=settings, ppo=PPOConfig(num_epochs=3))
+    assert both.learner == LearnerConfig("ppo", trpo=settings, ppo=PPOConfig(num_epochs=3))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # neither the new spelling nor replace warns
+        replaced = dataclasses.replace(old, num_demos=10)
+        assert replaced.learner == old.learner
+        assert dataclasses.replace(old, learner="ppo").learner == LearnerConfig(name="ppo")

@@ -30,7 +30,7 @@ from pngail_jax.demos import DemonstrationError, Demonstrations
 from pngail_jax.grid import make_cells, stack_cells
 from pngail_jax.jobs.trainer_configs import adversarial_config
 from pngail_jax.networks import orthogonal_init
-from pngail_jax.rl import RolloutConfig, TRPOConfig
+from pngail_jax.rl import LearnerConfig, RolloutConfig, TRPOConfig
 from pngail_jax.rl.ppo import PPOConfig
 
 METHODS = ("trex", "drex", "cail", "firl-fkl", "firl-rkl", "firl-js", "bc", "bc-weighted")
@@ -52,13 +52,13 @@ def demos(trajectories: bool = True) -> Demonstrations:
 
 def trainer_for(methods, data=None, num_iterations=2, learner="trpo"):
     config = AdversarialConfig(
-        learner=learner,
-        ppo=PPOConfig(num_minibatches=4),
+        learner=LearnerConfig(
+            learner, trpo=TRPOConfig(num_value_minibatches=5), ppo=PPOConfig(num_minibatches=4)
+        ),
         rollout=RolloutConfig(
             num_envs=4, unroll_length=25, num_iterations=num_iterations, eval_every=1,
             num_eval_episodes=1,
         ),
-        trpo=TRPOConfig(num_value_minibatches=5),
         classifier=ClassifierConfig(num_steps=20),
         phases=required_phases(methods),
         ranking=RankingConfig(num_steps=20, snippet_length=10, hidden_sizes=(16,)),

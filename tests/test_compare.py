@@ -305,6 +305,17 @@ def test_the_same_seeds_given_twice_are_refused_not_pooled(tmp_path, capsys):
     (copy / "config.json").write_text(json.dumps(config))
     message = refusal([run, copy], tmp_path, capsys)
     assert "the same seeds of the same config" in message and str(run) in message
+    # The same config run before and after the trainer's learner part (issue 74): its
+    # resolved.trainer in two shapes, the same settings: still the same seeds.
+    trpo, ppo = {"fisher": "gauss_newton"}, {"num_epochs": 10}
+    for folder, trainer in (
+        (run, {"learner": "trpo", "trpo": trpo, "ppo": ppo, "num_demos": 8}),
+        (copy, {"learner": {"name": "trpo", "trpo": trpo, "ppo": ppo}, "num_demos": 8}),
+    ):
+        config = json.loads((folder / "config.json").read_text())
+        sealed_config(folder, {**config, "resolved": {**config["resolved"], "trainer": trainer}})
+    message = refusal([run, copy], tmp_path, capsys)
+    assert "the same seeds of the same config" in message and str(copy) in message
     # Another base seed is other seeds: pooled.
     other = long_fake_run(tmp_path / "other", seed=1)
     scores = compare.load_scores([run, other])

@@ -145,7 +145,7 @@ def test_a_resume_refuses_a_method_whose_preset_changed(tmp_path):
 def test_value_epochs_reach_the_learners_config(tmp_path):
     config = sweep.parse_args(["--value-epochs", "3", "--out", str(tmp_path / "out")]).config
     assert config.learner.trpo.num_value_epochs == 3
-    assert adversarial_config(config).trpo.num_value_epochs == 3
+    assert adversarial_config(config).learner.trpo.num_value_epochs == 3
 
 
 def test_ppo_settings_reach_the_learners_config_and_config_json(tmp_path):
@@ -155,8 +155,8 @@ def test_ppo_settings_reach_the_learners_config_and_config_json(tmp_path):
             "--no-ppo-normalize-rewards", "--no-ppo-clip-value-loss"]  # fmt: skip
     argv += ["--out", str(tmp_path)]
     config = sweep.parse_args(argv).config
-    ppo = adversarial_config(config).ppo
-    assert config.learner.name == "ppo" and adversarial_config(config).learner == "ppo"
+    assert config.learner.name == "ppo" and adversarial_config(config).learner == config.learner
+    ppo = adversarial_config(config).learner.ppo
     assert (ppo.num_epochs, ppo.num_minibatches) == (4, 8)
     assert not ppo.normalize_rewards and not ppo.clip_value_loss and ppo.anneal_learning_rate
     assert RunConfig.from_dict(json.loads(json.dumps(config.to_dict()))) == config

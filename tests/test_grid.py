@@ -27,7 +27,7 @@ from pngail_jax.adversarial.trainer import (
 from pngail_jax.confidence import ClassifierConfig
 from pngail_jax.demos import DemonstrationError, Demonstrations
 from pngail_jax.grid import Grid, make_cells, nonfinite_cells, stack_cells
-from pngail_jax.rl import RolloutConfig, TRPOConfig
+from pngail_jax.rl import LearnerConfig, RolloutConfig, TRPOConfig
 from pngail_jax.storage.checkpoint import restore_tree, save_tree
 
 COMPARED = ("eval/return", "disc/loss", "disc/acc_agent", "train/reward", "trpo/kl")
@@ -72,7 +72,7 @@ def small_setup(num_iterations=2, eval_every=1, **config_overrides):
             eval_every=eval_every,
             num_eval_episodes=2,
         ),
-        trpo=TRPOConfig(num_value_minibatches=5),
+        learner=LearnerConfig(trpo=TRPOConfig(num_value_minibatches=5)),
         classifier=ClassifierConfig(num_steps=50),
         **config_overrides,
     )

@@ -22,7 +22,14 @@ from pngail_jax.adversarial.family import ADVERSARIAL
 from pngail_jax.adversarial.trainer import AdversarialHyperparams, AdversarialTrainer
 from pngail_jax.grid import make_cells, stack_cells
 from pngail_jax.jobs.trainer_configs import adversarial_config
-from pngail_jax.rl import PPO, PolicyTrainer, PPOConfig, PPOHyperparams, RolloutConfig
+from pngail_jax.rl import (
+    PPO,
+    LearnerConfig,
+    PolicyTrainer,
+    PPOConfig,
+    PPOHyperparams,
+    RolloutConfig,
+)
 from pngail_jax.rl.learners import learner_hyperparams, make_learner
 from pngail_jax.rl.ppo import clipped_surrogate_loss, value_loss
 
@@ -161,6 +168,19 @@ def test_bad_values_and_foreign_hyperparameters_are_named():
         learner_hyperparams("ppo", max_kl=0.01)
     with pytest.raises(ValueError, match="learner must be one of trpo, ppo"):
         make_learner("sac", RolloutConfig(), envs.make("Pendulum-v1"))
+
+
+def test_make_learner_takes_the_learner_part_and_the_old_keywords_with_a_warning():
+    """``make_learner(LearnerConfig, rollout, env)``: the part whole (its name picks the
+    learner, its settings configure it); a name alone is that learner at its defaults; the
+    old ``ppo=`` / ``trpo=`` keywords still work, with a DeprecationWarning."""
+    env, rollout = envs.make("Pendulum-v1"), RolloutConfig()
+    learner = make_learner(LearnerConfig("ppo", ppo=PPOConfig(num_epochs=3)), rollout, env)
+    assert isinstance(learner, PPO) and learner.ppo.num_epochs == 3
+    assert make_learner("ppo", rollout, env).ppo == PPOConfig()
+    with pytest.warns(DeprecationWarning, match=r"make_learner\(ppo=...\) is deprecated"):
+        old = make_learner("ppo", rollout, env, ppo=PPOConfig(num_epochs=3))
+    assert old.ppo == learner.ppo
     pendulum, config = envs.make("Pendulum-v1"), RolloutConfig(num_iterations=1, eval_every=1)
     trainer = PolicyTrainer(config, pendulum, learner=PPO(config, pendulum))
     with pytest.raises(ValueError, match="learner is PPO, which reads PPOHyperparams, but the"):
@@ -174,7 +194,7 @@ def test_run_config_takes_the_learner_and_refuses_the_other_learners_axes():
     from pngail_jax.config.validation import ConfigError
 
     config = RunConfig(learner="ppo", grid_axes=(("clip_eps", (0.1, 0.2)),))
-    assert adversarial_config(config).learner == "ppo"
+    assert adversarial_config(config).learner == LearnerConfig(name="ppo")
     with pytest.raises(ConfigError, match="max_kl=0.01: the ppo learner has no hyperparameter"):
         RunConfig(learner="ppo", grid_axes=(("max_kl", (0.01,)),))
     with pytest.raises(ConfigError, match="learner must be one of"):
@@ -188,7 +208,8 @@ def test_run_config_takes_the_learner_and_refuses_the_other_learners_axes():
 
 def ppo_trainer():
     env, demos, config = small_setup()
-    config = dataclasses.replace(config, learner="ppo", ppo=PPOConfig(num_minibatches=4))
+    learner = config.learner.replace(name="ppo", ppo=PPOConfig(num_minibatches=4))
+    config = dataclasses.replace(config, learner=learner)
     return AdversarialTrainer(config, env, demos)
 
 
@@ -242,8 +263,9 @@ def test_the_sweep_runs_with_ppo_and_keeps_a_cloned_policy_cloned(demos_path, tm
     main([*args, "--learner", "ppo"])
     config = json.loads((out / "config.json").read_text())
     assert config["config"]["learner"]["name"] == "ppo"
-    assert config["config"]["learner"]["ppo"] == config["resolved"]["trainer"]["ppo"]
-    assert config["resolved"]["trainer"]["learner"] == "ppo"
+    # The trainer's learner is the config's learner part, the same object (issue 74).
+    assert config["resolved"]["trainer"]["learner"] == config["config"]["learner"]
+    assert "ppo" not in config["resolved"]["trainer"]
     with (out / "metrics.csv").open() as file:
         rows = list(csv.DictReader(file))
     learnt = [row for row in rows if row["method"] in METHOD_NAMES]

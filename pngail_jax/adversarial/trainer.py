@@ -7,7 +7,7 @@
 2. ``num_iterations`` of: a rollout; the policy reward ``-log sigmoid(z)`` from the
    discriminator *before* this iteration's update; one Adam step of the discriminator on the
    agent batch and as many demonstration rows drawn with replacement; one update of the
-   policy learner (TRPO, the paper's, or PPO: ``AdversarialConfig.learner``).
+   policy learner (TRPO, the paper's, or PPO: ``AdversarialConfig.learner.name``).
 
 The discriminator (and every other learned function that compares the agent with the
 demonstrations: WGAIL's weights, behaviour cloning, CAIL's rankings) sees agent and
@@ -41,11 +41,15 @@ from pngail_jax.adversarial.method_checks import check_label_ratios, check_metho
 from pngail_jax.adversarial.methods import PHASES, MethodSpec
 from pngail_jax.adversarial.phase import PhaseContext, PhaseSet
 from pngail_jax.confidence import ClassifierConfig, confidence_errors, split_confidences
-from pngail_jax.config.learner import check_discriminator_learning_rate
+from pngail_jax.config.learner import (
+    LearnerConfig,
+    check_discriminator_learning_rate,
+    learner_with_settings,
+)
 from pngail_jax.demos import DemonstrationError, Demonstrations, make_split
 from pngail_jax.fitting import adam_step
 from pngail_jax.networks import Discriminator
-from pngail_jax.rl.learners import check_batch, learner_hyperparams, make_learner
+from pngail_jax.rl.learners import learner_hyperparams, make_learner
 from pngail_jax.rl.on_policy import RolloutConfig, run_evaluated_blocks
 from pngail_jax.rl.ppo import PPOConfig, PPOHyperparams, PPOState
 from pngail_jax.rl.trpo import TRPOConfig, TRPOHyperparams, TRPOState
@@ -57,11 +61,10 @@ class AdversarialConfig:
 
     # The rollout's shape, the run's length and the policy and value networks (both learners).
     rollout: RolloutConfig = RolloutConfig()
-    # The policy learner, "trpo" (the paper's) or "ppo" (``rl.learners``), and each one's
-    # own settings (the one that does not run is not read).
-    learner: str = "trpo"
-    trpo: TRPOConfig = TRPOConfig()
-    ppo: PPOConfig = PPOConfig()
+    # The policy learner's part, as every job config's (``config.learner.LearnerConfig``): its
+    # name, "trpo" (the paper's) or "ppo" (``rl.learners``), and each one's own settings (the
+    # one that does not run is not read). A name alone is that learner at its defaults.
+    learner: LearnerConfig = LearnerConfig()
     classifier: ClassifierConfig = ClassifierConfig()
     # Rows per split (the paper's n_c + n_u); None = every demonstration row.
     num_demos: int | None = None
@@ -86,9 +89,16 @@ class AdversarialConfig:
     # in which no cell reads it (GAIL, IC-GAIL, WGAIL, most appendix baselines) leaves it out:
     # 45% of init's compile on Pendulum, the same numbers (``methods.trains_classifier``).
     confidence_classifier: bool = True
+    # Deprecated (gone in 0.3): the learner's settings beside it, as before the learner part;
+    # given, each replaces ``learner``'s own with a DeprecationWarning. Init-only, so neither
+    # is a field (``dataclasses.asdict``, config.json and equality see ``learner`` alone).
+    trpo: dataclasses.InitVar[TRPOConfig | None] = None
+    ppo: dataclasses.InitVar[PPOConfig | None] = None
 
-    def __post_init__(self):
-        check_batch(self.learner, self.rollout, self.ppo, self.trpo)
+    def __post_init__(self, trpo: TRPOConfig | None, ppo: PPOConfig | None):
+        part = learner_with_settings(self.learner, "AdversarialConfig", trpo, ppo, stacklevel=4)
+        object.__setattr__(self, "learner", part)  # frozen: set once, here
+        part.check_batch(self.rollout)
         unknown = [phase for phase in self.phases if phase not in PHASES]
         if unknown or len(set(self.phases)) != len(self.phases):
             raise ValueError(
@@ -206,7 +216,7 @@ class AdversarialTrainer:
         self.num_demos = num_demos
         self.has_confidence = demos.confidence is not None
         # The policy learner, TRPO or PPO (``rl.learners``).
-        self.learner = make_learner(config.learner, config.rollout, env, config.ppo, config.trpo)
+        self.learner = make_learner(config.learner, config.rollout, env)
         self.discriminator = Discriminator(config.discriminator_hidden_sizes)
         self.optimizer = optax.scale_by_adam()
         # One action space on both sides of every learned comparison with the agent (the

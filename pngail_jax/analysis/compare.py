@@ -42,6 +42,7 @@ from pngail_jax.analysis.runs import (
     run_scores,
     verify_run,
 )
+from pngail_jax.config.learner import upgrade_trainer_learner
 from pngail_jax.storage.integrity import IntegrityError, atomic_path, read_json, write_json
 
 AGGREGATES = ("iqm", "mean", "median", "optimality_gap")
@@ -116,7 +117,9 @@ class Scores:
 
 def _same_run_key(run_dir: Path) -> str | None:
     """What makes two runs the same seeds of the same config: config.json without where and
-    how it ran (``provenance``) and the log; None when it cannot be read."""
+    how it ran (``provenance``) and the log, its trainer's learner in today's layout (a run
+    begun before the trainer's learner part holds the same settings in another shape); None
+    when it cannot be read."""
     try:
         config = read_json(run_dir / "config.json", "run config")
     except (OSError, IntegrityError):
@@ -124,6 +127,9 @@ def _same_run_key(run_dir: Path) -> str | None:
     if not isinstance(config, dict):
         return None
     kept = {key: value for key, value in config.items() if key not in ("provenance", "log")}
+    resolved = kept.get("resolved")
+    if isinstance(resolved, dict) and isinstance(resolved.get("trainer"), dict):
+        kept["resolved"] = {**resolved, "trainer": upgrade_trainer_learner(resolved["trainer"])}
     return json.dumps(kept, sort_keys=True)
 
 

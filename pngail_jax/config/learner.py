@@ -9,6 +9,7 @@ these describe and re-exports the names (``rl.on_policy``, ``rl.trpo``, ``rl.ppo
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from collections.abc import Mapping
 from typing import Literal
 
@@ -292,6 +293,34 @@ def learner_part(value) -> LearnerConfig:
     return LearnerConfig(**values)
 
 
+def learner_with_settings(
+    value,
+    where: str,
+    trpo: TRPOConfig | None = None,
+    ppo: PPOConfig | None = None,
+    stacklevel: int = 3,
+) -> LearnerConfig:
+    """``value`` as its learner part (``learner_part``), with the settings that ``where`` (a
+    trainer's config or function) used to take beside a learner's name: ``trpo`` and ``ppo``,
+    each, when given, replacing the part's own with a DeprecationWarning that names the new
+    spelling (the keywords go in 0.3, with the other deprecated shims). ``stacklevel`` as
+    ``warnings.warn``'s, counted from here (3: the caller of the function that calls this)."""
+    part = learner_part(value)
+    given = {"trpo": trpo, "ppo": ppo}
+    given = {name: settings for name, settings in given.items() if settings is not None}
+    if not given:
+        return part
+    spelled = ", ".join(f"{name}=..." for name in given)
+    warnings.warn(
+        f"{where}({spelled}) is deprecated and goes in 0.3: pass "
+        f"{where}(learner=LearnerConfig(name=..., {spelled})) "
+        "(pngail_jax.config.learner.LearnerConfig)",
+        DeprecationWarning,
+        stacklevel=stacklevel,
+    )
+    return part.replace(**given)
+
+
 def _known_keys(kind, where: str, data: Mapping) -> Mapping:
     unknown = sorted((key for key in data if key not in _field_names(kind)), key=str)
     if unknown:
@@ -329,5 +358,21 @@ def upgrade_learner_fields(data: Mapping) -> dict:
         "name": DEFAULT_LEARNER if learner is None else learner,
         "trpo": trpo,
         "ppo": dataclasses.asdict(PPOConfig()),
+    }
+    return upgraded
+
+
+def upgrade_trainer_learner(trainer: Mapping) -> dict:
+    """A sweep's ``resolved.trainer`` (its ``AdversarialConfig`` as written) from before the
+    trainer's learner part in today's layout: the learner's name ``learner`` with ``trpo``
+    and ``ppo`` beside it as ``learner = {"name", "trpo", "ppo"}``, the same values. Any
+    other object unchanged (today's; an offline run's trainer, which has no learner)."""
+    if not isinstance(trainer.get("learner"), str):
+        return dict(trainer)
+    upgraded = {key: value for key, value in trainer.items() if key not in ("trpo", "ppo")}
+    upgraded["learner"] = {
+        "name": trainer["learner"],
+        "trpo": trainer.get("trpo"),
+        "ppo": trainer.get("ppo"),
     }
     return upgraded

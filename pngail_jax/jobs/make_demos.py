@@ -174,8 +174,7 @@ def train_candidates(config: MakeDemosConfig, env, out: Path) -> list[Checkpoint
     """TRPO on the true reward, every evaluated checkpoint of every seed kept (in memory and
     under ``out/checkpoints/iter_XXXX/``)."""
     rollout = config.rollout_config
-    part = config.learner
-    learner = make_learner(part.name, rollout, env, part.ppo, part.trpo)
+    learner = make_learner(config.learner, rollout, env)
     trainer = PolicyTrainer(rollout, env, learner=learner)
     hyperparams = jax.tree.map(
         lambda x: jnp.broadcast_to(x, (config.seeds, *x.shape)),

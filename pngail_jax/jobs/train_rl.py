@@ -89,7 +89,7 @@ class TrainRLConfig:
     def trainer(self, env) -> PolicyTrainer:
         """The trainer of this run in ``env`` (its learner on the true reward)."""
         config = self.rollout_config
-        learner = make_learner(self.learner.name, config, env, self.learner.ppo, self.learner.trpo)
+        learner = make_learner(self.learner, config, env)
         return PolicyTrainer(config, env, learner=learner)
 
     def document(self, command: Sequence[str] | None = None) -> dict:

@@ -41,9 +41,7 @@ def adversarial_config(config: RunConfig, num_rows: int | None = None) -> Advers
     num_demos = config.num_demos if num_rows is None else config.task_num_demos(num_rows)
     return AdversarialConfig(
         rollout=config.settings.rollout_config(config.iterations),
-        learner=config.learner.name,
-        trpo=config.learner.trpo,
-        ppo=config.learner.ppo,
+        learner=config.learner,
         classifier=sized_classifier(config.classifier, config.label_ratios, num_demos),
         num_demos=num_demos,
         discriminator_hidden_sizes=config.discriminator_hidden_sizes,

@@ -1,7 +1,7 @@
 """Policy learners in pure JAX: TRPO (the paper's: conjugate gradient, Fisher products, line
 search) and PPO, on shared rollouts, GAE, networks and evaluation."""
 
-from pngail_jax.rl.learners import LEARNERS, learner_hyperparams, make_learner
+from pngail_jax.rl.learners import LEARNERS, LearnerConfig, learner_hyperparams, make_learner
 from pngail_jax.rl.on_policy import RolloutConfig
 from pngail_jax.rl.policy_trainer import PolicyTrainer, PolicyTrainState
 from pngail_jax.rl.ppo import PPO, PPOConfig, PPOHyperparams, PPOState
@@ -9,6 +9,7 @@ from pngail_jax.rl.trpo import TRPO, TRPOConfig, TRPOHyperparams, TRPOState
 
 __all__ = [
     "LEARNERS",
+    "LearnerConfig",
     "PPO",
     "PPOConfig",
     "PPOHyperparams",

@@ -9,10 +9,10 @@ from __future__ import annotations
 
 from pngail_jax import envs
 from pngail_jax.config.learner import LEARNERS as LEARNERS
+from pngail_jax.config.learner import LearnerConfig, check_hyperparam_names, learner_with_settings
 from pngail_jax.config.learner import check_batch as check_batch
-from pngail_jax.config.learner import check_hyperparam_names
 from pngail_jax.config.learner import hyperparam_names as hyperparam_names
-from pngail_jax.config.learner import learner_name as check_learner
+from pngail_jax.config.learner import learner_name as check_learner  # noqa: F401  (its old name)
 from pngail_jax.rl.on_policy import OnPolicyLearner, RolloutConfig
 from pngail_jax.rl.ppo import PPO, PPOConfig, PPOHyperparams
 from pngail_jax.rl.trpo import TRPO, TRPOConfig, TRPOHyperparams
@@ -21,17 +21,20 @@ HYPERPARAMS = {"trpo": TRPOHyperparams, "ppo": PPOHyperparams}
 
 
 def make_learner(
-    name: str,
+    learner: LearnerConfig | str,
     config: RolloutConfig,
     env: envs.Env,
     ppo: PPOConfig | None = None,
     trpo: TRPOConfig | None = None,
 ) -> OnPolicyLearner:
-    """The learner ``name`` for ``env``: ``config`` gives the rollout's shape and networks,
-    ``trpo`` and ``ppo`` each learner's own settings (None: the defaults)."""
-    if check_learner(name) == "ppo":
-        return PPO(config, env, ppo)
-    return TRPO(config, env, trpo)
+    """The policy learner ``learner`` describes (a ``LearnerConfig``: its name and settings; a
+    name alone: that learner at its defaults) for ``env``; ``config`` gives the rollout's
+    shape and networks. ``ppo`` and ``trpo`` are deprecated (gone in 0.3): the settings
+    passed beside a name before the learner part, each replacing ``learner``'s own."""
+    part = learner_with_settings(learner, "make_learner", trpo, ppo)
+    if part.name == "ppo":
+        return PPO(config, env, part.ppo)
+    return TRPO(config, env, part.trpo)
 
 
 def learner_hyperparams(name: str, **values) -> TRPOHyperparams | PPOHyperparams:
