@@ -326,9 +326,20 @@ def test_the_old_learner_settings_keywords_still_work_with_a_deprecation_warning
     with pytest.warns(DeprecationWarning, match=r"learner=LearnerConfig\(name=..., trpo=...\)"):
         old = AdversarialConfig(trpo=settings)
     assert old == AdversarialConfig(learner=LearnerConfig(trpo=settings))
-    with pytest.warns(DeprecationWarning, match=r"AdversarialConfig\(trpo=..., ppo=...\)"):
-        both = AdversarialConfig(learner="ppo", trpo=settings, ppo=PPOConfig(num_epochs=3))
-    assert both.learner == LearnerConfig("ppo", trpo=settings, ppo=PPOConfig(num_epochs=3))
+    # The running learner's settings are taken; the other's, which nothing read before
+    # either, are dropped, so a call that worked (PPO with TRPO's value epochs) still does.
+    with pytest.warns(DeprecationWarning, match=r"trpo=... is not read by ppo and is dropped"):
+        both = AdversarialConfig(
+            learner="ppo", trpo=TRPOConfig(num_value_epochs=3), ppo=PPOConfig(num_epochs=3)
+        )
+    assert both.learner == LearnerConfig("ppo", ppo=PPOConfig(num_epochs=3))
+    # Reading the old attribute raises one line naming the new one (None would read as
+    # TRPO's defaults and drop the run's own settings).
+    with pytest.raises(AttributeError, match=r"^AdversarialConfig.trpo has moved: read "
+                       r"AdversarialConfig.learner.trpo$"):  # fmt: skip
+        old.trpo.fisher  # noqa: B018
+    with pytest.raises(TypeError, match="AdversarialConfig.ppo has moved"):
+        bool(old.ppo)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # neither the new spelling nor replace warns
         replaced = dataclasses.replace(old, num_demos=10)

@@ -291,7 +291,8 @@ def test_each_bad_offline_flag_is_named_in_one_line(
     overrides, field, flag, reason, tmp_path, capsys
 ):
     """OfflineRunConfig's checks raise ConfigError with the field's path (as RunConfig's);
-    the offline program names the flag that set it, in one line."""
+    the offline program names the flag that set it, and the flags of the other settings its
+    reason names, in one line."""
     from pngail_jax.config.validation import ConfigError
     from pngail_jax.jobs.offline_config import OfflineRunConfig
     from pngail_jax.programs import offline as program
@@ -306,7 +307,9 @@ def test_each_bad_offline_flag_is_named_in_one_line(
     with pytest.raises(SystemExit, match="^2$"):
         program.parse_args([*argv, "--out", str(tmp_path / "refused")])
     error = capsys.readouterr().err.strip()
-    assert "\n" not in error and f"error: {flag}{'' if reason[0] == ':' else ' '}{reason}" in error
+    spelled = program.flag_words(reason)  # the other settings a reason names, by their flags
+    assert "\n" not in error and f"error: {flag}{'' if reason[0] == ':' else ' '}{spelled}" in error
+    assert "_" not in error.partition("error: ")[2]  # no field name left for a flag's user
 
 
 def test_an_offline_run_config_stores_its_numbers_in_their_types():

@@ -774,17 +774,9 @@ def edit_metrics(run, change):
         writer.writerows(rows)
 
 
-def test_the_verification_reads_every_number_it_passes_on(finished, tmp_path):
-    """Every program that reads a run (compare, record, resume) refuses, in one line naming
-    the file, method, seed and iteration: a normalised return edited alone; evaluations
-    edited in both columns, consistently, before the last (the training average no longer
-    the summary's) or at it (the final return no longer the summary's); a late average edited
-    in summary.json; a return range edited in summary.json."""
-    from pngail_jax.programs import compare as compare_program
-    from pngail_jax.programs import record as record_program
-
-    config = json.loads((finished / "config.json").read_text())
-    random_return, optimal_return = config["resolved"]["return_range"]
+def verification_cases(random_return: float, optimal_return: float) -> list:
+    """(damage to a finished run, the refusal it must give) pairs for
+    ``test_the_verification_reads_every_number_it_passes_on``."""
 
     def both(iteration, value):
         def change(row):
@@ -827,6 +819,22 @@ def test_the_verification_reads_every_number_it_passes_on(finished, tmp_path):
         (lambda run: summary_edit(run, edited_under_the_old_key),
          r"summary.json's return range \[-1000.0, 0.0\] is not config.json's"),
     ]  # fmt: skip
+    return cases
+
+
+def test_the_verification_reads_every_number_it_passes_on(finished, tmp_path):
+    """Every program that reads a run (compare, record, resume) refuses, in one line naming
+    the file, method, seed and iteration: a normalised return edited alone; evaluations
+    edited in both columns, consistently, before the last (the training average no longer
+    the summary's) or at it (the final return no longer the summary's); a late average edited
+    in summary.json; a return range edited in summary.json."""
+    from pngail_jax.programs import compare as compare_program
+    from pngail_jax.programs import record as record_program
+
+    config = json.loads((finished / "config.json").read_text())
+    random_return, optimal_return = config["resolved"]["return_range"]
+
+    cases = verification_cases(random_return, optimal_return)
     for index, (damage, message) in enumerate(cases):
         run = tmp_path / f"run{index}"
         shutil.copytree(finished, run)
@@ -855,6 +863,9 @@ def test_a_summary_written_before_return_range_had_its_name_reads(finished, tmp_
     config = json.loads((finished / "config.json").read_text())
     assert "normalizer" not in summary
     assert summary["return_range"] == config["resolved"]["return_range"]
+    # Whether a wrong range under the old key is read is the verification test's last case;
+    # here every program that reads a run gets through one (a reader asking for the new key
+    # alone would fail here).
     run = tmp_path / "old-summary"
     shutil.copytree(finished, run)
     old = {

@@ -43,6 +43,7 @@ from pngail_jax.adversarial.phase import PhaseContext, PhaseSet
 from pngail_jax.confidence import ClassifierConfig, confidence_errors, split_confidences
 from pngail_jax.config.learner import (
     LearnerConfig,
+    MovedSetting,
     check_discriminator_learning_rate,
     learner_with_settings,
 )
@@ -92,10 +93,16 @@ class AdversarialConfig:
     # Deprecated (gone in 0.3): the learner's settings beside it, as before the learner part;
     # given, each replaces ``learner``'s own with a DeprecationWarning. Init-only, so neither
     # is a field (``dataclasses.asdict``, config.json and equality see ``learner`` alone).
-    trpo: dataclasses.InitVar[TRPOConfig | None] = None
-    ppo: dataclasses.InitVar[PPOConfig | None] = None
+    # Not given, each reads as a ``MovedSetting``: reading ``config.trpo`` as before raises
+    # one line naming ``config.learner.trpo`` instead of reading None (the defaults).
+    trpo: dataclasses.InitVar[TRPOConfig | None] = MovedSetting(
+        "AdversarialConfig.trpo", "AdversarialConfig.learner.trpo"
+    )
+    ppo: dataclasses.InitVar[PPOConfig | None] = MovedSetting(
+        "AdversarialConfig.ppo", "AdversarialConfig.learner.ppo"
+    )
 
-    def __post_init__(self, trpo: TRPOConfig | None, ppo: PPOConfig | None):
+    def __post_init__(self, trpo, ppo):
         part = learner_with_settings(self.learner, "AdversarialConfig", trpo, ppo, stacklevel=4)
         object.__setattr__(self, "learner", part)  # frozen: set once, here
         part.check_batch(self.rollout)

@@ -293,32 +293,62 @@ def learner_part(value) -> LearnerConfig:
     return LearnerConfig(**values)
 
 
+class MovedSetting:
+    """The class default of a deprecated init-only keyword (``AdversarialConfig.trpo`` and
+    ``.ppo``, gone in 0.3): not given, as None was, but reading it as the old attribute raises
+    one line naming where the setting lives now, where None would read as "the defaults" (TRPO
+    takes a None config as its defaults) and drop the run's own settings without a word."""
+
+    def __init__(self, old: str, new: str):
+        self.__dict__.update(old=old, new=new)
+
+    def __getattr__(self, name: str):
+        raise AttributeError(f"{self.old} has moved: read {self.new}")
+
+    def __bool__(self) -> bool:
+        raise TypeError(f"{self.old} has moved: read {self.new}")
+
+    def __repr__(self) -> str:
+        return f"<{self.old}: moved to {self.new}>"
+
+
 def learner_with_settings(
     value,
     where: str,
-    trpo: TRPOConfig | None = None,
-    ppo: PPOConfig | None = None,
+    trpo: TRPOConfig | MovedSetting | None = None,
+    ppo: PPOConfig | MovedSetting | None = None,
     stacklevel: int = 3,
 ) -> LearnerConfig:
     """``value`` as its learner part (``learner_part``), with the settings that ``where`` (a
-    trainer's config or function) used to take beside a learner's name: ``trpo`` and ``ppo``,
-    each, when given, replacing the part's own with a DeprecationWarning that names the new
-    spelling (the keywords go in 0.3, with the other deprecated shims). ``stacklevel`` as
-    ``warnings.warn``'s, counted from here (3: the caller of the function that calls this)."""
+    trainer's config or function) used to take beside a learner's name: ``trpo`` and ``ppo``
+    (None or a ``MovedSetting``: not given), each, when given, with a DeprecationWarning that
+    names the new spelling (the keywords go in 0.3, with the other deprecated shims). The
+    running learner's replace the part's own; the other learner's, which nothing read then
+    either, are dropped (its checks against the running learner would refuse a call that
+    worked). ``stacklevel`` as ``warnings.warn``'s, counted from here (3: the caller of the
+    function that calls this)."""
     part = learner_part(value)
     given = {"trpo": trpo, "ppo": ppo}
-    given = {name: settings for name, settings in given.items() if settings is not None}
+    given = {
+        name: settings
+        for name, settings in given.items()
+        if settings is not None and not isinstance(settings, MovedSetting)
+    }
     if not given:
         return part
     spelled = ", ".join(f"{name}=..." for name in given)
+    unread = [name for name in given if name != part.name]
+    dropped = (
+        f"; {', '.join(unread)}=... is not read by {part.name} and is dropped" if unread else ""
+    )
     warnings.warn(
         f"{where}({spelled}) is deprecated and goes in 0.3: pass "
         f"{where}(learner=LearnerConfig(name=..., {spelled})) "
-        "(pngail_jax.config.learner.LearnerConfig)",
+        f"(pngail_jax.config.learner.LearnerConfig){dropped}",
         DeprecationWarning,
         stacklevel=stacklevel,
     )
-    return part.replace(**given)
+    return part.replace(**{name: given[name] for name in given if name == part.name})
 
 
 def _known_keys(kind, where: str, data: Mapping) -> Mapping:

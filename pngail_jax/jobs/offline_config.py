@@ -69,7 +69,7 @@ class OfflineRunConfig:
         seeds, seed = check_seeds(self.seeds, self.seed)
         self._set("seeds", seeds)
         self._set("seed", seed)
-        self.demonstrations  # noqa: B018  (the demonstrations part's checks)
+        self._set("action_scale", self.demonstrations.action_scale)  # checked, as a float
         self.settings  # noqa: B018  (the task's row: an unknown task is refused)
         for name in ("gradient_steps", "steps_per_iteration", "eval_every",
                      "chunk_iterations", "batch_size", "ilid_discriminator_steps"):  # fmt: skip

@@ -14,6 +14,7 @@ docs/methods.md ("Offline methods") has the losses and their codebases' settings
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 
 from pngail_jax.config.validation import ConfigError
@@ -45,6 +46,18 @@ from pngail_jax.storage.outputs import output_owner
 DEFAULTS = OfflineRunConfig()
 # OfflineRunConfig's fields whose flag is not the field's name with dashes.
 FLAGS = {"noise_std": "--noise"}
+
+
+def flag_of(field: str) -> str:
+    """The flag that sets ``OfflineRunConfig``'s ``field``."""
+    return FLAGS.get(field, "--" + field.replace("_", "-"))
+
+
+def flag_words(message: str) -> str:
+    """``message`` with the other settings a check names (a block of steps, say) called by
+    their flags too."""
+    return re.sub(r"\b(gradient_steps|steps_per_iteration|eval_every)\b",
+                  lambda match: flag_of(match.group(1)), message)  # fmt: skip
 
 
 def build_parser() -> ArgumentParser:
@@ -165,7 +178,7 @@ def parse_args(argv=None) -> argparse.Namespace:
             dwbc_discriminator_updates=args.dwbc_discriminator_updates,
         )  # fmt: skip
     except ConfigError as error:  # named by its field: the flag of that name
-        parser.error(error.named(FLAGS.get(error.field, "--" + error.field.replace("_", "-"))))
+        parser.error(flag_words(error.named(flag_of(error.field))))
     except ValueError as error:  # a check that reads several fields says them itself
         parser.error(str(error))
     return args
