@@ -237,6 +237,7 @@ class Grid:
         init = jit(jax.vmap(trainer.init))
         start = time.perf_counter()
         state_shape, _ = jax.eval_shape(init, *inputs)
+        self._state_shape = state_shape
         chunk = jax.vmap(functools.partial(trainer.run_blocks, num_blocks=blocks_per_chunk))
         state_index = len(self.cell_inputs)
         lowered = (
@@ -258,6 +259,14 @@ class Grid:
             return state_shape
         return jax.tree.map(
             lambda s: jax.ShapeDtypeStruct(s.shape, s.dtype, sharding=self.sharding), state_shape
+        )
+
+    def state_shape(self):
+        """The shapes and dtypes (``jax.ShapeDtypeStruct``) of the real cells' state, without
+        running the init: what a checkpoint is restored into."""
+        return jax.tree.map(
+            lambda s: jax.ShapeDtypeStruct((self.num_cells, *s.shape[1:]), s.dtype),
+            self._state_shape,
         )
 
     def init(self):

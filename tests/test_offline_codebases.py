@@ -298,17 +298,11 @@ def test_dwbcs_evaluation_metrics_against_numpy(demos):
 # -- the command line: --ilid-union, metrics.csv, the record, --resume -------------------------
 
 
-def test_the_ilid_union_flag_reaches_config_metrics_record_and_resume(tmp_path, capsys):
-    """--ilid-union released is written in config.json (the run's settings and its trainer's)
-    and read back by --resume; DWBC's evaluation columns are in metrics.csv and its record,
-    filled at the evaluations of DWBC's rows only; a bad value is one line naming the flag."""
-    from pngail_jax.analysis.run_records import write_record
+def five_trajectories(path):
+    """A made Pendulum set of 5 trajectories of 20 rows (one at confidence 1) at ``path``."""
     from pngail_jax.demos import save_npz
-    from pngail_jax.jobs.offline import OfflineRunConfig, load_offline_config
-    from pngail_jax.programs import offline as program
 
     rng = np.random.default_rng(0)
-    path = tmp_path / "demos.npz"
     save_npz(path, Demonstrations(
         observations=rng.normal(size=(100, 3)).astype(np.float32),
         actions=rng.uniform(-2, 2, size=(100, 1)).astype(np.float32),
@@ -316,6 +310,63 @@ def test_the_ilid_union_flag_reaches_config_metrics_record_and_resume(tmp_path, 
         trajectory_ids=np.repeat(np.arange(5), 20),
         metadata={"env": "Pendulum-v1", "random_return": -1200.0, "optimal_return": -150.0},
     ))  # fmt: skip
+    return path
+
+
+def test_an_ilid_run_cut_before_its_first_chunk_resumes_after_its_discriminators(
+    tmp_path, capsys, monkeypatch
+):
+    """ILID's discriminators train before its first chunk (an hour at its codebase's budget
+    on a 2-core CPU); the start is saved at once (chunk_0000), so a run cut before its first
+    chunk ends resumes from there without training them again, to the uninterrupted run's
+    evaluations and selection, bit for bit."""
+    from pngail_jax.jobs import offline as job
+    from pngail_jax.programs import offline as program
+
+    argv = [
+        "--demos", str(five_trajectories(tmp_path / "demos.npz")), "--methods", "ilid",
+        "--seeds", "2", "--gradient-steps", "40", "--steps-per-iteration", "10",
+        "--eval-every", "2", "--chunk-iterations", "2", "--batch-size", "8",
+        "--ilid-discriminator-steps", "50",
+    ]  # fmt: skip
+    program.main([*argv, "--out", str(tmp_path / "whole")])
+    cut = tmp_path / "cut"
+    with monkeypatch.context() as patched:
+
+        def stopped(*args, **kwargs):  # a Ctrl-C as the first chunk runs
+            raise KeyboardInterrupt
+
+        patched.setattr(job, "run_chunks", stopped)
+        with pytest.raises(SystemExit, match="--resume"):
+            program.main([*argv, "--out", str(cut)])
+    assert [c.name for c in (cut / "checkpoints" / "ilid").iterdir()] == ["chunk_0000"]
+    capsys.readouterr()
+    program.main(["--resume", str(cut)])
+    said = capsys.readouterr().out
+    assert f"resumed from {cut / 'checkpoints' / 'ilid' / 'chunk_0000'}" in said
+    assert "ILID's two discriminators" not in said
+
+    def rows(run):
+        with (run / "metrics.csv").open() as file:
+            rows = list(csv.DictReader(file))
+        return [{k: v for k, v in row.items() if k != "wall_seconds"} for row in rows]
+
+    assert rows(cut) == rows(tmp_path / "whole")
+    assert (
+        json.loads((cut / "summary.json").read_text())["ilid"]
+        == (json.loads((tmp_path / "whole" / "summary.json").read_text())["ilid"])
+    )
+
+
+def test_the_ilid_union_flag_reaches_config_metrics_record_and_resume(tmp_path, capsys):
+    """--ilid-union released is written in config.json (the run's settings and its trainer's)
+    and read back by --resume; DWBC's evaluation columns are in metrics.csv and its record,
+    filled at the evaluations of DWBC's rows only; a bad value is one line naming the flag."""
+    from pngail_jax.analysis.run_records import write_record
+    from pngail_jax.jobs.offline import OfflineRunConfig, load_offline_config
+    from pngail_jax.programs import offline as program
+
+    path = five_trajectories(tmp_path / "demos.npz")
     out = tmp_path / "run"
     argv = [
         "--demos", str(path), "--methods", "dwbc,ilid", "--seeds", "1", "--gradient-steps",

@@ -4,9 +4,11 @@ and stopping at a checkpoint.
 A job compiles its work into a ``pngail_jax.grid.Grid`` and runs it a chunk at a time:
 ``run_chunks`` runs the chunk, fetches its metrics, joins them to those so far, times it,
 prints the job's progress line and writes a checkpoint (``chunk_NNNN/``: the state via orbax,
-the metrics, the timing, then the digests that mark it complete; the last two kept). A stop
-asked for by a signal handler (``stop_after_this_chunk``) waits for the chunk's checkpoint.
-``start`` begins from a checkpoint (``intact_checkpoint``) or afresh.
+the metrics, the init's metrics, the timing, then the digests that mark it complete; the last
+two kept). A stop asked for by a signal handler (``stop_after_this_chunk``) waits for the
+chunk's checkpoint. ``start`` begins from a checkpoint (``intact_checkpoint``), without running
+the grid's init again where the checkpoint keeps the init's metrics, or afresh, saving the
+start as ``chunk_0000`` where the job asks (an init that runs long).
 """
 
 from __future__ import annotations
@@ -72,14 +74,47 @@ class Progress:
         self.chunks_done = chunk + 1
 
 
-def start(grid, checkpoint: Path | None):
+def start(grid, checkpoint: Path | None, *, save_to: Path | None = None, writer: bool = True):
     """The grid's first state and progress: restored from ``checkpoint`` (an intact
-    ``chunk_*`` directory, ``intact_checkpoint``), else fresh."""
+    ``chunk_*`` directory, ``intact_checkpoint``), else fresh. A checkpoint that keeps its
+    grid's initial metrics (``INIT_METRICS``) is restored without running the grid's init; an
+    older one runs it again for them. ``save_to``: a fresh start is saved there at once
+    (``chunk_0000``), for a job whose init runs long (ILID's discriminators), so a run cut
+    before its first chunk ends resumes after its init (every process calls it; ``writer``
+    writes)."""
+    if checkpoint is not None and (checkpoint / INIT_METRICS).exists():
+        progress = Progress(0, _load_metrics(checkpoint / INIT_METRICS), None, _fresh_timing())
+        return restore_checkpoint(grid, grid.state_shape(), checkpoint, progress), progress
     state, init_metrics = grid.init()
-    progress = Progress(0, grid.fetch(init_metrics), None, {"seconds": 0.0, "steps": 0})
+    progress = Progress(0, grid.fetch(init_metrics), None, _fresh_timing())
     if checkpoint is not None:
-        state = restore_checkpoint(grid, state, checkpoint, progress)
+        template = jax.eval_shape(lambda: grid.unpad(state))
+        state = restore_checkpoint(grid, template, checkpoint, progress)
+    elif save_to is not None:
+        save_checkpoint(save_to, progress, grid.fetch(state), writer)
     return state, progress
+
+
+def _fresh_timing() -> dict:
+    return {"seconds": 0.0, "steps": 0}
+
+
+# A checkpoint's files beside its state: the metrics of its chunks so far (none in the
+# ``chunk_0000`` of a saved start) and, since 0.2, the grid's initial metrics.
+CHUNK_METRICS, INIT_METRICS = "metrics.npz", "init_metrics.npz"
+
+
+def _save_metrics(path: Path, metrics: dict | None) -> None:
+    stored = {name.replace("/", ":"): value for name, value in (metrics or {}).items()}
+    with atomic_path(path) as temporary:
+        np.savez(temporary, **stored)
+
+
+def _load_metrics(path: Path) -> dict | None:
+    """The metrics ``_save_metrics`` wrote (None where it wrote none)."""
+    with np.load(path) as stored:
+        metrics = {name.replace(":", "/"): stored[name] for name in stored.files}
+    return metrics or None
 
 
 def run_chunks(
@@ -225,9 +260,8 @@ def save_checkpoint(directory: Path, progress: Progress, host_state, writer: boo
         save_tree(path / "state", host_state)
         if not writer:
             return
-        metrics = {name.replace("/", ":"): value for name, value in progress.metrics.items()}
-        with atomic_path(path / "metrics.npz") as temporary:
-            np.savez(temporary, **metrics)
+        _save_metrics(path / CHUNK_METRICS, progress.metrics)
+        _save_metrics(path / INIT_METRICS, progress.init_metrics)
         write_json(
             path / "progress.json",
             {"chunks_done": progress.chunks_done, "timing": progress.timing},
@@ -245,16 +279,15 @@ def save_checkpoint(directory: Path, progress: Progress, host_state, writer: boo
         shutil.rmtree(old)
 
 
-def restore_checkpoint(grid, state, checkpoint: Path, progress: Progress):
-    """The grid's state saved in ``checkpoint`` (an intact ``chunk_*``; ``state`` gives the
-    structure), with ``progress`` set to its metrics, chunks done and timing."""
-    template = jax.eval_shape(lambda: grid.unpad(state))
+def restore_checkpoint(grid, template, checkpoint: Path, progress: Progress):
+    """The grid's state saved in ``checkpoint`` (an intact ``chunk_*``; ``template``, the
+    shapes of its real cells' state, ``Grid.state_shape``, gives the structure), with
+    ``progress`` set to its metrics, chunks done and timing."""
     try:
         state = grid.place(restore_tree(checkpoint / "state", template))
     except ValueError as error:  # intact, but of another grid
         raise RunError(f"cannot resume from {checkpoint}: {error}") from None
-    with np.load(checkpoint / "metrics.npz") as stored:
-        progress.metrics = {name.replace(":", "/"): stored[name] for name in stored.files}
+    progress.metrics = _load_metrics(checkpoint / CHUNK_METRICS)
     done = read_json(checkpoint / "progress.json", "progress record")
     progress.chunks_done, progress.timing = done["chunks_done"], done["timing"]
     print(f"resumed from {checkpoint} (iteration {progress.iterations_done(grid)})")

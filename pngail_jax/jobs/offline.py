@@ -210,7 +210,8 @@ def _run_group(
     if "ilid" in trainer_config.components and checkpoint is None:  # minutes, before step 1
         steps = trainer_config.ilid_discriminator_steps
         with ticking(f"{methods}: ILID's two discriminators, {steps:,} steps each"):
-            state, progress = start(grid, checkpoint)
+            # saved at once: a run cut before its first chunk ends resumes after them
+            state, progress = start(grid, checkpoint, save_to=checkpoints)
     else:
         state, progress = start(grid, checkpoint)
     steps_per_chunk = grid.num_cells * grid.iterations_per_chunk
