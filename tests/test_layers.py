@@ -68,9 +68,9 @@ LAYERS = [
 
 # The jobs in their dependency order: each imports only those before it.
 JOB_ORDER = [
-    "errors", "trainer_configs", "classify", "chunks", "early_rewards", "train_seeds", "make_demos",
-    "demonstrations", "train_rl", "compare_settings", "comparison_record", "build", "record",
-    "results", "sweep", "offline_config", "offline",
+    "errors", "trainer_configs", "classify", "chunks", "early_rewards", "train_seeds",
+    "make_demos_run", "make_demos", "demonstrations", "train_rl", "compare_settings",
+    "comparison_record", "build", "record", "results", "sweep", "offline_config", "offline",
 ]  # fmt: skip
 LONGEST_MODULE = 700
 LONGEST_JOB = 400

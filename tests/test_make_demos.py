@@ -39,15 +39,15 @@ def test_make_demos_tiny_pendulum(tmp_path, capsys):
         ]
     )
     # Written through temporary siblings that were renamed: none is left behind.
-    names = [".pngail-outputs.json", ".pngail-run.json", "checkpoints", "demos.npz",
-             "normalizer.json"]  # fmt: skip
+    names = [".config.sealed.json", ".pngail-outputs.json", ".pngail-run.json", "checkpoints",
+             "config.json", "demos.npz", "normalizer.json"]  # fmt: skip
     assert sorted(p.name for p in tmp_path.iterdir()) == names
     # Finished work is not replaced by a second run without --overwrite.
     with pytest.raises(SystemExit, match="^2$"):  # parser.error's; its line on stderr
         make_demos.parse_args(["--out", str(tmp_path)])
     assert (
-        f"--out {tmp_path} already holds a run of experiments.make_demos: pass --overwrite to "
-        "replace it"
+        f"--out {tmp_path} already holds a run of experiments.make_demos: --resume {tmp_path} "
+        "to continue it, pass --overwrite to replace it"
     ) in capsys.readouterr().err
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -127,8 +127,9 @@ def test_bad_output_directories_fail_before_any_training(tmp_path, capsys):
         make_demos.parse_args(["--out", str(tmp_path)])
     err = capsys.readouterr().err
     assert (
-        f"--out {tmp_path} already holds a run of experiments.make_demos: pass --overwrite" in err
-    )
+        f"--out {tmp_path} already holds a run of experiments.make_demos: --resume {tmp_path} "
+        "to continue it, pass --overwrite"
+    ) in err
     with pytest.raises(SystemExit, match="^2$"):  # the test's own file: not the program's
         make_demos.parse_args(["--out", str(tmp_path), "--overwrite"])
     assert (

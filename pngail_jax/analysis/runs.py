@@ -56,26 +56,30 @@ OFFLINE_SEALED = ("program", "config", "demonstrations", "input_files", "normali
 # begins, a key added by hand included.
 RUN_UNSEALED = ("provenance", "resumed_provenance", "complete", "wall_seconds", "train_seconds")
 # Each program's method family: the sweep's adversarial methods, the offline program's,
-# and train_rl's reinforcement learning on the true reward (no demonstrations).
-FAMILIES = {"sweep": "adversarial", "offline": "offline", "train_rl": "reinforcement"}
+# and reinforcement learning on the true reward (no demonstrations): train_rl's, and
+# make_demos' learner whose checkpoints the demonstrations are rolled out from.
+FAMILIES = {"sweep": "adversarial", "offline": "offline", "train_rl": "reinforcement",
+            "make_demos": "reinforcement"}  # fmt: skip
 
 
 def run_document(program: str, config: dict, resolved: dict, provenance: dict) -> dict:
     """The one layout of a run's ``config.json``, whichever program writes it (``sweep``:
     ``jobs.record.write_config``; ``offline``: ``jobs.offline.run_offline``; ``train_rl``:
-    ``jobs.train_rl.TrainRLConfig.document``)::
+    ``jobs.train_rl.TrainRLConfig.document``; ``make_demos``:
+    ``jobs.make_demos_run.making_document``)::
 
-        {"program": "sweep" | "offline" | "train_rl",
+        {"program": "sweep" | "offline" | "train_rl" | "make_demos",
          "family": "adversarial" | "offline" | "reinforcement",  # what it ran (FAMILIES)
-         "config": {the job config's fields: RunConfig's, OfflineRunConfig's or
-                    TrainRLConfig's (with train_rl's "argv", the flags --resume reads)},
+         "config": {the job config's fields: RunConfig's, OfflineRunConfig's,
+                    TrainRLConfig's or MakeDemosConfig's (with train_rl's and
+                    make_demos' "argv", the flags --resume reads)},
          "resolved": {what the config resolved to when the run began: "demos_path",
                       "inputs" (each input file's integrity.file_record), "return_range"
                       (random, optimal) and "return_range_source", "trainer" (the
                       trainer's static config), and the program's own: a sweep's
                       "methods" (their presets), "physics", "action_scale", "num_demos",
-                      "bsc_eps"; train_rl's are "env_options", "rollout" and
-                      "hyperparams" alone},
+                      "bsc_eps"; train_rl's and make_demos' are "env_options",
+                      "rollout" and "hyperparams" alone},
          "provenance": {where and with what it ran: provenance()},
          ...}  # the offline program adds "complete", its seconds and, when resumed,
                # "resumed_provenance" as it ends
@@ -99,7 +103,7 @@ class RunConfigView:
     """A run's ``config.json`` (or a record's ``config``), whichever program wrote it and in
     whichever layout, read the same way (``read_run_config``)."""
 
-    program: str  # "sweep", "offline" or (its seal alone is read) "train_rl"
+    program: str  # "sweep", "offline" or (its seal alone is read) "train_rl", "make_demos"
     settings: dict  # env, methods, seeds, demos, ...: what the run was asked to do
     sealed: dict  # what the run's config seal covers
     inputs: dict  # the input files' records (integrity.file_record), by name

@@ -24,6 +24,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
+from pngail_jax.analysis.runs import UntrustedRun, sealed_document, sealed_part
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.storage.checkpoint import restore_tree, save_tree
 from pngail_jax.storage.integrity import (
@@ -34,7 +35,7 @@ from pngail_jax.storage.integrity import (
     write_json,
     write_manifest,
 )
-from pngail_jax.storage.outputs import record_held_outputs
+from pngail_jax.storage.outputs import output_owner, record_held_outputs
 
 
 @dataclasses.dataclass
@@ -292,3 +293,22 @@ def restore_checkpoint(grid, template, checkpoint: Path, progress: Progress):
     progress.chunks_done, progress.timing = done["chunks_done"], done["timing"]
     print(f"resumed from {checkpoint} (iteration {progress.iterations_done(grid)})")
     return state
+
+
+def resumable_config(out: Path, program: str, finished: str, *, part=sealed_part) -> dict:
+    """The config.json of ``program``'s interrupted run in ``out``, which a resume compares
+    with its own config; ``RunError`` with one line for a directory holding no run of
+    ``program``, a finished run (its ``finished`` file written), or a config.json without
+    its seal or changed since the run began (``part``: what the seal covers)."""
+    if output_owner(out) != program:
+        raise RunError(f"--resume {out} holds no run of experiments.{program}")
+    if (out / finished).exists():
+        raise RunError(f"--resume {out}: the run is complete (its {finished} is written)")
+    try:
+        saved, _ = sealed_document(
+            out, f"--resume {out}", what=f"{program} run config", part=part,
+            unsealed_remedy="start a new run",
+        )  # fmt: skip
+    except UntrustedRun as error:
+        raise RunError(str(error)) from None
+    return saved

@@ -5,7 +5,8 @@
     path = make_demonstrations(MakeDemosConfig(env="Pendulum-v1"), "demos/pendulum")
 
 1. ``train_candidates``: TRPO on the true reward (``seeds`` in one program), keeping every
-   evaluated checkpoint (``checkpoints/iter_XXXX/``, loadable with ``pngail_jax.load_policy``).
+   evaluated checkpoint (``checkpoints/iter_XXXX/``, loadable with ``pngail_jax.load_policy``)
+   and the learner's whole state after every block (``training/``, the last two kept).
 2. ``pick_policies``: the optimal policy is the best-evaluated checkpoint; the intermediate
    policy is the earlier checkpoint whose evaluated normalised return is closest to
    ``intermediate_target`` (0.45: the authors' Pendulum set has intermediate confidences of
@@ -16,8 +17,11 @@
    with its return normalised between random and optimal (clipped to [0, 1]); actions clipped
    to the bounds, as the environment applies them; the random and optimal returns in the metadata.
 
-``demos.npz`` is written last and atomically (a temporary sibling renamed onto it), so its
-presence means the making finished; ``python -m experiments.make_demos`` is this with flags.
+``config.json`` (sealed) is written first and ``demos.npz`` last and atomically (a temporary
+sibling renamed onto it), so its presence means the making finished; then ``training/`` goes.
+A making cut short resumes (``resume=True``, or ``python -m experiments.make_demos --resume
+DIR``) from its last block, to the demonstrations of an uninterrupted one.
+``python -m experiments.make_demos`` is this with flags.
 """
 
 from __future__ import annotations
@@ -25,7 +29,9 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import shutil
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -41,15 +47,20 @@ from pngail_jax.demos.generate import normalized_return, random_policy_return, r
 from pngail_jax.demos.npz import save_npz
 from pngail_jax.demos.types import Demonstrations
 from pngail_jax.jobs.errors import RunError, refusals
+from pngail_jax.jobs.make_demos_run import (
+    DEMOS_FILE,
+    PROGRAM,
+    TRAINING,
+    begin_making,
+    kept_snapshots,
+    making_document,
+)
 from pngail_jax.jobs.train_seeds import train_seeds
 from pngail_jax.rl import PolicyTrainer
 from pngail_jax.rl.learners import learner_hyperparams, make_learner
 from pngail_jax.storage.checkpoint import save_trpo_policies
 from pngail_jax.storage.integrity import atomic_path, atomic_write_text
 from pngail_jax.storage.outputs import Claim, claimed
-
-DEMOS_FILE = "demos.npz"  # written last: its presence marks a finished run
-PROGRAM = "make_demos"  # the owner its directories are marked with (pngail_jax.storage.outputs)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -131,19 +142,32 @@ class Picked:
 
 
 def make_demonstrations(
-    config: MakeDemosConfig, out, *, overwrite: bool = False, wait: bool = False
+    config: MakeDemosConfig,
+    out,
+    *,
+    overwrite: bool = False,
+    wait: bool = False,
+    resume: bool = False,
+    command: Sequence[str] | None = None,
 ) -> Path:
-    """Makes ``config``'s demonstrations into ``out`` (``demos.npz``, ``normalizer.json``,
-    ``checkpoints/``) and returns the path of ``demos.npz``. ``out`` must be new, empty or,
-    with ``overwrite``, an earlier making's (``pngail_jax.storage.outputs``); refusals raise
-    ``RunError`` with one line; a second process on the same ``out`` is refused, or with
-    ``wait`` waits for the first to end."""
-    with refusals(), claimed(Path(out), PROGRAM, overwrite=overwrite, wait=wait) as claim:
-        return make_claimed(config, claim)
+    """Makes ``config``'s demonstrations into ``out`` (``config.json``, ``demos.npz``,
+    ``normalizer.json``, ``checkpoints/``) and returns the path of ``demos.npz``. ``out`` must
+    be new, empty or, with ``overwrite``, an earlier making's (``pngail_jax.storage.outputs``);
+    ``resume``: continue the making cut short in ``out``, begun with the same config (and
+    ``command``, the program's flags, which config.json keeps for its ``--resume``). Refusals
+    raise ``RunError`` with one line; a second process on the same ``out`` is refused, or with
+    ``wait`` waits for the first to end. A stop asked for by a signal handler ends at the next
+    block's checkpoint."""
+    out = Path(out)
+    with refusals(), claimed(out, PROGRAM, overwrite=overwrite, wait=wait, resume=resume) as claim:
+        return make_claimed(config, claim, command)
 
 
-def make_claimed(config: MakeDemosConfig, claim: Claim) -> Path:
-    """``make_demonstrations`` into a directory already claimed (``claim``)."""
+def make_claimed(
+    config: MakeDemosConfig, claim: Claim, command: Sequence[str] | None = None
+) -> Path:
+    """``make_demonstrations`` into a directory already claimed (``claim``; resumed where it
+    says so)."""
     out = claim.directory
     try:
         # Sized for Warp's widest batch: the seeds' training, or the episodes rolled at once.
@@ -151,7 +175,7 @@ def make_claimed(config: MakeDemosConfig, claim: Claim) -> Path:
         env = env_settings.make_env(config.env, config.settings, cells=widest)
     except ValueError as error:  # e.g. a custom factory that raised or returned no Env
         raise RunError(f"environment: {error}") from None
-    claim.prepare()  # an old run kept until here
+    begin_making(claim, making_document(config, command))  # an old run kept until here
     start = time.perf_counter()
     snapshots = train_candidates(config, env, out)
     print("2/3 measuring random and optimal returns", flush=True)
@@ -159,6 +183,7 @@ def make_claimed(config: MakeDemosConfig, claim: Claim) -> Path:
     picked = pick_policies(config, env, snapshots, episodes)
     demos = roll_out_mixture(config, env, picked, episodes)
     path = write_demonstrations(out, demos, {k: demos.metadata[k] for k in RETURN_RANGE_KEYS})
+    shutil.rmtree(out / TRAINING, ignore_errors=True)  # finished: nothing left to resume
     print(policies_table(picked))
     _, first_rows = np.unique(demos.trajectory_ids, return_index=True)
     confidences = [float(c) for c in demos.confidence[np.sort(first_rows)]]
@@ -172,7 +197,9 @@ def make_claimed(config: MakeDemosConfig, claim: Claim) -> Path:
 
 def train_candidates(config: MakeDemosConfig, env, out: Path) -> list[Checkpoint]:
     """TRPO on the true reward, every evaluated checkpoint of every seed kept (in memory and
-    under ``out/checkpoints/iter_XXXX/``)."""
+    under ``out/checkpoints/iter_XXXX/``), the whole state after every block under
+    ``out/training/``, from which a making cut short continues (the checkpoints of the
+    blocks before the one it restores read back from ``out/checkpoints/``)."""
     rollout = config.rollout_config
     learner = make_learner(config.learner, rollout, env)
     trainer = PolicyTrainer(rollout, env, learner=learner)
@@ -183,6 +210,9 @@ def train_candidates(config: MakeDemosConfig, env, out: Path) -> list[Checkpoint
     snapshots: list[Checkpoint] = []
 
     def keep(iteration, state, metrics):
+        if not snapshots:  # resumed after this block: the earlier ones are kept on disk
+            kept = kept_snapshots(out, rollout.eval_every, iteration)
+            snapshots.extend(Checkpoint(*fields) for fields in kept)
         returns = metrics["eval/return"][:, -1]
         save_trpo_policies(
             out / "checkpoints" / f"iter_{iteration:04d}", env, rollout, state, returns
@@ -197,7 +227,8 @@ def train_candidates(config: MakeDemosConfig, env, out: Path) -> list[Checkpoint
         flush=True,
     )
     train_key = _keys(config)[0]
-    train_seeds(trainer, hyperparams, jax.random.split(train_key, config.seeds), on_block=keep)
+    keys = jax.random.split(train_key, config.seeds)
+    train_seeds(trainer, hyperparams, keys, on_block=keep, checkpoints=out / TRAINING)
     return snapshots
 
 

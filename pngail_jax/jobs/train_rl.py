@@ -23,12 +23,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from pngail_jax.analysis.report import write_seed_metrics_csv
-from pngail_jax.analysis.runs import UntrustedRun, run_document, sealed_document, sealed_part
+from pngail_jax.analysis.runs import run_document, sealed_part
 from pngail_jax.config import settings as env_settings
 from pngail_jax.config.learner import LearnerConfig
 from pngail_jax.config.saved import is_run_document, provenance
 from pngail_jax.config.training import check_training
-from pngail_jax.jobs.chunks import nanmean
+from pngail_jax.jobs.chunks import nanmean, resumable_config
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.jobs.train_seeds import train_seeds
 from pngail_jax.rl import PolicyTrainer, RolloutConfig, TRPOConfig, TRPOHyperparams
@@ -41,7 +41,7 @@ from pngail_jax.storage.integrity import (
     write_manifest,
     write_sealed,
 )
-from pngail_jax.storage.outputs import claimed, output_owner
+from pngail_jax.storage.outputs import claimed
 
 PROGRAM = "train_rl"  # the owner its directories are marked with (pngail_jax.storage.outputs)
 # metrics.csv's columns after seed and iteration, by learner.
@@ -204,17 +204,7 @@ def check_resumable(out: Path, document: dict) -> None:
     config.json differ from the config it was sealed with when it began (``document``: what
     the resumed flags give, in today's layout). A run begun in a flat layout is compared in
     that layout's keys (``flat_document``); its config.json is never rewritten."""
-    if output_owner(out) != PROGRAM:
-        raise RunError(f"--resume {out} holds no run of experiments.train_rl")
-    if (out / "policy.json").exists():
-        raise RunError(f"--resume {out}: the run is complete (its policy.json is written)")
-    try:
-        saved, _ = sealed_document(
-            out, f"--resume {out}", what="train_rl run config", part=_sealed,
-            unsealed_remedy="start a new run",
-        )  # fmt: skip
-    except UntrustedRun as error:
-        raise RunError(str(error)) from None
+    saved = resumable_config(out, PROGRAM, "policy.json", part=_sealed)
     if is_run_document(saved):
         changes = document_differences(sealed_part(saved), sealed_part(document))
     else:

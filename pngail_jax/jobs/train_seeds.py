@@ -20,7 +20,9 @@ def train_seeds(trainer, hyperparams, keys, on_block=None, checkpoints: Path | N
     Calls ``on_block(iteration, trpo_state, block_metrics)`` if given (e.g. to keep
     checkpoints). With ``checkpoints`` (a directory), the whole state is saved there after
     every block (``chunk_NNNN/``, the last two kept), and a run that finds an intact one
-    continues from it to the numbers of an uninterrupted run. The numbers are those of the
+    continues from it to the numbers of an uninterrupted run; ``on_block`` is then called
+    first for the block restored (its policies may not have been kept: the run can be cut
+    between a block's checkpoint and ``on_block``). The numbers are those of the
     whole-scan ``trainer.train``. Returns ``(final TRPOState, metrics)`` with metrics
     float[seeds, num_iterations].
     """
@@ -31,6 +33,9 @@ def train_seeds(trainer, hyperparams, keys, on_block=None, checkpoints: Path | N
     if checkpoints is not None and checkpoints.exists():
         found = intact_checkpoint(checkpoints)
     state, progress = start(grid, found)
+    if on_block is not None and progress.chunks_done:
+        block = {name: values[:, -config.eval_every :] for name, values in progress.metrics.items()}
+        on_block(progress.iterations_done(grid), grid.fetch(trainer.policy_state(state)), block)
 
     def line(progress, metrics) -> str:
         rate = grid.num_cells * config.eval_every * config.batch_size

@@ -14,7 +14,8 @@ import signal
 from collections.abc import Sequence
 from pathlib import Path
 
-from pngail_jax.storage.outputs import output_refusal
+from pngail_jax.storage.integrity import IntegrityError, read_json
+from pngail_jax.storage.outputs import output_owner, output_refusal
 
 
 class HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
@@ -185,6 +186,52 @@ def claim_output(
     refusal = output_refusal(directory, program, overwrite, flag)
     if refusal:
         parser.error(refusal)
+
+
+# What --resume DIR takes besides itself (train_rl's and make_demos'): the run's config.json
+# holds every other flag.
+RESUME_FLAGS = ("--resume", "--compile-cache", "--no-compile-cache")
+
+
+def resumed_args(
+    parser: argparse.ArgumentParser,
+    given: argparse.Namespace,
+    argv: Sequence[str],
+    *,
+    program: str,
+    finished: str,
+    job: str,
+    check,
+    read_argv=lambda document: document["config"]["argv"],
+) -> argparse.Namespace:
+    """The flags of the run of ``program`` in ``given.resume`` (``read_argv`` of its
+    config.json), parsed and checked again (``check(parser, args)``), with ``out``, ``resume``
+    and ``argv`` (the stored flags) set and this command's compilation-cache flags: what
+    ``--resume DIR`` runs. Exits through ``parser.error`` when ``argv`` has any other flag
+    but ``RESUME_FLAGS``, the directory holds no run of ``program`` or a finished one (its
+    ``finished`` file written), or no flags (a run begun from Python: ``job``, the function
+    it began with, resumes it)."""
+    directory = given.resume
+    if any(a.split("=")[0] not in RESUME_FLAGS for a in argv if a.startswith("--")):
+        parser.error("--resume DIR takes no other flags: the run's config.json has them")
+    if output_owner(directory) != program:
+        parser.error(f"--resume {directory} holds no run of experiments.{program}")
+    if (directory / finished).exists():
+        parser.error(f"--resume {directory}: the run is complete (its {finished} is written)")
+    try:
+        stored = read_argv(read_json(directory / "config.json", f"{program} run config"))
+    except (OSError, IntegrityError, KeyError, TypeError, AttributeError) as error:
+        parser.error(f"--resume {directory}: no flags to resume with ({error})")
+    if not isinstance(stored, list):  # begun from Python, with no flags
+        parser.error(
+            f"--resume {directory}: no flags to resume with (a run begun from Python: "
+            f"resume it with {job}(..., resume=True))"
+        )
+    args = parser.parse_args(stored)
+    check(parser, args)
+    args.out, args.resume, args.argv = directory, directory, stored
+    args.compile_cache, args.no_compile_cache = given.compile_cache, given.no_compile_cache
+    return args
 
 
 def text_argument(text: str) -> str:

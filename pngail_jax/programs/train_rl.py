@@ -20,7 +20,7 @@ from pathlib import Path
 from pngail_jax.config.budget import check_eval_interval
 from pngail_jax.config.validation import ConfigError
 from pngail_jax.jobs.errors import RunError
-from pngail_jax.jobs.train_rl import TrainRLConfig, flat_document, train_rl
+from pngail_jax.jobs.train_rl import PROGRAM, TrainRLConfig, flat_document, train_rl
 from pngail_jax.programs import flags
 from pngail_jax.programs.cli import (
     ENV_HELP,
@@ -34,11 +34,10 @@ from pngail_jax.programs.cli import (
     interrupted,
     note_deprecated,
     path_argument,
+    resumed_args,
     signals_stop_at_a_checkpoint,
     use_compile_cache,
 )
-from pngail_jax.storage.integrity import IntegrityError, read_json
-from pngail_jax.storage.outputs import output_owner
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -80,10 +79,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-# What --resume DIR takes besides itself: the run's config.json holds every other flag.
-RESUME_FLAGS = ("--resume", "--compile-cache", "--no-compile-cache")
-
-
 def parse_args(argv=None) -> argparse.Namespace:
     """The checked flags of ``argv``: of a new run (its ``--out`` claimed), or of the run that
     ``--resume DIR`` continues (its own flags, read from its config.json)."""
@@ -91,7 +86,11 @@ def parse_args(argv=None) -> argparse.Namespace:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parser.parse_args(argv)
     if args.resume is not None:
-        return _resumed_args(parser, args, argv)
+        return resumed_args(
+            parser, args, argv, program=PROGRAM, finished="policy.json",
+            job=f"pngail_jax.jobs.{PROGRAM}.train_rl", check=_check,
+            read_argv=lambda document: flat_document(document)["argv"],  # any layout's
+        )  # fmt: skip
     note_deprecated(argv, {"--fast-solver": "--solver fast"})
     _check(parser, args)
     if args.out is None:
@@ -118,33 +117,6 @@ def _check(parser, args) -> None:
         args.learner.check_batch(args.settings.rollout_config(args.iterations))
     except ValueError as error:
         parser.error(str(error))
-
-
-def _resumed_args(parser, given: argparse.Namespace, argv: list[str]) -> argparse.Namespace:
-    """The flags of the run in ``--resume DIR`` (its config.json's ``argv``), checked again,
-    with the compilation-cache flags of this command."""
-    directory = given.resume
-    if any(a.split("=")[0] not in RESUME_FLAGS for a in argv if a.startswith("--")):
-        parser.error("--resume DIR takes no other flags: the run's config.json has them")
-    if output_owner(directory) != "train_rl":
-        parser.error(f"--resume {directory} holds no run of experiments.train_rl")
-    if (directory / "policy.json").exists():
-        parser.error(f"--resume {directory}: the run is complete (its policy.json is written)")
-    try:
-        document = read_json(directory / "config.json", "train_rl run config")
-        stored = flat_document(document)["argv"]  # whichever layout the run began in
-    except (OSError, IntegrityError, KeyError, TypeError, AttributeError) as error:
-        parser.error(f"--resume {directory}: no flags to resume with ({error})")
-    if not isinstance(stored, list):  # begun from Python (jobs.train_rl), with no flags
-        parser.error(
-            f"--resume {directory}: no flags to resume with (a run begun from Python: "
-            "resume it with pngail_jax.jobs.train_rl.train_rl(..., resume=True))"
-        )
-    args = parser.parse_args(stored)
-    _check(parser, args)
-    args.out, args.resume, args.argv = directory, directory, stored
-    args.compile_cache, args.no_compile_cache = given.compile_cache, given.no_compile_cache
-    return args
 
 
 def main(argv=None) -> None:

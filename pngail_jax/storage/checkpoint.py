@@ -106,6 +106,19 @@ def save_trpo_policies(
     )
 
 
+def load_policies(directory: str | Path) -> tuple[dict, ObservationNormalizer, np.ndarray]:
+    """The stacked per-seed policies ``save_policies`` wrote in ``directory`` (its files
+    checked against their digests), as they were given to it: the policy parameters and
+    the observation normaliser, every leaf with a leading seed axis (``float32[seeds,
+    ...]``), and the final evaluation returns float[seeds] (NaN where a seed diverged)."""
+    directory = Path(directory).absolute()
+    metadata = _policy_metadata(directory, verbose=False)
+    arrays = ocp.StandardCheckpointer().restore(directory / "policy_params")
+    returns = [np.nan if r is None else r for r in metadata["final_eval_returns"]]
+    normalizer = ObservationNormalizer(**arrays["normalizer"])
+    return arrays["policy_params"], normalizer, np.asarray(returns, np.float64)
+
+
 # The keys load_policy reads from policy.json.
 POLICY_KEYS = (
     "observation_size",

@@ -34,7 +34,7 @@ LEGACY_MARKS = {
     "make_demos": ("demos.npz", "normalizer.json"),  # normalizer.json: one cut short
     "train_rl": ("policy.json",),
 }
-RESUMABLE = {"sweep", "paper", "offline"}
+RESUMABLE = {"sweep", "paper", "offline", "make_demos"}
 # The names each program's run writes at the top of its directory (fnmatch patterns; its
 # owner's tests check that every name a real run writes is listed here). A run lists as its
 # own (OUTPUT_LIST) only what it wrote under these names; --overwrite removes only what that
@@ -48,7 +48,8 @@ OWNED = {
                 "summary.md", "summary.json", "checkpoints", *_LOGS),
     "train_rl": ("config.json", ".config.sealed.json", "metrics.csv", "learning_curve.png",
                  "policy.json", "policy_params", "digests.json", "checkpoints"),
-    "make_demos": ("demos.npz", "normalizer.json", "checkpoints"),
+    "make_demos": ("config.json", ".config.sealed.json", "demos.npz", "normalizer.json",
+                   "checkpoints", "training"),
     "compare_settings": ("comparison.json", "comparison.md", "comparison.png",
                          "reference*", "table*", "mid-fast", "wide-fast*"),  # + its arms' runs
     "paper": ("paper.json", ".paper.sealed.json", "grids", "demos", "timings.json",
@@ -183,7 +184,7 @@ def output_owner(directory: Path) -> str | None:
         except (OSError, ValueError):
             return None
         if isinstance(document, dict):
-            if document.get("program") in ("offline", "train_rl"):
+            if document.get("program") in ("offline", "train_rl", "make_demos"):
                 return document["program"]
             # The flat layouts before it: the sweep's has what it resolved; train_rl's has not.
             if "resolved" in document:
