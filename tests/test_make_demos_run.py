@@ -2,6 +2,7 @@
 ``experiments.make_demos --resume DIR``): a making cut short resumes to the demonstrations of an
 uninterrupted one, and every resume that cannot be trusted is refused in one line."""
 
+import dataclasses
 import json
 import shutil
 
@@ -200,3 +201,42 @@ def test_resume_refuses_in_one_line(tmp_path, capsys):
     with pytest.raises(RunError, match=r"the run is complete \(its demos.npz is written\)"):
         make_demonstrations(config, edited, resume=True, command=argv)
     assert not any(p.name == "training" for p in edited.iterdir())  # nothing was trained
+
+
+@pytest.mark.filterwarnings("ignore:.*normalised returns run backwards")  # 6 tiny iterations
+def test_a_folder_a_job_keeps_continues_its_own_cut_making_and_replaces_another(
+    whole, tmp_path, monkeypatch, capsys
+):
+    """``continue_cut`` (the demonstrations' cache, a plan's folder): a making of the same
+    config cut short there continues to the uninterrupted one's demonstrations; a cut making
+    of another config is replaced."""
+    whole, _ = whole
+    config = make_demos.parse_args([*FLAGS, "--out", str(tmp_path / "unused")]).config
+    save, saved = chunks.save_checkpoint, []
+
+    def save_then_stop(*args, **kwargs):
+        save(*args, **kwargs)
+        saved.append(args[0])
+        if len(saved) % 2 == 0:  # the second block of each making
+            raise KeyboardInterrupt
+
+    cut, other = tmp_path / "cut", tmp_path / "other"
+    monkeypatch.setattr(chunks, "save_checkpoint", save_then_stop)
+    for out, made in ((cut, config), (other, dataclasses.replace(config, seed=1))):
+        with pytest.raises(KeyboardInterrupt):
+            make_demonstrations(made, out)  # from Python, as the cache and a plan begin them
+        assert not (out / "demos.npz").exists() and (out / "training").is_dir()
+    monkeypatch.setattr(chunks, "save_checkpoint", save)
+    capsys.readouterr()
+
+    make_demonstrations(config, cut, overwrite=True, continue_cut=True)
+    printed = capsys.readouterr().out
+    assert f"continuing the making cut short in {cut}" in printed and "resumed from" in printed
+    _assert_same_demonstrations(cut / "demos.npz", whole / "demos.npz")
+    assert sorted(p.name for p in cut.iterdir()) == FINISHED
+
+    make_demonstrations(config, other, overwrite=True, continue_cut=True)
+    printed = capsys.readouterr().out
+    assert "continuing" not in printed and "resumed from" not in printed
+    _assert_same_demonstrations(other / "demos.npz", whole / "demos.npz")  # made afresh
+    assert json.loads((other / "config.json").read_text())["config"]["seed"] == 0

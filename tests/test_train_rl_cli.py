@@ -127,9 +127,10 @@ def test_cli_rejects_bad_arguments(capsys):
 def test_finished_work_is_not_overwritten_without_the_flag(run_dir, tmp_path, capsys):
     with pytest.raises(SystemExit, match="^2$"):  # parser.error's; its line on stderr
         train_rl.parse_args(["--out", str(run_dir)])
-    assert f"--out {run_dir} already holds a run of experiments.train_rl: pass --overwrite" in (
-        capsys.readouterr().err
-    )
+    assert (
+        f"--out {run_dir} already holds a run of experiments.train_rl: --resume {run_dir} to "
+        "continue it, pass --overwrite"
+    ) in (capsys.readouterr().err)
     assert train_rl.parse_args(["--out", str(run_dir), "--overwrite"]).overwrite
     a_file = tmp_path / "notes.txt"
     a_file.write_text("mine")

@@ -52,6 +52,7 @@ from pngail_jax.jobs.make_demos_run import (
     PROGRAM,
     TRAINING,
     begin_making,
+    is_cut_making,
     kept_snapshots,
     making_document,
 )
@@ -148,19 +149,34 @@ def make_demonstrations(
     overwrite: bool = False,
     wait: bool = False,
     resume: bool = False,
+    continue_cut: bool = False,
     command: Sequence[str] | None = None,
 ) -> Path:
     """Makes ``config``'s demonstrations into ``out`` (``config.json``, ``demos.npz``,
     ``normalizer.json``, ``checkpoints/``) and returns the path of ``demos.npz``. ``out`` must
     be new, empty or, with ``overwrite``, an earlier making's (``pngail_jax.storage.outputs``);
     ``resume``: continue the making cut short in ``out``, begun with the same config (and
-    ``command``, the program's flags, which config.json keeps for its ``--resume``). Refusals
+    ``command``, the program's flags, which config.json keeps for its ``--resume``);
+    ``continue_cut`` (with ``overwrite``, in a folder a job keeps for itself): a making of the
+    same config cut short in ``out`` continues, anything else there is replaced. Refusals
     raise ``RunError`` with one line; a second process on the same ``out`` is refused, or with
     ``wait`` waits for the first to end. A stop asked for by a signal handler ends at the next
     block's checkpoint."""
     out = Path(out)
     with refusals(), claimed(out, PROGRAM, overwrite=overwrite, wait=wait, resume=resume) as claim:
+        if continue_cut:
+            return make_or_continue(config, claim)
         return make_claimed(config, claim, command)
+
+
+def make_or_continue(config: MakeDemosConfig, claim: Claim) -> Path:
+    """``make_claimed`` into a folder a job keeps for itself (the demonstrations' cache, a
+    plan's folder; claimed with ``overwrite``): a making of the same ``config`` cut short there
+    continues from its last block, anything else there is replaced."""
+    if not claim.resume and is_cut_making(claim.directory, making_document(config)):
+        print(f"continuing the making cut short in {claim.directory}", flush=True)
+        claim = dataclasses.replace(claim, resume=True)
+    return make_claimed(config, claim)
 
 
 def make_claimed(

@@ -95,6 +95,18 @@ def check_resumable(out: Path, document: dict) -> None:
         raise RunError(f"cannot resume {out}: these flags give another run ({listed})")
 
 
+def is_cut_making(out: Path, document: dict) -> bool:
+    """Whether ``out`` holds a making of ``document``'s config (``making_document``) cut short,
+    which a resume can continue (``check_resumable`` would accept it)."""
+    if not (out / "config.json").exists() or (out / DEMOS_FILE).exists():
+        return False
+    try:
+        check_resumable(out, document)
+    except RunError:
+        return False
+    return True
+
+
 def kept_snapshots(out: Path, eval_every: int, before: int) -> list[tuple]:
     """The evaluated policies a making kept under ``out/checkpoints/iter_XXXX/`` for every
     evaluation before iteration ``before`` (every ``eval_every`` iterations), in the order

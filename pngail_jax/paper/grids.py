@@ -112,8 +112,9 @@ def demo_config(
 
 def make_plan_demonstrations(config, directory: Path) -> None:
     """``pngail_jax.jobs.make_demos.make_demonstrations`` into the plan's own ``directory`` (a
-    making cut short there is replaced)."""
-    make_demos.make_demonstrations(config, directory, overwrite=True)
+    making of the same config cut short there continues from its last block; any other
+    making there is replaced)."""
+    make_demos.make_demonstrations(config, directory, overwrite=True, continue_cut=True)
 
 
 # -- grids -----------------------------------------------------------------------------------

@@ -34,7 +34,7 @@ LEGACY_MARKS = {
     "make_demos": ("demos.npz", "normalizer.json"),  # normalizer.json: one cut short
     "train_rl": ("policy.json",),
 }
-RESUMABLE = {"sweep", "paper", "offline", "make_demos"}
+RESUMABLE = {"sweep", "paper", "offline", "make_demos", "train_rl"}
 # The names each program's run writes at the top of its directory (fnmatch patterns; its
 # owner's tests check that every name a real run writes is listed here). A run lists as its
 # own (OUTPUT_LIST) only what it wrote under these names; --overwrite removes only what that
