@@ -91,6 +91,28 @@ def test_a_glance_table_joins_records_by_task():
         record_tables.glance_table([records[0], records[0]])
 
 
+def test_a_glance_table_takes_a_method_from_the_record_a_marker_picks():
+    """``NAME:A,B`` takes only those methods of a record: DWBC from its own record beside the
+    other methods of the task's, in the paper's column order; a method a record does not have
+    is refused in one line, and so is the marker's table."""
+    names = ["offline-pendulum", "offline-pendulum-dwbc5000"]
+    records = [run_records.check_record(ROOT / "records" / name) for name in names]
+    with pytest.raises(run_records.RecordError, match="'dwbc' on Pendulum-v1 is in another"):
+        record_tables.glance_table(records)
+    picks = {"offline-pendulum": ["bc-expert", "bc-all", "iswbc"], names[1]: ["dwbc"]}
+    lines = record_tables.glance_table(records, picks=picks).splitlines()
+    assert lines[0] == "| task (seeds) | BC (expert rows) | BC (all rows) | DWBC | ISW-BC |"
+    seeds = np.asarray(records[1]["late_average_normalized_return"]["dwbc"], float)
+    mean, se = seeds.mean(), seeds.std(ddof=1) / np.sqrt(len(seeds))
+    assert lines[2].split(" | ")[3] == f"{mean:.2f} ± {se:.2f}"
+    with pytest.raises(run_records.RecordError, match="record offline-pendulum has no method 'x'"):
+        record_tables.glance_table(records[:1], picks={"offline-pendulum": ["x"]})
+    marker = f"<!-- record-glance offline-pendulum:bc-all {names[1]}:dwbc -->"
+    (parsed,) = program.parse_markers(Path("page.md"), f"{marker}\n<!-- /record-glance -->\n")
+    assert parsed.names == tuple(names)
+    assert parsed.options == {"picks": {"offline-pendulum": ["bc-all"], names[1]: ["dwbc"]}}
+
+
 # The results tables of these documents, outside the record markers, each say where their
 # numbers rest: a record (``records/NAME``) or "record not kept", in the table or in the line
 # right above it. A results table is one whose header names a result or whose cells hold a
@@ -385,6 +407,11 @@ def test_a_missing_closing_marker_writes_nothing_and_names_the_line(tmp_path, mo
         ("<!-- record-table pendulum-10seeds pendulum-1000-5seeds -->",
          "record-table takes one record name, not 2"),
         ("<!-- record-glance -->", "record-glance takes one record name or more, not 0"),
+        ("<!-- record-table pendulum-10seeds:gail -->",
+         "record-table takes whole records, not pendulum-10seeds:gail"),
+        ("<!-- record-glance offline-pendulum:bc-all,,dwbc -->",
+         "record-glance offline-pendulum:bc-all,,dwbc: must be methods' names, A,B"),
+        ("<!-- record-glance offline/pendulum -->", "'offline/pendulum' is not a record's name"),
         ("<!-- record-table pendulum-10seeds baseline=gail baseline=bc -->",
          "record-table has baseline= twice"),
     ],

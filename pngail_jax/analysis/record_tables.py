@@ -21,7 +21,7 @@ from pngail_jax.analysis.run_records import (
     seed_values,
     statistic_key,
 )
-from pngail_jax.config.presets import display_name, reads_confidences
+from pngail_jax.config.presets import DISPLAY_NAMES, display_name, reads_confidences
 
 
 def record_table(record: dict, baseline: str | None = None) -> str:
@@ -74,25 +74,33 @@ def record_table(record: dict, baseline: str | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
-def glance_table(records: list[dict], statistic: str = "late_average") -> str:
+def glance_table(
+    records: list[dict], statistic: str = "late_average", picks: dict | None = None
+) -> str:
     """Several checked records in one table: a row per task (the records of one task
-    joined, each method from one record only), a column per method in the order met, each
+    joined, each method from one record only), a column per method in the paper's order, each
     cell the mean ± s.e. over seeds of ``statistic``'s normalised return ("-": not run).
-    The docs' tables between ``<!-- record-glance NAME NAME ... -->`` markers are this text
-    (``experiments.record --docs``)."""
+    ``picks``: ``{record name: [method, ...]}``, only those methods of that record (a default
+    measured in a record of its own beside the others'). The docs' tables between ``<!--
+    record-glance NAME[:A,B] NAME ... -->`` markers are this text (``experiments.record
+    --docs``)."""
 
     rows: dict[str, dict[str, np.ndarray]] = {}
     for record in records:
         env = str(read_run_config(record["config"]).settings.get("env"))
         task = rows.setdefault(env, {})
-        for method, seeds in record[statistic_key(statistic)].items():
+        for method, seeds in _picked(record, statistic_key(statistic), picks).items():
             if method in task:
                 raise RecordError(
                     f"record {record['name']}: {method!r} on {env} is in another record of "
                     "the table too"
                 )
             task[method] = seed_values(seeds)
-    methods = list(dict.fromkeys(method for task in rows.values() for method in task))
+    # Columns in the paper's order of methods (DISPLAY_NAMES), whichever record each came
+    # from; others after them, in the order met.
+    met = list(dict.fromkeys(method for task in rows.values() for method in task))
+    rank = {name: index for index, name in enumerate(DISPLAY_NAMES)}
+    methods = sorted(met, key=lambda method: (rank.get(method, len(rank)), met.index(method)))
     lines = [
         "| task (seeds) | " + " | ".join(display_name(method) for method in methods) + " |",
         "|---|" + "---:|" * len(methods),
@@ -106,6 +114,21 @@ def glance_table(records: list[dict], statistic: str = "late_average") -> str:
         seeds = "/".join(map(str, counts))
         lines.append(f"| {env} ({seeds}) | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def _picked(record: dict, key: str, picks: dict | None) -> dict:
+    """``record[key]`` (per method), only the methods ``picks`` names for the record when it
+    names any; RecordError for a picked method the record does not have."""
+    wanted = (picks or {}).get(record["name"])
+    if wanted is None:
+        return record[key]
+    missing = [method for method in wanted if method not in record[key]]
+    if missing:
+        raise RecordError(
+            f"record {record['name']} has no method {missing[0]!r} (it has "
+            f"{', '.join(record[key])})"
+        )
+    return {method: record[key][method] for method in wanted}
 
 
 def _mean_se(values: np.ndarray) -> str:

@@ -14,7 +14,8 @@ A table in README.md or a page under docs/ between ``<!-- record-table NAME -->`
 ``<!-- /record-table -->`` is ``record_tables.record_table`` of ``records/NAME`` (with
 ``baseline=METHOD`` after the name: each method's probability of improvement over it), and one
 between ``<!-- record-glance NAME NAME ... -->`` and ``<!-- /record-glance -->`` is
-``record_tables.glance_table`` of those records (a row per task), and one between
+``record_tables.glance_table`` of those records (a row per task; ``NAME:A,B`` takes only
+methods A and B of that record), and one between
 ``<!-- record-comparison NAME -->`` and ``<!-- /record-comparison -->`` the table of a
 recorded ``experiments.compare_settings`` comparison (``jobs.comparison_record``: RUN_DIR a
 finished comparison's folder); ``<!-- record-contrast NAME NAME ... baseline=ARM
@@ -180,6 +181,7 @@ class MarkerKind:
 
     usage: str  # the marker as the docs write it
     several_records: bool = False
+    picks: bool = False  # a name may be NAME:A,B, only those methods of that record
     required: dict[str, Callable[[str], object]] = dataclasses.field(default_factory=dict)
     optional: dict[str, Callable[[str], object]] = dataclasses.field(default_factory=dict)
 
@@ -189,7 +191,7 @@ class MarkerKind:
 # rather than ignored.
 MARKER_KINDS = {
     "table": MarkerKind("record-table NAME [baseline=METHOD]", optional={"baseline": _method}),
-    "glance": MarkerKind("record-glance NAME NAME ...", several_records=True),
+    "glance": MarkerKind("record-glance NAME[:A,B] NAME ...", several_records=True, picks=True),
     "comparison": MarkerKind("record-comparison NAME"),
     "blocks": MarkerKind("record-blocks NAME block=STEPS", required={"block": _block_steps}),
     "diagnostics": MarkerKind(
@@ -270,10 +272,8 @@ def _opening(where: str, kind: str, words: list[str]) -> tuple[tuple[str, ...], 
         raise run_records.RecordError(
             f"{where}: record-{kind} takes {wanted}, not {len(names)} {usage}"
         )
-    for name in names:
-        if not RECORD_NAME.fullmatch(name):
-            raise run_records.RecordError(f"{where}: '{name}' is not a record's name {usage}")
-    parsers, options = spec.required | spec.optional, {}
+    names, picks = _picked_names(where, kind, names)
+    parsers, options = spec.required | spec.optional, ({"picks": picks} if picks else {})
     for word in words:
         if "=" not in word:
             continue
@@ -296,6 +296,29 @@ def _opening(where: str, kind: str, words: list[str]) -> tuple[tuple[str, ...], 
             f"{where}: record-{kind} needs {' and '.join(missing)} {usage}"
         )
     return names, options
+
+
+def _picked_names(where: str, kind: str, words) -> tuple[tuple[str, ...], dict]:
+    """The record names of an opening marker's name words, and the methods picked from each
+    written ``NAME:A,B`` (only in a kind that takes picks); RecordError for a word that is not
+    a record's name, or picks that do not parse or that the kind does not take."""
+    usage = f"(<!-- {MARKER_KINDS[kind].usage} -->)"
+    names, picks = [], {}
+    for word in words:
+        name, colon, methods = word.partition(":")
+        if not RECORD_NAME.fullmatch(name):
+            raise run_records.RecordError(f"{where}: '{word}' is not a record's name {usage}")
+        if colon and not MARKER_KINDS[kind].picks:
+            raise run_records.RecordError(
+                f"{where}: record-{kind} takes whole records, not {word} {usage}"
+            )
+        if colon:
+            try:
+                picks[name] = _methods(methods)
+            except ValueError as error:
+                raise run_records.RecordError(f"{where}: record-{kind} {word}: {error}") from None
+        names.append(name)
+    return tuple(names), picks
 
 
 def parse_markers(path: Path, text: str) -> list[Marker]:
@@ -378,7 +401,7 @@ def _expected(marker: Marker, records: Path) -> str:
         return comparison_record.contrast_table(checked, options["arms"], options["baseline"])
     checked = [run_records.check_record(folder) for folder in folders]
     if marker.kind == "glance":
-        return record_tables.glance_table(checked)
+        return record_tables.glance_table(checked, picks=options.get("picks"))
     if marker.kind == "table":
         return record_tables.record_table(checked[0], options.get("baseline"))
     if marker.kind == "blocks":
