@@ -27,7 +27,7 @@ from pngail_jax.demos.generate import random_policy_return
 from pngail_jax.demos.minari import MINARI_PREFIX
 from pngail_jax.jobs.errors import RunError, refusals
 from pngail_jax.jobs.make_demos import PROGRAM as MAKE_PROGRAM
-from pngail_jax.jobs.make_demos import MakeDemosConfig, make_or_continue
+from pngail_jax.jobs.make_demos import MakeDemosConfig, make_claimed
 from pngail_jax.storage.integrity import file_record
 from pngail_jax.storage.outputs import claimed
 
@@ -127,7 +127,7 @@ def load_or_make_demos(config, saved_path: str | None = None, env=None):
         damaged = True
     # Made once, under the cache's lock: a second run that finds another process making
     # them waits for it, then reuses what it made. The cache is the sweep's own: a making
-    # cut short there continues from its last block (``make_or_continue``).
+    # cut short there continues from its last block (``continue_cut``).
     with refusals(), claimed(cached.parent, MAKE_PROGRAM, overwrite=True, wait=True) as claim:
         if cached.exists() and not damaged:  # made by the process waited for
             demos = _cached_demos(cached)
@@ -135,7 +135,7 @@ def load_or_make_demos(config, saved_path: str | None = None, env=None):
                 return demos, str(cached.absolute())
         elif not damaged:
             print(f"no demonstrations given: making them into {cached.parent}")
-        make_or_continue(MakeDemosConfig(env=config.env), claim)
+        make_claimed(MakeDemosConfig(env=config.env), claim, continue_cut=True)
     return load_demonstrations(cached), str(cached.absolute())
 
 

@@ -52,7 +52,6 @@ from pngail_jax.jobs.make_demos_run import (
     PROGRAM,
     TRAINING,
     begin_making,
-    is_cut_making,
     kept_snapshots,
     making_document,
 )
@@ -157,33 +156,19 @@ def make_demonstrations(
     be new, empty or, with ``overwrite``, an earlier making's (``pngail_jax.storage.outputs``);
     ``resume``: continue the making cut short in ``out``, begun with the same config (and
     ``command``, the program's flags, which config.json keeps for its ``--resume``);
-    ``continue_cut`` (with ``overwrite``, in a folder a job keeps for itself): a making of the
-    same config cut short in ``out`` continues, anything else there is replaced. Refusals
+    ``continue_cut`` (with ``overwrite``: a job's own folder): continue a cut making of
+    ``config`` there, else replace what is there. Refusals
     raise ``RunError`` with one line; a second process on the same ``out`` is refused, or with
     ``wait`` waits for the first to end. A stop asked for by a signal handler ends at the next
     block's checkpoint."""
     out = Path(out)
     with refusals(), claimed(out, PROGRAM, overwrite=overwrite, wait=wait, resume=resume) as claim:
-        if continue_cut:
-            return make_or_continue(config, claim)
-        return make_claimed(config, claim, command)
+        return make_claimed(config, claim, command, continue_cut)
 
 
-def make_or_continue(config: MakeDemosConfig, claim: Claim) -> Path:
-    """``make_claimed`` into a folder a job keeps for itself (the demonstrations' cache, a
-    plan's folder; claimed with ``overwrite``): a making of the same ``config`` cut short there
-    continues from its last block, anything else there is replaced."""
-    if not claim.resume and is_cut_making(claim.directory, making_document(config)):
-        print(f"continuing the making cut short in {claim.directory}", flush=True)
-        claim = dataclasses.replace(claim, resume=True)
-    return make_claimed(config, claim)
-
-
-def make_claimed(
-    config: MakeDemosConfig, claim: Claim, command: Sequence[str] | None = None
-) -> Path:
+def make_claimed(config: MakeDemosConfig, claim: Claim, command=None, continue_cut=False) -> Path:
     """``make_demonstrations`` into a directory already claimed (``claim``; resumed where it
-    says so)."""
+    says so, or with ``continue_cut`` where it holds this config's making cut short)."""
     out = claim.directory
     try:
         # Sized for Warp's widest batch: the seeds' training, or the episodes rolled at once.
@@ -191,7 +176,7 @@ def make_claimed(
         env = env_settings.make_env(config.env, config.settings, cells=widest)
     except ValueError as error:  # e.g. a custom factory that raised or returned no Env
         raise RunError(f"environment: {error}") from None
-    begin_making(claim, making_document(config, command))  # an old run kept until here
+    begin_making(claim, making_document(config, command), continue_cut)  # old run kept so far
     start = time.perf_counter()
     snapshots = train_candidates(config, env, out)
     print("2/3 measuring random and optimal returns", flush=True)

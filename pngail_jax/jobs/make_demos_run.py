@@ -71,11 +71,16 @@ def making_document(config, command: Sequence[str] | None = None) -> dict:
     return json.loads(json.dumps(run_document(PROGRAM, fields, resolved, where)))
 
 
-def begin_making(claim: Claim, document: dict) -> None:
+def begin_making(claim: Claim, document: dict, continue_cut: bool = False) -> None:
     """A new making (``claim``, not resumed) prepares its directory and writes ``document``
     (``making_document``) as its sealed config.json; a resumed one is checked
-    (``check_resumable``), under the lock: another resume may have finished it meanwhile."""
+    (``check_resumable``), under the lock: another resume may have finished it meanwhile.
+    ``continue_cut`` (a folder a job keeps for itself, claimed with ``overwrite``): a making of
+    the same config cut short there is resumed, anything else replaced."""
     out = claim.directory
+    if not claim.resume and continue_cut and is_cut_making(out, document):
+        print(f"continuing the making cut short in {out}", flush=True)
+        return
     if claim.resume:
         check_resumable(out, document)
         return
