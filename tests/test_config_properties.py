@@ -446,3 +446,23 @@ def test_a_long_silent_step_shows_its_elapsed_time():
     lines = stream.getvalue().splitlines()
     assert lines[0] == "compiling ..." and len(lines) >= 3
     assert all(line.startswith("compiling ... ") and line.endswith(" s") for line in lines[1:])
+
+
+def test_a_long_step_that_counts_its_steps_shows_them_and_the_time_left():
+    import io
+    import re
+    import time
+
+    from pngail_jax.analysis.tracking import StepCounter, ticking
+
+    stream, counter = io.StringIO(), StepCounter()
+    with ticking("ILID", every=0.05, stream=stream, counter=counter, total=200):
+        deadline = time.monotonic() + 30
+        while "steps" not in stream.getvalue() and time.monotonic() < deadline:
+            time.sleep(0.01)
+            if len(stream.getvalue().splitlines()) >= 2:  # a line before any report
+                counter(50)
+                counter(20)  # another cell's later report of fewer steps: the most is kept
+    counted = [line for line in stream.getvalue().splitlines() if "steps" in line]
+    assert counted, stream.getvalue()
+    assert re.fullmatch(r"ILID \.\.\. \d+ s \(50 of 200 steps, about \d+ s left\)", counted[0])

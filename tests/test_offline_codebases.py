@@ -22,6 +22,7 @@ from pngail_jax.demos import Demonstrations, successor_rows
 from pngail_jax.grid import make_cells, stack_cells
 from pngail_jax.offline.family import OFFLINE
 from pngail_jax.offline.ilid import (
+    PROGRESS_REPORTS,
     RELEASED_UNION_PADDING,
     IlidSelection,
     released_zero_share,
@@ -193,6 +194,39 @@ def test_ilids_selection_and_weights_from_its_discriminators_against_numpy(union
     assert metrics["ilid/union_zero_share"] == fields["ilid_zero_share"]
     d_zero = _clipped_sigmoid(_relu_logit(params["pair"], np.zeros(size + 1)))
     np.testing.assert_allclose(fields["ilid_zero_weight"], d_zero / (1 - d_zero), rtol=1e-5)
+
+
+@pytest.mark.parametrize("steps", [250, 37])  # blocks of 2 and a remainder; of 1
+def test_ilids_progress_reports_its_steps_and_changes_no_number(steps):
+    """With ``progress`` set, both discriminators' training reports its steps (once for the
+    grid's every cell, ``PROGRESS_REPORTS`` times each), and every output is bit for bit the
+    one of the same steps in one loop; under jit(vmap), as a grid runs it."""
+    num_rows, size = 60, 3
+    rows = jnp.asarray(RNG.normal(size=(num_rows, size + 1)), jnp.float32)
+    expert = jnp.arange(num_rows) < 20
+    successors = jnp.asarray(successor_rows(np.repeat(np.arange(3), 20), 3))
+    spec = offline_spec("ilid", ilid_discriminator_learning_rate=3e-2, ilid_bar=0.5)
+
+    class OneLoop(IlidSelection):
+        def _reporting_loop(self, step, carry, phase):
+            return jax.lax.fori_loop(0, self.discriminator_steps, step, carry)
+
+    def run(selection):
+        def one(key):
+            return selection.select(spec, rows, rows[:, :size], successors, expert,
+                                    jnp.zeros(num_rows), key)  # fmt: skip
+
+        return jax.jit(jax.vmap(one))(jax.random.split(jax.random.key(3), 2))
+
+    reported = []
+    reporting = IlidSelection((16,), steps, 16)
+    reporting.progress = lambda done: reported.append(int(done))
+    got, expected = run(reporting), run(OneLoop((16,), steps, 16))
+    for made, wanted in zip(jax.tree.leaves(got), jax.tree.leaves(expected), strict=True):
+        np.testing.assert_array_equal(made, wanted)
+    every = max(1, steps // PROGRESS_REPORTS)
+    blocks = [every * (block + 1) for block in range(steps // every)]
+    assert sorted(reported) == blocks + [steps + done for done in blocks]
 
 
 def test_the_released_zero_share_is_its_padded_buffers():

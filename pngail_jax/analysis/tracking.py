@@ -195,11 +195,25 @@ def open_logger(
     return RunLogger(writers)
 
 
+class StepCounter:
+    """The steps a compiled program has done, as it tells them from inside (a host callback,
+    ``offline.ilid.IlidSelection.progress``); a report may come once for each cell or device
+    of a grid, so the largest is kept."""
+
+    def __init__(self):
+        self.done = 0
+
+    def __call__(self, done) -> None:
+        self.done = max(self.done, int(done))
+
+
 @contextlib.contextmanager
-def ticking(label: str, every: float | None = None, stream=None):
+def ticking(label: str, every: float | None = None, stream=None, counter=None, total=None):
     """Shows the elapsed time of a long step that prints nothing itself (a first compile takes
     minutes on a CPU): on a terminal, ``label ... 42 s`` rewritten in place each second;
-    elsewhere (a log file), a line every ``every`` seconds (default 30)."""
+    elsewhere (a log file), a line every ``every`` seconds (default 30). With a ``counter``
+    (``StepCounter``) of ``total`` steps, the steps done and the time left at that pace too:
+    ``label ... 42 s (20,000 of 200,000 steps, about 6 min left)``."""
     import sys
     import threading
     import time
@@ -213,6 +227,9 @@ def ticking(label: str, every: float | None = None, stream=None):
         while not done.wait(interval):
             elapsed = time.perf_counter() - start
             text = f"{label} ... {elapsed:.0f} s"
+            if counter is not None and total and counter.done:
+                left = elapsed * (total - counter.done) / counter.done
+                text += f" ({counter.done:,} of {total:,} steps, about {_minutes(left)} left)"
             stream.write(f"\r{text}" if live else f"{text}\n")
             stream.flush()
 
@@ -226,3 +243,11 @@ def ticking(label: str, every: float | None = None, stream=None):
         thread.join()
         if live:
             stream.write("\n")
+
+
+def _minutes(seconds: float) -> str:
+    """A time left, as a person reads it: ``40 s``, ``6 min``, ``2 h 5 min``."""
+    if seconds < 60:
+        return f"{seconds:.0f} s"
+    minutes = round(seconds / 60)
+    return f"{minutes} min" if minutes < 60 else f"{minutes // 60} h {minutes % 60} min"

@@ -28,7 +28,7 @@ from pngail_jax.analysis.runs import (
     sealed_part,
     verify_run,
 )
-from pngail_jax.analysis.tracking import ticking
+from pngail_jax.analysis.tracking import StepCounter, ticking
 from pngail_jax.config import settings as env_settings
 from pngail_jax.config.saved import provenance
 from pngail_jax.config.task import task_bsc_eps
@@ -203,13 +203,16 @@ def _run_group(
     }
     inputs = stack_cells(cells, jax.random.key(config.seed), overrides, family=OFFLINE)
     methods = ", ".join(dict.fromkeys(cell.method for cell in cells))
+    counter = StepCounter()  # ILID's discriminators tell their steps from inside the program
+    trainer.ilid.progress = counter
     with ticking(f"compiling {methods}"):
         grid = Grid(trainer, inputs, chunk_blocks)
     print(f"{methods}: {len(cells)} cells, compiled in {grid.compile_seconds:.1f} s", flush=True)
     checkpoint = intact_checkpoint(checkpoints) if resume else None
     if "ilid" in trainer_config.components and checkpoint is None:  # minutes, before step 1
         steps = trainer_config.ilid_discriminator_steps
-        with ticking(f"{methods}: ILID's two discriminators, {steps:,} steps each"):
+        label = f"{methods}: ILID's two discriminators, {steps:,} steps each"
+        with ticking(label, counter=counter, total=2 * steps):
             # saved at once: a run cut before its first chunk ends resumes after them
             state, progress = start(grid, checkpoint, save_to=checkpoints)
     else:

@@ -34,6 +34,8 @@ ILID_UNIONS = ("intended", "released")
 # The released code's union buffer: ReplayBuffer's max_size zero rows (main.py:231), before E
 # and S are concatenated onto them.
 RELEASED_UNION_PADDING = 1_000_000
+# How many times each discriminator's training reports its steps to ``IlidSelection.progress``.
+PROGRESS_REPORTS = 100
 
 
 def check_union(union: str, name: str = "ilid_union") -> None:
@@ -74,7 +76,10 @@ def odds(d: jax.Array) -> jax.Array:
 class IlidSelection:
     """ILID's discriminators and selection, as its codebase runs them before the policy
     learns. Static: the discriminators' hidden sizes, their Adam steps, the batch size (each
-    side), the union's kind (``ILID_UNIONS``). ``select`` runs both phases."""
+    side), the union's kind (``ILID_UNIONS``). ``select`` runs both phases. ``progress``: None,
+    or a host function the compiled training calls (``jax.debug.callback``, once for every
+    cell of a grid) with the steps done of both discriminators, ``PROGRESS_REPORTS`` times
+    each; set it before the program is compiled. The numbers are the same either way."""
 
     def __init__(self, hidden_sizes, discriminator_steps: int, batch_size: int,
                  union: str = "intended"):  # fmt: skip
@@ -83,6 +88,7 @@ class IlidSelection:
         self.discriminator_steps = discriminator_steps
         self.batch_size, self.union = batch_size, union
         self.optimizer = optax.scale_by_adam()
+        self.progress = None
 
     def select(self, spec, rows, observations, successors, expert, true_confidence, key):
         """ILID's two phases: a state discriminator of the expert rows' states against the
@@ -101,14 +107,16 @@ class IlidSelection:
         state_key, pair_key = jax.random.split(key)
         other = ~expert
         state_params, state_loss = self.discriminator(
-            spec, rows[:, :size], expert, other, state_key
+            spec, rows[:, :size], expert, other, state_key, phase=0
         )
         d_states = clipped_probability(self.network.apply(state_params, observations))
         selected = other & ilid_selection(d_states >= spec.ilid_bar, successors)
         union = expert | selected
         released = self.union == "released"
         zero_share = released_zero_share(union.sum()) if released else None
-        pair_params, pair_loss = self.discriminator(spec, rows, expert, union, pair_key, zero_share)
+        pair_params, pair_loss = self.discriminator(
+            spec, rows, expert, union, pair_key, zero_share, phase=1
+        )
         fields = {  # nothing selected: the selected-rows term clones the expert rows instead
             "ilid_selected_probability": jnp.where(
                 selected.any(), uniform_over(selected), uniform_over(expert)
@@ -125,12 +133,13 @@ class IlidSelection:
             metrics["ilid/union_zero_share"] = zero_share
         return fields, metrics, {"state": state_params, "pair": pair_params}
 
-    def discriminator(self, spec, rows, positive, negative, key, zero_share=None):
+    def discriminator(self, spec, rows, positive, negative, key, zero_share=None, phase=0):
         """An ILID discriminator on ``rows`` float[M, D] (normalised states, or states and
         actions), trained ``discriminator_steps`` Adam steps with coupled weight decay on
         batches drawn from the ``positive`` and ``negative`` rows (bool[M]), each negative a
         zero row with probability ``zero_share`` float[] where given (the released code's
-        padded union); its parameters and its last loss."""
+        padded union); its parameters and its last loss. ``phase``: 0 for the state
+        discriminator, 1 for the state-action one (where its steps count in ``progress``)."""
         init_key, loop_key = jax.random.split(key)
         params = self.network.init(init_key, rows[0])
         optimizer_state = self.optimizer.init(params)
@@ -157,11 +166,26 @@ class IlidSelection:
             )
             return params, optimizer_state, loss
 
-        params, _, loss = jax.lax.fori_loop(
-            0, self.discriminator_steps, step,
-            (params, optimizer_state, jnp.zeros((), jnp.float32)),
-        )  # fmt: skip
+        carry = (params, optimizer_state, jnp.zeros((), jnp.float32))
+        params, _, loss = self._reporting_loop(step, carry, phase)
         return params, loss
+
+    def _reporting_loop(self, step, carry, phase: int):
+        """``step`` (index, carry) -> carry run for indices 0 .. ``discriminator_steps`` - 1,
+        in ``PROGRESS_REPORTS`` blocks (and what is left), ``progress`` told after each block
+        when set: the same steps on the same indices as one loop."""
+        steps = self.discriminator_steps
+        every = max(1, steps // PROGRESS_REPORTS)
+        blocks = steps // every
+
+        def block(index, carry):
+            carry = jax.lax.fori_loop(index * every, (index + 1) * every, step, carry)
+            if self.progress is not None:
+                jax.debug.callback(self.progress, phase * steps + (index + 1) * every)
+            return carry
+
+        carry = jax.lax.fori_loop(0, blocks, block, carry)
+        return jax.lax.fori_loop(blocks * every, steps, step, carry)
 
 
 def _selection_metrics(selected, other, true_confidence) -> dict[str, jax.Array]:
