@@ -133,9 +133,9 @@ def test_the_offline_family_learns_halfcheetah_on_the_c_engine(tmp_path):
     BC (expert rows) 2,514 and 2,368; BC (every row) 1,154 and 1,158; DWBC 3,293 and 3,322
     (its default 5,000 discriminator updates, every 2nd step; 2,887 and 3,057 with 100, every
     100th); ISW-BC 1,851 and 2,687 (the committed record offline-halfcheetah, 5 seeds at
-    50,000 steps: BC on the expert rows and DWBC 0.68 normalised). The bars: BC on the expert rows both
-    seeds above 1,000; DWBC's and ISW-BC's mean over the seeds above 1,600, which BC on every
-    row (the mixture's average, what a weighting gone flat gives) does not reach."""
+    50,000 steps: BC on the expert rows and DWBC 0.68 normalised). The bars: BC on the expert
+    rows both seeds above 1,000; DWBC's and ISW-BC's mean over the seeds above 1,600, which BC
+    on every row (the mixture's average, what a weighting gone flat gives) does not reach."""
     from pngail_jax.jobs.offline import OfflineRunConfig, run_offline
 
     methods = ("bc-expert", "bc-all", "dwbc", "iswbc")
