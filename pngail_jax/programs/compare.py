@@ -1,5 +1,6 @@
-"""Compare methods across sweep runs and tasks: IQM, mean, median, optimality gap, performance
-profiles and probabilities of improvement, with stratified bootstrap intervals.
+"""Compare methods across runs (or their committed records) and tasks: IQM, mean, median,
+optimality gap, performance profiles and probabilities of improvement, with stratified
+bootstrap intervals.
 
     python -m experiments.compare runs/pendulum runs/hopper runs/halfcheetah
     python -m experiments.compare runs/a runs/b --baseline gail --out runs/compare-ab
