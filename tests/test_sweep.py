@@ -305,16 +305,17 @@ def test_a_damaged_demonstration_cache_is_made_again(demos_path, tmp_path, monke
     cached.write_bytes(demos_path.read_bytes()[:300])  # a truncated copy
     calls = []
 
-    def fake_make(config, claim):  # stands in for minutes of TRPO
-        calls.append((config, claim.directory, claim.overwrite))
+    def fake_make(config, claim, continue_cut=False):  # stands in for minutes of TRPO
+        calls.append((config, claim.directory, claim.overwrite, continue_cut))
         shutil.copy(demos_path, cached)
 
     monkeypatch.setattr(demos_job, "make_claimed", fake_make)
     demos, path = demos_job.load_or_make_demos(RunConfig(env="Pendulum-v1"))
     printed = capsys.readouterr().out
     assert "the cached demonstrations are damaged" in printed and str(cached) in printed
-    # The making's defaults (the command line's), over the runner's own damaged cache.
-    assert calls == [(MakeDemosConfig(env="Pendulum-v1"), tmp_path / "Pendulum-v1", True)]
+    # The making's defaults (the command line's), over the runner's own damaged cache (a
+    # making of the same config cut short there would continue).
+    assert calls == [(MakeDemosConfig(env="Pendulum-v1"), tmp_path / "Pendulum-v1", True, True)]
     assert demos.num_rows == 100 and path == str(cached.absolute())
 
 
@@ -446,7 +447,7 @@ def test_a_second_sweep_waits_for_the_demonstrations_another_process_makes(
     monkeypatch.setattr(demos_job, "DEMO_CACHE", tmp_path)
     monkeypatch.setattr(outputs, "WAIT_SECONDS", 0.1)
 
-    def made_twice(config, claim):
+    def made_twice(config, claim, **_):
         raise AssertionError("the demonstrations were made a second time")
 
     monkeypatch.setattr(demos_job, "make_claimed", made_twice)

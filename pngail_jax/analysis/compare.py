@@ -1,7 +1,9 @@
 """Comparisons across runs and tasks, as rliable defines them (Agarwal et al., 2021).
 
 A score is a seed's normalised return, (R - random) / (optimal - random), read from a
-sweep run's ``metrics.csv``: by default the headline figure, its mean over the last
+sweep or offline run's ``metrics.csv``, or from a run record (``records/<name>``, checked by
+``run_records.check_record``: its per-seed lists); ``PATH:A,B`` takes methods A and B of it
+alone. By default the headline figure, its mean over the last
 ``report.LATE_SHARE`` of training (``statistic="late_average"``), or its final evaluation
 (``statistic="final"``). ``Scores`` holds them per method (a method label: the method,
 plus its setting when a run has several) and task (the run's environment; runs of one task
@@ -28,16 +30,19 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-from pngail_jax.analysis import stats
+from pngail_jax.analysis import run_records, stats
 from pngail_jax.analysis.report import HEADLINE
 from pngail_jax.analysis.runs import (
+    RUN_PROGRAMS,
     STATISTICS,
     RunReadError,
+    read_run_config,
     run_progress,
     run_scores,
     verify_run,
@@ -115,13 +120,48 @@ class Scores:
         return np.concatenate(values), np.concatenate(labels)
 
 
-def _same_run_key(run_dir: Path) -> str | None:
-    """What makes two runs the same seeds of the same config: config.json without where and
-    how it ran (``provenance``) and the log, its trainer's learner in today's layout (a run
-    begun before the trainer's learner part holds the same settings in another shape); None
-    when it cannot be read."""
+# What may follow a path's last colon as the methods picked from it: names joined by commas.
+PICK = re.compile(r"[\w.+-]+(,[\w.+-]+)*")
+
+
+@dataclasses.dataclass(frozen=True)
+class Source:
+    """A run folder or a run record's folder to compare, and the methods picked from it
+    (None: every method it has)."""
+
+    path: Path
+    methods: tuple[str, ...] | None = None
+
+    def __str__(self) -> str:
+        return str(self.path) + ("" if self.methods is None else ":" + ",".join(self.methods))
+
+
+def parse_source(text: str) -> Source:
+    """``PATH`` or ``PATH:A,B`` (methods A and B of it alone). Split at the last colon only
+    when what follows reads as method names and what comes before exists, so that a path
+    holding a colon stays whole."""
+    before, colon, after = text.rpartition(":")
+    if colon and before and PICK.fullmatch(after) and Path(before).exists():
+        return Source(Path(before), tuple(after.split(",")))
+    return Source(Path(text))
+
+
+def is_record(folder: Path) -> bool:
+    """Whether ``folder`` holds a run record (``records/<name>``) rather than a run."""
+    return (Path(folder) / run_records.RECORD_FILE).is_file()
+
+
+def _same_run_key(folder: Path) -> str | None:
+    """What makes two runs the same seeds of the same config: config.json (a record's
+    ``config``, the same document) without where and how it ran (``provenance``) and the log,
+    its trainer's learner in today's layout (a run begun before the trainer's learner part
+    holds the same settings in another shape); None when it cannot be read."""
     try:
-        config = read_json(run_dir / "config.json", "run config")
+        if is_record(folder):
+            config = read_json(Path(folder) / run_records.RECORD_FILE, "run record")
+            config = config.get("config") if isinstance(config, dict) else None
+        else:
+            config = read_json(Path(folder) / "config.json", "run config")
     except (OSError, IntegrityError):
         return None
     if not isinstance(config, dict):
@@ -133,54 +173,113 @@ def _same_run_key(run_dir: Path) -> str | None:
     return json.dumps(kept, sort_keys=True)
 
 
-def _check_distinct(run_dirs: Sequence[Path]) -> None:
-    """CompareError when a run is given twice, or two runs hold the same seeds of the same
-    config (a copy, or the same command run again): pooling them would count each seed
-    twice and shrink every interval."""
+def _check_distinct(folders: Sequence[Path]) -> None:
+    """CompareError when a run or record is given twice, or two of them hold the same seeds
+    of the same config (a copy, a record and the run it was made from, or the same command
+    run again): pooling them would count each seed twice and shrink every interval."""
     seen_paths: dict[Path, Path] = {}
     seen_configs: dict[str, Path] = {}
-    for run_dir in map(Path, run_dirs):
-        resolved = run_dir.resolve()
+    for folder in map(Path, folders):
+        resolved = folder.resolve()
         if resolved in seen_paths:
             first = seen_paths[resolved]
-            also = "" if str(first) == str(run_dir) else f" (as {first} too)"
-            raise CompareError(f"{run_dir} is given twice{also}")
-        seen_paths[resolved] = run_dir
-        key = _same_run_key(run_dir)
+            also = "" if str(first) == str(folder) else f" (as {first} too)"
+            raise CompareError(
+                f"{folder} is given twice{also}: give it once (PATH:A,B picks several of "
+                "its methods)"
+            )
+        seen_paths[resolved] = folder
+        key = _same_run_key(folder)
         if key is not None and key in seen_configs:
             raise CompareError(
-                f"{run_dir} and {seen_configs[key]} are the same seeds of the same config "
-                "(a copy, or the same command run twice): compare one of them, or give the "
-                "sweep another --seed for more seeds"
+                f"{folder} and {seen_configs[key]} are the same seeds of the same config "
+                "(a copy, a record of the run, or the same command run twice): compare one "
+                "of them, or give the sweep another --seed for more seeds"
             )
         if key is not None:
-            seen_configs[key] = run_dir
+            seen_configs[key] = folder
+
+
+def _record_scores(folder: Path, statistic: str) -> tuple[str, dict[str, np.ndarray], str | None]:
+    """A run record's task, each method's scores float[seeds] under ``statistic`` (NaN for a
+    diverged seed), and how far its run got (None when complete). CompareError for a record
+    that does not check (``run_records.check_record``) or is of another program's run."""
+    _check_record_program(folder)
+    try:
+        record = run_records.check_record(folder)
+    except run_records.RecordError as error:
+        raise CompareError(str(error)) from None
+    task = read_run_config(record["config"]).settings.get("env")
+    if task is None:
+        raise CompareError(f"{folder / run_records.RECORD_FILE}: its config names no env")
+    per_seed = record[run_records.statistic_key(statistic)]
+    scores = {method: run_records.seed_values(seeds) for method, seeds in per_seed.items()}
+    done, planned = record.get("iterations_done"), record.get("iterations")
+    progress = None if record["complete"] else f"{done:,} of {planned:,} iterations"
+    return str(task), scores, progress
+
+
+def _check_record_program(folder: Path) -> None:
+    """CompareError for a record of another program than a sweep or an offline run (a
+    settings comparison's, ``experiments.compare_settings``): it holds no method's seeds.
+    An unreadable record is left to ``check_record`` to name."""
+    try:
+        record = read_json(Path(folder) / run_records.RECORD_FILE, "run record")
+    except (OSError, IntegrityError):
+        return
+    program = record.get("program") if isinstance(record, dict) else None
+    if isinstance(program, str) and program.removeprefix("experiments.") not in RUN_PROGRAMS:
+        raise CompareError(
+            f"{folder} is a record of {program}, not of a sweep or an offline run: it holds no "
+            "method's seeds to compare"
+        )
+
+
+def _picked(source: Source, scores: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """``scores`` of the methods ``source`` picks (all without a pick); CompareError naming
+    a picked method it does not have, and those it has."""
+    if source.methods is None:
+        return scores
+    missing = [method for method in source.methods if method not in scores]
+    if missing:
+        raise CompareError(
+            f"{source.path} has no method {missing[0]!r} (it has {', '.join(scores)})"
+        )
+    return {method: scores[method] for method in source.methods}
 
 
 def load_scores(
-    run_dirs: Sequence[Path], statistic: str = HEADLINE, *, allow_unsealed: bool = False
+    sources: Sequence[Path | Source], statistic: str = HEADLINE, *, allow_unsealed: bool = False
 ) -> Scores:
-    """The scores (``statistic``) of every run, pooled per task (two runs of one task: their
-    seeds together). Methods keep the order they first appear in. CompareError for a run given
-    twice, two runs of the same seeds and config, or one that fails ``runs.verify_run`` (its
-    seal missing, unless ``allow_unsealed``, or not matching its config; a damaged or
-    cut-short metrics.csv; a summary.json that disagrees with it). Input files are not
-    checked: a comparison reads results, not data. Notes of what was let through are in the
-    returned ``Scores.notes``."""
-    _check_distinct(run_dirs)
+    """The scores (``statistic``) of every run folder or run record (a ``Source`` may pick
+    some of its methods), pooled per task (two sources of one task: their seeds together).
+    Methods keep the order they first appear in. CompareError for a folder given twice, two of
+    the same seeds and config (a record and its run among them), a picked method a source does
+    not have, a record that does not check (``run_records.check_record``), or a run that fails
+    ``runs.verify_run`` (its seal missing, unless ``allow_unsealed``, or not matching its
+    config; a damaged or cut-short metrics.csv; a summary.json that disagrees with it). Input
+    files are not checked: a comparison reads results, not data. Notes of what was let
+    through are in the returned ``Scores.notes``; unfinished runs and records (read to their
+    latest evaluation) in ``Scores.unfinished``."""
+    if statistic not in STATISTICS:
+        raise CompareError(f"statistic {statistic!r}: give one of {', '.join(STATISTICS)}")
+    sources = [item if isinstance(item, Source) else Source(Path(item)) for item in sources]
+    _check_distinct([source.path for source in sources])
     values: dict[str, dict[str, np.ndarray]] = {}
     unfinished, notes = {}, []
-    for run_dir in run_dirs:
-        notes += verify_run(
-            Path(run_dir), str(run_dir), allow_unsealed=allow_unsealed, check_inputs=False
-        )
-        task, scores = run_scores(run_dir, statistic)
-        for method, seeds in scores.items():
+    for source in sources:
+        if is_record(source.path):
+            task, scores, progress = _record_scores(source.path, statistic)
+        else:
+            notes += verify_run(
+                source.path, str(source.path), allow_unsealed=allow_unsealed, check_inputs=False
+            )
+            (task, scores), progress = run_scores(source.path, statistic), run_progress(source.path)
+        for method, seeds in _picked(source, scores).items():
             by_task = values.setdefault(method, {})
             by_task[task] = np.concatenate([by_task.get(task, np.empty(0)), seeds])
-        progress = run_progress(run_dir)
         if progress is not None:
-            unfinished[str(run_dir)] = progress
+            unfinished[str(source.path)] = progress
     return Scores(values, unfinished, statistic, notes)
 
 

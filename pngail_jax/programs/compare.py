@@ -1,15 +1,19 @@
-"""Compare methods across sweep runs and tasks: IQM, mean, median, optimality gap, performance
-profiles and probabilities of improvement, with stratified bootstrap intervals.
+"""Compare methods across runs (or their committed records) and tasks: IQM, mean, median,
+optimality gap, performance profiles and probabilities of improvement, with stratified
+bootstrap intervals.
 
     python -m experiments.compare runs/pendulum runs/hopper runs/halfcheetah
     python -m experiments.compare runs/a runs/b --baseline gail --out runs/compare-ab
+    python -m experiments.compare records/offline-hopper:bc-all,iswbc
+                                  records/offline-hopper-dwbc5000:dwbc records/offline-ant
 
-Reads each run's normalised returns (``metrics.csv`` of a sweep or an offline run; runs of
-one task pool their seeds): a seed's score is its mean over the last 20% of training (the
-headline, which two re-runs agree on best), or with ``--statistic final`` its last
-evaluation. Writes to ``--out``: ``compare.json``, ``compare.md`` (the tables: the
-aggregates, then each task on its own) and ``aggregates.png``, ``profiles.png``,
-``improvement.png``. The definitions:
+Reads each run's normalised returns (``metrics.csv`` of a sweep or an offline run, or a
+committed run record's per-seed lists, the record checked first; runs of one task pool their
+seeds); ``PATH:A,B`` takes only methods A and B of that run or record: a seed's score is
+its mean over the last 20% of training (the headline, which two re-runs agree on best), or
+with ``--statistic final`` its last evaluation. Writes to ``--out``: ``compare.json``,
+``compare.md`` (the tables: the aggregates, then each task on its own) and
+``aggregates.png``, ``profiles.png``, ``improvement.png``. The definitions:
 ``pngail_jax.analysis.compare`` (rliable's, Agarwal et al. 2021).
 """
 
@@ -27,6 +31,7 @@ from pngail_jax.programs.cli import (
     add_allow_unsealed,
     claim_output,
     path_argument,
+    text_argument,
 )
 from pngail_jax.storage.integrity import atomic_write_text
 from pngail_jax.storage.outputs import claimed
@@ -36,8 +41,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser = ArgumentParser(
         "compare", description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter
     )
-    parser.add_argument("runs", nargs="+", type=path_argument, metavar="RUN_DIR",
-                        help="sweep run directories (one or more per task)")  # fmt: skip
+    parser.add_argument(
+        "runs", nargs="+", type=source_argument, metavar="RUN_DIR",
+        help="sweep or offline run directories, or run records (records/NAME), mixed freely "
+        "(one or more per task; the same method's seeds of one task pool); RUN_DIR:A,B takes "
+        "methods A and B of it alone (records/offline-hopper-dwbc5000:dwbc)",
+    )  # fmt: skip
     parser.add_argument(
         "--baseline",
         help="the method every other is compared with, P(method > baseline) (default: pngail "
@@ -67,14 +76,20 @@ def parse_args(argv=None) -> argparse.Namespace:
     )  # fmt: skip
     args = parser.parse_args(argv)
     for run in args.runs:
-        if not run.is_dir():
-            parser.error(f"{run} is not a directory")
+        if not run.path.is_dir():
+            parser.error(f"{run.path} is not a directory")
     if args.out is None:
         args.out = Path("runs") / f"compare-{time.strftime('%Y%m%d-%H%M%S')}"
-    if any(args.out.resolve() == run.resolve() for run in args.runs):
+    if any(args.out.resolve() == run.path.resolve() for run in args.runs):
         parser.error(f"--out {args.out} is one of the runs: give another directory")
     claim_output(parser, args.out, "compare", args.overwrite)
     return args
+
+
+def source_argument(text: str) -> compare.Source:
+    """An argparse ``type``: a run's or a record's folder, ``PATH:A,B`` picking methods of it
+    (``compare.parse_source``); an empty string is refused."""
+    return compare.parse_source(text_argument(text))
 
 
 def main(argv=None) -> Path:
@@ -117,10 +132,16 @@ def _against_record(args, scores) -> tuple[dict, str]:
     from pngail_jax.jobs.offline_config import offline_defaults
     from pngail_jax.storage.integrity import read_json
 
+    records = [str(run.path) for run in args.runs if compare.is_record(run.path)]
+    if records:
+        raise compare.CompareError(
+            f"--expected sets runs against a record: {records[0]} is a record itself "
+            "(compare it without --expected)"
+        )
     record = run_records.check_record(args.expected)
-    notes = run_records.check_comparable(args.runs, record)
+    notes = run_records.check_comparable([run.path for run in args.runs], record)
     rows = run_records.expected_rows(scores, record)
-    config = read_json(args.runs[0] / "config.json", "run config")
+    config = read_json(args.runs[0].path / "config.json", "run config")
     differences = run_records.config_differences(
         config, record, RunConfig().to_dict(), offline_defaults()
     )
