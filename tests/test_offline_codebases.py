@@ -463,22 +463,44 @@ def test_a_run_resumed_from_before_a_metric_existed_gets_nan_for_its_earlier_chu
 def test_dwbc_discriminator_updates_set_its_cadence_and_bad_values_are_one_line(tmp_path, capsys):
     """--dwbc-discriminator-updates N spaces N Adam steps of DWBC's discriminator over the
     run (every gradient_steps / N-th step: its codebase's 5,000 of 500,000 are every 100th,
-    5,000 of 50,000 every 10th); without it, every 100th step as before (a config.json from
-    before the field loads that way); a count that does not divide the steps is one line."""
+    5,000 of 50,000 every 10th, the default); every-100 (None) gives every 100th step, as
+    runs did before, and a config.json from before the field loads that way; a count of at
+    least the steps is one a step; a count that does not divide the steps is one line."""
     from pngail_jax.jobs.offline import OfflineRunConfig
     from pngail_jax.programs import offline as program
 
-    assert OfflineRunConfig().dwbc_discriminator_every == 100  # 500 updates at 50,000 steps
-    assert OfflineRunConfig().trainer_config(1000).dwbc_discriminator_every == 100
-    codebase = OfflineRunConfig(dwbc_discriminator_updates=5000)
-    assert codebase.trainer_config(1000).dwbc_discriminator_every == 10
+    assert OfflineRunConfig().dwbc_discriminator_updates == 5000
+    assert OfflineRunConfig().dwbc_discriminator_every == 10  # the codebase's 5,000 updates
+    assert OfflineRunConfig().trainer_config(1000).dwbc_discriminator_every == 10
+    assert OfflineRunConfig(gradient_steps=500_000).dwbc_discriminator_every == 100
+    assert OfflineRunConfig(gradient_steps=1000, steps_per_iteration=100, eval_every=1,
+                            ).dwbc_discriminator_every == 1  # fmt: skip
+    former = OfflineRunConfig(dwbc_discriminator_updates=None)
+    assert former.trainer_config(1000).dwbc_discriminator_every == 100  # 500 at 50,000
     argv = ["--demos", "data/released/Pendulum-v1_mixture.npy", "--gradient-steps", "40000"]
-    args = program.parse_args([*argv, "--dwbc-discriminator-updates", "4000",
-                               "--out", str(tmp_path / "a")])  # fmt: skip
-    assert args.config.dwbc_discriminator_every == 10
-    with pytest.raises(SystemExit, match="^2$"):
-        program.parse_args([*argv, "--dwbc-discriminator-updates", "3000",
-                            "--out", str(tmp_path / "b")])  # fmt: skip
-    error = capsys.readouterr().err
-    assert "--dwbc-discriminator-updates must be a positive integer that divides" in error
-    assert error.count("\n") == 1
+    for flag, every in (("4000", 10), ("every-100", 100), ("40000", 1), ("90000", 1)):
+        args = program.parse_args([*argv, "--dwbc-discriminator-updates", flag,
+                                   "--out", str(tmp_path / "a")])  # fmt: skip
+        assert args.config.dwbc_discriminator_every == every, flag
+    for flag in ("3000", "many"):
+        with pytest.raises(SystemExit, match="^2$"):
+            program.parse_args([*argv, "--dwbc-discriminator-updates", flag,
+                                "--out", str(tmp_path / "b")])  # fmt: skip
+        error = capsys.readouterr().err
+        assert "--dwbc-discriminator-updates must be a positive integer that divides" in error
+        assert f"got {flag if flag.isdigit() else repr(flag)}" in error
+        assert error.count("\n") == 1
+
+
+def test_an_offline_config_json_from_before_the_dwbc_default_resumes_as_it_ran(tmp_path):
+    """A run's config.json written before 5,000 updates became DWBC's default (without the
+    field) resumes at the cadence it began with, every 100th step, not today's default."""
+    from pngail_jax.analysis.runs import run_document
+    from pngail_jax.jobs.offline_config import load_offline_config, offline_defaults
+    from pngail_jax.storage.integrity import write_json
+
+    fields = offline_defaults()
+    assert fields["dwbc_discriminator_updates"] is None  # what such a record ran with
+    del fields["dwbc_discriminator_updates"]
+    write_json(tmp_path / "config.json", run_document("offline", fields, {}, {}))
+    assert load_offline_config(tmp_path).dwbc_discriminator_every == 100

@@ -129,12 +129,13 @@ def test_the_offline_family_learns_halfcheetah_on_the_c_engine(tmp_path):
     """The offline family on a MuJoCo task through the offline job, one program: BC on the
     expert rows (D_c's rows at confidence >= 0.5), BC on every row, DWBC and ISW-BC on the
     authors' HalfCheetah file, 2 seeds x 10,000 gradient steps, evaluated on the C engine (10
-    episodes of 1,000 steps). Random scores -288 (Table 3). Measured here (key 0, 2026-12-06):
-    BC (expert rows) 2,514 and 2,368; BC (every row) 1,154 and 1,158; DWBC 2,887 and 3,057;
-    ISW-BC 1,851 and 2,687 (the committed record offline-halfcheetah, 5 seeds at 50,000 steps:
-    BC on the expert rows and DWBC 0.68 normalised). The bars: BC on the expert rows both
-    seeds above 1,000; DWBC's and ISW-BC's mean over the seeds above 1,600, which BC on every
-    row (the mixture's average, what a weighting gone flat gives) does not reach."""
+    episodes of 1,000 steps). Random scores -288 (Table 3). Measured here (key 0, 2026-12-07):
+    BC (expert rows) 2,514 and 2,368; BC (every row) 1,154 and 1,158; DWBC 3,293 and 3,322
+    (its default 5,000 discriminator updates, every 2nd step; 2,887 and 3,057 with 100, every
+    100th); ISW-BC 1,851 and 2,687 (the committed record offline-halfcheetah, 5 seeds at
+    50,000 steps: BC on the expert rows and DWBC 0.68 normalised). The bars: BC on the expert
+    rows both seeds above 1,000; DWBC's and ISW-BC's mean over the seeds above 1,600, which BC
+    on every row (the mixture's average, what a weighting gone flat gives) does not reach."""
     from pngail_jax.jobs.offline import OfflineRunConfig, run_offline
 
     methods = ("bc-expert", "bc-all", "dwbc", "iswbc")

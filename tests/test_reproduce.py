@@ -255,8 +255,9 @@ def test_every_committed_records_command_runs_as_written(folder, tmp_path, monke
 def test_an_offline_rerun_cut_short_or_of_an_older_record_is_the_same_run():
     """An offline run writes its trainer's fields when it finishes, so a re-run cut short has
     none: they are compared only where both sides have them; a record from before a setting
-    existed (``ilid_union``, ``dwbc_discriminator_updates``) ran with its default, so a re-run
-    of its command today is the same run; a changed setting still differs."""
+    existed (``ilid_union``, ``dwbc_discriminator_updates``) ran with the default of then (the
+    union's today's, DWBC's updates every 100th step: ``FORMER_DEFAULTS``), so a re-run of its
+    command with the flag that pins it is the same run; a changed setting still differs."""
     from pngail_jax.analysis import run_records
     from pngail_jax.jobs.offline_config import offline_defaults
 
@@ -276,3 +277,24 @@ def test_an_offline_rerun_cut_short_or_of_an_older_record_is_the_same_run():
     assert differences(config, older) == []
     assert differences(cut, older) == []
     assert differences(changed, record) == ["config.ilid_union"]
+    today = copy.deepcopy(cut)  # DWBC's updates at today's default, 5,000: another run
+    today["config"]["dwbc_discriminator_updates"] = 5000
+    assert differences(today, older) == ["config.dwbc_discriminator_updates"]
+
+
+def test_a_rerun_of_an_offline_record_pins_what_it_ran_with_where_a_default_changed(tmp_path):
+    """The re-run of a record whose command named no DWBC updates (every 100th step then, 5,000
+    now) adds --dwbc-discriminator-updates every-100, which parses to what the record ran
+    with; a record that named a count re-runs its command as it is."""
+    from pngail_jax.programs import offline as offline_program
+    from pngail_jax.programs import reproduce
+
+    for name, pinned in (("offline-pendulum", True), ("offline-pendulum-dwbc5000", False)):
+        record = json.loads((ROOT / f"records/{name}/record.json").read_text())
+        program, argv = reproduce.stored_command(record)
+        action, arguments = reproduce.plan(record, program, argv, tmp_path / name)
+        assert action == "run"
+        added = ["--dwbc-discriminator-updates", "every-100"]
+        assert (arguments[-2:] == added) is pinned, name
+        updates = offline_program.parse_args(arguments).config.dwbc_discriminator_updates
+        assert updates == (None if pinned else 5000)

@@ -34,6 +34,15 @@ from pngail_jax.storage.integrity import IntegrityError, read_json
 
 PROGRAM = "offline"
 
+# DWBC's discriminator updates in its codebase (one every 100th of 500,000 policy steps).
+DWBC_CODEBASE_UPDATES = 5_000
+# Fields whose default changed: what a config.json written before (without the field, or with
+# the old default written) ran with. The spelling of each on the command line:
+# ``former_default_flags``.
+FORMER_DEFAULTS = {"dwbc_discriminator_updates": None}
+# ``--dwbc-discriminator-updates every-100``: None, one update every 100th step.
+EVERY_100TH = "every-100"
+
 
 @dataclasses.dataclass(frozen=True)
 class OfflineRunConfig:
@@ -58,9 +67,11 @@ class OfflineRunConfig:
     ilid_discriminator_steps: int = 100_000  # each of ILID's two, before its policy (codebase's)
     ilid_discriminator_learning_rate: float = 1e-5  # its codebase's Adam step size
     ilid_union: str = "intended"  # E+S; "released": padded with zero rows (offline_ilid)
-    # Adam steps of DWBC's discriminator over the run; None: one every 100th policy step (its
-    # codebase's cadence: 500 at 50,000 steps), its codebase's number: 5,000 (of 500,000).
-    dwbc_discriminator_updates: int | None = None
+    # Adam steps of DWBC's discriminator over the run, evenly spaced: its codebase's number
+    # (5,000 of 500,000 steps; every 10th of 50,000). None: one every 100th policy step, its
+    # codebase's cadence (500 at 50,000 steps), what every run did before 5,000 became the
+    # default, and what a config.json without the field reads as (``FORMER_DEFAULTS``).
+    dwbc_discriminator_updates: int | None = DWBC_CODEBASE_UPDATES
 
     def __post_init__(self):
         """Each field checked, in its stored type: ConfigError (a ValueError) naming it by
@@ -109,19 +120,20 @@ class OfflineRunConfig:
             fail("methods", f"must be distinct, got {list(self.methods)}")
 
     def _check_dwbc_updates(self) -> None:
-        """DWBC's discriminator updates: None (its codebase's cadence), or a positive count
-        that divides the gradient steps (evenly spaced)."""
+        """DWBC's discriminator updates: None (one every 100th step), or a positive count
+        that divides the gradient steps (evenly spaced) or is at least their number (one
+        update a step)."""
         updates = self.dwbc_discriminator_updates
         if updates is None:
             return
         if (
             isinstance(updates, bool) or not isinstance(updates, numbers.Integral) or updates < 1
-            or self.gradient_steps % updates
+            or (updates < self.gradient_steps and self.gradient_steps % updates)
         ):  # fmt: skip
             fail(
                 "dwbc_discriminator_updates",
                 f"must be a positive integer that divides gradient_steps "
-                f"({self.gradient_steps}), got {updates!r}",
+                f"({self.gradient_steps}) or is at least it (one a step), got {updates!r}",
             )
         self._set("dwbc_discriminator_updates", int(updates))
 
@@ -129,8 +141,8 @@ class OfflineRunConfig:
     def dwbc_discriminator_every(self) -> int:
         """DWBC's discriminator steps on every this-many-th policy step."""
         if self.dwbc_discriminator_updates is None:
-            return OfflineConfig.dwbc_discriminator_every
-        return self.gradient_steps // self.dwbc_discriminator_updates
+            return 100
+        return max(1, self.gradient_steps // self.dwbc_discriminator_updates)
 
     @property
     def demonstrations(self) -> DemonstrationsConfig:
@@ -167,10 +179,20 @@ class OfflineRunConfig:
 
 
 def offline_defaults() -> dict:
-    """A default offline run's settings as its config.json writes them (tuples as lists):
-    what an offline record from before a field existed ran with."""
-    values = dataclasses.asdict(OfflineRunConfig())
+    """A default offline run's settings as its config.json writes them (tuples as lists), a
+    field whose default changed at its former value (``FORMER_DEFAULTS``): what an offline
+    record from before a field existed ran with."""
+    values = dataclasses.asdict(OfflineRunConfig()) | FORMER_DEFAULTS
     return {key: list(v) if isinstance(v, tuple) else v for key, v in values.items()}
+
+
+def former_default_flags(settings: dict) -> list[str]:
+    """The flags that give a re-run of an offline record's command (its ``config`` part,
+    ``settings``) what the record ran with where a default changed since: its command named
+    no value, and today's default is another (``FORMER_DEFAULTS``)."""
+    if settings.get("dwbc_discriminator_updates") is None:
+        return ["--dwbc-discriminator-updates", EVERY_100TH]
+    return []
 
 
 def load_offline_config(out: str | Path) -> OfflineRunConfig:
@@ -181,7 +203,7 @@ def load_offline_config(out: str | Path) -> OfflineRunConfig:
         view = read_run_config(document)
         if view.program != PROGRAM:
             raise ValueError(f"written by {document.get('program')!r}")
-        values = dict(view.settings)
+        values = FORMER_DEFAULTS | dict(view.settings)  # a field it predates: as it ran
         for name in ("methods", "hidden_sizes"):
             values[name] = tuple(values[name])
         return OfflineRunConfig(**values)

@@ -21,6 +21,7 @@ from pngail_jax.config.validation import ConfigError
 from pngail_jax.demos import released_task
 from pngail_jax.jobs.errors import RunError
 from pngail_jax.jobs.offline import OfflineRunConfig, load_offline_config, run_offline
+from pngail_jax.jobs.offline_config import EVERY_100TH
 from pngail_jax.offline.ilid import ILID_UNIONS
 from pngail_jax.offline.trainer import (
     CLASSIFIED_SUFFIX,
@@ -112,14 +113,27 @@ def build_parser() -> ArgumentParser:
     return parser
 
 
+def _dwbc_updates(value: str) -> int | str | None:
+    """--dwbc-discriminator-updates' value: a count (checked by the config), or every-100
+    (None: the cadence before 5,000 became the default)."""
+    if value == EVERY_100TH:
+        return None
+    try:
+        return int(value)
+    except ValueError:
+        return value  # the config refuses it in one line, naming the flag
+
+
 def _add_ilid_flags(parser: ArgumentParser) -> None:
     """ILID's flags (its discriminators' budget and the union it draws from) and DWBC's
     discriminator budget."""
     parser.add_argument(
-        "--dwbc-discriminator-updates", type=int, default=DEFAULTS.dwbc_discriminator_updates,
+        "--dwbc-discriminator-updates", type=_dwbc_updates,
+        default=DEFAULTS.dwbc_discriminator_updates,
         help="Adam steps of DWBC's discriminator over the run, evenly spaced (must divide "
-        "--gradient-steps; its codebase's: 5,000 over 500,000 steps; default: one every 100th "
-        "step, 500 at 50,000)",
+        "--gradient-steps, or be at least it: one a step); default: its codebase's 5,000 "
+        f"(of its 500,000 steps; every 10th of 50,000); {EVERY_100TH}: one every 100th step, "
+        "as runs did before 5,000 became the default",
     )  # fmt: skip
     parser.add_argument(
         "--ilid-discriminator-steps", type=int, default=DEFAULTS.ilid_discriminator_steps,

@@ -28,7 +28,12 @@ from pathlib import Path
 
 from pngail_jax.analysis import compare, run_records
 from pngail_jax.analysis.report import HEADLINE
-from pngail_jax.analysis.runs import RUN_PROGRAMS, STATISTICS, run_progress_numbers
+from pngail_jax.analysis.runs import (
+    RUN_PROGRAMS,
+    STATISTICS,
+    read_run_config,
+    run_progress_numbers,
+)
 from pngail_jax.storage.integrity import IntegrityError, read_json
 from pngail_jax.storage.outputs import output_owner, output_refusal
 
@@ -117,6 +122,16 @@ def _same_run(out: Path, record: dict) -> list[str]:
     return run_records.config_differences(config, record, RunConfig().to_dict(), offline_defaults())
 
 
+def _former_defaults(record: dict, program: str) -> list[str]:
+    """The flags that pin what an offline record ran with where a default changed since
+    (``jobs.offline_config.former_default_flags``); none for a sweep's."""
+    if program != "offline":
+        return []
+    from pngail_jax.jobs.offline_config import former_default_flags
+
+    return former_default_flags(dict(read_run_config(record["config"]).settings))
+
+
 def plan(record: dict, program: str, argv: list[str], out: Path) -> tuple[str, list[str]]:
     """What the re-run does in ``out``: ("run", the record's arguments into ``out``) for a new
     or empty folder, ("resume", ``--resume OUT``) for this re-run cut short (a run of the
@@ -125,7 +140,7 @@ def plan(record: dict, program: str, argv: list[str], out: Path) -> tuple[str, l
     out = Path(out)
     refusal = output_refusal(out, program)
     if refusal is None:
-        return "run", rerun_arguments(argv, out)
+        return "run", rerun_arguments(argv, out) + _former_defaults(record, program)
     if output_owner(out) != program:
         raise run_records.RecordError(refusal)  # another program's run, or files it did not make
     if not (out / "config.json").is_file():
