@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_compare import refusal as run_refusal
 
 from pngail_jax.analysis import compare, run_records
 from pngail_jax.analysis.runs import sealed_part
@@ -43,12 +44,8 @@ def run_from_record(folder, directory, provenance="elsewhere"):
 
 def refusal(arguments, tmp_path, capsys) -> str:
     """The one line ``experiments.compare ARGUMENTS`` exits with (nothing written)."""
-    out = tmp_path / "comparison"
-    with pytest.raises(SystemExit) as stop:
-        program.main([*map(str, arguments), "--out", str(out)])
-    assert not out.exists()
-    message = str(stop.value.code) + capsys.readouterr().err
-    assert "Traceback" not in message and message.strip().count("\n") == 0, message
+    message = run_refusal(arguments, tmp_path, capsys)
+    assert message.strip().count("\n") == 0, message
     return message
 
 
