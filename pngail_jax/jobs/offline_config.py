@@ -140,8 +140,8 @@ class OfflineRunConfig:
     @property
     def dwbc_discriminator_every(self) -> int:
         """DWBC's discriminator steps on every this-many-th policy step."""
-        if self.dwbc_discriminator_updates is None:
-            return 100
+        if self.dwbc_discriminator_updates is None:  # the trainer's own: every 100th
+            return OfflineConfig.dwbc_discriminator_every
         return max(1, self.gradient_steps // self.dwbc_discriminator_updates)
 
     @property
