@@ -215,6 +215,31 @@ def test_the_block_table_is_each_seeds_block_mean_then_mean_and_se_over_seeds():
     assert "| PN-GAIL | " + " | ".join(cells) + " |" in table
 
 
+def test_an_offline_records_blocks_are_gradient_steps():
+    """An offline record has no environment steps: its blocks are spans of gradient steps
+    (iteration x the run's steps per iteration), labelled in thousands; each cell is each
+    seed's block mean, then mean ± s.e. over seeds, recomputed here in plain NumPy."""
+    folder = ROOT / "records" / "offline-pendulum"
+    record = run_records.check_record(folder)
+    table = record_tables.block_table(record, folder, 20_000).splitlines()
+    assert table[0] == "| k gradient steps | 0-20 | 20-40 | 40-50 | final (50 k) |"
+    per_iteration = record["config"]["config"]["steps_per_iteration"]
+    rows = [r for r in _metrics("offline-pendulum") if r["method"] == "bc-all" and r["eval_return"]]
+    seeds = sorted({r["seed"] for r in rows})
+    cells = []
+    for low, high in ((0, 20_000), (20_000, 40_000), (40_000, 50_000)):
+        per_seed = [
+            np.mean([float(r["normalized_return"]) for r in rows
+                     if r["seed"] == seed and low < int(r["iteration"]) * per_iteration <= high])
+            for seed in seeds
+        ]  # fmt: skip
+        cells.append(f"{np.mean(per_seed):.2f} ± {np.std(per_seed, ddof=1) / np.sqrt(5):.2f}")
+    last = max(int(r["iteration"]) for r in rows)
+    final = [float(r["normalized_return"]) for r in rows if int(r["iteration"]) == last]
+    cells.append(f"{np.mean(final):.2f} ± {np.std(final, ddof=1) / np.sqrt(5):.2f}")
+    assert "| BC (all rows) | " + " | ".join(cells) + " |" in table
+
+
 def test_the_diagnostics_table_is_the_block_mean_over_iterations_and_seeds(tmp_path):
     folder = ROOT / "records" / "pendulum-500-5seeds"
     record = run_records.check_record(folder)

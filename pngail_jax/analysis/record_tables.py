@@ -139,15 +139,27 @@ def _mean_se(values: np.ndarray) -> str:
     return f"{values.mean():.2f} ± {se:.2f}"
 
 
-def _block_label(block: int, block_steps: int, last_step: int) -> str:
-    """A block's span in M steps, its end at most the run's last step."""
+def _block_label(block: int, block_steps: int, last_step: int, scale: float = 1e6) -> str:
+    """A block's span in steps / ``scale`` (M steps, or k gradient steps), its end at most
+    the run's last step."""
     low, high = block * block_steps, min((block + 1) * block_steps, last_step)
-    return f"{low / 1e6:g}-{high / 1e6:g}"
+    return f"{low / scale:g}-{high / scale:g}"
+
+
+def _step_axis(record: dict) -> tuple[int | None, float, str]:
+    """How a record's blocks count: (None, 1e6, "M steps") for a sweep's environment steps;
+    an offline run's gradient steps, in thousands: (its gradient steps per iteration, 1e3,
+    "k gradient steps")."""
+    config = record.get("config")
+    view = read_run_config(config) if isinstance(config, dict) else None
+    if view is not None and view.program == "offline":
+        return int(view.settings["steps_per_iteration"]), 1e3, "k gradient steps"
+    return None, 1e6, "M steps"
 
 
 def _blocks_of(record: dict, steps, block_steps: int) -> np.ndarray:
-    """The block of each environment step count (step s in block ceil(s / block_steps) - 1);
-    RecordError for a block of no steps or a run without environment steps (offline)."""
+    """The block of each step count (step s in block ceil(s / block_steps) - 1); RecordError
+    for a block of no steps or no steps to cut (an offline run's environment steps)."""
     steps = np.asarray(steps)
     if block_steps < 1:
         raise RecordError(f"record {record['name']}: a block of {block_steps} steps")
@@ -157,16 +169,17 @@ def _blocks_of(record: dict, steps, block_steps: int) -> np.ndarray:
 
 
 def block_table(record: dict, folder: Path, block_steps: int) -> str:
-    """How a recorded run learned, per block of ``block_steps`` environment steps per run:
-    per method, each seed's mean normalised evaluation in the block (an evaluation at step s
-    is in block ceil(s / block_steps)), then mean ± s.e. over seeds; the last column the final
-    evaluation. A seed without a final evaluation (diverged) is left out of every column, as
-    from the record's headline. ``folder`` holds the checked ``record``. The docs' tables
-    between ``<!-- record-blocks NAME block=STEPS -->`` markers are this text."""
-
+    """How a recorded run learned, per block of ``block_steps`` environment steps per run
+    (an offline run's: gradient steps): per method, each seed's mean normalised evaluation in
+    the block (an evaluation at step s is in block ceil(s / block_steps)), then mean ± s.e.
+    over seeds; the last column the final evaluation. A seed without a final evaluation
+    (diverged) is left out of every column, as from the record's headline. ``folder`` holds
+    the checked ``record``. The docs' tables between ``<!-- record-blocks NAME block=STEPS
+    -->`` markers are this text."""
+    per_iteration, scale, unit = _step_axis(record)
     groups = read_evaluations(
         Path(folder) / METRICS_FILE, "normalized_return", evaluated_by="eval_return",
-        group_by=("method", "setting"),
+        group_by=("method", "setting"), steps_per_iteration=per_iteration,
     )  # fmt: skip
     if not groups:
         raise RecordError(f"record {record['name']}: no evaluated iteration")
@@ -176,9 +189,9 @@ def block_table(record: dict, folder: Path, block_steps: int) -> str:
         {int(b) for steps, _ in groups.values() for b in _blocks_of(record, steps, block_steps)}
     )
     lines = [
-        "| M steps | "
-        + " | ".join(_block_label(b, block_steps, last) for b in order)
-        + f" | final ({last / 1e6:g} M) |",
+        f"| {unit} | "
+        + " | ".join(_block_label(b, block_steps, last, scale) for b in order)
+        + f" | final ({last / scale:g} {unit.split()[0]}) |",
         "|---|" + "---:|" * (len(order) + 1),
     ]
     for (method, setting), (steps, values) in groups.items():

@@ -164,14 +164,20 @@ def metrics_rows(path: Path) -> Iterator[dict[str, str]]:
 
 
 def read_evaluations(
-    path: Path, value: str, *, evaluated_by: str | None = None, group_by: Sequence[str] = ()
+    path: Path,
+    value: str,
+    *,
+    evaluated_by: str | None = None,
+    group_by: Sequence[str] = (),
+    steps_per_iteration: int | None = None,
 ) -> dict[tuple, tuple[np.ndarray, np.ndarray]]:
     """The evaluations in a ``metrics.csv`` (the sweep's or ``train_rl``'s), per group (the
     values of the ``group_by`` columns, e.g. method and setting): the environment steps
-    int[I] of the evaluated iterations and the ``value`` column float[seeds, I] (NaN where
-    empty). A row counts as evaluated where its ``evaluated_by`` column (default: ``value``)
-    is neither empty nor NaN; where a seed has no evaluated row at an iteration another seed
-    has (the sweep leaves a diverged seed's returns empty), its value is NaN."""
+    int[I] of the evaluated iterations (or, given ``steps_per_iteration``, the iteration
+    times it: an offline run's gradient steps) and the ``value`` column float[seeds, I] (NaN
+    where empty). A row counts as evaluated where its ``evaluated_by`` column (default:
+    ``value``) is neither empty nor NaN; where a seed has no evaluated row at an iteration
+    another seed has (the sweep leaves a diverged seed's returns empty), its value is NaN."""
     evaluated_by = evaluated_by or value
     rows: dict[tuple, dict[int, dict[int, float]]] = {}
     steps: dict[int, int] = {}
@@ -182,7 +188,12 @@ def read_evaluations(
         group = tuple(row[column] for column in group_by)
         number = float(row[value]) if row[value] else math.nan
         rows.setdefault(group, {}).setdefault(int(row["seed"]), {})[int(row["iteration"])] = number
-        steps[int(row["iteration"])] = int(float(row["env_steps"]))
+        iteration = int(row["iteration"])
+        steps[iteration] = (
+            iteration * steps_per_iteration
+            if steps_per_iteration is not None
+            else int(float(row["env_steps"]))
+        )
     evaluations = {}
     for group, seeds in rows.items():
         iterations = sorted({i for evaluated in seeds.values() for i in evaluated})

@@ -24,7 +24,8 @@ each one's baseline on the task's own physics, with each arm's probability of im
 ``<!-- record-blocks NAME block=STEPS -->`` and
 ``<!-- record-diagnostics NAME block=STEPS [methods=A,B] -->`` (closed by ``<!--
 /record-blocks -->`` and ``<!-- /record-diagnostics -->``) give a record's learning and its
-diagnostics per block of environment steps, and ``<!-- record-seeds NAME turn=LEVEL
+diagnostics per block of environment steps (record-blocks of an offline record: per block
+of gradient steps), and ``<!-- record-seeds NAME turn=LEVEL
 [methods=A,B] -->`` (closed by ``<!-- /record-seeds -->``) its seeds side by side (the
 lowest evaluation, the turn above LEVEL, the classifier's error): ``--docs`` writes them,
 and tests/test_docs_tables.py fails when one differs from its records. Both read every
@@ -159,7 +160,7 @@ def _arms(value: str) -> list[str]:
 
 def _block_steps(value: str) -> int:
     if not re.fullmatch(r"[0-9]+", value) or int(value) == 0:
-        raise ValueError("must be a positive whole number of environment steps")
+        raise ValueError("must be a positive whole number of steps")
     return int(value)
 
 
