@@ -201,18 +201,27 @@ def test_the_block_table_is_each_seeds_block_mean_then_mean_and_se_over_seeds():
     rows = [
         r for r in _metrics("pendulum-500-5seeds") if r["method"] == "pngail" and r["eval_return"]
     ]
-    cells = []
-    for low in range(0, 2_500_000, 500_000):
-        per_seed = [
-            np.mean([float(r["normalized_return"]) for r in rows
-                     if r["seed"] == seed and low < int(r["env_steps"]) <= low + 500_000])
-            for seed in sorted({r["seed"] for r in rows})
-        ]  # fmt: skip
-        cells.append(f"{np.mean(per_seed):.2f} ± {np.std(per_seed, ddof=1) / np.sqrt(5):.2f}")
-    last = max(int(r["env_steps"]) for r in rows)
-    final = [float(r["normalized_return"]) for r in rows if int(r["env_steps"]) == last]
-    cells.append(f"{np.mean(final):.2f} ± {np.std(final, ddof=1) / np.sqrt(5):.2f}")
+    edges = [(low, low + 500_000) for low in range(0, 2_500_000, 500_000)]
+    cells = _numpy_block_cells(rows, lambda r: int(r["env_steps"]), edges)
     assert "| PN-GAIL | " + " | ".join(cells) + " |" in table
+
+
+def _numpy_block_cells(rows, step, edges) -> list[str]:
+    """The block table's cells in plain NumPy: per (low, high] of ``edges``, each seed's mean
+    normalised return over its evaluated ``rows`` whose ``step(row)`` falls there, then
+    "mean ± s.e." (ddof 1) over seeds; the final evaluation's last."""
+
+    def mean_se(values) -> str:
+        return f"{np.mean(values):.2f} ± {np.std(values, ddof=1) / np.sqrt(len(values)):.2f}"
+
+    seeds = sorted({r["seed"] for r in rows})
+    cells = [
+        mean_se([np.mean([float(r["normalized_return"]) for r in rows
+                          if r["seed"] == seed and low < step(r) <= high]) for seed in seeds])
+        for low, high in edges
+    ]  # fmt: skip
+    last = max(step(r) for r in rows)
+    return cells + [mean_se([float(r["normalized_return"]) for r in rows if step(r) == last])]
 
 
 def test_an_offline_records_blocks_are_gradient_steps():
@@ -225,18 +234,8 @@ def test_an_offline_records_blocks_are_gradient_steps():
     assert table[0] == "| k gradient steps | 0-20 | 20-40 | 40-50 | final (50 k) |"
     per_iteration = record["config"]["config"]["steps_per_iteration"]
     rows = [r for r in _metrics("offline-pendulum") if r["method"] == "bc-all" and r["eval_return"]]
-    seeds = sorted({r["seed"] for r in rows})
-    cells = []
-    for low, high in ((0, 20_000), (20_000, 40_000), (40_000, 50_000)):
-        per_seed = [
-            np.mean([float(r["normalized_return"]) for r in rows
-                     if r["seed"] == seed and low < int(r["iteration"]) * per_iteration <= high])
-            for seed in seeds
-        ]  # fmt: skip
-        cells.append(f"{np.mean(per_seed):.2f} ± {np.std(per_seed, ddof=1) / np.sqrt(5):.2f}")
-    last = max(int(r["iteration"]) for r in rows)
-    final = [float(r["normalized_return"]) for r in rows if int(r["iteration"]) == last]
-    cells.append(f"{np.mean(final):.2f} ± {np.std(final, ddof=1) / np.sqrt(5):.2f}")
+    edges = [(0, 20_000), (20_000, 40_000), (40_000, 50_000)]
+    cells = _numpy_block_cells(rows, lambda r: int(r["iteration"]) * per_iteration, edges)
     assert "| BC (all rows) | " + " | ".join(cells) + " |" in table
 
 
