@@ -153,7 +153,10 @@ def _step_axis(record: dict) -> tuple[int | None, float, str]:
     config = record.get("config")
     view = read_run_config(config) if isinstance(config, dict) else None
     if view is not None and view.program == "offline":
-        return int(view.settings["steps_per_iteration"]), 1e3, "k gradient steps"
+        per_iteration = view.settings.get("steps_per_iteration")
+        if not isinstance(per_iteration, int) or per_iteration < 1:
+            raise RecordError(f"record {record['name']}: no steps_per_iteration to count in")
+        return per_iteration, 1e3, "k gradient steps"
     return None, 1e6, "M steps"
 
 
