@@ -232,8 +232,10 @@ def diagnostics_table(
     """The discriminator and policy diagnostics of a recorded run per block of
     ``block_steps`` environment steps per run: a row per method (``methods``, default all;
     per setting where the run has several) and column of ``DIAGNOSTICS``, each cell the mean
-    over every (iteration, seed) row of the block, all seeds pooled. The docs' tables between
-    ``<!-- record-diagnostics NAME block=STEPS [methods=A,B] -->`` markers are this text."""
+    over every (iteration, seed) row of the block, all seeds pooled: of a record of the
+    evaluated rows (``run_records.ROWS``), over those, which the header says. The docs'
+    tables between ``<!-- record-diagnostics NAME block=STEPS [methods=A,B] -->`` markers are
+    this text."""
 
     rows = list(metrics_rows(Path(folder) / METRICS_FILE))
     _check_methods(record, [row["method"] for row in rows], methods)
@@ -249,7 +251,9 @@ def diagnostics_table(
                 sums.setdefault(key, {}).setdefault(int(block), []).append(float(row[column]))
     order = sorted({int(b) for b in blocks})
     lines = [
-        "| M steps | " + " | ".join(_block_label(b, block_steps, max(steps)) for b in order) + " |",
+        f"| {_diagnostics_corner(record)} | "
+        + " | ".join(_block_label(b, block_steps, max(steps)) for b in order)
+        + " |",
         "|---|" + "---:|" * len(order),
     ]
     for (method, setting, column), values in sums.items():
@@ -258,6 +262,13 @@ def diagnostics_table(
         cells = [form.format(np.mean(values[b])) if b in values else "-" for b in order]
         lines.append(f"| {name}: {title} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def _diagnostics_corner(record: dict) -> str:
+    """The diagnostics table's top-left cell: what its columns and its rows' cells are."""
+    if record.get("rows") == "evaluated":
+        return "M steps (means over the evaluated iterations)"
+    return "M steps"
 
 
 def _turn(steps: np.ndarray, values: np.ndarray, level: float) -> str:

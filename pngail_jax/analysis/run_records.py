@@ -7,10 +7,13 @@ A record is a folder (``records/<name>/``) made from a sweep run's folder:
   provenance), how far it got, its training and compile seconds, the digest of the metrics
   file, and each method's normalised returns per seed under both statistics: the headline
   (the mean over the last ``late_share`` of training) and the final evaluation;
-- ``metrics.csv.gz``: the run's ``metrics.csv``, every cell and iteration (the evaluations
-  and the diagnostics columns), gzipped.
+- ``metrics.csv.gz``: the run's ``metrics.csv`` (the evaluations and the diagnostics columns),
+  gzipped: every cell and iteration (``rows`` "all", the default), or with ``rows``
+  "evaluated" the rows of the evaluated iterations and each cell's last alone, for a run
+  whose every row would be megabytes (the diagnostics tables then average those rows).
 
-No checkpoints, policies or plots: a 12-cell run of 5,000 iterations is about 2 MB.
+No checkpoints, policies or plots: a 12-cell run of 5,000 iterations is about 2 MB with every
+row, 35 cells of 5,000 iterations evaluated every tenth 0.5 MB with the evaluated ones.
 ``check_record`` reads a record back and verifies it: the metrics file against its digest,
 whole against the config (every cell, every iteration the record says the run reached),
 and both statistics recomputed from it against those the record states.
@@ -52,10 +55,13 @@ from pngail_jax.storage.integrity import (
 from pngail_jax.storage.outputs import output_owner
 
 # 3: its digest and whether its run's seal was checked; 2: both statistics per seed (1 held
-# the final evaluation only). ``upgrade_record`` brings a format-2 record to 3.
+# the final evaluation only). ``record_upkeep.upgrade_record`` brings a format-2 record to 3.
 FORMAT = 3
 RECORD_FILE = "record.json"
 METRICS_FILE = "metrics.csv.gz"
+# What a record's metrics file keeps of its run's rows (``record.json``'s ``rows``; a record
+# without the key keeps them all).
+ROWS = ("all", "evaluated")
 MACHINE_KEYS = (
     "cpu_model", "platform", "device_kind", "device_count", "process_count", "python",
     "libraries", "xla_flags",
@@ -97,16 +103,23 @@ def _training_seconds(metrics_path: Path) -> float | None:
 
 
 def write_record(
-    run_dir: Path, name: str, records: Path = Path("records"), *, allow_unsealed: bool = False
+    run_dir: Path,
+    name: str,
+    records: Path = Path("records"),
+    *,
+    allow_unsealed: bool = False,
+    rows: str = "all",
 ) -> Path:
     """Records the sweep or offline run in ``run_dir`` as ``records/<name>/`` and checks it,
     once ``runs.verify_run`` trusts the run (its seal, unless ``allow_unsealed``; metrics.csv
-    whole and agreeing with summary.json; its input files are not looked at). A record of
-    that name already there is replaced only if it records the same run (same config and
-    commit); anything else in the way is refused. Returns the record's folder."""
+    whole and agreeing with summary.json; its input files are not looked at), keeping the
+    metrics ``rows`` (one of ``ROWS``). A record of that name already there is replaced only
+    if it records the same run (same config and commit); anything else in the way is
+    refused. Returns the record's folder."""
 
     run_dir = Path(run_dir)
     check_name(name)
+    _check_rows_choice(rows)
     try:  # verify_run refuses a folder of neither program
         notes = verify_run(run_dir, str(run_dir), allow_unsealed=allow_unsealed,
                            check_inputs=False)  # fmt: skip
@@ -139,6 +152,7 @@ def write_record(
         "training_seconds": _training_seconds(run_dir / "metrics.csv"),
         "compile_seconds": summary.get("compile_seconds"),
         "late_share": LATE_SHARE,
+        "rows": rows,
         **{statistic_key(name): _per_seed(values) for name, values in scores.items()},
         "confidence_mae": _confidence_errors(summary),
     }
@@ -146,16 +160,49 @@ def write_record(
     _check_replaceable(folder, record)
     folder.mkdir(parents=True, exist_ok=True)
     metrics = folder / METRICS_FILE
-    # No file name and no time in the gzip header: the same run gives the same bytes.
-    with atomic_path(metrics) as temporary, temporary.open("wb") as raw:
-        with (run_dir / "metrics.csv").open("rb") as source:
-            with gzip.GzipFile(filename="", mode="wb", fileobj=raw, mtime=0) as target:
-                shutil.copyfileobj(source, target)
+    with (run_dir / "metrics.csv").open("rb") as source:
+        write_metrics(metrics, source, kept_lines(run_dir / "metrics.csv", rows))
     record["metrics"] = {"file": METRICS_FILE, "bytes": metrics.stat().st_size,
                          "sha256": file_digest(metrics)}  # fmt: skip
     write_json(folder / RECORD_FILE, sealed_record(record))
     check_record(folder)
     return folder
+
+
+def _check_rows_choice(rows: str) -> None:
+    if rows not in ROWS:
+        raise RecordError(f"rows {rows!r}: give one of {', '.join(ROWS)}")
+
+
+def kept_lines(metrics: Path, rows: str) -> set[int] | None:
+    """The line numbers (0 the header) of the metrics file ``metrics`` (``metrics.csv`` or a
+    record's gzipped one) that a record keeping ``rows`` keeps: None for "all"; for
+    "evaluated" the header, every row with an evaluation and each cell's last row."""
+    _check_rows_choice(rows)
+    if rows == "all":
+        return None
+    last = iterations_per_cell(metrics)
+    kept = {0}
+    for number, row in enumerate(metrics_rows(metrics), start=1):
+        cell = (row["method"], row["setting"], int(row["seed"]))
+        if row.get("eval_return") not in (None, "") or int(row["iteration"]) == last[cell]:
+            kept.add(number)
+    return kept
+
+
+def write_metrics(path: Path, source, kept: set[int] | None) -> None:
+    """Writes the lines of the binary file ``source`` numbered in ``kept`` (every line when
+    None), byte for byte, to ``path`` gzipped, atomically, with no file name and no time in
+    the gzip header: the same run gives the same bytes. The metrics files hold no line
+    breaks inside a field, so a line is a row."""
+    with atomic_path(path) as temporary, temporary.open("wb") as raw:
+        with gzip.GzipFile(filename="", mode="wb", fileobj=raw, mtime=0) as target:
+            if kept is None:
+                shutil.copyfileobj(source, target)
+                return
+            for number, line in enumerate(source):
+                if number in kept:
+                    target.write(line)
 
 
 def sealed_record(record: dict) -> dict:
@@ -254,8 +301,27 @@ def check_record(folder: Path) -> dict:
                 f"{folder / RECORD_FILE}: its {statistic_key(name)} differs from that of "
                 f"{METRICS_FILE}"
             )
+    _check_kept_rows(folder, record)
     _check_confidence_errors(folder, record)
     return record
+
+
+def _check_kept_rows(folder: Path, record: dict) -> None:
+    """RecordError unless the record's ``rows`` is one of ``ROWS`` and a record of the
+    evaluated rows holds no other row (a record of every row is whole by its digest and
+    ``_check_config_facts``)."""
+    rows = record.get("rows", "all")
+    if rows not in ROWS:
+        raise RecordError(f"{folder / RECORD_FILE}: rows {rows!r} is not one of {', '.join(ROWS)}")
+    if rows == "all":
+        return
+    metrics = folder / METRICS_FILE
+    total = 1 + sum(1 for _ in metrics_rows(metrics))
+    if len(kept_lines(metrics, rows)) != total:
+        raise RecordError(
+            f"{metrics} holds rows without an evaluation before each cell's last, which a "
+            "record of the evaluated rows drops: the record or its metrics were edited"
+        )
 
 
 def _check_config_facts(folder: Path, record: dict) -> None:
@@ -370,45 +436,6 @@ def _check_task(where: Path, config: dict, return_range: list[float] | None) -> 
             )
 
 
-def upgrade_record(folder: Path) -> dict:
-    """Brings a record of the format before this one (2) to ``FORMAT``: an offline record's
-    iterations done and planned (which format 2 left empty) from its config and metrics,
-    ``unsealed`` None (format 2 did not keep whether the run's seal was checked), and its
-    digest; then checks it whole, and puts the old file back when the check fails. Returns
-    the checked record."""
-
-    folder = Path(folder)
-    path = folder / RECORD_FILE
-    try:
-        original = path.read_bytes()
-        record = read_json(path, "run record")
-    except FileNotFoundError:
-        raise RecordError(f"{folder} holds no run record ({RECORD_FILE} is missing)") from None
-    except (OSError, IntegrityError) as error:
-        raise RecordError(f"{path}: unreadable ({error})") from None
-    if not isinstance(record, dict) or record.get("format") != FORMAT - 1:
-        raise RecordError(f"{path}: not a run record of format {FORMAT - 1}, nothing to upgrade")
-    command = record.get("command")
-    if isinstance(command, list) and command[:3] == ["python", "-m", "offline"]:
-        record["command"] = ["python", "-m", "experiments.offline", *command[3:]]  # format 2's slip
-    offline = read_run_config(record.get("config") or {}).program == "offline"
-    if offline and record.get("iterations") is None:
-        try:
-            reached = max(iterations_per_cell(folder / METRICS_FILE).values())
-        except (ValueError, KeyError, TypeError, EOFError, OSError) as error:
-            raise RecordError(f"{folder / METRICS_FILE} is damaged ({error})") from None
-        record["iterations_done"] = reached
-        record["iterations"] = planned_iterations(record["config"])
-    record = sealed_record({**record, "format": FORMAT, "unsealed": record.get("unsealed")})
-    write_json(path, record)
-    try:
-        return check_record(folder)
-    except RecordError:
-        with atomic_path(path) as temporary:
-            temporary.write_bytes(original)
-        raise
-
-
 def _check_confidence_errors(folder: Path, record: dict) -> None:
     """RecordError unless the record's ``confidence_mae`` (where it has one) holds, for
     methods of the record, one number (or None) per seed."""
@@ -452,7 +479,8 @@ def describe(record: dict) -> str:
         f"{record['name']}: {env}, {len(finals)} methods, "
         f"{cells} runs, {how_far}; commit {str(record['commit'])[:10]}, "
         f"{record['machine'].get('cpu_model') or 'CPU not recorded'}; "
-        f"metrics {record['metrics']['bytes']:,} bytes{unsealed}"
+        f"metrics {record['metrics']['bytes']:,} bytes"
+        f"{', its evaluated rows' if record.get('rows') == 'evaluated' else ''}{unsealed}"
     )
 
 

@@ -7,8 +7,10 @@
 
 A record (``pngail_jax.analysis.run_records``) holds the run's config, command, commit, machine,
 training seconds, each method's final normalised returns per seed, and its metrics.csv
-gzipped (every cell and iteration): what a results table in the docs rests on, without
-checkpoints, policies or plots. Writing one checks it; ``--check`` verifies kept ones (the
+gzipped (every cell and iteration; with ``--rows evaluated`` the evaluated iterations and each
+cell's last alone, for a run whose every row would be megabytes; ``--thin records/NAME`` does
+that to a kept record): what a results table in the docs rests on, without checkpoints,
+policies or plots. Writing one checks it; ``--check`` verifies kept ones (the
 metrics file against its digest, whole against the config, the final returns recomputed).
 A table in README.md or a page under docs/ between ``<!-- record-table NAME -->`` and
 ``<!-- /record-table -->`` is ``record_tables.record_table`` of ``records/NAME`` (with
@@ -44,7 +46,7 @@ import re
 from collections.abc import Callable
 from pathlib import Path
 
-from pngail_jax.analysis import record_tables, run_records
+from pngail_jax.analysis import record_tables, record_upkeep, run_records
 from pngail_jax.jobs import comparison_record
 from pngail_jax.programs.cli import (
     ArgumentParser,
@@ -74,6 +76,17 @@ def build_parser() -> ArgumentParser:
         help="bring run records of the format before this one up to date (their digest added, "
         "checked whole; the file is left as it was when the check fails)",
     )  # fmt: skip
+    parser.add_argument(
+        "--rows", choices=run_records.ROWS, default="all",
+        help="the run's metrics rows the record keeps: all (default), or evaluated (the "
+        "evaluated iterations and each cell's last: a tenth or less of a long run's file; the "
+        "diagnostics tables then average those rows)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--thin", action="store_true",
+        help="keep only the evaluated rows of kept records of every row (as --rows evaluated "
+        "would have; checked whole after, left as they were when the check fails)",
+    )  # fmt: skip
     add_allow_unsealed(
         parser.add_argument, "record a sweep or offline run (a comparison has no seal)"
     )
@@ -98,10 +111,19 @@ def build_parser() -> ArgumentParser:
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    """The flags of ``argv``, one of the program's modes (record, --check, --upgrade, --docs,
-    --reproduce) with only the flags it takes; else one line naming the clash."""
+    """The flags of ``argv``, one of the program's modes (record, --check, --upgrade, --thin,
+    --docs, --reproduce) with only the flags it takes; else one line naming the clash."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.rows != "all" and (args.check or args.upgrade or args.thin or args.docs
+                               or args.reproduce is not None):  # fmt: skip
+        parser.error("--rows is for writing a record from a run (a kept one: --thin)")
+    if args.thin:
+        if not args.paths or args.name or args.check or args.upgrade or args.docs:
+            parser.error("--thin takes the records to thin alone: --thin records/NAME ...")
+        if args.reproduce is not None or args.out is not None or args.allow_unsealed:
+            parser.error("--thin takes the records to thin alone: --thin records/NAME ...")
+        return args
     if args.reproduce is not None:
         if args.paths or args.name or args.check or args.upgrade or args.docs:
             parser.error("--reproduce NAME takes --out and --records alone")
@@ -487,15 +509,24 @@ def main(argv=None) -> list[Path]:
             return list(args.paths)
         if args.upgrade:
             for folder in args.paths:
-                record = run_records.upgrade_record(folder)
+                record = record_upkeep.upgrade_record(folder)
                 print(f"upgraded {folder} to format {record['format']}, and checked it")
             return list(args.paths)
+        if args.thin:
+            for folder in args.paths:
+                record = record_upkeep.thin_record(folder)
+                print(f"thinned {folder} to its evaluated rows, and checked it\n    "
+                      f"{run_records.describe(record)}")  # fmt: skip
+            return list(args.paths)
         if comparison_record.is_comparison(args.paths[0]):
+            if args.rows != "all":
+                raise run_records.RecordError("--rows is for a sweep or offline run's record")
             folder = comparison_record.write(args.paths[0], args.name, args.records)
         else:
             folder = run_records.write_record(
-                args.paths[0], args.name, args.records, allow_unsealed=args.allow_unsealed
-            )
+                args.paths[0], args.name, args.records, allow_unsealed=args.allow_unsealed,
+                rows=args.rows,
+            )  # fmt: skip
         print(f"wrote {folder} and checked it\n    {describe_checked(folder)}")
     except run_records.RecordError as error:
         raise SystemExit(str(error)) from None
