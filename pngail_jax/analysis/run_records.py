@@ -13,7 +13,7 @@ A record is a folder (``records/<name>/``) made from a sweep run's folder:
   whose every row would be megabytes (the diagnostics tables then average those rows).
 
 No checkpoints, policies or plots: a 12-cell run of 5,000 iterations is about 2 MB with every
-row, 35 cells of 5,000 iterations evaluated every tenth 0.5 MB with the evaluated ones.
+row, 35 cells of 5,000 iterations evaluated every tenth 0.6 MB with the evaluated ones.
 ``check_record`` reads a record back and verifies it: the metrics file against its digest,
 whole against the config (every cell, every iteration the record says the run reached),
 and both statistics recomputed from it against those the record states.
