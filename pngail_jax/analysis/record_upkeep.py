@@ -16,6 +16,7 @@ from pngail_jax.analysis.run_records import (
     RecordError,
     check_record,
     kept_lines,
+    metrics_entry,
     planned_iterations,
     sealed_record,
     write_metrics,
@@ -24,7 +25,6 @@ from pngail_jax.analysis.runs import read_run_config
 from pngail_jax.storage.integrity import (
     IntegrityError,
     atomic_path,
-    file_digest,
     read_json,
     write_json,
 )
@@ -88,8 +88,7 @@ def thin_record(folder: Path) -> dict:
         with gzip.open(metrics, "rb") as source:  # read whole before the new file replaces it
             write_metrics(metrics, source, kept)
         record = {**record, "rows": "evaluated", "thinned_from": record["metrics"],
-                  "metrics": {"file": METRICS_FILE, "bytes": metrics.stat().st_size,
-                              "sha256": file_digest(metrics)}}  # fmt: skip
+                  "metrics": metrics_entry(metrics)}  # fmt: skip
         write_json(path, sealed_record(record))
         return check_record(folder)
     except BaseException:

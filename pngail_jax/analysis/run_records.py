@@ -120,18 +120,7 @@ def write_record(
     run_dir = Path(run_dir)
     check_name(name)
     _check_rows_choice(rows)
-    try:  # verify_run refuses a folder of neither program
-        notes = verify_run(run_dir, str(run_dir), allow_unsealed=allow_unsealed,
-                           check_inputs=False)  # fmt: skip
-        for note in notes:
-            print(f"note: {note}")
-        config = read_json(run_dir / "config.json", "run config")
-        summary = read_json(run_dir / "summary.json", "run summary")
-        scores = {name: run_scores(run_dir, name)[1] for name in STATISTICS}
-    except FileNotFoundError as error:
-        raise RecordError(f"{run_dir}: {Path(error.filename).name} is missing") from None
-    except (OSError, IntegrityError, RunReadError) as error:
-        raise RecordError(str(error)) from None
+    notes, config, summary, scores = _verified_run(run_dir, allow_unsealed)
     provenance = config.get("provenance", {})
     progress = run_progress_numbers(run_dir)
     record = {
@@ -162,11 +151,32 @@ def write_record(
     metrics = folder / METRICS_FILE
     with (run_dir / "metrics.csv").open("rb") as source:
         write_metrics(metrics, source, kept_lines(run_dir / "metrics.csv", rows))
-    record["metrics"] = {"file": METRICS_FILE, "bytes": metrics.stat().st_size,
-                         "sha256": file_digest(metrics)}  # fmt: skip
-    write_json(folder / RECORD_FILE, sealed_record(record))
+    write_json(folder / RECORD_FILE, sealed_record({**record, "metrics": metrics_entry(metrics)}))
     check_record(folder)
     return folder
+
+
+def _verified_run(run_dir: Path, allow_unsealed: bool):
+    """The run in ``run_dir`` once ``runs.verify_run`` trusts it (its notes printed): its
+    notes, config.json, summary.json and per-seed scores under each statistic."""
+    try:  # verify_run refuses a folder of neither program
+        notes = verify_run(run_dir, str(run_dir), allow_unsealed=allow_unsealed,
+                           check_inputs=False)  # fmt: skip
+        for note in notes:
+            print(f"note: {note}")
+        config = read_json(run_dir / "config.json", "run config")
+        summary = read_json(run_dir / "summary.json", "run summary")
+        scores = {name: run_scores(run_dir, name)[1] for name in STATISTICS}
+    except FileNotFoundError as error:
+        raise RecordError(f"{run_dir}: {Path(error.filename).name} is missing") from None
+    except (OSError, IntegrityError, RunReadError) as error:
+        raise RecordError(str(error)) from None
+    return notes, config, summary, scores
+
+
+def metrics_entry(metrics: Path) -> dict:
+    """``record.json``'s ``metrics``: the written metrics file's name, size and SHA-256."""
+    return {"file": METRICS_FILE, "bytes": metrics.stat().st_size, "sha256": file_digest(metrics)}
 
 
 def _check_rows_choice(rows: str) -> None:
